@@ -1,0 +1,35 @@
+"""Exceptions a user can cause. Each message says what was wrong and what to do.
+
+The CLI and the nodes catch :class:`CalibrationError` and show its message; anything else
+reaching the user as a traceback is a bug.
+"""
+
+from __future__ import annotations
+
+
+class CalibrationError(Exception):
+    """Base class of every error the package raises on bad input or bad data."""
+
+
+class InputError(CalibrationError):
+    """Malformed input: wrong shapes, NaN/Inf, non-unit quaternions, wrong units."""
+
+
+class PairingError(CalibrationError):
+    """No profile could be paired with a flange pose."""
+
+
+class ProfileRejected(CalibrationError):
+    """One profile is unusable (too few points, arc too short, fit failed).
+
+    Raised per profile and turned into a :class:`~linelaser_calib.core.types.Rejection`
+    by the pipeline; never fatal on its own.
+    """
+
+
+class DegenerateError(CalibrationError):
+    """The poses cannot determine the transform; the message names the missing motion."""
+
+
+class SolverError(CalibrationError):
+    """The solver failed to converge to a usable solution."""

@@ -1,0 +1,225 @@
+"""Rigid-body geometry on plain numpy arrays.
+
+Conventions (see DESIGN.md):
+
+- ``T_a_b`` is a (4, 4) homogeneous matrix, the pose of frame b in frame a; it maps
+  b-coordinates into a-coordinates: ``p_a = T_a_b @ p_b``.
+- Quaternions are ``xyzw`` (scalar last), as in ROS messages.
+- Rotation vectors (axis * angle) are in radians; translations in metres.
+
+Every ``check_*`` function validates its input at the entry and raises ``ValueError``
+that shows the bad value.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation
+
+FloatArray = NDArray[np.float64]
+
+#: Tolerance on |det R - 1| and |R^T R - I| accepted by :func:`check_rotation`.
+ROTATION_TOLERANCE = 1e-6
+#: Quaternions whose norm differs from 1 by more than this are called non-unit.
+QUATERNION_NORM_TOLERANCE = 1e-3
+
+
+def check_rotation(R: ArrayLike, tolerance: float = ROTATION_TOLERANCE) -> FloatArray:
+    """Validate a rotation matrix.
+
+    Parameters
+    ----------
+    R : array-like, shape (3, 3)
+        Candidate rotation matrix.
+    tolerance : float
+        Largest accepted deviation from orthonormality and det = +1.
+
+    Returns
+    -------
+    R : ndarray, shape (3, 3), float64
+    """
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape != (3, 3):
+        raise ValueError(f"rotation matrix must have shape (3, 3), got {R.shape}")
+    if not np.all(np.isfinite(R)):
+        raise ValueError(f"rotation matrix contains NaN or Inf:\n{R}")
+    err = np.max(np.abs(R.T @ R - np.eye(3)))
+    if err > tolerance or abs(np.linalg.det(R) - 1.0) > tolerance:
+        raise ValueError(f"matrix is not a proper rotation (orthonormality error {err:.3g}):\n{R}")
+    return R
+
+
+def check_transform(T: ArrayLike, tolerance: float = ROTATION_TOLERANCE) -> FloatArray:
+    """Validate a homogeneous rigid transform.
+
+    Parameters
+    ----------
+    T : array-like, shape (4, 4)
+
+    Returns
+    -------
+    T : ndarray, shape (4, 4), float64
+    """
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        raise ValueError(f"transform must have shape (4, 4), got {T.shape}")
+    if not np.all(np.isfinite(T)):
+        raise ValueError(f"transform contains NaN or Inf:\n{T}")
+    if np.max(np.abs(T[3] - [0.0, 0.0, 0.0, 1.0])) > tolerance:
+        raise ValueError(f"last row of a transform must be [0, 0, 0, 1], got {T[3]}")
+    check_rotation(T[:3, :3], tolerance)
+    return T
+
+
+def check_quaternion_xyzw(q: ArrayLike) -> FloatArray:
+    """Validate and normalise an ``xyzw`` quaternion.
+
+    A quaternion is accepted if it is finite and its norm is within
+    :data:`QUATERNION_NORM_TOLERANCE` of one; it is then normalised exactly.
+
+    Raises
+    ------
+    ValueError
+        For a wrong shape, NaN/Inf, a zero quaternion or a clearly non-unit one.
+    """
+    q = np.asarray(q, dtype=np.float64)
+    if q.shape != (4,):
+        raise ValueError(f"quaternion must have shape (4,), got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError(f"quaternion contains NaN or Inf: {q}")
+    norm = float(np.linalg.norm(q))
+    if norm < 1e-12:
+        raise ValueError(f"zero quaternion {q} (xyzw) is not a rotation")
+    if abs(norm - 1.0) > QUATERNION_NORM_TOLERANCE:
+        raise ValueError(f"quaternion {q} (xyzw) is not unit: norm {norm:.6f}")
+    return q / norm
+
+
+def matrix_from_quaternion_xyzw(q_xyzw: ArrayLike) -> FloatArray:
+    """Rotation matrix (3, 3) from a unit ``xyzw`` quaternion (validated)."""
+    q = check_quaternion_xyzw(q_xyzw)
+    return np.asarray(Rotation.from_quat(q).as_matrix(), dtype=np.float64)
+
+
+def quaternion_xyzw_from_matrix(R: ArrayLike) -> FloatArray:
+    """Unit ``xyzw`` quaternion with w >= 0 from a rotation matrix (3, 3)."""
+    q = np.asarray(Rotation.from_matrix(check_rotation(R, 1e-4)).as_quat(), dtype=np.float64)
+    return q if q[3] >= 0.0 else -q
+
+
+def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
+    """Rotation matrix (3, 3) from a rotation vector (3,) in radians."""
+    return np.asarray(Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64)).as_matrix())
+
+
+def rotvec_from_matrix(R: ArrayLike) -> FloatArray:
+    """Rotation vector (3,) in radians from a rotation matrix (3, 3)."""
+    return np.asarray(Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec())
+
+
+def transform_from_rotation_translation(R: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Homogeneous (4, 4) transform from a rotation (3, 3) and a translation (3,) in m."""
+    T = np.eye(4)
+    T[:3, :3] = np.asarray(R, dtype=np.float64)
+    T[:3, 3] = np.asarray(t, dtype=np.float64)
+    return T
+
+
+def transform_from_translation_quaternion(t: ArrayLike, q_xyzw: ArrayLike) -> FloatArray:
+    """Homogeneous (4, 4) transform from a translation (3,) in m and an ``xyzw`` quaternion."""
+    return transform_from_rotation_translation(matrix_from_quaternion_xyzw(q_xyzw), t)
+
+
+def translation_quaternion_from_transform(T: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Translation (3,) in m and ``xyzw`` quaternion (4,) of a (4, 4) transform."""
+    T = np.asarray(T, dtype=np.float64)
+    return T[:3, 3].copy(), quaternion_xyzw_from_matrix(T[:3, :3])
+
+
+def transform_from_rotvec_translation(rotvec: ArrayLike, t: ArrayLike) -> FloatArray:
+    """Homogeneous (4, 4) transform from a rotation vector (rad) and a translation (m)."""
+    return transform_from_rotation_translation(matrix_from_rotvec(rotvec), t)
+
+
+def invert_transform(T: ArrayLike) -> FloatArray:
+    """Inverse of a rigid (4, 4) transform: ``T_b_a`` from ``T_a_b``."""
+    T = np.asarray(T, dtype=np.float64)
+    R = T[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ T[:3, 3]
+    return out
+
+
+def apply_transform(T: ArrayLike, points: ArrayLike) -> FloatArray:
+    """Map points (N, 3) from frame b into frame a with ``T_a_b`` (4, 4).
+
+    ``T`` may also be a stack (K, 4, 4) applied to points (K, N, 3) or (K, 3).
+    """
+    T = np.asarray(T, dtype=np.float64)
+    p = np.asarray(points, dtype=np.float64)
+    if T.ndim == 2:
+        return np.asarray(p @ T[:3, :3].T + T[:3, 3])
+    if p.ndim == 2:
+        return np.asarray(np.einsum("kij,kj->ki", T[:, :3, :3], p) + T[:, :3, 3])
+    return np.asarray(np.einsum("kij,knj->kni", T[:, :3, :3], p) + T[:, None, :3, 3])
+
+
+def project_to_so3(M: ArrayLike) -> FloatArray:
+    """Nearest rotation matrix (Frobenius norm) to a (3, 3) matrix, by SVD."""
+    U, _, Vt = np.linalg.svd(np.asarray(M, dtype=np.float64))
+    D = np.diag([1.0, 1.0, float(np.sign(np.linalg.det(U @ Vt)) or 1.0)])
+    return np.asarray(U @ D @ Vt)
+
+
+def rotation_angle(R: ArrayLike) -> float:
+    """Rotation angle (rad, in [0, pi]) of a rotation matrix (3, 3)."""
+    R = np.asarray(R, dtype=np.float64)
+    c = (np.trace(R) - 1.0) / 2.0
+    s = np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2.0
+    return float(np.arctan2(s, c))
+
+
+def transform_error(T_estimate: ArrayLike, T_truth: ArrayLike) -> tuple[float, float]:
+    """Rotation (rad) and translation (m) error between two (4, 4) transforms."""
+    A = np.asarray(T_estimate, dtype=np.float64)
+    B = np.asarray(T_truth, dtype=np.float64)
+    return rotation_angle(A[:3, :3].T @ B[:3, :3]), float(np.linalg.norm(A[:3, 3] - B[:3, 3]))
+
+
+def interpolate_transform(T0: ArrayLike, T1: ArrayLike, s: float) -> FloatArray:
+    """Interpolate between two transforms: lerp on translation, slerp on rotation.
+
+    Parameters
+    ----------
+    T0, T1 : array-like, shape (4, 4)
+    s : float
+        0 gives ``T0`` and 1 gives ``T1``.
+    """
+    A = np.asarray(T0, dtype=np.float64)
+    B = np.asarray(T1, dtype=np.float64)
+    delta = rotvec_from_matrix(A[:3, :3].T @ B[:3, :3])
+    R = A[:3, :3] @ matrix_from_rotvec(s * delta)
+    return transform_from_rotation_translation(R, (1.0 - s) * A[:3, 3] + s * B[:3, 3])
+
+
+def skew(v: ArrayLike) -> FloatArray:
+    """Skew-symmetric (3, 3) matrix with ``skew(v) @ u == cross(v, u)``."""
+    x, y, z = np.asarray(v, dtype=np.float64)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def rpy_from_matrix(R: ArrayLike) -> FloatArray:
+    """Roll, pitch, yaw (rad) of a rotation, ROS convention: fixed axes x-y-z, R = Rz Ry Rx."""
+    return np.asarray(Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_euler("xyz"))
+
+
+def orthonormal_basis(direction: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Two unit vectors (3,) that with ``direction`` form a right-handed orthonormal basis."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / np.linalg.norm(d)
+    helper = np.eye(3)[int(np.argmin(np.abs(d)))]
+    u = np.cross(d, helper)
+    u /= np.linalg.norm(u)
+    return u, np.cross(d, u)

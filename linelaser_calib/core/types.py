@@ -1,0 +1,190 @@
+"""Typed records shared by every stage of the pipeline.
+
+All arrays are float64 in SI units (metres, radians); stamps are integer nanoseconds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class Profile:
+    """One laser profile as received.
+
+    Attributes
+    ----------
+    stamp_ns : int
+        Acquisition stamp, ns.
+    points : ndarray, shape (N, 3)
+        Points in the sensor frame, m. The laser plane is x-z, so y is ~0.
+        May still hold NaN/Inf (REP 117); cleaning drops them.
+    frame_id : str
+        Sensor frame id from the message header.
+    """
+
+    stamp_ns: int
+    points: FloatArray
+    frame_id: str = "laser"
+
+
+@dataclass(frozen=True)
+class FlangePose:
+    """One flange pose sample from the robot.
+
+    Attributes
+    ----------
+    stamp_ns : int
+    T_base_flange : ndarray, shape (4, 4)
+        Pose of the flange in the base frame (translation in m).
+    frame_id : str
+        Base frame id from the message header.
+    """
+
+    stamp_ns: int
+    T_base_flange: FloatArray
+    frame_id: str = "base_link"
+
+
+@dataclass(frozen=True)
+class Sample:
+    """A profile paired with the flange pose interpolated at its stamp.
+
+    Attributes
+    ----------
+    index : int
+        Index of the profile in the input stream (stable across stages, for reports).
+    stamp_ns : int
+    T_base_flange : ndarray, shape (4, 4)
+    points : ndarray, shape (N, 3)
+        Sensor-frame points, m.
+    """
+
+    index: int
+    stamp_ns: int
+    T_base_flange: FloatArray
+    points: FloatArray
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """Why a profile or sample was not used.
+
+    Attributes
+    ----------
+    index : int
+        Profile index in the input stream.
+    stamp_ns : int
+    stage : str
+        ``pairing``, ``cleaning``, ``ellipse`` or ``outlier``.
+    reason : str
+        Human-readable reason, with units.
+    """
+
+    index: int
+    stamp_ns: int
+    stage: str
+    reason: str
+
+
+@dataclass(frozen=True)
+class EllipseFit:
+    """A RANSAC ellipse fitted to one profile in the sensor x-z plane.
+
+    Attributes
+    ----------
+    centre_xz : ndarray, shape (2,)
+        Ellipse centre (x_c, z_c) in the sensor frame, m (paper eq. 5).
+    conic : ndarray, shape (6,)
+        (A, B, C, D, E, F) of A x^2 + B xz + C z^2 + D x + E z + F = 0, in m units,
+        scaled so that F = 1 when F is not ~0 (paper eq. 4).
+    semi_axes : ndarray, shape (2,)
+        Semi-major and semi-minor axis lengths, m.
+    inliers : ndarray of bool, shape (N,)
+        Inlier mask over the cleaned points handed to the fit.
+    coverage_rad : float
+        Angular extent of the inlier arc around the centre, rad.
+    rms_m : float
+        RMS algebraic-to-geometric residual of the inliers, m.
+    """
+
+    centre_xz: FloatArray
+    conic: FloatArray
+    semi_axes: FloatArray
+    inliers: BoolArray
+    coverage_rad: float
+    rms_m: float
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """A cylinder in the base frame.
+
+    Attributes
+    ----------
+    point : ndarray, shape (3,)
+        A point on the axis, m (the one closest to the base origin).
+    direction : ndarray, shape (3,)
+        Unit axis direction.
+    radius : float
+        m.
+    """
+
+    point: FloatArray
+    direction: FloatArray
+    radius: float
+
+
+@dataclass
+class CalibrationResult:
+    """The outcome of a calibration, written to files in one place (``linelaser_calib.io``).
+
+    Attributes
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+        The hand-eye (the paper's T_EL).
+    cylinder : Cylinder
+        Fitted cylinder in the base frame.
+    method : str
+        ``paper`` or ``default`` (maximum likelihood).
+    samples_used : list of int
+        Profile indices that entered the final solve.
+    samples_rejected : list of Rejection
+    rms_residual_m : float
+        RMS residual of the final cost, m (centre-to-axis for ``paper``,
+        point-to-surface for ``default``).
+    sample_residuals_m : dict of int to float
+        Per-sample RMS residual, m, keyed by profile index.
+    uncertainty_translation_m, uncertainty_rotation_rad : ndarray, shape (3,) or None
+        1-sigma of the hand-eye translation (m) and rotation (rad, small angles about the
+        sensor-frame axes), when the method estimates it.
+    radius_estimated : bool
+        True if the radius was estimated rather than given.
+    warnings : list of str
+    history : dict of str to list of float
+        Convergence traces for reports (e.g. ``pso_best``, ``galm_phi``, ``refine_cost``).
+    parent_frame, child_frame, base_frame : str
+        Frame ids: flange, sensor and robot base.
+    """
+
+    T_flange_sensor: FloatArray
+    cylinder: Cylinder
+    method: str
+    samples_used: list[int]
+    samples_rejected: list[Rejection]
+    rms_residual_m: float
+    sample_residuals_m: dict[int, float] = field(default_factory=dict)
+    uncertainty_translation_m: FloatArray | None = None
+    uncertainty_rotation_rad: FloatArray | None = None
+    radius_estimated: bool = False
+    warnings: list[str] = field(default_factory=list)
+    history: dict[str, list[float]] = field(default_factory=dict)
+    parent_frame: str = "tool0"
+    child_frame: str = "laser"
+    base_frame: str = "base_link"
