@@ -1,0 +1,317 @@
+"""Pair each profile with the flange pose at its stamp.
+
+One implementation serves the offline path (a whole bag at once) and the collector node
+(profiles arriving live against a rolling pose buffer): both go through :class:`PoseBuffer`.
+
+For a profile stamped ``t`` (shifted by ``clock_offset_s`` onto the pose clock):
+
+1. If poses bracket ``t`` and both are within ``sync_tolerance_s``, the pose is
+   interpolated: lerp on position, slerp on rotation.
+2. Else, if one pose is within ``sync_tolerance_s``, the nearest pose is used.
+3. Else the profile is rejected, with the distance to the nearest pose in the reason.
+
+The robot's speed at ``t`` is measured over ``t +- speed_window_s`` from the interpolated
+stream; a profile taken faster than ``max_linear_speed_m_s`` or ``max_angular_speed_rad_s``
+is rejected (the pose is then unreliable by latency times speed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .geometry import FloatArray, interpolate_transform, rotation_angle
+from .types import FlangePose, Profile, Rejection, Sample
+
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class PairingConfig:
+    """Pairing parameters (SI units).
+
+    Attributes
+    ----------
+    sync_tolerance_s : float
+        Largest gap between a profile stamp and a pose stamp used for it, s.
+    clock_offset_s : float
+        Added to every profile stamp to put it on the pose clock, s.
+    max_linear_speed_m_s : float
+        Profiles taken while the flange moved faster are rejected, m/s. 0 disables.
+    max_angular_speed_rad_s : float
+        Same for the rotation speed, rad/s. 0 disables.
+    speed_window_s : float
+        Half-width of the window over which the speed is measured, s.
+    """
+
+    sync_tolerance_s: float = 0.02
+    clock_offset_s: float = 0.0
+    max_linear_speed_m_s: float = 0.005
+    max_angular_speed_rad_s: float = 0.01
+    speed_window_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        if not self.sync_tolerance_s > 0.0:
+            raise ValueError(f"sync_tolerance_s must be > 0 s, got {self.sync_tolerance_s}")
+        if self.max_linear_speed_m_s < 0.0 or self.max_angular_speed_rad_s < 0.0:
+            raise ValueError("speed bounds must be >= 0 (0 disables the check)")
+        if self.speed_window_s < 0.0:
+            raise ValueError(f"speed_window_s must be >= 0 s, got {self.speed_window_s}")
+
+
+@dataclass
+class PairingResult:
+    """Outcome of pairing a batch of profiles.
+
+    Attributes
+    ----------
+    samples : list of Sample
+        Paired profiles, in profile-stamp order.
+    rejected : list of Rejection
+        Profiles that could not be paired, with reasons.
+    notes : list of str
+        Things fixed on the way (unsorted or duplicate pose stamps).
+    median_offset_s : float or None
+        Median of (nearest pose stamp - profile stamp) over all profiles, s.
+    span_offset_s : float or None
+        Centre of the pose stream's time span minus the centre of the profiles' span, s:
+        the clock offset estimate when the two streams do not overlap at all.
+    """
+
+    samples: list[Sample]
+    rejected: list[Rejection]
+    notes: list[str] = field(default_factory=list)
+    median_offset_s: float | None = None
+    span_offset_s: float | None = None
+
+    def explain_nothing_paired(self, config: PairingConfig) -> str:
+        """A paragraph telling the user why nothing paired and what to try."""
+        reasons = sorted({r.reason.split(" (")[0] for r in self.rejected})
+        text = f"No profile could be paired with a flange pose ({len(self.rejected)} rejected"
+        text += f": {'; '.join(reasons[:3])})." if reasons else ")."
+        if self.median_offset_s is not None:
+            text += (
+                f" The median offset from a profile stamp to its nearest pose stamp is "
+                f"{self.median_offset_s * 1e3:.1f} ms against a sync tolerance of "
+                f"{config.sync_tolerance_s * 1e3:.1f} ms."
+            )
+            if abs(self.median_offset_s) > config.sync_tolerance_s:
+                guess = self.median_offset_s
+                if self.span_offset_s is not None and abs(self.span_offset_s) > abs(guess):
+                    guess = self.span_offset_s
+                    text += (
+                        " The two streams do not overlap in time; their centres are "
+                        f"{guess:.3f} s apart."
+                    )
+                text += (
+                    f" If the two clocks differ by a constant, set the clock offset to about "
+                    f"{guess:.3f} s; otherwise raise the sync tolerance or record the flange "
+                    "pose at a higher rate."
+                )
+        return text
+
+
+class PoseBuffer:
+    """Flange poses sorted by stamp, queried at profile stamps.
+
+    Poses may arrive unsorted or duplicated; the buffer keeps them sorted and keeps the first
+    of any duplicate stamp. ``max_age_s`` bounds the buffer for live use.
+    """
+
+    def __init__(self, max_age_s: float | None = None) -> None:
+        self._stamps: list[int] = []
+        self._transforms: list[FloatArray] = []
+        self._max_age_ns = None if max_age_s is None else int(max_age_s * NS_PER_S)
+        self.duplicates = 0
+        self.out_of_order = 0
+
+    def __len__(self) -> int:
+        return len(self._stamps)
+
+    @property
+    def latest_stamp_ns(self) -> int | None:
+        """Stamp of the newest pose, or None when empty."""
+        return self._stamps[-1] if self._stamps else None
+
+    def add(self, pose: FlangePose) -> None:
+        """Insert one pose in stamp order (duplicates of an existing stamp are ignored)."""
+        stamps = self._stamps
+        i = int(np.searchsorted(stamps, pose.stamp_ns))
+        if i < len(stamps) and stamps[i] == pose.stamp_ns:
+            self.duplicates += 1
+            return
+        if i < len(stamps):
+            self.out_of_order += 1
+        stamps.insert(i, pose.stamp_ns)
+        self._transforms.insert(i, pose.T_base_flange)
+        if self._max_age_ns is not None:
+            cut = int(np.searchsorted(stamps, stamps[-1] - self._max_age_ns))
+            if cut > 0:
+                del stamps[:cut]
+                del self._transforms[:cut]
+
+    def extend(self, poses: list[FlangePose]) -> None:
+        """Insert many poses (sorted once, much faster than repeated :meth:`add`)."""
+        if not poses:
+            return
+        stamps = np.array([p.stamp_ns for p in poses] + self._stamps, dtype=np.int64)
+        transforms = [p.T_base_flange for p in poses] + self._transforms
+        self.out_of_order += int(np.count_nonzero(np.diff(stamps[: len(poses)]) < 0))
+        order = np.argsort(stamps, kind="stable")
+        stamps = stamps[order]
+        keep = np.ones(len(stamps), dtype=bool)
+        keep[1:] = np.diff(stamps) != 0
+        self.duplicates += int(np.count_nonzero(~keep))
+        self._stamps = [int(s) for s in stamps[keep]]
+        self._transforms = [transforms[int(i)] for i in order[keep]]
+
+    def ready_for(self, stamp_ns: int, config: PairingConfig) -> bool:
+        """True when no later pose can still change the pairing of ``stamp_ns``."""
+        latest = self.latest_stamp_ns
+        horizon = max(config.sync_tolerance_s, config.speed_window_s)
+        t = stamp_ns + round(config.clock_offset_s * NS_PER_S)
+        return latest is not None and latest >= t + round(horizon * NS_PER_S)
+
+    def nearest_offset_ns(self, stamp_ns: int) -> int | None:
+        """Signed offset from ``stamp_ns`` to the nearest pose stamp, ns."""
+        if not self._stamps:
+            return None
+        i = int(np.searchsorted(self._stamps, stamp_ns))
+        candidates = [self._stamps[j] - stamp_ns for j in (i - 1, i) if 0 <= j < len(self)]
+        return min(candidates, key=abs)
+
+    def pose_at(self, stamp_ns: int, tolerance_ns: int) -> FloatArray | str:
+        """Flange pose at ``stamp_ns``, or the reason there is none.
+
+        Returns
+        -------
+        T_base_flange : ndarray, shape (4, 4), or str
+            Interpolated when two poses within the tolerance bracket the stamp, the nearest
+            pose when only one is within it, else a reason.
+        """
+        stamps = self._stamps
+        if not stamps:
+            return "no flange pose received"
+        i = int(np.searchsorted(stamps, stamp_ns))
+        if i < len(stamps) and stamps[i] == stamp_ns:
+            return self._transforms[i]
+        before = i - 1 if i > 0 and stamp_ns - stamps[i - 1] <= tolerance_ns else None
+        after = i if i < len(stamps) and stamps[i] - stamp_ns <= tolerance_ns else None
+        if before is not None and after is not None:
+            s = (stamp_ns - stamps[before]) / (stamps[after] - stamps[before])
+            return interpolate_transform(self._transforms[before], self._transforms[after], s)
+        if before is not None:
+            return self._transforms[before]
+        if after is not None:
+            return self._transforms[after]
+        offset = self.nearest_offset_ns(stamp_ns)
+        assert offset is not None
+        return (
+            f"no flange pose within {tolerance_ns / 1e6:.1f} ms of the profile stamp "
+            f"(nearest is {offset / 1e6:+.1f} ms away)"
+        )
+
+    def speed_at(self, stamp_ns: int, window_ns: int) -> tuple[float, float] | None:
+        """Linear (m/s) and angular (rad/s) flange speed around ``stamp_ns``.
+
+        Measured between the poses interpolated at ``stamp_ns -+ window_ns``; None when
+        the buffer does not cover that window.
+        """
+        if window_ns <= 0 or not self._stamps:
+            return None
+        lo, hi = stamp_ns - window_ns, stamp_ns + window_ns
+        if lo < self._stamps[0] or hi > self._stamps[-1]:
+            return None
+        far = 10 * window_ns
+        A, B = self.pose_at(lo, far), self.pose_at(hi, far)
+        if isinstance(A, str) or isinstance(B, str):
+            return None
+        dt = (hi - lo) / NS_PER_S
+        linear = float(np.linalg.norm(B[:3, 3] - A[:3, 3])) / dt
+        return linear, rotation_angle(A[:3, :3].T @ B[:3, :3]) / dt
+
+    def pair(self, profile: Profile, index: int, config: PairingConfig) -> Sample | Rejection:
+        """Pair one profile, or say why it cannot be paired."""
+        t = profile.stamp_ns + round(config.clock_offset_s * NS_PER_S)
+        pose = self.pose_at(t, round(config.sync_tolerance_s * NS_PER_S))
+        if isinstance(pose, str):
+            return Rejection(index, profile.stamp_ns, "pairing", pose)
+        speed = self.speed_at(t, round(config.speed_window_s * NS_PER_S))
+        if speed is not None:
+            linear, angular = speed
+            if config.max_linear_speed_m_s > 0.0 and linear > config.max_linear_speed_m_s:
+                return Rejection(
+                    index,
+                    profile.stamp_ns,
+                    "pairing",
+                    f"robot moving at {linear * 1e3:.1f} mm/s during the profile "
+                    f"(limit {config.max_linear_speed_m_s * 1e3:.1f} mm/s)",
+                )
+            if config.max_angular_speed_rad_s > 0.0 and angular > config.max_angular_speed_rad_s:
+                return Rejection(
+                    index,
+                    profile.stamp_ns,
+                    "pairing",
+                    f"robot rotating at {np.degrees(angular):.2f} deg/s during the profile "
+                    f"(limit {np.degrees(config.max_angular_speed_rad_s):.2f} deg/s)",
+                )
+        return Sample(index, profile.stamp_ns, np.asarray(pose, dtype=np.float64), profile.points)
+
+
+def pair_profiles(
+    profiles: list[Profile], poses: list[FlangePose], config: PairingConfig
+) -> PairingResult:
+    """Pair every profile with the flange pose at its stamp.
+
+    Parameters
+    ----------
+    profiles : list of Profile
+        In any order; a profile whose stamp repeats an earlier one is rejected.
+    poses : list of FlangePose
+        The flange pose stream, in any order; duplicate stamps keep the first pose.
+    config : PairingConfig
+
+    Returns
+    -------
+    PairingResult
+        Samples in stamp order; ``samples[i].index`` is the profile's position in
+        ``profiles``.
+    """
+    buffer = PoseBuffer()
+    buffer.extend(poses)
+    notes = []
+    if buffer.out_of_order:
+        notes.append(f"{buffer.out_of_order} flange poses arrived out of stamp order; sorted")
+    if buffer.duplicates:
+        notes.append(f"{buffer.duplicates} flange poses repeated a stamp; kept the first")
+    samples: list[Sample] = []
+    rejected: list[Rejection] = []
+    offsets: list[int] = []
+    seen: set[int] = set()
+    order = sorted(range(len(profiles)), key=lambda k: profiles[k].stamp_ns)
+    for k in order:
+        profile = profiles[k]
+        if profile.stamp_ns in seen:
+            rejected.append(
+                Rejection(k, profile.stamp_ns, "pairing", "duplicate profile stamp; kept first")
+            )
+            continue
+        seen.add(profile.stamp_ns)
+        offset = buffer.nearest_offset_ns(profile.stamp_ns)
+        if offset is not None:
+            offsets.append(offset)
+        outcome = buffer.pair(profile, k, config)
+        if isinstance(outcome, Sample):
+            samples.append(outcome)
+        else:
+            rejected.append(outcome)
+    median = float(np.median(offsets)) / NS_PER_S if offsets else None
+    span = None
+    if profiles and poses:
+        pose_stamps = [p.stamp_ns for p in poses]
+        profile_stamps = [p.stamp_ns for p in profiles]
+        span = (
+            (min(pose_stamps) + max(pose_stamps)) - (min(profile_stamps) + max(profile_stamps))
+        ) / (2 * NS_PER_S)
+    return PairingResult(samples, rejected, notes, median, span)
