@@ -1,0 +1,723 @@
+"""rosbag2 (MCAP) recordings of profiles and flange poses: write, read, summarise, append.
+
+A recording holds ``sensor_msgs/msg/PointCloud2`` profiles in the sensor frame and
+``geometry_msgs/msg/PoseStamped`` flange poses in the base frame. Bags are written with
+rosbags as rosbag2 version 9 MCAP directories (``metadata.yaml`` + ``<name>.mcap``), with each
+message logged at its header stamp. Reading uses rosbags' rosbag2 ``Reader`` (MCAP or
+SQLite 3 storage) and decodes with the Jazzy typestore: the definitions of PointCloud2 and
+PoseStamped (and of Header, Time, PointField, Pose) are the same in every ROS 2
+distribution, so this decodes bags recorded with any of them, without parsing each bag's
+stored definitions (which costs ~15 ms per bag, too much for a session of many small bags).
+
+Durability. rosbags buffers messages in memory (MCAP chunks of about 1 MiB) and writes the
+chunk index, the summary and ``metadata.yaml`` only on close; its reader needs all of them.
+So a rosbag2 bag is readable only once closed. :func:`write_bag` therefore writes into a
+hidden temporary directory and renames it into place when complete: a crash leaves no
+half-written bag under the requested name. :class:`SessionBagWriter`, for live collection,
+writes each sample (one profile and its flange pose) as its own small closed bag inside a
+session directory, so a crash loses at most the sample being written. :func:`read_bag`
+reads a session directory like a single bag.
+
+Topics are auto-detected by type when exactly one topic of each type holds messages.
+Every user-caused failure (missing, empty, truncated or corrupt bag, missing or ambiguous
+topics, wrong types) raises :class:`~linelaser_calib.io.errors.BagError` saying what to do;
+a single malformed message is skipped and reported in :attr:`BagContents.skipped`.
+"""
+
+from __future__ import annotations
+
+import datetime
+import functools
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.types import FlangePose, Profile
+from linelaser_calib.io.errors import BagError
+from msg_adapters import (
+    MessageError,
+    flange_pose_from_pose_stamped,
+    pointcloud2_from_points,
+    pose_stamped_from_flange_pose,
+    profile_from_pointcloud2,
+    rosbags_types,
+    stamp_ns_from_msg,
+)
+
+PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
+POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+#: File in a session directory that marks it as one (see :class:`SessionBagWriter`).
+SESSION_MARKER = "linelaser_calib_session.txt"
+_SAMPLE_PREFIX = "sample_"
+
+#: Called as ``progress(done, total)`` while messages are decoded.
+Progress = Callable[[int, int], None]
+
+
+class TopicSummary(NamedTuple):
+    """One topic of a bag: name, message type and message count."""
+
+    topic: str
+    msgtype: str
+    msgcount: int
+
+
+class SkippedMessage(NamedTuple):
+    """A message that could not be used: topic, stamp (header, else log time) ns, reason."""
+
+    topic: str
+    stamp_ns: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class BagContents:
+    """Profiles and flange poses read from a bag, sorted by stamp.
+
+    Attributes
+    ----------
+    path : Path
+        The bag (or session) directory or MCAP file read.
+    profiles : list of Profile
+        Points (N, 3) in m with invalid (NaN/Inf) points dropped.
+    poses : list of FlangePose
+    profile_topic, pose_topic : str
+        Topics the profiles and poses came from.
+    sensor_frame, base_frame : str
+        Header frame ids of the first profile and the first pose.
+    topics : list of TopicSummary
+        Every topic of the bag, sorted by name.
+    start_ns, end_ns : int
+        Log times of the first and last message of the bag, ns.
+    skipped : list of SkippedMessage
+        Messages on the two topics that were malformed or undecodable.
+    """
+
+    path: Path
+    profiles: list[Profile]
+    poses: list[FlangePose]
+    profile_topic: str
+    pose_topic: str
+    sensor_frame: str
+    base_frame: str
+    topics: list[TopicSummary]
+    start_ns: int
+    end_ns: int
+    skipped: list[SkippedMessage]
+
+
+class PointCount(NamedTuple):
+    """Valid points per profile: minimum, median and maximum over the profiles."""
+
+    min: int
+    median: float
+    max: int
+
+
+@dataclass(frozen=True)
+class BagInfo:
+    """What a bag holds, for ``linelaser-calib info``.
+
+    Attributes
+    ----------
+    path : Path
+    topics : list of TopicSummary
+    start_ns, end_ns : int or None
+        Log times of the first and last message, ns; None for an empty bag.
+    contents : BagContents or None
+        The decoded profiles and poses; None when they could not be read (see ``problem``).
+    problem : str or None
+        Why the profiles and poses could not be read (e.g. ambiguous topics).
+    points_per_profile : PointCount or None
+        Valid points per profile; None without profiles.
+    """
+
+    path: Path
+    topics: list[TopicSummary]
+    start_ns: int | None
+    end_ns: int | None
+    contents: BagContents | None
+    problem: str | None
+    points_per_profile: PointCount | None
+
+
+@functools.cache
+def _typestore() -> Typestore:
+    """The ROS 2 Jazzy typestore that serialises and deserialises every message."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _fsync_tree(directory: Path) -> None:
+    """Flush every file in ``directory`` and the directory entry itself to disk."""
+    for path in directory.iterdir():
+        if path.is_file():
+            with path.open("rb") as stream:
+                os.fsync(stream.fileno())
+    _fsync_directory(directory)
+
+
+def _fsync_directory(directory: Path) -> None:
+    fd = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+class _ProfilePoseWriter:
+    """A rosbags MCAP writer with one profile and one pose connection."""
+
+    def __init__(self, writer: Writer, profile_topic: str, pose_topic: str) -> None:
+        store = _typestore()
+        self._writer = writer
+        self._types = rosbags_types(store)
+        self._profiles = writer.add_connection(profile_topic, PROFILE_TYPE, typestore=store)
+        self._poses = writer.add_connection(pose_topic, POSE_TYPE, typestore=store)
+
+    def write_profile(
+        self,
+        stamp_ns: int,
+        points: NDArray[np.float64],
+        frame_id: str,
+        *,
+        intensity: NDArray[np.float64] | None,
+        organised: bool,
+        padding_bytes: int,
+    ) -> None:
+        msg = pointcloud2_from_points(
+            points,
+            stamp_ns,
+            frame_id,
+            types=self._types,
+            intensity=intensity,
+            organised=organised,
+            padding_bytes=padding_bytes,
+        )
+        self._writer.write(self._profiles, stamp_ns, _typestore().serialize_cdr(msg, PROFILE_TYPE))
+
+    def write_pose(self, pose: FlangePose) -> None:
+        msg = pose_stamped_from_flange_pose(pose, types=self._types)
+        self._writer.write(self._poses, pose.stamp_ns, _typestore().serialize_cdr(msg, POSE_TYPE))
+
+
+@contextmanager
+def _new_bag(path: Path, profile_topic: str, pose_topic: str) -> Iterator[_ProfilePoseWriter]:
+    """Write a bag at ``path`` that appears there only once complete and on disk.
+
+    The bag is written as ``<tmp>/<name>`` in a hidden temporary directory next to ``path``
+    (so the MCAP file keeps the name ``<name>.mcap``), flushed, then renamed to ``path``.
+    On any error the temporary directory is removed and nothing appears at ``path``.
+    """
+    if path.exists():
+        raise BagError(
+            f"{path} exists already and bags are never overwritten; "
+            "choose a new output path or delete the old bag"
+        )
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(
+            tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".partial", dir=path.parent)
+        )
+    except OSError as err:
+        raise BagError(f"cannot create bag {path}: {err}") from err
+    try:
+        with Writer(staging / path.name, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            yield _ProfilePoseWriter(writer, profile_topic, pose_topic)
+        _fsync_tree(staging / path.name)
+        (staging / path.name).rename(path)
+        _fsync_directory(path.parent)
+    except OSError as err:
+        raise BagError(f"cannot write bag {path}: {err}") from err
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def write_bag(
+    path: str | Path,
+    profiles: Sequence[Profile],
+    poses: Sequence[FlangePose],
+    *,
+    profile_topic: str = "/profile",
+    pose_topic: str = "/flange_pose",
+    sensor_frame: str = "laser",
+    base_frame: str = "base_link",
+    organised: bool = True,
+    intensities: Sequence[NDArray[np.float64] | None] | None = None,
+    padding_bytes: int = 0,
+) -> Path:
+    """Write profiles and flange poses to a new rosbag2 MCAP bag, in stamp order.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory to create; it must not exist.
+    profiles : sequence of Profile
+        Points (N, 3) in m, NaN/Inf rows are invalid returns.
+    poses : sequence of FlangePose
+    profile_topic, pose_topic : str
+    sensor_frame, base_frame : str
+        Header frame ids of every profile and every pose (the records' own ``frame_id`` is
+        not used).
+    organised : bool
+        Organised clouds (height 1, invalid rows kept) or dense ones (invalid rows dropped).
+    intensities : sequence of (ndarray (N,) or None), optional
+        Per-profile intensity field (float32 in the message).
+    padding_bytes : int
+        Unused bytes per point, as some drivers send.
+
+    Returns
+    -------
+    Path
+        The bag directory.
+
+    Raises
+    ------
+    BagError
+        If ``path`` exists or cannot be written.
+    InputError
+        If ``intensities`` does not match ``profiles``.
+    """
+    path = Path(path)
+    if intensities is None:
+        intensities = [None] * len(profiles)
+    if len(intensities) != len(profiles):
+        raise InputError(f"{len(intensities)} intensity arrays given for {len(profiles)} profiles")
+    events = sorted(
+        [(pose.stamp_ns, 0, i) for i, pose in enumerate(poses)]
+        + [(profile.stamp_ns, 1, i) for i, profile in enumerate(profiles)]
+    )
+    with _new_bag(path, profile_topic, pose_topic) as bag:
+        for _, kind, i in events:
+            if kind == 0:
+                pose = poses[i]
+                bag.write_pose(FlangePose(pose.stamp_ns, pose.T_base_flange, base_frame))
+            else:
+                intensity = intensities[i]
+                bag.write_profile(
+                    profiles[i].stamp_ns,
+                    profiles[i].points,
+                    sensor_frame,
+                    intensity=None if intensity is None else np.asarray(intensity),
+                    organised=organised,
+                    padding_bytes=padding_bytes,
+                )
+    return path
+
+
+class SessionBagWriter:
+    """Persist samples one by one during live collection; a crash loses at most one sample.
+
+    The session is a directory holding a marker file and one complete rosbag2 MCAP bag per
+    sample, ``sample_000000/``, ``sample_000001/``, ... Each bag holds the flange pose and
+    the profile, both stamped with the profile stamp. :meth:`append` returns only after the
+    sample's bag is closed, flushed to disk (fsync) and renamed into place, so every
+    appended sample survives a crash; a sample interrupted mid-write stays in a hidden
+    ``.sample_*.partial`` directory that readers ignore. :func:`read_bag` and
+    :func:`bag_info` read the session directory as one bag.
+
+    Parameters
+    ----------
+    path : str or Path
+        Session directory to create; it must not exist.
+    profile_topic, pose_topic : str
+    organised : bool
+        Organised (invalid rows kept) or dense profile clouds.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        profile_topic: str = "/profile",
+        pose_topic: str = "/flange_pose",
+        organised: bool = True,
+    ) -> None:
+        self.path = Path(path)
+        self.profile_topic = profile_topic
+        self.pose_topic = pose_topic
+        self.organised = organised
+        self.count = 0
+        self._closed = False
+        if self.path.exists():
+            raise BagError(
+                f"{self.path} exists already and sessions are never overwritten; "
+                "choose a new session path or delete the old one"
+            )
+        try:
+            self.path.mkdir(parents=True)
+            (self.path / SESSION_MARKER).write_text(
+                "linelaser_calib sample session: one rosbag2 bag per sample in sample_*/\n",
+                encoding="utf-8",
+            )
+            _fsync_tree(self.path)
+        except OSError as err:
+            raise BagError(f"cannot create session directory {self.path}: {err}") from err
+
+    def append(self, profile: Profile, pose_at_profile: FlangePose) -> Path:
+        """Write one sample durably.
+
+        Parameters
+        ----------
+        profile : Profile
+            Points (N, 3) in m in frame ``profile.frame_id``.
+        pose_at_profile : FlangePose
+            Flange pose at the profile stamp, in frame ``pose_at_profile.frame_id``. It is
+            written with the profile stamp, so both messages carry identical stamps.
+
+        Returns
+        -------
+        Path
+            The sample's bag directory.
+        """
+        if self._closed:
+            raise BagError(f"session {self.path} is closed; start a new session to record more")
+        sample_path = self.path / f"{_SAMPLE_PREFIX}{self.count:06d}"
+        pose = FlangePose(profile.stamp_ns, pose_at_profile.T_base_flange, pose_at_profile.frame_id)
+        with _new_bag(sample_path, self.profile_topic, self.pose_topic) as bag:
+            bag.write_pose(pose)
+            bag.write_profile(
+                profile.stamp_ns,
+                profile.points,
+                profile.frame_id,
+                intensity=None,
+                organised=self.organised,
+                padding_bytes=0,
+            )
+        self.count += 1
+        return sample_path
+
+    def close(self) -> None:
+        """Stop appending. Every appended sample is already on disk."""
+        self._closed = True
+
+    def __enter__(self) -> SessionBagWriter:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+def _bag_parts(path: Path) -> list[Path]:
+    """The bag directories or files to read for ``path`` (one, or a session's samples)."""
+    if not path.exists():
+        raise BagError(f"bag {path} does not exist; check the path")
+    if path.is_file():
+        if path.suffix not in {".mcap", ".db3"}:
+            raise BagError(
+                f"{path} is not a rosbag2 bag; pass the bag directory (holding "
+                "metadata.yaml) or its .mcap file"
+            )
+        return [path]
+    if (path / "metadata.yaml").is_file():
+        return [path]
+    if (path / SESSION_MARKER).is_file():
+        samples = sorted(
+            p for p in path.glob(f"{_SAMPLE_PREFIX}*") if (p / "metadata.yaml").is_file()
+        )
+        if not samples:
+            raise BagError(f"session {path} holds no samples yet; record some first")
+        return samples
+    inner = sorted(p.name for p in path.iterdir() if (p / "metadata.yaml").is_file())
+    storage = sorted(p.name for p in path.iterdir() if p.suffix in {".mcap", ".db3"})
+    if inner:
+        hint = f"; it contains the bags {inner}: pass one of them"
+    elif storage:
+        hint = (
+            f"; it holds {storage} (the recorder was probably killed before closing the bag): "
+            "pass the storage file itself, or recreate metadata.yaml with `ros2 bag reindex`"
+        )
+    else:
+        hint = ""
+    raise BagError(f"{path} is not a rosbag2 bag (it has no metadata.yaml){hint}")
+
+
+@contextmanager
+def _open_part(part: Path, bag: Path) -> Iterator[Reader]:
+    """Open one bag with rosbags; any failure to parse it becomes a :class:`BagError`."""
+    try:
+        reader = Reader(part)
+        reader.open()
+    # A damaged file makes the parsers raise almost anything (seen: UnicodeDecodeError,
+    # KeyError, MemoryError, rosbags' own errors); all mean the same to the user.
+    except Exception as err:
+        raise BagError(_unreadable(bag, part, err)) from err
+    try:
+        yield reader
+    finally:
+        reader.close()
+
+
+def _unreadable(bag: Path, part: Path, err: Exception) -> str:
+    where = str(bag) if part == bag else f"{bag} (sample {part.name})"
+    return (
+        f"cannot read bag {where}: {type(err).__name__}: {err}. The file is truncated or "
+        "corrupt (e.g. the recorder was killed before closing it): re-record it, or salvage "
+        "a copy of a truncated MCAP file with the mcap CLI (`mcap recover`)"
+    )
+
+
+class _Summary(NamedTuple):
+    topics: list[TopicSummary]
+    start_ns: int | None
+    end_ns: int | None
+
+
+def _summarise(bag: Path, parts: Sequence[Path]) -> _Summary:
+    counts: dict[tuple[str, str], int] = {}
+    starts: list[int] = []
+    ends: list[int] = []
+    for part in parts:
+        with _open_part(part, bag) as reader:
+            for conn in reader.connections:
+                key = (conn.topic, conn.msgtype)
+                counts[key] = counts.get(key, 0) + conn.msgcount
+            if any(conn.msgcount for conn in reader.connections):
+                starts.append(reader.start_time)
+                ends.append(reader.end_time - 1)
+    topics = [TopicSummary(t, m, n) for (t, m), n in sorted(counts.items())]
+    return _Summary(topics, min(starts, default=None), max(ends, default=None))
+
+
+def _listing(topics: Sequence[TopicSummary]) -> str:
+    return ", ".join(f"{t.topic} ({t.msgtype}, {t.msgcount} msgs)" for t in topics) or "none"
+
+
+def _choose_topic(
+    bag: Path, topics: Sequence[TopicSummary], msgtype: str, wanted: str | None, what: str
+) -> str:
+    """The topic of type ``msgtype`` to read: ``wanted`` if given, else the only one."""
+    option = f"{what}_topic (--{what}-topic)"
+    if wanted is not None:
+        found = [t for t in topics if t.topic == wanted]
+        if not found:
+            raise BagError(
+                f"bag {bag} has no topic {wanted!r}; its topics are: {_listing(topics)}. "
+                f"Pass an existing {msgtype} topic as {option}"
+            )
+        if all(t.msgtype != msgtype for t in found):
+            raise BagError(
+                f"topic {wanted!r} in bag {bag} has type {found[0].msgtype}, expected "
+                f"{msgtype}; pass a {msgtype} topic as {option}"
+            )
+        if sum(t.msgcount for t in found if t.msgtype == msgtype) == 0:
+            raise BagError(f"topic {wanted!r} in bag {bag} holds no messages")
+        return wanted
+    candidates = [t for t in topics if t.msgtype == msgtype and t.msgcount > 0]
+    if len(candidates) == 1:
+        return candidates[0].topic
+    if not candidates:
+        raise BagError(
+            f"bag {bag} holds no {msgtype} messages (the {what}s); its topics are: "
+            f"{_listing(topics)}"
+        )
+    raise BagError(
+        f"bag {bag} has several {msgtype} topics: {_listing(candidates)}; choose one with {option}"
+    )
+
+
+def _raw_messages(
+    reader: Reader, connections: Sequence[Any], bag: Path, part: Path
+) -> Iterator[tuple[Any, int, Any]]:
+    """``reader.messages(connections)``, with a damaged chunk turned into :class:`BagError`."""
+    iterator = iter(reader.messages(connections))
+    while True:
+        try:
+            item = next(iterator)
+        except StopIteration:
+            return
+        except Exception as err:  # a damaged chunk: see _open_part
+            raise BagError(_unreadable(bag, part, err)) from err
+        yield item
+
+
+def _convert(
+    topic: str, msgtype: str, log_ns: int, raw: Any
+) -> Profile | FlangePose | SkippedMessage:
+    """Decode one profile or pose message; a malformed one becomes a :class:`SkippedMessage`."""
+    try:
+        msg: Any = _typestore().deserialize_cdr(raw, msgtype)
+    # Corrupt message bytes make the deserialiser raise various errors; skip the message.
+    except Exception as err:
+        return SkippedMessage(topic, log_ns, f"cannot decode the message: {err}")
+    try:
+        if msgtype == PROFILE_TYPE:
+            return profile_from_pointcloud2(msg)
+        return flange_pose_from_pose_stamped(msg)
+    except MessageError as err:
+        return SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err))
+
+
+def read_bag(
+    path: str | Path,
+    *,
+    profile_topic: str | None = None,
+    pose_topic: str | None = None,
+    progress: Progress | None = None,
+) -> BagContents:
+    """Read the profiles and flange poses of a bag (or a :class:`SessionBagWriter` session).
+
+    Parameters
+    ----------
+    path : str or Path
+        rosbag2 directory, its ``.mcap`` file, or a session directory.
+    profile_topic, pose_topic : str, optional
+        Topics to read. By default the only PointCloud2 topic and the only PoseStamped topic
+        holding messages.
+    progress : callable(done, total), optional
+        Called after each message of the two topics.
+
+    Returns
+    -------
+    BagContents
+        Profiles (invalid points dropped) and poses sorted by stamp; malformed messages are
+        listed in ``skipped`` instead of aborting the read.
+
+    Raises
+    ------
+    BagError
+        Missing path, not a bag, empty, truncated or corrupt bag, missing, ambiguous or
+        wrongly typed topics, or no readable profile or pose at all.
+    """
+    bag = Path(path)
+    parts = _bag_parts(bag)
+    summary = _summarise(bag, parts)
+    if summary.start_ns is None or summary.end_ns is None:
+        raise BagError(
+            f"bag {bag} is empty (topics: {_listing(summary.topics)}); record the profile "
+            "and flange pose topics"
+        )
+    chosen_profile = _choose_topic(bag, summary.topics, PROFILE_TYPE, profile_topic, "profile")
+    chosen_pose = _choose_topic(bag, summary.topics, POSE_TYPE, pose_topic, "pose")
+    wanted = {(chosen_profile, PROFILE_TYPE), (chosen_pose, POSE_TYPE)}
+    total = sum(t.msgcount for t in summary.topics if (t.topic, t.msgtype) in wanted)
+
+    profiles: list[Profile] = []
+    poses: list[FlangePose] = []
+    skipped: list[SkippedMessage] = []
+    done = 0
+    for part in parts:
+        with _open_part(part, bag) as reader:
+            connections = [c for c in reader.connections if (c.topic, c.msgtype) in wanted]
+            for conn, log_ns, raw in _raw_messages(reader, connections, bag, part):
+                item = _convert(conn.topic, conn.msgtype, log_ns, raw)
+                if isinstance(item, Profile):
+                    profiles.append(item)
+                elif isinstance(item, FlangePose):
+                    poses.append(item)
+                else:
+                    skipped.append(item)
+                done += 1
+                if progress is not None:
+                    progress(done, total)
+
+    for items, topic, what in ((profiles, chosen_profile, "profile"), (poses, chosen_pose, "pose")):
+        if not items:
+            first = next((s.reason for s in skipped if s.topic == topic), "none")
+            raise BagError(
+                f"bag {bag}: no readable {what} on {topic} "
+                f"({sum(s.topic == topic for s in skipped)} skipped; first reason: {first})"
+            )
+    profiles.sort(key=lambda p: p.stamp_ns)
+    poses.sort(key=lambda p: p.stamp_ns)
+    return BagContents(
+        path=bag,
+        profiles=profiles,
+        poses=poses,
+        profile_topic=chosen_profile,
+        pose_topic=chosen_pose,
+        sensor_frame=profiles[0].frame_id,
+        base_frame=poses[0].frame_id,
+        topics=summary.topics,
+        start_ns=summary.start_ns,
+        end_ns=summary.end_ns,
+        skipped=skipped,
+    )
+
+
+def bag_info(
+    path: str | Path, *, profile_topic: str | None = None, pose_topic: str | None = None
+) -> BagInfo:
+    """Summarise a bag: topics, time span, profiles, poses and points per profile.
+
+    A bag whose topics cannot be chosen (ambiguous, missing) still gets its topic list, with
+    the reason in ``problem``.
+
+    Raises
+    ------
+    BagError
+        If the bag does not exist or cannot be opened at all.
+    """
+    bag = Path(path)
+    summary = _summarise(bag, _bag_parts(bag))
+    try:
+        contents: BagContents | None = read_bag(
+            bag, profile_topic=profile_topic, pose_topic=pose_topic
+        )
+        problem = None
+    except BagError as err:
+        contents, problem = None, str(err)
+    counts = None
+    if contents is not None:
+        sizes = [len(p.points) for p in contents.profiles]
+        counts = PointCount(min(sizes), float(np.median(sizes)), max(sizes))
+    return BagInfo(bag, summary.topics, summary.start_ns, summary.end_ns, contents, problem, counts)
+
+
+def _utc(stamp_ns: int) -> str:
+    moment = datetime.datetime.fromtimestamp(stamp_ns / 1e9, tz=datetime.timezone.utc)
+    return moment.strftime("%Y-%m-%d %H:%M:%S.%f")[:-3]
+
+
+def format_bag_info(info: BagInfo) -> str:
+    """Human-readable text of :func:`bag_info`'s result (times in UTC and s, labelled)."""
+    lines = [f"bag: {info.path}"]
+    if info.start_ns is None or info.end_ns is None:
+        lines.append("time: empty bag (no messages)")
+    else:
+        duration_s = (info.end_ns - info.start_ns) / 1e9
+        lines.append(
+            f"time: {_utc(info.start_ns)} to {_utc(info.end_ns)} UTC, duration {duration_s:.3f} s"
+        )
+    lines.append("topics:")
+    width = max((len(t.topic) for t in info.topics), default=0)
+    lines += [f"  {t.topic:<{width}}  {t.msgtype}  {t.msgcount} msgs" for t in info.topics]
+    contents = info.contents
+    if contents is None:
+        lines.append(f"profiles and poses: not readable: {info.problem}")
+        return "\n".join(lines)
+    lines.append(
+        f"profiles: {len(contents.profiles)} on {contents.profile_topic} "
+        f"(frame {contents.sensor_frame})"
+    )
+    if info.points_per_profile is not None:
+        n = info.points_per_profile
+        lines.append(f"valid points per profile: min {n.min}, median {n.median:g}, max {n.max}")
+    lines.append(
+        f"flange poses: {len(contents.poses)} on {contents.pose_topic} "
+        f"(frame {contents.base_frame})"
+    )
+    if contents.skipped:
+        first = contents.skipped[0]
+        lines.append(
+            f"skipped messages: {len(contents.skipped)} (first: {first.topic} at "
+            f"{first.stamp_ns} ns: {first.reason})"
+        )
+    return "\n".join(lines)

@@ -1,0 +1,444 @@
+"""Result and truth YAML files: the one place calibration results are written and read.
+
+The result file layout is the DESIGN.md contract::
+
+    hand_eye:                       # T_flange_sensor
+      parent_frame: tool0
+      child_frame: laser
+      translation: [x, y, z]        # m
+      rotation_xyzw: [x, y, z, w]
+      matrix: [[...], [...], [...], [0, 0, 0, 1]]
+      uncertainty: {translation_m: [sx, sy, sz], rotation_rad: [rx, ry, rz]}   # 1 sigma, or null
+    cylinder: {frame: base_link, point: [x, y, z], direction: [x, y, z], radius: r}
+    quality: {method: ..., samples_used: N, samples_rejected: [...], rms_residual_m: ...,
+              warnings: [...]}
+
+``quality`` also carries ``samples_used_indices``, ``sample_residuals_m`` (profile index ->
+RMS m) and ``radius_estimated``. Truth files (simulator output) use the same ``hand_eye`` and
+``cylinder`` keys (no uncertainty, no quality) plus free extra top-level keys.
+
+Values are plain Python floats, ints and strings (no numpy tags). Files are written
+atomically: a temporary file in the same directory is flushed and renamed over the target,
+so a reader never sees a partial file. When reading, ``translation`` and ``rotation_xyzw``
+define the transform; ``matrix``, if present, must agree with them.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from numpy.typing import ArrayLike, NDArray
+
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.geometry import (
+    check_quaternion_xyzw,
+    check_transform,
+    transform_from_translation_quaternion,
+    translation_quaternion_from_transform,
+)
+from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection
+from linelaser_calib.io.errors import ResultFileError
+
+FloatArray = NDArray[np.float64]
+
+#: Largest accepted difference between ``matrix`` and ``translation``/``rotation_xyzw``.
+MATRIX_TOLERANCE = 1e-6
+
+_RESULT_HEADER = (
+    "# linelaser_calib result. hand_eye is T_flange_sensor (pose of child_frame in\n"
+    "# parent_frame); lengths in m, angles in rad, quaternions xyzw, uncertainty 1 sigma.\n"
+)
+_TRUTH_HEADER = (
+    "# linelaser_calib ground truth (simulator). hand_eye is T_flange_sensor;\n"
+    "# lengths in m, quaternions xyzw.\n"
+)
+
+
+@dataclass(frozen=True)
+class Truth:
+    """A truth file: the true hand-eye and cylinder, plus the whole file as read.
+
+    Attributes
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+    cylinder : Cylinder
+        In ``base_frame``, m.
+    parent_frame, child_frame, base_frame : str
+    raw : dict
+        The parsed YAML, including extra keys (scenario, seed, noise, ...).
+    """
+
+    T_flange_sensor: FloatArray
+    cylinder: Cylinder
+    parent_frame: str
+    child_frame: str
+    base_frame: str
+    raw: dict[str, Any]
+
+
+def _floats(values: ArrayLike) -> list[float]:
+    return [float(v) for v in np.asarray(values, dtype=np.float64).reshape(-1)]
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with numpy arrays and scalars turned into plain Python lists and numbers."""
+    if isinstance(value, Mapping):
+        return {_plain(key): _plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(item) for item in value]
+    if isinstance(value, (np.ndarray, np.generic)):
+        return value.tolist()
+    return value
+
+
+def _hand_eye_section(
+    T_flange_sensor: ArrayLike, parent_frame: str, child_frame: str
+) -> dict[str, Any]:
+    T = check_transform(T_flange_sensor, 1e-4)
+    translation, q_xyzw = translation_quaternion_from_transform(T)
+    return {
+        "parent_frame": parent_frame,
+        "child_frame": child_frame,
+        "translation": _floats(translation),
+        "rotation_xyzw": _floats(q_xyzw),
+        "matrix": [_floats(row) for row in T],
+    }
+
+
+def _cylinder_section(cylinder: Cylinder, frame: str) -> dict[str, Any]:
+    return {
+        "frame": frame,
+        "point": _floats(cylinder.point),
+        "direction": _floats(cylinder.direction),
+        "radius": float(cylinder.radius),
+    }
+
+
+def _write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Path:
+    """Write ``header`` + YAML of ``data`` to ``path`` via a flushed temporary file."""
+    try:
+        text = header + yaml.safe_dump(
+            data, sort_keys=False, default_flow_style=None, width=100, allow_unicode=True
+        )
+    except yaml.YAMLError as err:
+        raise InputError(f"cannot write {path}: a value is not plain YAML data: {err}") from err
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as stream:
+                os.fchmod(stream.fileno(), 0o644)
+                stream.write(text)
+                stream.flush()
+                os.fsync(stream.fileno())
+            os.replace(tmp_name, path)
+        except BaseException:
+            Path(tmp_name).unlink(missing_ok=True)
+            raise
+    except OSError as err:
+        raise ResultFileError(f"cannot write {path}: {err}") from err
+    return path
+
+
+def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
+    """Write a calibration result in the contract layout, atomically.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    path : str or Path
+        Target file; missing parent directories are created.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ResultFileError
+        If the file cannot be written (nothing is left at ``path`` then).
+    """
+    unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+    hand_eye = _hand_eye_section(result.T_flange_sensor, result.parent_frame, result.child_frame)
+    hand_eye["uncertainty"] = (
+        None
+        if unc_t is None and unc_r is None
+        else {
+            "translation_m": None if unc_t is None else _floats(unc_t),
+            "rotation_rad": None if unc_r is None else _floats(unc_r),
+        }
+    )
+    data = {
+        "hand_eye": hand_eye,
+        "cylinder": _cylinder_section(result.cylinder, result.base_frame),
+        "quality": {
+            "method": result.method,
+            "samples_used": len(result.samples_used),
+            "samples_rejected": [
+                {
+                    "index": int(r.index),
+                    "stamp_ns": int(r.stamp_ns),
+                    "stage": r.stage,
+                    "reason": r.reason,
+                }
+                for r in result.samples_rejected
+            ],
+            "rms_residual_m": float(result.rms_residual_m),
+            "warnings": [str(w) for w in result.warnings],
+            "radius_estimated": bool(result.radius_estimated),
+            "samples_used_indices": [int(i) for i in result.samples_used],
+            "sample_residuals_m": {
+                int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
+            },
+        },
+    }
+    return _write_yaml_atomically(Path(path), _RESULT_HEADER, data)
+
+
+def write_truth_yaml(
+    path: str | Path,
+    T_flange_sensor: ArrayLike,
+    cylinder: Cylinder,
+    *,
+    parent_frame: str = "tool0",
+    child_frame: str = "laser",
+    base_frame: str = "base_link",
+    extra: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write a truth file (same ``hand_eye``/``cylinder`` keys as a result), atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    T_flange_sensor : array-like, shape (4, 4)
+        True hand-eye, translation in m.
+    cylinder : Cylinder
+        True cylinder in ``base_frame``, m.
+    parent_frame, child_frame, base_frame : str
+    extra : mapping, optional
+        Further top-level keys (scenario, seed, noise levels, ...); numpy values are
+        converted to plain lists and numbers.
+
+    Raises
+    ------
+    InputError
+        If ``extra`` reuses ``hand_eye`` or ``cylinder`` or holds values YAML cannot store.
+    ResultFileError
+        If the file cannot be written.
+    """
+    extra = dict(extra or {})
+    clash = sorted({"hand_eye", "cylinder"} & set(extra))
+    if clash:
+        raise InputError(f"extra keys {clash} would overwrite the truth itself; rename them")
+    data = {
+        "hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame),
+        "cylinder": _cylinder_section(cylinder, base_frame),
+        **_plain(extra),
+    }
+    return _write_yaml_atomically(Path(path), _TRUTH_HEADER, data)
+
+
+class _Fields:
+    """Typed access to a parsed YAML mapping; every problem names the file and the key."""
+
+    def __init__(self, path: Path, data: Any, prefix: str = "") -> None:
+        if not isinstance(data, dict):
+            where = prefix.rstrip(".") or "the top level"
+            raise ResultFileError(f"{path}: {where} must be a mapping, got {data!r}")
+        self.path, self.data, self.prefix = path, data, prefix
+
+    def _error(self, key: object, problem: str) -> ResultFileError:
+        return ResultFileError(f"{self.path}: key {self.prefix}{key} {problem}")
+
+    def has(self, key: str) -> bool:
+        return self.data.get(key) is not None
+
+    def get(self, key: object) -> Any:
+        if key not in self.data:
+            raise self._error(key, "is missing")
+        return self.data[key]
+
+    def section(self, key: str) -> _Fields:
+        return _Fields(self.path, self.get(key), f"{self.prefix}{key}.")
+
+    def text(self, key: str) -> str:
+        value = self.get(key)
+        if not isinstance(value, str):
+            raise self._error(key, f"must be a string, got {value!r}")
+        return value
+
+    def number(self, key: object) -> float:
+        value = self.get(key)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self._error(key, f"must be a number, got {value!r}")
+        return float(value)
+
+    def integer(self, key: str) -> int:
+        value = self.get(key)
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self._error(key, f"must be an integer, got {value!r}")
+        return value
+
+    def array(self, key: str, shape: tuple[int, ...]) -> FloatArray:
+        value = self.get(key)
+        try:
+            array = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise self._error(key, f"must be numbers of shape {shape}, got {value!r}") from None
+        if array.shape != shape or not np.all(np.isfinite(array)):
+            raise self._error(key, f"must be finite numbers of shape {shape}, got {value!r}")
+        return array
+
+    def items(self, key: str) -> list[Any]:
+        """The list at ``key``; an absent or null key gives an empty list."""
+        value = self.data.get(key)
+        if value is None:
+            return []
+        if not isinstance(value, list):
+            raise self._error(key, f"must be a list, got {value!r}")
+        return value
+
+    def integers(self, key: str) -> list[int]:
+        values = self.items(key)
+        if not all(isinstance(v, int) and not isinstance(v, bool) for v in values):
+            raise self._error(key, f"must be a list of integers, got {values!r}")
+        return values
+
+    def flag(self, key: str) -> bool:
+        value = self.data.get(key, False)
+        if not isinstance(value, bool):
+            raise self._error(key, f"must be true or false, got {value!r}")
+        return value
+
+
+def _load(path: str | Path) -> tuple[Path, _Fields]:
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ResultFileError(f"{path} does not exist; check the path") from None
+    except (OSError, UnicodeDecodeError) as err:
+        raise ResultFileError(f"cannot read {path}: {err}") from err
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise ResultFileError(f"{path} is not valid YAML: {err}") from None
+    return path, _Fields(path, data)
+
+
+def _read_hand_eye(fields: _Fields) -> tuple[FloatArray, str, str]:
+    """``T_flange_sensor`` (4, 4), parent frame, child frame from the ``hand_eye`` section."""
+    hand_eye = fields.section("hand_eye")
+    translation = hand_eye.array("translation", (3,))
+    try:
+        q_xyzw = check_quaternion_xyzw(hand_eye.array("rotation_xyzw", (4,)))
+    except ValueError as err:
+        raise ResultFileError(f"{fields.path}: key hand_eye.rotation_xyzw: {err}") from None
+    T = transform_from_translation_quaternion(translation, q_xyzw)
+    if hand_eye.has("matrix"):
+        matrix = hand_eye.array("matrix", (4, 4))
+        if np.max(np.abs(matrix - T)) > MATRIX_TOLERANCE:
+            raise ResultFileError(
+                f"{fields.path}: hand_eye.matrix disagrees with hand_eye.translation and "
+                "hand_eye.rotation_xyzw; fix or delete the matrix"
+            )
+    return T, hand_eye.text("parent_frame"), hand_eye.text("child_frame")
+
+
+def _read_cylinder(fields: _Fields) -> tuple[Cylinder, str]:
+    """Cylinder (unit direction) and its frame from the ``cylinder`` section."""
+    section = fields.section("cylinder")
+    direction = section.array("direction", (3,))
+    norm = float(np.linalg.norm(direction))
+    radius = section.number("radius")
+    if norm < 1e-12 or not radius > 0.0:
+        raise ResultFileError(
+            f"{fields.path}: cylinder needs a non-zero direction and a radius > 0 m, got "
+            f"direction {direction.tolist()} and radius {radius} m"
+        )
+    cylinder = Cylinder(section.array("point", (3,)), direction / norm, radius)
+    return cylinder, section.text("frame")
+
+
+def _read_uncertainty(hand_eye: _Fields, key: str) -> FloatArray | None:
+    if not hand_eye.has("uncertainty"):
+        return None
+    uncertainty = hand_eye.section("uncertainty")
+    return uncertainty.array(key, (3,)) if uncertainty.has(key) else None
+
+
+def read_result_yaml(path: str | Path) -> CalibrationResult:
+    """Read a result file written by :func:`write_result_yaml` (or by hand, same keys).
+
+    ``samples_used`` is restored from ``quality.samples_used_indices`` (empty if absent);
+    optional keys (``warnings``, ``samples_rejected``, ``uncertainty``, ...) default to empty.
+    Convergence ``history`` is not stored in the file.
+
+    Raises
+    ------
+    ResultFileError
+        Missing file, invalid YAML, or a missing or malformed key (named in the message).
+    """
+    path, fields = _load(path)
+    T, parent_frame, child_frame = _read_hand_eye(fields)
+    cylinder, base_frame = _read_cylinder(fields)
+    hand_eye = fields.section("hand_eye")
+    quality = fields.section("quality")
+    rejected = []
+    for i, entry in enumerate(quality.items("samples_rejected")):
+        item = _Fields(path, entry, f"quality.samples_rejected[{i}].")
+        rejected.append(
+            Rejection(
+                item.integer("index"),
+                item.integer("stamp_ns"),
+                item.text("stage"),
+                item.text("reason"),
+            )
+        )
+    residuals: dict[int, float] = {}
+    if quality.has("sample_residuals_m"):
+        section = quality.section("sample_residuals_m")
+        for key in section.data:
+            if isinstance(key, bool) or not isinstance(key, int):
+                raise ResultFileError(
+                    f"{path}: key quality.sample_residuals_m must map profile indices "
+                    f"(integers) to m, got key {key!r}"
+                )
+            residuals[key] = section.number(key)
+    return CalibrationResult(
+        T_flange_sensor=T,
+        cylinder=cylinder,
+        method=quality.text("method"),
+        samples_used=quality.integers("samples_used_indices"),
+        samples_rejected=rejected,
+        rms_residual_m=quality.number("rms_residual_m"),
+        sample_residuals_m=residuals,
+        uncertainty_translation_m=_read_uncertainty(hand_eye, "translation_m"),
+        uncertainty_rotation_rad=_read_uncertainty(hand_eye, "rotation_rad"),
+        radius_estimated=quality.flag("radius_estimated"),
+        warnings=[str(w) for w in quality.items("warnings")],
+        parent_frame=parent_frame,
+        child_frame=child_frame,
+        base_frame=base_frame,
+    )
+
+
+def read_truth_yaml(path: str | Path) -> Truth:
+    """Read a truth file written by :func:`write_truth_yaml` (``bags/*/truth.yaml``).
+
+    Raises
+    ------
+    ResultFileError
+        Missing file, invalid YAML, or a missing or malformed key.
+    """
+    path, fields = _load(path)
+    T, parent_frame, child_frame = _read_hand_eye(fields)
+    cylinder, base_frame = _read_cylinder(fields)
+    return Truth(T, cylinder, parent_frame, child_frame, base_frame, fields.data)

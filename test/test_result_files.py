@@ -1,0 +1,217 @@
+"""linelaser_calib.io.results: result and truth YAML layout, exact round trips, atomic writes."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.geometry import (
+    matrix_from_quaternion_xyzw,
+    transform_from_rotvec_translation,
+)
+from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection
+from linelaser_calib.io import (
+    ResultFileError,
+    read_result_yaml,
+    read_truth_yaml,
+    write_result_yaml,
+    write_truth_yaml,
+)
+
+
+def random_cylinder(rng: np.random.Generator) -> Cylinder:
+    direction = rng.normal(size=3)
+    return Cylinder(
+        rng.normal(size=3), direction / np.linalg.norm(direction), 0.02 + 0.01 * rng.random()
+    )
+
+
+def random_result(rng: np.random.Generator, *, with_uncertainty: bool = True) -> CalibrationResult:
+    return CalibrationResult(
+        T_flange_sensor=transform_from_rotvec_translation(
+            rng.normal(size=3), 0.1 * rng.normal(size=3)
+        ),
+        cylinder=random_cylinder(rng),
+        method="default",
+        samples_used=[0, 1, 2, 4, 7],
+        samples_rejected=[
+            Rejection(3, 1_700_000_000_000_000_003, "ellipse", "arc 12.0 deg is too short"),
+            Rejection(5, 1_700_000_000_000_000_005, "pairing", "no pose within 5.0 ms"),
+        ],
+        rms_residual_m=float(rng.random() * 1e-4),
+        sample_residuals_m={i: float(rng.random() * 1e-4) for i in (0, 1, 2, 4, 7)},
+        uncertainty_translation_m=rng.random(3) * 1e-4 if with_uncertainty else None,
+        uncertainty_rotation_rad=rng.random(3) * 1e-3 if with_uncertainty else None,
+        radius_estimated=True,
+        warnings=["rotation about the sensor x axis is weakly observed"],
+        history={"refine_cost": [3.0, 2.0, 1.0]},
+    )
+
+
+def test_result_file_follows_the_contract(tmp_path: Path) -> None:
+    result = random_result(np.random.default_rng(30))
+    path = write_result_yaml(result, tmp_path / "out" / "result.yaml")
+    text = path.read_text()
+    assert "!!" not in text  # plain YAML, no python/numpy tags
+    data = yaml.safe_load(text)
+    assert list(data) == ["hand_eye", "cylinder", "quality"]
+    hand_eye = data["hand_eye"]
+    assert (hand_eye["parent_frame"], hand_eye["child_frame"]) == ("tool0", "laser")
+    T = np.eye(4)
+    T[:3, :3] = matrix_from_quaternion_xyzw(hand_eye["rotation_xyzw"])
+    T[:3, 3] = hand_eye["translation"]
+    np.testing.assert_allclose(T, result.T_flange_sensor, atol=1e-15)
+    np.testing.assert_array_equal(hand_eye["matrix"], result.T_flange_sensor)
+    assert hand_eye["matrix"][3] == [0.0, 0.0, 0.0, 1.0]
+    assert set(hand_eye["uncertainty"]) == {"translation_m", "rotation_rad"}
+    assert data["cylinder"]["frame"] == "base_link"
+    assert set(data["cylinder"]) == {"frame", "point", "direction", "radius"}
+    quality = data["quality"]
+    assert quality["samples_used"] == 5
+    assert quality["samples_rejected"][0] == {
+        "index": 3,
+        "stamp_ns": 1_700_000_000_000_000_003,
+        "stage": "ellipse",
+        "reason": "arc 12.0 deg is too short",
+    }
+    assert {"method", "rms_residual_m", "warnings"} <= set(quality)
+    assert type(quality["rms_residual_m"]) is float
+
+
+def test_result_round_trips_exactly(tmp_path: Path) -> None:
+    rng = np.random.default_rng(31)
+    for i in range(5):
+        result = random_result(rng, with_uncertainty=i % 2 == 0)
+        back = read_result_yaml(write_result_yaml(result, tmp_path / f"r{i}.yaml"))
+        np.testing.assert_allclose(back.T_flange_sensor, result.T_flange_sensor, atol=1e-15)
+        np.testing.assert_array_equal(back.cylinder.point, result.cylinder.point)
+        np.testing.assert_allclose(back.cylinder.direction, result.cylinder.direction, atol=1e-16)
+        assert back.cylinder.radius == result.cylinder.radius
+        assert back.samples_used == result.samples_used
+        assert back.samples_rejected == result.samples_rejected
+        assert back.rms_residual_m == result.rms_residual_m
+        assert back.sample_residuals_m == result.sample_residuals_m
+        assert back.warnings == result.warnings
+        assert back.radius_estimated is True
+        assert (back.method, back.parent_frame, back.child_frame, back.base_frame) == (
+            "default",
+            "tool0",
+            "laser",
+            "base_link",
+        )
+        if result.uncertainty_translation_m is None:
+            assert back.uncertainty_translation_m is None
+            assert back.uncertainty_rotation_rad is None
+        else:
+            np.testing.assert_array_equal(
+                back.uncertainty_translation_m, result.uncertainty_translation_m
+            )
+            np.testing.assert_array_equal(
+                back.uncertainty_rotation_rad, result.uncertainty_rotation_rad
+            )
+
+
+def test_missing_uncertainty_is_written_as_null(tmp_path: Path) -> None:
+    result = random_result(np.random.default_rng(32), with_uncertainty=False)
+    path = write_result_yaml(result, tmp_path / "result.yaml")
+    assert yaml.safe_load(path.read_text())["hand_eye"]["uncertainty"] is None
+    assert "uncertainty: null" in path.read_text()
+
+
+def test_failed_write_keeps_the_old_file_and_leaves_no_temporary(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    rng = np.random.default_rng(33)
+    path = write_result_yaml(random_result(rng), tmp_path / "result.yaml")
+    before = path.read_bytes()
+
+    def failing_replace(src: str, dst: str) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "replace", failing_replace)
+    with pytest.raises(ResultFileError, match=r"cannot write .*result.yaml.*No space left"):
+        write_result_yaml(random_result(rng), path)
+    assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["result.yaml"]
+
+
+def test_truth_round_trips_with_plain_extras(tmp_path: Path) -> None:
+    rng = np.random.default_rng(34)
+    T = transform_from_rotvec_translation(rng.normal(size=3), rng.normal(size=3))
+    cylinder = random_cylinder(rng)
+    extra = {
+        "scenario": "nominal",
+        "seed": np.int64(7),
+        "noise": {"sigma_m": np.float32(2e-5)},
+        "poses": np.arange(3),
+    }
+    path = write_truth_yaml(tmp_path / "truth.yaml", T, cylinder, base_frame="world", extra=extra)
+    assert "!!" not in path.read_text()
+    truth = read_truth_yaml(path)
+    np.testing.assert_allclose(truth.T_flange_sensor, T, atol=1e-15)
+    np.testing.assert_array_equal(truth.cylinder.point, cylinder.point)
+    assert truth.cylinder.radius == cylinder.radius
+    assert (truth.parent_frame, truth.child_frame, truth.base_frame) == ("tool0", "laser", "world")
+    assert truth.raw["seed"] == 7 and truth.raw["poses"] == [0, 1, 2]
+    assert truth.raw["noise"]["sigma_m"] == float(np.float32(2e-5))
+    assert "uncertainty" not in truth.raw["hand_eye"] and "quality" not in truth.raw
+
+
+def test_truth_extras_cannot_replace_the_truth_or_hold_objects(tmp_path: Path) -> None:
+    cylinder = Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02)
+    with pytest.raises(InputError, match="overwrite the truth"):
+        write_truth_yaml(tmp_path / "t.yaml", np.eye(4), cylinder, extra={"cylinder": 1})
+    with pytest.raises(InputError, match="not plain YAML data"):
+        write_truth_yaml(tmp_path / "t.yaml", np.eye(4), cylinder, extra={"when": object()})
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected_text"),
+    [
+        (None, "does not exist"),
+        ("hand_eye: [unclosed\n", "is not valid YAML"),
+        ("- 1\n- 2\n", "the top level must be a mapping"),
+        ("delete hand_eye.translation", "key hand_eye.translation is missing"),
+        (
+            "set hand_eye.translation [1, 2]",
+            "key hand_eye.translation must be finite numbers of shape",
+        ),
+        ("set hand_eye.rotation_xyzw [0, 0, 0, 0]", "zero quaternion"),
+        ("set hand_eye.rotation_xyzw [0, 0, a, 1]", "key hand_eye.rotation_xyzw must be numbers"),
+        ("set hand_eye.translation [0.5, 0, 0]", "hand_eye.matrix disagrees"),
+        ("set cylinder.radius 0", "radius > 0 m"),
+        ("set quality.rms_residual_m fast", "key quality.rms_residual_m must be a number"),
+        ("delete quality", "key quality is missing"),
+    ],
+)
+def test_malformed_result_files_raise_result_file_error(
+    tmp_path: Path, edit: str | None, expected_text: str
+) -> None:
+    path = tmp_path / "result.yaml"
+    if edit is not None:
+        write_result_yaml(random_result(np.random.default_rng(35)), path)
+        data = yaml.safe_load(path.read_text())
+        action, _, rest = edit.partition(" ")
+        if action in {"delete", "set"}:
+            dotted, _, value = rest.partition(" ")
+            *parents, leaf = dotted.split(".")
+            section = data
+            for key in parents:
+                section = section[key]
+            if action == "delete":
+                del section[leaf]
+            else:
+                section[leaf] = yaml.safe_load(value)
+            path.write_text(yaml.safe_dump(data))
+        else:
+            path.write_text(edit)
+    with pytest.raises(ResultFileError) as caught:
+        read_result_yaml(path)
+    assert expected_text in str(caught.value)
+    assert str(path) in str(caught.value)
