@@ -1,0 +1,765 @@
+"""The cylinder paper's seed solver: PSO fused with the generalized Lagrange multiplier method.
+
+Faithful parts (papers.md §A, §3.3, Fig. 4):
+
+- :func:`galm` is the generalized Lagrange multiplier method of §3.3.1: BFGS minimises
+  φ(x, λ, σ) = f(x) − λᵀh(x) + σ/2 ‖h(x)‖² (eq. 14); stop when ‖h‖ ≤ ε; σ ← ησ when
+  ‖h_k‖ > α‖h_{k−1}‖; λ ← λ − σ_k h(x_k).
+- :func:`pso` is plain PSO with the update of eq. 15.
+- :func:`solve_pso_galm` is the 7-step hybrid of §3.3.3: particles are GALM initial points,
+  g_best and f_best are initialised from the first swarm; each generation the best and the
+  worst particle are found; if the generation's best beats f_best it becomes g_best,
+  otherwise GALM runs from the worst particle and its result replaces g_best if its φ is
+  lower; stop when n ≥ n_max or f_best < ψ; move the particles by eq. 15 towards g_best.
+
+Choices where the paper is silent (documented defaults):
+
+- PSO constants w = 0.729, c1 = c2 = 1.494 (the constriction-equivalent values of Clerc and
+  Kennedy); velocities are clamped to a fraction of the box width and positions are clamped
+  to the box (the velocity component that hit the wall is zeroed).
+- Particle fitness is φ(x, λ0 = 0, σ0), i.e. f + σ0/2‖h‖²; a GALM result is compared by
+  φ at its own final (λ_k, σ_k), as in Fig. 4.
+- GALM parameters σ0, η, α, ε and the BFGS tolerances (below).
+
+Departures, each with its switch in :class:`HybridConfig`:
+
+1. ``normalised=True`` (default): the bounded cost with N/|N|
+   (:mod:`~linelaser_calib.core.cylinder_model`, departure 1); ``False`` is the literal
+   eq. 12, whose GALM runs diverge. A GALM run flagged as diverged never becomes g_best.
+2. ``PsoConfig.stagnation_generations`` (default 6, 0 disables): the hybrid also stops after
+   that many generations without improvement of f_best (the paper only has n_max and ψ,
+   and ψ is below the noise floor of noisy data).
+3. ``box="data"`` (default): search box from the data. The paper's Table 2 box (t and the
+   axis point in [0, 300] mm) only fits its own scene. The data box keeps a_ij, m, l, n in
+   [−1, 1], takes t ∈ [−b, b]³ (b = ``translation_bound_m``) and the axis point in the
+   bounding box of the flange positions grown by b plus the largest centre norm, which
+   holds every centre O_j and so a stretch of the axis. ``box="paper"`` gives Table 2.
+4. ``faithful=False`` (default) adds two steps after the hybrid:
+
+   - Polish: g_best seeds a Levenberg-Marquardt least-squares fit on a minimal
+     parametrisation (rotation vector, t, two direction components, two axis offsets) of
+     the centre-to-axis residuals, so that the rotation is exactly orthonormal (the paper
+     has no a1 ⊥ a3 constraint) and the unit norms hold exactly.
+   - Restarts: if the polished RMS centre-to-axis distance exceeds ``accept_rms_m``, the
+     hybrid runs again from a new swarm, up to ``max_restarts`` times, keeping the best.
+
+The paper's algorithm is ``HybridConfig(faithful=True, box="paper")`` (with the bounded cost;
+add ``normalised=False`` for the literal one).
+
+Units: configs are SI (ψ in m²); inside, the problem's length unit applies
+(:class:`~linelaser_calib.core.cylinder_model.CentreAxisProblem`). GALM works on f in that
+unit: σ0 and the divergence bound are in unit², which with the default unit (the RMS centre
+norm) makes them scale-free.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.optimize import least_squares, minimize
+
+from linelaser_calib.core.cylinder_model import (
+    DIRECTION,
+    N_PARAMS,
+    POINT,
+    TRANS,
+    CentreAxisProblem,
+    calibration_from_x,
+    x_from_calibration,
+)
+from linelaser_calib.core.errors import DegenerateError, InputError, SolverError
+from linelaser_calib.core.geometry import matrix_from_rotvec, orthonormal_basis
+from linelaser_calib.core.types import Cylinder, FloatArray
+
+#: The paper's ψ for the noisy simulation (0.5 mm²), in m².
+PAPER_PSI_M2 = 0.5e-6
+#: Table 2 box: a_ij, m, l, n in [-1, 1]; t and the axis point in [0, 300] mm.
+PAPER_BOX_MM = (
+    np.array([-1.0] * 6 + [0.0] * 6 + [-1.0] * 3),
+    np.array([1.0] * 6 + [300.0] * 6 + [1.0] * 3),
+)
+
+
+class ConstrainedProblem(Protocol):
+    """An equality-constrained problem min f(x) s.t. h(x) = 0 (eq. 13), as GALM needs it."""
+
+    def cost(self, x: ArrayLike) -> FloatArray:
+        """f for a batch (K, n) -> (K,)."""
+        ...
+
+    def cost_and_gradient(self, x: ArrayLike) -> tuple[float, FloatArray]:
+        """f and its gradient (n,) for one x (n,)."""
+        ...
+
+    def constraints(self, x: ArrayLike) -> FloatArray:
+        """h, shape (l,) for x (n,) or (K, l) for (K, n)."""
+        ...
+
+    def constraints_jacobian(self, x: ArrayLike) -> FloatArray:
+        """dh/dx, shape (l, n), for one x (n,)."""
+        ...
+
+
+@dataclass(frozen=True)
+class GalmConfig:
+    """Generalized Lagrange multiplier method (§3.3.1). Lengths in the problem's unit.
+
+    Attributes
+    ----------
+    sigma0 : float
+        Initial penalty σ0 > 0, in f units (unit²).
+    eta : float
+        Penalty growth η > 1.
+    alpha : float
+        Required constraint reduction ratio α ∈ (0, 1).
+    epsilon : float
+        Stop when ‖h(x_k)‖ ≤ ε (h is unitless).
+    max_outer : int
+        Most outer (multiplier) iterations.
+    bfgs_gtol : float
+        BFGS stop on the gradient's max-norm, f units per x unit.
+    bfgs_max_iter : int
+        Most BFGS iterations per inner solve.
+    divergence_cost : float
+        Abandon the run as diverged when φ or f falls below −divergence_cost (f units).
+        On the constraint surface f ≥ 0, so only the unbounded literal cost gets there
+        (the paper calls a result beyond 1e3 (mm²) diverged).
+    divergence_x : float
+        Abandon the run as diverged when max |x_i| exceeds this (x units): overflow guard.
+    """
+
+    sigma0: float = 10.0
+    eta: float = 4.0
+    alpha: float = 0.25
+    epsilon: float = 1e-10
+    max_outer: int = 30
+    bfgs_gtol: float = 1e-8
+    bfgs_max_iter: int = 400
+    divergence_cost: float = 1e3
+    divergence_x: float = 1e6
+
+    def __post_init__(self) -> None:
+        if not (self.sigma0 > 0.0 and self.eta > 1.0 and 0.0 < self.alpha < 1.0):
+            raise InputError(
+                f"GALM needs sigma0 > 0, eta > 1 and 0 < alpha < 1, got sigma0={self.sigma0}, "
+                f"eta={self.eta}, alpha={self.alpha}"
+            )
+        if self.epsilon <= 0.0 or self.max_outer < 1 or self.bfgs_max_iter < 1:
+            raise InputError("GALM needs epsilon > 0, max_outer >= 1 and bfgs_max_iter >= 1")
+
+
+@dataclass(frozen=True)
+class GalmResult:
+    """Outcome of one GALM run (problem units).
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Last iterate.
+    f : float
+        f(x).
+    phi : float
+        φ(x, λ_k, σ_k) with the multipliers and penalty the last inner solve used.
+    h_norm : float
+        ‖h(x)‖.
+    iterations : int
+        Outer iterations run.
+    inner_iterations : int
+        BFGS iterations summed over the outer ones.
+    multipliers : ndarray, shape (l,)
+        λ after the last update.
+    sigma : float
+        Penalty after the last update.
+    converged : bool
+        ‖h‖ ≤ ε was reached.
+    diverged : bool
+        f fell below −divergence_cost, x grew beyond divergence_x or became non-finite.
+    history_phi, history_f : list of float
+        φ and f after each outer iteration.
+    """
+
+    x: FloatArray
+    f: float
+    phi: float
+    h_norm: float
+    iterations: int
+    inner_iterations: int
+    multipliers: FloatArray
+    sigma: float
+    converged: bool
+    diverged: bool
+    history_phi: list[float]
+    history_f: list[float]
+
+
+class _Diverged(Exception):
+    """Raised inside the BFGS objective to abandon a run that is running away."""
+
+    def __init__(self, x: FloatArray) -> None:
+        super().__init__("diverged")
+        self.x = x
+
+
+def galm(
+    x0: ArrayLike,
+    problem: ConstrainedProblem,
+    config: GalmConfig = GalmConfig(),
+    multipliers0: ArrayLike | None = None,
+) -> GalmResult:
+    """Minimise f subject to h = 0 by the generalized Lagrange multiplier method (§3.3.1).
+
+    Parameters
+    ----------
+    x0 : array-like, shape (n,)
+        Initial point.
+    problem : ConstrainedProblem
+        For example a :class:`~linelaser_calib.core.cylinder_model.CentreAxisProblem`.
+    config : GalmConfig
+    multipliers0 : array-like, shape (l,), optional
+        λ0; zeros by default.
+
+    Returns
+    -------
+    GalmResult
+    """
+    x = np.array(x0, dtype=np.float64)
+    h = problem.constraints(x)
+    lam = np.zeros(h.shape) if multipliers0 is None else np.array(multipliers0, dtype=float)
+    sigma = config.sigma0
+    h_prev = float(np.linalg.norm(h))
+    history_phi: list[float] = []
+    history_f: list[float] = []
+    inner = 0
+    converged = diverged = False
+    k = 0
+    while k < config.max_outer:
+        k += 1
+        lam_used, sigma_used = lam.copy(), sigma
+
+        def phi_and_grad(
+            z: FloatArray, lam_k: FloatArray = lam_used, sigma_k: float = sigma_used
+        ) -> tuple[float, FloatArray]:
+            f, g = problem.cost_and_gradient(z)
+            hz = problem.constraints(z)
+            J = problem.constraints_jacobian(z)
+            phi = f - float(lam_k @ hz) + 0.5 * sigma_k * float(hz @ hz)
+            if not np.isfinite(phi) or phi < -config.divergence_cost:
+                raise _Diverged(z.copy())
+            if np.max(np.abs(z)) > config.divergence_x:
+                raise _Diverged(z.copy())
+            return phi, g - J.T @ lam_k + sigma_k * (J.T @ hz)
+
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):
+                res = minimize(
+                    phi_and_grad,
+                    x,
+                    jac=True,
+                    method="BFGS",
+                    options={"gtol": config.bfgs_gtol, "maxiter": config.bfgs_max_iter},
+                )
+            x = np.asarray(res.x, dtype=np.float64)
+            inner += int(res.nit)
+        except _Diverged as stop:
+            x = stop.x
+            diverged = True
+        f = float(problem.cost(x[None])[0])
+        h = problem.constraints(x)
+        history_f.append(f)
+        history_phi.append(f - float(lam_used @ h) + 0.5 * sigma_used * float(h @ h))
+        h_norm = float(np.linalg.norm(h))
+        if diverged or not np.isfinite(f) or f < -config.divergence_cost:
+            diverged = True
+            break
+        if h_norm <= config.epsilon:
+            converged = True
+            break
+        if h_norm > config.alpha * h_prev:
+            sigma *= config.eta
+        lam = lam - sigma_used * h
+        h_prev = h_norm
+    return GalmResult(
+        x=x,
+        f=history_f[-1],
+        phi=history_phi[-1],
+        h_norm=float(np.linalg.norm(problem.constraints(x))),
+        iterations=k,
+        inner_iterations=inner,
+        multipliers=lam,
+        sigma=sigma,
+        converged=converged,
+        diverged=diverged,
+        history_phi=history_phi,
+        history_f=history_f,
+    )
+
+
+@dataclass(frozen=True)
+class PsoConfig:
+    """Particle swarm (eq. 15) and the hybrid's generation loop.
+
+    Attributes
+    ----------
+    n_particles : int
+        Swarm size (the paper uses 20).
+    inertia : float
+        w (not given by the paper).
+    c1, c2 : float
+        Cognitive and social acceleration (not given by the paper).
+    max_generations : int
+        n_max.
+    psi : float
+        Stop when the best fitness is below ψ, in the fitness's units; m² for
+        :func:`solve_pso_galm` (the paper's 0.5 mm² by default).
+    stagnation_generations : int
+        Stop after this many generations without a relative improvement of the best
+        fitness larger than ``stagnation_tol`` (0 disables).
+    stagnation_tol : float
+        Relative improvement that counts as progress.
+    velocity_clamp : float
+        Largest velocity component as a fraction of the box width.
+    """
+
+    n_particles: int = 20
+    inertia: float = 0.729
+    c1: float = 1.494
+    c2: float = 1.494
+    max_generations: int = 30
+    psi: float = PAPER_PSI_M2
+    stagnation_generations: int = 6
+    stagnation_tol: float = 1e-6
+    velocity_clamp: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.n_particles < 2 or self.max_generations < 1:
+            raise InputError("PSO needs at least 2 particles and 1 generation")
+        if not 0.0 < self.velocity_clamp <= 1.0:
+            raise InputError(f"velocity_clamp must be in (0, 1], got {self.velocity_clamp}")
+
+
+@dataclass(frozen=True)
+class PsoResult:
+    """Outcome of :func:`pso`.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n,)
+        Global best position.
+    fitness : float
+    generations : int
+    history : list of float
+        Best fitness after each generation (the initial swarm first).
+    """
+
+    x: FloatArray
+    fitness: float
+    generations: int
+    history: list[float]
+
+
+class _Swarm:
+    """Positions, velocities and personal bests of a swarm in a box (eq. 15)."""
+
+    def __init__(
+        self,
+        lower: FloatArray,
+        upper: FloatArray,
+        config: PsoConfig,
+        rng: np.random.Generator,
+    ) -> None:
+        self.lower, self.upper, self.config, self.rng = lower, upper, config, rng
+        shape = (config.n_particles, lower.size)
+        self.v_max = config.velocity_clamp * (upper - lower)
+        self.x = rng.uniform(lower, upper, shape)
+        self.v = rng.uniform(-self.v_max, self.v_max, shape)
+        self.p_best = self.x.copy()
+        self.p_fitness = np.full(config.n_particles, np.inf)
+
+    def record(self, fitness: FloatArray) -> None:
+        """Update the personal bests with the fitness (K,) of the current positions."""
+        better = fitness < self.p_fitness
+        self.p_best[better] = self.x[better]
+        self.p_fitness[better] = fitness[better]
+
+    def step(self, g_best: FloatArray) -> None:
+        """Move every particle by eq. 15 towards its own best and the global best."""
+        c = self.config
+        r1 = self.rng.uniform(size=self.x.shape)
+        r2 = self.rng.uniform(size=self.x.shape)
+        self.v = (
+            c.inertia * self.v
+            + c.c1 * r1 * (self.p_best - self.x)
+            + c.c2 * r2 * (g_best[None] - self.x)
+        )
+        self.v = np.clip(self.v, -self.v_max, self.v_max)
+        x = self.x + self.v
+        hit = (x < self.lower) | (x > self.upper)
+        self.x = np.clip(x, self.lower, self.upper)
+        self.v[hit] = 0.0
+
+
+class _Stagnation:
+    """Counts consecutive generations without relative progress of the best fitness."""
+
+    def __init__(self, generations: int, tol: float) -> None:
+        self.generations, self.tol, self.count = generations, tol, 0
+        self.last = np.inf
+
+    def stalled(self, best: float) -> bool:
+        if self.last - best > self.tol * abs(self.last) or not np.isfinite(self.last):
+            self.count = 0
+        else:
+            self.count += 1
+        self.last = min(self.last, best)
+        return 0 < self.generations <= self.count
+
+
+def pso(
+    fitness: Callable[[FloatArray], FloatArray],
+    lower: ArrayLike,
+    upper: ArrayLike,
+    config: PsoConfig,
+    rng: np.random.Generator,
+) -> PsoResult:
+    """Minimise a function over a box with plain PSO (eq. 15).
+
+    Parameters
+    ----------
+    fitness : callable
+        Maps positions (K, n) to fitness (K,).
+    lower, upper : array-like, shape (n,)
+        Search box.
+    config : PsoConfig
+        ``psi`` is in the fitness's units.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    PsoResult
+    """
+    lo, hi = _check_box(lower, upper)
+    swarm = _Swarm(lo, hi, config, rng)
+    stagnation = _Stagnation(config.stagnation_generations, config.stagnation_tol)
+    F = fitness(swarm.x)
+    swarm.record(F)
+    g = int(np.argmin(F))
+    g_best, f_best = swarm.x[g].copy(), float(F[g])
+    history = [f_best]
+    while len(history) <= config.max_generations:
+        if f_best < config.psi or stagnation.stalled(f_best):
+            break
+        swarm.step(g_best)
+        F = fitness(swarm.x)
+        swarm.record(F)
+        g = int(np.argmin(F))
+        if F[g] < f_best:
+            g_best, f_best = swarm.x[g].copy(), float(F[g])
+        history.append(f_best)
+    return PsoResult(x=g_best, fitness=f_best, generations=len(history) - 1, history=history)
+
+
+def _check_box(lower: ArrayLike, upper: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Validate a search box: finite 1-D bounds of equal shape with lower < upper."""
+    lo = np.asarray(lower, dtype=np.float64)
+    hi = np.asarray(upper, dtype=np.float64)
+    if lo.ndim != 1 or lo.shape != hi.shape or not np.all(np.isfinite(lo) & np.isfinite(hi)):
+        raise InputError(f"search box bounds must be finite vectors of equal length: {lo}, {hi}")
+    if not np.all(lo < hi):
+        raise InputError(f"search box lower bounds must be below the upper ones: {lo}, {hi}")
+    return lo, hi
+
+
+@dataclass(frozen=True)
+class HybridConfig:
+    """PSO + GALM hybrid (Fig. 4) and this package's departures (see the module docstring).
+
+    Attributes
+    ----------
+    pso : PsoConfig
+        ``psi`` in m².
+    galm : GalmConfig
+        In the problem's internal unit.
+    faithful : bool
+        True runs the paper's algorithm only: no polish, no restarts.
+    normalised : bool
+        Bounded cost with N/|N| (default) or the paper-literal eq. 9.
+    box : {"data", "paper"}
+        Search box derived from the data, or the paper's Table 2 box.
+    translation_bound_m : float
+        Half-width b of the hand-eye translation box, m (``box="data"``).
+    length_unit_m : float or None
+        Internal length unit, m; None takes the RMS norm of the centres.
+    accept_rms_m : float
+        Largest polished RMS centre-to-axis distance that ends the restarts, m.
+    max_restarts : int
+        Extra swarms tried when a run is not accepted.
+    """
+
+    pso: PsoConfig = field(default_factory=PsoConfig)
+    galm: GalmConfig = field(default_factory=GalmConfig)
+    faithful: bool = False
+    normalised: bool = True
+    box: Literal["data", "paper"] = "data"
+    translation_bound_m: float = 0.5
+    length_unit_m: float | None = None
+    accept_rms_m: float = 5e-4
+    max_restarts: int = 8
+
+    def __post_init__(self) -> None:
+        if self.box not in ("data", "paper"):
+            raise InputError(f"box must be 'data' or 'paper', got {self.box!r}")
+        if self.translation_bound_m <= 0.0 or self.accept_rms_m <= 0.0 or self.max_restarts < 0:
+            raise InputError(
+                "translation_bound_m and accept_rms_m must be positive and max_restarts >= 0"
+            )
+
+
+@dataclass(frozen=True)
+class PaperSolution:
+    """Result of :func:`solve_pso_galm`, SI units.
+
+    Attributes
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+        Hand-eye; rotation completed with a2 = a3 × a1 and projected onto SO(3).
+    cylinder : Cylinder
+        Axis in the base frame (point closest to the origin, unit direction). The radius is
+        not estimated by this method: NaN, to be set by the caller.
+    x : ndarray, shape (15,)
+        The raw vector of eq. 10 (t and the axis point in m) the solver ended with.
+    f_m2 : float
+        f(x) in m² (in the configured cost form).
+    rms_m : float
+        RMS centre-to-axis distance of the returned transform and axis, m.
+    h_norm : float
+        ‖h(x)‖ of the raw vector.
+    accepted : bool
+        Faithful mode: f_best < ψ was reached. Otherwise: the polished RMS distance is at
+        most ``accept_rms_m``.
+    generations : int
+        PSO generations run, summed over restarts (the paper's "iterations").
+    galm_runs, galm_iterations : int
+        GALM runs and their outer iterations, summed.
+    restarts : int
+        Extra swarms used.
+    history : dict of str to list of float
+        ``pso_best``: f_best after each generation (m²); ``galm_phi`` and ``galm_f``:
+        φ and f after each GALM outer iteration (m²), runs concatenated (paper Figs. 5-6).
+    time_s : float
+        Wall-clock time of the solve, s.
+    """
+
+    T_flange_sensor: FloatArray
+    cylinder: Cylinder
+    x: FloatArray
+    f_m2: float
+    rms_m: float
+    h_norm: float
+    accepted: bool
+    generations: int
+    galm_runs: int
+    galm_iterations: int
+    restarts: int
+    history: dict[str, list[float]]
+    time_s: float
+
+
+@dataclass
+class _Run:
+    """Mutable bookkeeping of one hybrid solve."""
+
+    generations: int = 0
+    galm_runs: int = 0
+    galm_iterations: int = 0
+    history: dict[str, list[float]] = field(
+        default_factory=lambda: {"pso_best": [], "galm_phi": [], "galm_f": []}
+    )
+
+
+def search_box(problem: CentreAxisProblem, config: HybridConfig) -> tuple[FloatArray, FloatArray]:
+    """The PSO search box in the problem's unit, shape (15,) each (module docstring, item 3)."""
+    if config.box == "paper":
+        scale = np.where(np.arange(N_PARAMS) < 6, 1.0, 1e-3 / problem.unit_m)
+        scale[DIRECTION] = 1.0
+        return PAPER_BOX_MM[0] * scale, PAPER_BOX_MM[1] * scale
+    b = config.translation_bound_m / problem.unit_m
+    grow = b + float(np.max(np.linalg.norm(problem.centres_xz, axis=1)))
+    lower = -np.ones(N_PARAMS)
+    upper = np.ones(N_PARAMS)
+    lower[TRANS], upper[TRANS] = -b, b
+    lower[POINT] = problem.positions.min(axis=0) - grow
+    upper[POINT] = problem.positions.max(axis=0) + grow
+    return lower, upper
+
+
+def solve_pso_galm(
+    centres_xz: ArrayLike,
+    T_base_flange: ArrayLike,
+    config: HybridConfig = HybridConfig(),
+    rng: np.random.Generator | None = None,
+) -> PaperSolution:
+    """Hand-eye and cylinder axis from ellipse centres, with no initial guess (§3.3.3).
+
+    Parameters
+    ----------
+    centres_xz : array-like, shape (M, 2)
+        Ellipse centres in the sensor x-z plane, m.
+    T_base_flange : array-like, shape (M, 4, 4)
+        Flange pose of each centre, m.
+    config : HybridConfig
+    rng : numpy.random.Generator, optional
+        Source of all randomness; ``default_rng(0)`` if omitted.
+
+    Returns
+    -------
+    PaperSolution
+
+    Raises
+    ------
+    InputError, DegenerateError
+        Bad data (see :meth:`CentreAxisProblem.from_data`).
+    SolverError
+        The faithful solver ended on a vector that is no hand-eye (a1 ∥ a3). A solve that
+        merely misses ψ or ``accept_rms_m`` does not raise: see ``accepted``.
+    """
+    start = time.perf_counter()
+    rng = np.random.default_rng(0) if rng is None else rng
+    problem = CentreAxisProblem.from_data(
+        centres_xz, T_base_flange, normalised=config.normalised, unit_m=config.length_unit_m
+    )
+    area = problem.unit_m**2
+    psi = config.pso.psi / area
+    lower, upper = search_box(problem, config)
+    run = _Run()
+    best_x, f_best = _hybrid(problem, lower, upper, psi, config, rng, run)
+    accepted = f_best < psi
+    restarts = 0
+    if not config.faithful:
+        best_x, best_rms = _polish(problem, best_x)
+        while best_rms > config.accept_rms_m and restarts < config.max_restarts:
+            restarts += 1
+            x, rms = _polish(problem, _hybrid(problem, lower, upper, psi, config, rng, run)[0])
+            if rms < best_rms:
+                best_x, best_rms = x, rms
+        accepted = best_rms <= config.accept_rms_m
+    try:
+        T_flange_sensor, cylinder = calibration_from_x(best_x, problem.unit_m)
+    except DegenerateError as err:
+        raise SolverError(
+            f"the PSO+GALM solver ended on a point that is no hand-eye ({err}); "
+            "use the default (non-faithful) mode or more varied flange poses"
+        ) from err
+    x_si = best_x.copy()
+    x_si[TRANS] *= problem.unit_m
+    x_si[POINT] *= problem.unit_m
+    return PaperSolution(
+        T_flange_sensor=T_flange_sensor,
+        cylinder=cylinder,
+        x=x_si,
+        f_m2=float(problem.cost(best_x[None])[0]) * area,
+        rms_m=_rms(problem, x_from_calibration(T_flange_sensor, cylinder, problem.unit_m)),
+        h_norm=float(np.linalg.norm(problem.constraints(best_x))),
+        accepted=accepted,
+        generations=run.generations,
+        galm_runs=run.galm_runs,
+        galm_iterations=run.galm_iterations,
+        restarts=restarts,
+        history=run.history,
+        time_s=time.perf_counter() - start,
+    )
+
+
+def _rms(problem: CentreAxisProblem, x: FloatArray) -> float:
+    """RMS centre-to-axis distance of x (internal units), m."""
+    return float(np.sqrt(np.mean(problem.distances_m(x) ** 2)))
+
+
+def _hybrid(
+    problem: CentreAxisProblem,
+    lower: FloatArray,
+    upper: FloatArray,
+    psi: float,
+    config: HybridConfig,
+    rng: np.random.Generator,
+    run: _Run,
+) -> tuple[FloatArray, float]:
+    """One swarm of the 7-step hybrid (Fig. 4); returns g_best and f_best (internal units)."""
+    area = problem.unit_m**2
+    sigma0 = config.galm.sigma0
+
+    def fitness(X: FloatArray) -> FloatArray:
+        H = problem.constraints(X)
+        return np.asarray(problem.cost(X) + 0.5 * sigma0 * np.sum(H**2, axis=1))
+
+    swarm = _Swarm(lower, upper, config.pso, rng)
+    stagnation = _Stagnation(config.pso.stagnation_generations, config.pso.stagnation_tol)
+    F = fitness(swarm.x)  # step 1: g_best and f_best from the initial swarm
+    swarm.record(F)
+    g_best, f_best = swarm.x[int(np.argmin(F))].copy(), float(np.min(F))
+    for n in range(1, config.pso.max_generations + 1):
+        if n > 1:  # step 2 (the first generation is the initial swarm)
+            F = fitness(swarm.x)
+            swarm.record(F)
+        best, worst = int(np.argmin(F)), int(np.argmax(F))
+        if F[best] < f_best:  # step 3
+            g_best, f_best = swarm.x[best].copy(), float(F[best])
+        else:  # step 4
+            result = galm(swarm.x[worst], problem, config.galm)
+            run.galm_runs += 1
+            run.galm_iterations += result.iterations
+            run.history["galm_phi"].extend(v * area for v in result.history_phi)
+            run.history["galm_f"].extend(v * area for v in result.history_f)
+            if not result.diverged and result.phi < f_best:
+                g_best, f_best = result.x.copy(), result.phi
+        run.generations += 1
+        run.history["pso_best"].append(f_best * area)
+        if f_best < psi or stagnation.stalled(f_best):  # step 5
+            break
+        swarm.step(g_best)  # step 6
+    return g_best, f_best
+
+
+def _polish(problem: CentreAxisProblem, x: FloatArray) -> tuple[FloatArray, float]:
+    """Levenberg-Marquardt on a minimal parametrisation from x (departure 4).
+
+    Parameters are a rotation vector applied on the left of the SO(3)-projected hand-eye
+    rotation, t, two tangent components of the axis direction and two offsets of the axis
+    point in the plane through the start point perpendicular to the start direction.
+
+    Returns
+    -------
+    x : ndarray, shape (15,)
+        Polished vector, internal units (x itself if it is no hand-eye).
+    rms_m : float
+        Its RMS centre-to-axis distance, m (inf if x is no hand-eye).
+    """
+    try:
+        T0, cyl0 = calibration_from_x(x)  # unit_m = 1: internal units throughout
+    except DegenerateError:
+        return x, np.inf
+    R0, n0 = T0[:3, :3], cyl0.direction
+    P0 = x[POINT] - float((x[POINT] - cyl0.point) @ n0) * n0
+    b1, b2 = orthonormal_basis(n0)
+    c = np.zeros((problem.n_centres, 3))
+    c[:, [0, 2]] = problem.centres_xz
+
+    def unpack(p: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        R = matrix_from_rotvec(p[0:3]) @ R0
+        n = n0 + p[6] * b1 + p[7] * b2
+        return R, p[3:6], n / np.linalg.norm(n), P0 + p[8] * b1 + p[9] * b2
+
+    def residuals(p: FloatArray) -> FloatArray:
+        R, t, n, point = unpack(p)
+        W = np.einsum("mij,mj->mi", problem.rotations, c @ R.T + t) + problem.positions - point
+        return np.asarray((W - np.outer(W @ n, n)).ravel())
+
+    p0 = np.concatenate([np.zeros(3), T0[:3, 3], np.zeros(4)])
+    sol = least_squares(residuals, p0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    R, t, n, point = unpack(sol.x)
+    polished = np.concatenate([R[:, 0], R[:, 2], t, point, n])
+    return polished, _rms(problem, polished)
