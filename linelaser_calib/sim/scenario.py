@@ -1,0 +1,627 @@
+"""Simulation scenarios: every knob of the simulator in one frozen dataclass, plus presets.
+
+A :class:`Scenario` holds plain numbers, strings and tuples only (no arrays), so that it can
+be written to and read from YAML by the I/O layer and compared with ``==``. Lists given for
+tuple fields (as YAML readers produce them) are converted to tuples.
+
+Units are SI throughout: metres, radians, seconds, hertz and integer nanoseconds; the unit is
+in each field name or its description. Degrees appear only in descriptions, labelled.
+
+Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
+
+``paper``
+    The simulation of the cylinder paper, §4.1.1 (``papers.md`` §A): axis through
+    (1, 1, 1) mm with direction (3, 1, 1)/√11 (a 200 mm long cylinder centred there), Ø40 mm;
+    true hand-eye eq. 17 (its printed rotation is orthonormal to ~4 digits only and is
+    projected to SO(3) by SVD; translation (150, 200, 250) mm); 50 step-and-shoot poses,
+    about half long-axis (α 50°-75°), half short-axis (β 40°-60°); sensor σ 5 µm on x and z;
+    robot σ 0.1 mm and 0.01° per axis; 125 Hz pose stream; no background, no spikes or
+    dropouts, dense profiles without intensity. The paper gives no sensor geometry, so a
+    wide profiler is assumed: range 80-200 mm, fan ±30°, 800 points; this holds the whole
+    long-axis arc of Ø40 mm up to α = 75° (up to ~150 mm wide). The poses are placed
+    around the cylinder from the cut angles and the range; the flange follows from the
+    hand-eye (0.35 m behind the sensor).
+``ur_scancontrol``
+    A UR-class arm with a scanCONTROL-class profiler (representative numbers, not a
+    datasheet): an upright Ø40 x 100 mm shaft on a table (the background plane, in view)
+    at (0.45, 0.15, 0) m; range 70-150 mm, fan ±25°, 640 points, organised with NaN rows
+    and intensity; σ 8 µm depth and 6 µm lateral; 0.5 % spikes of 2-8 mm, 2 % dropouts,
+    returns lost beyond 80° incidence and in the shadow of a 30 mm camera baseline;
+    30 step-and-shoot poses, long-axis α 50°-65° (at 75° the arc would fill the fan and
+    leave no room for the table) and short-axis β 40°-60°, sensor azimuth within ±150° of
+    the robot side; hand-eye 0.128 m out from the flange, rotated (roll -20°, pitch 12°,
+    yaw 95°); robot σ 0.03 mm and 0.003° per axis; 125 Hz pose stream, 0.3 s dwell.
+``continuous``
+    ``ur_scancontrol`` scanned while the robot moves through 6 waypoints without stopping
+    (spline path, 0.15 m/s and 1.5 rad/s on average, sensor roll not flipped), profiles at
+    10 Hz with 320 points, a 500 Hz pose stream and profiles stamped 4 ms late.
+
+Bag size: a streamed pose costs ~120 bytes and a point 12-16 bytes in a rosbag2 MCAP file,
+so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` and
+``profile_rate_hz`` set the size; the presets make ~0.8-1.1 MB each before compression.
+
+:func:`random_scenario` draws random scenes for robustness benchmarks.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.geometry import (
+    check_quaternion_xyzw,
+    matrix_from_quaternion_xyzw,
+    project_to_so3,
+    quaternion_xyzw_from_matrix,
+    transform_from_rotation_translation,
+)
+from linelaser_calib.core.types import Cylinder, FloatArray
+
+Vec3 = tuple[float, float, float]
+Range = tuple[float, float]
+
+#: Accepted values of :attr:`Scenario.motion`.
+MOTIONS = ("step", "continuous")
+#: Accepted values of :attr:`Scenario.background`.
+BACKGROUNDS = ("none", "table", "plane")
+#: Accepted values of :attr:`Scenario.pose_mode`.
+POSE_MODES = ("paper", "general")
+
+
+def _deg(value: float) -> float:
+    return math.radians(value)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Every parameter of one simulated calibration run.
+
+    Scene
+    -----
+    name : str
+        Label for reports (the preset name, or ``custom``).
+    cylinder_radius_m : float
+        Cylinder radius, m.
+    cylinder_length_m : float
+        Length of the finite cylinder along its axis, m.
+    cylinder_base_m : (3,) floats
+        Centre of the cylinder's bottom face in the base frame, m. The cylinder occupies axial
+        positions 0 .. ``cylinder_length_m`` from here along ``axis_direction``.
+    axis_direction : (3,) floats
+        Axis direction in the base frame (normalised on use; any non-zero length).
+    background : str
+        ``none``; ``table``: an infinite plane through ``cylinder_base_m`` perpendicular to the
+        axis, on which the cylinder stands (sensor and flange stay on the cylinder's side);
+        ``plane``: the plane through ``background_point_m`` with normal ``background_normal``,
+        whose normal points to the side where sensor and flange must stay.
+    background_point_m : (3,) floats
+        A point of the ``plane`` background, m.
+    background_normal : (3,) floats
+        Normal of the ``plane`` background (normalised on use).
+
+    Hand-eye (truth)
+    ----------------
+    hand_eye_translation_m : (3,) floats
+        Translation of the true ``T_flange_sensor``, m.
+    hand_eye_rotation_xyzw : (4,) floats
+        Rotation of the true ``T_flange_sensor``, unit quaternion ``xyzw``.
+
+    Profiler
+    --------
+    z_min_m, z_max_m : float
+        Measuring range (depth along sensor z), m. Returns outside are invalid.
+    fan_half_angle_rad : float
+        Half the opening angle of the laser fan, rad. Rays leave the sensor origin in the
+        x-z plane with directions (τ, 0, 1)/|.|, τ evenly spaced in
+        [-tan(fan_half_angle_rad), +tan(fan_half_angle_rad)] (even spacing in x at any
+        depth, like the columns of a triangulation camera). The width at depth z is
+        2 z tan(fan_half_angle_rad).
+    resolution : int
+        Number of rays (points per organised profile).
+    sigma_depth_m, sigma_lateral_m, sigma_y_m : float
+        Gaussian noise (1σ) on each point's z, x and y in the sensor frame, m. With
+        ``sigma_y_m`` = 0 every point has y = 0 exactly.
+    spike_fraction : float
+        Fraction of returned points displaced along their ray by a random ±(``spike_min_m`` ..
+        ``spike_max_m``) offset (reflections; they get a high, glint-like intensity).
+    spike_min_m, spike_max_m : float
+        Range of spike displacement magnitudes, m.
+    dropout_fraction : float
+        Fraction of otherwise valid rays that return nothing (NaN).
+    max_incidence_rad : float
+        Returns whose angle between the ray and the surface normal exceeds this are lost
+        (grazing incidence), rad. π/2 disables the gate.
+    camera_baseline_m : float
+        Offset of the triangulation camera along sensor +y, m. A point is lost if the camera
+        cannot see it (surface facing away or occluded by the scene). 0 disables shadowing.
+    intensity : bool
+        Produce per-point intensities (0..1): reflectance · cos(incidence) · (1 + noise).
+        Invalid points get 0.
+    cylinder_reflectance, background_reflectance : float
+        Reflectance factors (0..1) used for the intensity.
+    intensity_noise : float
+        Relative 1σ noise of the intensity.
+    organised : bool
+        True: every profile has ``resolution`` rows, NaN rows for invalid rays (REP 117).
+        False: dense, invalid rays dropped.
+
+    Pose sampler
+    ------------
+    n_poses : int
+        Number of sensor poses (step-and-shoot shots, or continuous-motion waypoints).
+    pose_mode : str
+        ``paper``: long-axis and short-axis profiles (see below) with their own cut-angle
+        ranges; ``general``: any in-plane viewing direction, cut angle in
+        ``general_cut_range_rad``.
+    long_axis_fraction : float
+        In ``paper`` mode, the fraction of long-axis profiles.
+    long_axis_cut_range_rad : (2,) floats
+        Cut angle α (between the laser plane and the cylinder's cross-section) of long-axis
+        profiles, rad; the sensor looks along the ellipse's minor axis and sees the flat arc
+        spanning the major axis. Paper: 50°–75°.
+    short_axis_cut_range_rad : (2,) floats
+        Cut angle β of short-axis profiles, rad; the sensor looks along the ellipse's major axis
+        (obliquely along the cylinder) and sees the curved arc around a major-axis vertex.
+        Paper: 40°–60°.
+    general_cut_range_rad : (2,) floats
+        Cut angle in ``general`` mode, rad.
+    view_spread_rad : float
+        The sensor position is turned inside the laser plane about the ellipse centre by up to
+        ± this from the nominal long/short-axis view, rad.
+    aim_spread_rad : float
+        The sensor is yawed about its y axis by up to ± this, so the arc is off-centre, rad.
+    flip_roll : bool
+        Turn half of the sensors 180° about their viewing axis (x and y flipped).
+    standoff_spread : float
+        0..1: fraction of the feasible standoff interval (whole arc within range and fan)
+        the standoff is drawn from, centred on its middle.
+    axial_spread : float
+        0..1: fraction of the feasible axial interval (ellipse fully on the side) the ellipse
+        centre is drawn from, centred on its middle.
+    azimuth_range_rad : (2,) floats
+        Allowed azimuth of the sensor around the axis, rad, measured from the direction from
+        the axis towards the base origin (the robot side; any perpendicular if the axis passes
+        within 1 cm of the origin), right-handed about the axis. (-π, π) allows all round.
+    clearance_m : float
+        Least distance of the sensor and flange origins from the cylinder and the background,
+        m (a crude collision check).
+    min_arc_fraction : float
+        A pose is used only if at least this fraction of the rays return a cylinder point
+        (noise-free).
+
+    Robot
+    -----
+    robot_sigma_translation_m, robot_sigma_rotation_rad : float
+        Per-axis 1σ of the per-shot pose error: recorded = true · E_sys · E, E with a Gaussian
+        translation (m) and a Gaussian rotation vector (rad), in the flange frame.
+    robot_systematic_translation_m, robot_systematic_rotvec_rad : (3,) floats
+        The fixed error E_sys (translation m, rotation vector rad), in the flange frame.
+    pose_jitter_translation_m, pose_jitter_rotation_rad : float
+        Per-message 1σ jitter on every streamed pose (m, rad).
+    robot_rate_hz : float
+        Rate of the flange-pose stream, Hz (the stream runs before, during and after the
+        scan; the period is rounded to whole ns).
+    motion : str
+        ``step``: step-and-shoot, a profile mid-way through each dwell; ``continuous``:
+        profiles at ``profile_rate_hz`` while the robot moves through the waypoints.
+    dwell_s : float
+        Step-and-shoot: time the robot rests at each pose, s.
+    margin_s : float
+        Stream time before the first and after the last motion, s.
+    move_speed_m_s, move_angular_speed_rad_s : float
+        Average sensor speed (m/s) and turn rate (rad/s) of the moves. Step moves use
+        quintic time scaling (at rest at both ends); continuous motion follows splines
+        through the waypoints with quintic ease-in/out over the whole path.
+    min_move_s : float
+        Step-and-shoot: shortest move, s.
+    profile_rate_hz : float
+        Continuous motion: profile rate, Hz.
+    latency_s : float
+        Profiles are stamped this much later than acquired (negative: earlier), s.
+    epoch_ns : int
+        Stamp of the first streamed pose, ns.
+
+    Topics and frames
+    -----------------
+    profile_topic, pose_topic : str
+    sensor_frame, flange_frame, base_frame : str
+    """
+
+    name: str = "custom"
+    cylinder_radius_m: float = 0.02
+    cylinder_length_m: float = 0.2
+    cylinder_base_m: Vec3 = (0.45, 0.15, 0.0)
+    axis_direction: Vec3 = (0.0, 0.0, 1.0)
+    background: str = "none"
+    background_point_m: Vec3 = (0.0, 0.0, 0.0)
+    background_normal: Vec3 = (0.0, 0.0, 1.0)
+
+    hand_eye_translation_m: Vec3 = (0.0, -0.06, 0.09)
+    hand_eye_rotation_xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+
+    z_min_m: float = 0.08
+    z_max_m: float = 0.2
+    fan_half_angle_rad: float = _deg(30.0)
+    resolution: int = 800
+    sigma_depth_m: float = 5e-6
+    sigma_lateral_m: float = 5e-6
+    sigma_y_m: float = 0.0
+    spike_fraction: float = 0.0
+    spike_min_m: float = 0.002
+    spike_max_m: float = 0.008
+    dropout_fraction: float = 0.0
+    max_incidence_rad: float = math.pi / 2
+    camera_baseline_m: float = 0.0
+    intensity: bool = False
+    cylinder_reflectance: float = 0.9
+    background_reflectance: float = 0.5
+    intensity_noise: float = 0.02
+    organised: bool = False
+
+    n_poses: int = 30
+    pose_mode: str = "paper"
+    long_axis_fraction: float = 0.5
+    long_axis_cut_range_rad: Range = (_deg(50.0), _deg(75.0))
+    short_axis_cut_range_rad: Range = (_deg(40.0), _deg(60.0))
+    general_cut_range_rad: Range = (_deg(40.0), _deg(75.0))
+    view_spread_rad: float = _deg(10.0)
+    aim_spread_rad: float = _deg(4.0)
+    flip_roll: bool = True
+    standoff_spread: float = 0.6
+    axial_spread: float = 0.8
+    azimuth_range_rad: Range = (-math.pi, math.pi)
+    clearance_m: float = 0.03
+    min_arc_fraction: float = 0.15
+
+    robot_sigma_translation_m: float = 0.0
+    robot_sigma_rotation_rad: float = 0.0
+    robot_systematic_translation_m: Vec3 = (0.0, 0.0, 0.0)
+    robot_systematic_rotvec_rad: Vec3 = (0.0, 0.0, 0.0)
+    pose_jitter_translation_m: float = 0.0
+    pose_jitter_rotation_rad: float = 0.0
+    robot_rate_hz: float = 125.0
+    motion: str = "step"
+    dwell_s: float = 0.3
+    margin_s: float = 0.2
+    move_speed_m_s: float = 0.25
+    move_angular_speed_rad_s: float = 1.0
+    min_move_s: float = 0.4
+    profile_rate_hz: float = 10.0
+    latency_s: float = 0.0
+    epoch_ns: int = 1_700_000_000_000_000_000
+
+    profile_topic: str = "/profile"
+    pose_topic: str = "/flange_pose"
+    sensor_frame: str = "laser"
+    flange_frame: str = "tool0"
+    base_frame: str = "base_link"
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, list):
+                object.__setattr__(self, f.name, tuple(float(v) for v in value))
+        self._validate()
+
+    @property
+    def T_flange_sensor(self) -> FloatArray:
+        """The true hand-eye, shape (4, 4), translation in m."""
+        R = matrix_from_quaternion_xyzw(self.hand_eye_rotation_xyzw)
+        return transform_from_rotation_translation(R, self.hand_eye_translation_m)
+
+    @property
+    def axis_unit(self) -> FloatArray:
+        """Unit axis direction, shape (3,)."""
+        a = np.asarray(self.axis_direction, dtype=np.float64)
+        return a / np.linalg.norm(a)
+
+    def cylinder(self) -> Cylinder:
+        """The true cylinder as an infinite axis: the axis point closest to the base origin."""
+        a = self.axis_unit
+        b = np.asarray(self.cylinder_base_m, dtype=np.float64)
+        return Cylinder(point=b - (b @ a) * a, direction=a, radius=self.cylinder_radius_m)
+
+    def _validate(self) -> None:
+        def require(ok: bool, what: str) -> None:
+            if not ok:
+                raise InputError(f"scenario {self.name!r}: {what}")
+
+        def positive(*names: str) -> None:
+            for n in names:
+                require(getattr(self, n) > 0.0, f"{n} must be > 0, got {getattr(self, n)}")
+
+        def non_negative(*names: str) -> None:
+            for n in names:
+                require(getattr(self, n) >= 0.0, f"{n} must be >= 0, got {getattr(self, n)}")
+
+        def fraction(*names: str) -> None:
+            for n in names:
+                v = getattr(self, n)
+                require(0.0 <= v <= 1.0, f"{n} must be in [0, 1], got {v}")
+
+        def vector(name: str, size: int, nonzero: bool) -> None:
+            v = np.asarray(getattr(self, name), dtype=np.float64)
+            require(
+                v.shape == (size,) and bool(np.all(np.isfinite(v))),
+                f"{name} must be {size} finite numbers, got {getattr(self, name)}",
+            )
+            if nonzero:
+                require(float(np.linalg.norm(v)) > 1e-12, f"{name} must not be zero")
+
+        def cut_range(name: str) -> None:
+            lo, hi = getattr(self, name)
+            require(
+                0.0 < lo <= hi < math.pi / 2,
+                f"{name} must satisfy 0 < low <= high < pi/2 rad, got ({lo}, {hi})",
+            )
+
+        positive("cylinder_radius_m", "cylinder_length_m", "z_min_m", "fan_half_angle_rad")
+        positive("robot_rate_hz", "dwell_s", "move_speed_m_s", "move_angular_speed_rad_s")
+        positive("min_move_s", "profile_rate_hz", "max_incidence_rad")
+        non_negative("sigma_depth_m", "sigma_lateral_m", "sigma_y_m", "spike_min_m")
+        non_negative("camera_baseline_m", "intensity_noise", "view_spread_rad", "aim_spread_rad")
+        non_negative("clearance_m", "robot_sigma_translation_m", "robot_sigma_rotation_rad")
+        non_negative("pose_jitter_translation_m", "pose_jitter_rotation_rad", "margin_s")
+        fraction("spike_fraction", "dropout_fraction", "cylinder_reflectance")
+        fraction("background_reflectance", "long_axis_fraction", "standoff_spread")
+        fraction("axial_spread", "min_arc_fraction")
+        for name in ("cylinder_base_m", "background_point_m"):
+            vector(name, 3, nonzero=False)
+        for name in ("robot_systematic_translation_m", "robot_systematic_rotvec_rad"):
+            vector(name, 3, nonzero=False)
+        for name in ("axis_direction", "background_normal", "hand_eye_translation_m"):
+            vector(name, 3, nonzero=name != "hand_eye_translation_m")
+        try:
+            check_quaternion_xyzw(self.hand_eye_rotation_xyzw)
+        except ValueError as exc:
+            raise InputError(f"scenario {self.name!r}: hand_eye_rotation_xyzw: {exc}") from None
+        require(
+            self.z_max_m > self.z_min_m,
+            f"z_max_m ({self.z_max_m}) must exceed z_min_m ({self.z_min_m})",
+        )
+        require(
+            self.fan_half_angle_rad < math.pi / 2,
+            f"fan_half_angle_rad must be < pi/2, got {self.fan_half_angle_rad}",
+        )
+        require(
+            self.max_incidence_rad <= math.pi / 2,
+            f"max_incidence_rad must be <= pi/2, got {self.max_incidence_rad}",
+        )
+        require(
+            isinstance(self.resolution, int) and self.resolution >= 3,
+            f"resolution must be an integer >= 3, got {self.resolution}",
+        )
+        require(
+            self.spike_max_m >= self.spike_min_m,
+            f"spike_max_m ({self.spike_max_m}) must be >= spike_min_m ({self.spike_min_m})",
+        )
+        require(
+            isinstance(self.n_poses, int) and self.n_poses >= 1,
+            f"n_poses must be an integer >= 1, got {self.n_poses}",
+        )
+        require(self.background in BACKGROUNDS, f"background must be one of {BACKGROUNDS}")
+        require(self.pose_mode in POSE_MODES, f"pose_mode must be one of {POSE_MODES}")
+        require(self.motion in MOTIONS, f"motion must be one of {MOTIONS}")
+        require(
+            self.motion == "step" or self.n_poses >= 2,
+            "continuous motion needs n_poses >= 2 waypoints",
+        )
+        for name in ("long_axis_cut_range_rad", "short_axis_cut_range_rad"):
+            cut_range(name)
+        cut_range("general_cut_range_rad")
+        lo, hi = self.azimuth_range_rad
+        require(
+            lo < hi <= lo + 2 * math.pi,
+            f"azimuth_range_rad must satisfy low < high <= low + 2 pi, got ({lo}, {hi})",
+        )
+        require(
+            abs(self.latency_s) < self.margin_s,
+            f"|latency_s| ({self.latency_s}) must be < margin_s ({self.margin_s}) so the pose "
+            "stream brackets every profile stamp; raise margin_s",
+        )
+        require(
+            isinstance(self.epoch_ns, int) and self.epoch_ns >= 0,
+            f"epoch_ns must be a non-negative integer, got {self.epoch_ns}",
+        )
+        for name in ("profile_topic", "pose_topic", "sensor_frame", "flange_frame", "base_frame"):
+            require(bool(getattr(self, name)), f"{name} must not be empty")
+
+
+def _paper_hand_eye() -> tuple[Vec3, tuple[float, float, float, float]]:
+    """Paper eq. 17 (mm), rotation projected to SO(3) by SVD (it is orthonormal to ~4 digits)."""
+    M = np.array(
+        [
+            [0.5771, 0.4940, 0.6503],
+            [-0.8153, 0.3021, 0.4940],
+            [0.0475, -0.8153, 0.5771],
+        ]
+    )
+    q = quaternion_xyzw_from_matrix(project_to_so3(M))
+    return (0.150, 0.200, 0.250), (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+
+def _paper_scenario() -> Scenario:
+    direction = np.array([3.0, 1.0, 1.0]) / math.sqrt(11.0)
+    length = 0.2
+    base = np.array([0.001, 0.001, 0.001]) - 0.5 * length * direction
+    translation, rotation = _paper_hand_eye()
+    return Scenario(
+        name="paper",
+        cylinder_radius_m=0.020,
+        cylinder_length_m=length,
+        cylinder_base_m=(float(base[0]), float(base[1]), float(base[2])),
+        axis_direction=(float(direction[0]), float(direction[1]), float(direction[2])),
+        background="none",
+        hand_eye_translation_m=translation,
+        hand_eye_rotation_xyzw=rotation,
+        z_min_m=0.08,
+        z_max_m=0.20,
+        fan_half_angle_rad=_deg(30.0),
+        resolution=800,
+        sigma_depth_m=5e-6,
+        sigma_lateral_m=5e-6,
+        n_poses=50,
+        robot_sigma_translation_m=1e-4,
+        robot_sigma_rotation_rad=_deg(0.01),
+        robot_rate_hz=125.0,
+        clearance_m=0.03,
+    )
+
+
+def _ur_scancontrol_scenario() -> Scenario:
+    # Roll, pitch, yaw (fixed x-y-z axes) of the sensor on its bracket.
+    R_flange_sensor = Rotation.from_euler("xyz", [_deg(-20.0), _deg(12.0), _deg(95.0)])
+    q = quaternion_xyzw_from_matrix(R_flange_sensor.as_matrix())
+    return Scenario(
+        name="ur_scancontrol",
+        cylinder_radius_m=0.020,
+        cylinder_length_m=0.10,
+        cylinder_base_m=(0.45, 0.15, 0.0),
+        axis_direction=(0.0, 0.0, 1.0),
+        background="table",
+        hand_eye_translation_m=(0.012, -0.085, 0.095),
+        hand_eye_rotation_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+        z_min_m=0.07,
+        z_max_m=0.15,
+        fan_half_angle_rad=_deg(25.0),
+        resolution=640,
+        sigma_depth_m=8e-6,
+        sigma_lateral_m=6e-6,
+        spike_fraction=0.005,
+        spike_min_m=0.002,
+        spike_max_m=0.008,
+        dropout_fraction=0.02,
+        max_incidence_rad=_deg(80.0),
+        camera_baseline_m=0.03,
+        intensity=True,
+        organised=True,
+        n_poses=30,
+        long_axis_cut_range_rad=(_deg(50.0), _deg(65.0)),
+        axial_spread=1.0,
+        azimuth_range_rad=(_deg(-150.0), _deg(150.0)),
+        clearance_m=0.03,
+        robot_sigma_translation_m=3e-5,
+        robot_sigma_rotation_rad=_deg(0.003),
+        robot_rate_hz=125.0,
+        dwell_s=0.3,
+    )
+
+
+def _continuous_scenario() -> Scenario:
+    return replace(
+        _ur_scancontrol_scenario(),
+        name="continuous",
+        motion="continuous",
+        n_poses=6,
+        flip_roll=False,
+        resolution=320,
+        robot_rate_hz=500.0,
+        profile_rate_hz=10.0,
+        move_speed_m_s=0.15,
+        move_angular_speed_rad_s=1.5,
+        latency_s=0.004,
+    )
+
+
+#: Named scenarios; see the module docstring and :func:`scenario_from_preset`.
+PRESETS: dict[str, Scenario] = {
+    "paper": _paper_scenario(),
+    "ur_scancontrol": _ur_scancontrol_scenario(),
+    "continuous": _continuous_scenario(),
+}
+
+
+def scenario_from_preset(name: str, **overrides: Any) -> Scenario:
+    """A preset scenario with some fields replaced.
+
+    Parameters
+    ----------
+    name : str
+        A key of :data:`PRESETS`.
+    **overrides
+        Scenario fields to replace (SI units, see :class:`Scenario`).
+
+    Raises
+    ------
+    InputError
+        For an unknown preset or field, or an invalid value.
+    """
+    if name not in PRESETS:
+        raise InputError(f"unknown scenario preset {name!r}; choose one of {sorted(PRESETS)}")
+    known = {f.name for f in fields(Scenario)}
+    unknown = sorted(set(overrides) - known)
+    if unknown:
+        raise InputError(
+            f"unknown scenario field(s) {unknown}; see linelaser_calib.sim.Scenario for the "
+            "list of fields"
+        )
+    return replace(PRESETS[name], **overrides)
+
+
+def random_scenario(
+    rng: np.random.Generator,
+    *,
+    n_poses_range: tuple[int, int] = (12, 100),
+    **overrides: Any,
+) -> Scenario:
+    """A random scene for robustness benchmarks.
+
+    Drawn: a uniformly random hand-eye rotation with a 0.03-0.3 m translation in a random
+    direction; the cylinder axis through a point uniform in a ±0.5 m box, in a uniformly
+    random direction; radius 10-30 mm and a length that holds every cut; a table or no
+    background (even odds); a profiler with range start 50-100 mm, range depth 100-200 mm
+    and fan half-angle 20°-35°; ``general`` poses (any in-plane viewing direction, cut
+    angles 40°-75°); sensor noise 2-20 µm, robot noise up to 0.1 mm and 0.01° (1σ per
+    axis); spikes up to 1 %, dropouts up to 5 %; ``n_poses`` uniform in ``n_poses_range``
+    (inclusive). Everything else keeps the :class:`Scenario` defaults.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+    n_poses_range : (int, int)
+        Inclusive range of the number of poses.
+    **overrides
+        Fields set after drawing (they win over the draws).
+    """
+    q = rng.normal(size=4)
+    q = q / np.linalg.norm(q)
+    t_dir = rng.normal(size=3)
+    translation = t_dir / np.linalg.norm(t_dir) * rng.uniform(0.03, 0.3)
+    axis = rng.normal(size=3)
+    axis = axis / np.linalg.norm(axis)
+    radius = float(rng.uniform(0.01, 0.03))
+    cut_range = (_deg(40.0), _deg(75.0))
+    length = max(float(rng.uniform(0.12, 0.3)), 2.0 * radius * math.tan(cut_range[1]) + 0.02)
+    z_min = float(rng.uniform(0.05, 0.1))
+    drawn = Scenario(
+        name="random",
+        cylinder_radius_m=radius,
+        cylinder_length_m=length,
+        cylinder_base_m=tuple(float(v) for v in rng.uniform(-0.5, 0.5, 3)),  # type: ignore[arg-type]
+        axis_direction=(float(axis[0]), float(axis[1]), float(axis[2])),
+        background="table" if rng.random() < 0.5 else "none",
+        hand_eye_translation_m=(
+            float(translation[0]),
+            float(translation[1]),
+            float(translation[2]),
+        ),
+        hand_eye_rotation_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+        z_min_m=z_min,
+        z_max_m=z_min + float(rng.uniform(0.1, 0.2)),
+        fan_half_angle_rad=float(rng.uniform(_deg(20.0), _deg(35.0))),
+        sigma_depth_m=float(rng.uniform(2e-6, 2e-5)),
+        sigma_lateral_m=float(rng.uniform(2e-6, 2e-5)),
+        spike_fraction=float(rng.uniform(0.0, 0.01)),
+        dropout_fraction=float(rng.uniform(0.0, 0.05)),
+        pose_mode="general",
+        general_cut_range_rad=cut_range,
+        n_poses=int(rng.integers(n_poses_range[0], n_poses_range[1] + 1)),
+        robot_sigma_translation_m=float(rng.uniform(0.0, 1e-4)),
+        robot_sigma_rotation_rad=float(rng.uniform(0.0, _deg(0.01))),
+    )
+    return replace(drawn, **overrides) if overrides else drawn

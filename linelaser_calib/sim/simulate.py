@@ -1,0 +1,171 @@
+"""Public entry of the simulator: :func:`simulate` a scenario into profiles, poses and truth."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
+from linelaser_calib.sim.poses import sample_sensor_poses
+from linelaser_calib.sim.profiler import measure, trace
+from linelaser_calib.sim.robot import (
+    draw_errors,
+    jitter_transforms,
+    plan_motion,
+    reported_flange,
+    true_flange,
+)
+from linelaser_calib.sim.scenario import Scenario
+from linelaser_calib.sim.scene import Int8Array, Int64Array, Scene
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationTruth:
+    """Ground truth of a simulated run.
+
+    Per-shot arrays have one row per profile (K profiles); per-ray arrays are organised
+    (K, N = resolution) whatever the output format: for dense output, profile k's points
+    are the rows of ray ``valid[k]``.
+
+    Attributes
+    ----------
+    scenario : Scenario
+    seed : int
+    T_flange_sensor : ndarray, shape (4, 4)
+        The true hand-eye.
+    cylinder : Cylinder
+        The true cylinder axis (point closest to the base origin) and radius; its finite
+        extent is ``scenario.cylinder_base_m`` + [0, ``scenario.cylinder_length_m``] along
+        the axis.
+    T_base_flange_true : ndarray, shape (K, 4, 4)
+        True flange pose at each profile's acquisition time.
+    T_base_flange_recorded : ndarray, shape (K, 4, 4)
+        What the robot reports at the acquisition time, without per-message jitter
+        (true · E_sys · E).
+    stamps_ns : ndarray of int64, shape (K,)
+        Profile stamps as published (acquisition + latency).
+    acquisition_stamps_ns : ndarray of int64, shape (K,)
+        True acquisition times.
+    T_base_sensor_waypoints : ndarray, shape (M, 4, 4)
+        The sampled sensor poses (the shots in step-and-shoot).
+    waypoint_kinds : tuple of str
+        ``long``, ``short`` or ``general`` per waypoint.
+    waypoint_cut_angles_rad : ndarray, shape (M,)
+        Angle between each waypoint's laser plane and the cylinder cross-section, rad.
+    surface : ndarray of int8, shape (K, N)
+        :class:`~linelaser_calib.sim.scene.Surface` hit by each ray (before gates).
+    points_true_sensor : ndarray, shape (K, N, 3)
+        Noise-free hit points in the sensor frame, m (NaN: no hit).
+    valid, spike, dropout : ndarray of bool, shape (K, N)
+        Ray returned a point; that point is a reflection spike; the ray was dropped at
+        random.
+    """
+
+    scenario: Scenario
+    seed: int
+    T_flange_sensor: FloatArray
+    cylinder: Cylinder
+    T_base_flange_true: FloatArray
+    T_base_flange_recorded: FloatArray
+    stamps_ns: Int64Array
+    acquisition_stamps_ns: Int64Array
+    T_base_sensor_waypoints: FloatArray
+    waypoint_kinds: tuple[str, ...]
+    waypoint_cut_angles_rad: FloatArray
+    surface: Int8Array
+    points_true_sensor: FloatArray
+    valid: BoolArray
+    spike: BoolArray
+    dropout: BoolArray
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedData:
+    """Everything a simulated run produces.
+
+    Attributes
+    ----------
+    profiles : list of Profile
+        One per shot, in stamp order; organised (NaN rows kept) or dense per the scenario.
+    intensities : list of (ndarray or None)
+        Per profile, intensities (rows aligned with the profile's points), or None.
+    poses : list of FlangePose
+        The full reported flange-pose stream, sorted by stamp.
+    truth : SimulationTruth
+    """
+
+    profiles: list[Profile]
+    intensities: list[FloatArray | None]
+    poses: list[FlangePose]
+    truth: SimulationTruth
+
+    @property
+    def scenario(self) -> Scenario:
+        """The scenario simulated (topics and frame names included)."""
+        return self.truth.scenario
+
+
+def simulate(scenario: Scenario, seed: int) -> SimulatedData:
+    """Simulate a calibration run; deterministic for a given scenario and seed.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    seed : int
+        Seed of the single ``numpy.random.Generator`` used for every random draw.
+
+    Raises
+    ------
+    InputError
+        If the scenario admits too few feasible sensor poses.
+    """
+    rng = np.random.default_rng(seed)
+    scene = Scene.from_scenario(scenario)
+    sampled = sample_sensor_poses(rng, scenario, scene)
+    motion = plan_motion(sampled.T_base_sensor, scenario)
+    errors = draw_errors(rng, scenario, len(sampled.T_base_sensor))
+
+    period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
+    acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
+    t_shot = acq_ns / 1e9
+    T_sensor_shot = motion.T_base_sensor(t_shot)
+    traced = trace(scene, scenario, T_sensor_shot)
+    measured = measure(rng, scenario, traced)
+
+    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
+    stream_ns = np.arange(n_stream, dtype=np.int64) * period_ns
+    stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
+    stream = stream @ jitter_transforms(rng, scenario, n_stream)
+
+    stamps = scenario.epoch_ns + acq_ns + round(scenario.latency_s * 1e9)
+    profiles, intensities = [], []
+    for k in range(len(acq_ns)):
+        keep = slice(None) if scenario.organised else measured.valid[k]
+        profiles.append(
+            Profile(int(stamps[k]), measured.points[k][keep], frame_id=scenario.sensor_frame)
+        )
+        intensities.append(None if measured.intensity is None else measured.intensity[k][keep])
+    poses = [
+        FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
+        for s, T in zip(stream_ns, stream, strict=True)
+    ]
+    truth = SimulationTruth(
+        scenario=scenario,
+        seed=seed,
+        T_flange_sensor=scenario.T_flange_sensor,
+        cylinder=scenario.cylinder(),
+        T_base_flange_true=true_flange(motion, scenario, t_shot),
+        T_base_flange_recorded=reported_flange(motion, scenario, errors, t_shot),
+        stamps_ns=stamps,
+        acquisition_stamps_ns=scenario.epoch_ns + acq_ns,
+        T_base_sensor_waypoints=sampled.T_base_sensor,
+        waypoint_kinds=sampled.kinds,
+        waypoint_cut_angles_rad=sampled.cut_angles_rad,
+        surface=traced.surface,
+        points_true_sensor=traced.points_sensor,
+        valid=measured.valid,
+        spike=measured.spike,
+        dropout=measured.dropout,
+    )
+    return SimulatedData(profiles, intensities, poses, truth)
