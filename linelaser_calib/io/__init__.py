@@ -21,6 +21,7 @@ from linelaser_calib.io.results import (
     Truth,
     read_result_yaml,
     read_truth_yaml,
+    result_to_dict,
     write_result_yaml,
     write_truth_yaml,
 )
@@ -39,6 +40,7 @@ __all__ = [
     "read_bag",
     "read_result_yaml",
     "read_truth_yaml",
+    "result_to_dict",
     "write_bag",
     "write_result_yaml",
     "write_truth_yaml",

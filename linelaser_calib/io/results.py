@@ -147,24 +147,8 @@ def _write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Pat
     return path
 
 
-def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
-    """Write a calibration result in the contract layout, atomically.
-
-    Parameters
-    ----------
-    result : CalibrationResult
-    path : str or Path
-        Target file; missing parent directories are created.
-
-    Returns
-    -------
-    Path
-
-    Raises
-    ------
-    ResultFileError
-        If the file cannot be written (nothing is left at ``path`` then).
-    """
+def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
+    """The result in the contract layout (plain lists and numbers), for YAML and JSON."""
     unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
     hand_eye = _hand_eye_section(result.T_flange_sensor, result.parent_frame, result.child_frame)
     hand_eye["uncertainty"] = (
@@ -175,7 +159,7 @@ def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
             "rotation_rad": None if unc_r is None else _floats(unc_r),
         }
     )
-    data = {
+    return {
         "hand_eye": hand_eye,
         "cylinder": _cylinder_section(result.cylinder, result.base_frame),
         "quality": {
@@ -199,7 +183,27 @@ def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
             },
         },
     }
-    return _write_yaml_atomically(Path(path), _RESULT_HEADER, data)
+
+
+def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
+    """Write a calibration result in the contract layout, atomically.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    path : str or Path
+        Target file; missing parent directories are created.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ResultFileError
+        If the file cannot be written (nothing is left at ``path`` then).
+    """
+    return _write_yaml_atomically(Path(path), _RESULT_HEADER, result_to_dict(result))
 
 
 def write_truth_yaml(

@@ -1,0 +1,331 @@
+"""``linelaser-calib``: a thin command-line wrapper around the library.
+
+Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
+``calibrate`` (the offline calibration) and ``demo`` (calibrate the committed bags and show
+the error against their truth). Exit code 0 means success; a user error prints one
+paragraph on stderr and exits with 1; a usage error exits with 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from linelaser_calib.core.errors import CalibrationError, InputError
+from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.pairing import PairingConfig
+from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
+from linelaser_calib.io.results import (
+    read_result_yaml,
+    read_truth_yaml,
+    result_to_dict,
+    write_result_yaml,
+    write_truth_yaml,
+)
+from linelaser_calib.offline import calibrate_bag
+from linelaser_calib.summary import format_summary
+
+PROG = "linelaser-calib"
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not (np.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return value
+
+
+def _xyz(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected x,y,z in metres, got {text!r}")
+    x, y, z = (float(p) for p in parts)
+    return x, y, z
+
+
+# --- simulate -------------------------------------------------------------------------------
+
+
+def simulate_to_bag(
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object]
+) -> tuple[Path, Path]:
+    """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
+
+    Returns the bag directory and the truth file.
+    """
+    from linelaser_calib.sim.scenario import scenario_from_preset
+    from linelaser_calib.sim.simulate import simulate
+
+    scenario = scenario_from_preset(scenario_name, **overrides)
+    data = simulate(scenario, seed)
+    write_bag(
+        out,
+        data.profiles,
+        data.poses,
+        profile_topic=scenario.profile_topic,
+        pose_topic=scenario.pose_topic,
+        sensor_frame=scenario.sensor_frame,
+        base_frame=scenario.base_frame,
+        organised=scenario.organised,
+        intensities=data.intensities if scenario.intensity else None,
+    )
+    truth = write_truth_yaml(
+        out / "truth.yaml",
+        data.truth.T_flange_sensor,
+        data.truth.cylinder,
+        parent_frame=scenario.flange_frame,
+        child_frame=scenario.sensor_frame,
+        base_frame=scenario.base_frame,
+        extra={
+            "simulation": {
+                "scenario": scenario_name,
+                "seed": seed,
+                "overrides": overrides,
+                "profiles": len(data.profiles),
+                "poses": len(data.poses),
+                "command": simulate_command(out, scenario_name, seed, overrides),
+            }
+        },
+    )
+    return out, truth
+
+
+#: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
+SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
+    ("--poses", "n_poses", int),
+    ("--radius", "cylinder_radius_m", float),
+    ("--points", "resolution", int),
+    ("--sensor-sigma", "sigma_depth_m", float),
+    ("--robot-sigma-t", "robot_sigma_translation_m", float),
+    ("--robot-sigma-r", "robot_sigma_rotation_rad", float),
+    ("--spikes", "spike_fraction", float),
+    ("--profile-topic", "profile_topic", str),
+    ("--pose-topic", "pose_topic", str),
+    ("--sensor-frame", "sensor_frame", str),
+    ("--flange-frame", "flange_frame", str),
+    ("--base-frame", "base_frame", str),
+)
+
+
+def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[str, object]) -> str:
+    """The ``linelaser-calib simulate`` command line that regenerates a bag."""
+    flags = {field: flag for flag, field, _ in SIMULATE_OPTIONS}
+    words = [PROG, "simulate", str(out), "--scenario", scenario_name, "--seed", str(seed)]
+    for field, value in overrides.items():
+        if field == "organised":
+            words.append("--organised" if value else "--dense")
+        else:
+            words += [flags[field], str(value)]
+    return " ".join(words)
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    overrides: dict[str, object] = {
+        field: getattr(args, field)
+        for _, field, _ in SIMULATE_OPTIONS
+        if getattr(args, field) is not None
+    }
+    if args.organised is not None:
+        overrides["organised"] = args.organised
+    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides)
+    print(f"wrote {bag} and {truth}")
+    print(format_bag_info(bag_info(bag)))
+    return 0
+
+
+# --- info -----------------------------------------------------------------------------------
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    print(format_bag_info(bag_info(args.bag)))
+    return 0
+
+
+# --- calibrate ------------------------------------------------------------------------------
+
+
+def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+    initial = None
+    if args.initial is not None:
+        initial = read_result_yaml(args.initial).T_flange_sensor
+    return PipelineConfig(
+        method=Method(args.method),
+        radius_m=args.radius,
+        seed=args.seed,
+        pairing=PairingConfig(
+            sync_tolerance_s=args.sync_tolerance, clock_offset_s=args.clock_offset
+        ),
+        initial_T_flange_sensor=initial,
+    )
+
+
+class _StderrProgress:
+    """Progress on stderr, one line per stage, for long bags."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.started = time.monotonic()
+        self.last_stage = ""
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        if stage != self.last_stage or done == total:
+            elapsed = time.monotonic() - self.started
+            print(f"  [{elapsed:6.2f} s] {stage}: {done}/{total}", file=sys.stderr)
+            self.last_stage = stage
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    config = _pipeline_config(args)
+    run = calibrate_bag(
+        args.bag,
+        config,
+        profile_topic=args.profile_topic,
+        pose_topic=args.pose_topic,
+        flange_frame=args.flange_frame,
+        progress=_StderrProgress(args.progress),
+    )
+    if args.output is not None:
+        write_result_yaml(run.result, args.output)
+    truth_path = Path(args.bag) / "truth.yaml"
+    truth = read_truth_yaml(truth_path) if truth_path.is_file() else None
+    if args.json:
+        print(json.dumps(result_to_dict(run.result), indent=2))
+    else:
+        print(
+            f"{run.bag.path}: {len(run.bag.profiles)} profiles on {run.bag.profile_topic}, "
+            f"{len(run.bag.poses)} poses on {run.bag.pose_topic}"
+        )
+        print(format_summary(run.result, truth))
+        if args.output is not None:
+            print(f"Result written to {args.output}")
+    return 0
+
+
+# --- demo -----------------------------------------------------------------------------------
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    root = Path(args.bags)
+    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
+    if not bags:
+        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
+    rows = []
+    for bag in bags:
+        truth = read_truth_yaml(bag / "truth.yaml")
+        for method in (Method.PAPER, Method.DEFAULT):
+            started = time.perf_counter()
+            run = calibrate_bag(bag, PipelineConfig(method=method, seed=args.seed))
+            seconds = time.perf_counter() - started
+            print(f"=== {bag.name}, method {method.value} ({seconds:.2f} s) ===")
+            print(format_summary(run.result, truth))
+            print()
+            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
+            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
+    print("Error against truth (hand-eye T_flange_sensor):")
+    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
+    for name, method, rot_deg, trans_mm, seconds in rows:
+        print(f"  {name:<28}{method:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+    return 0
+
+
+# --- parser ---------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``linelaser-calib``."""
+    parser = argparse.ArgumentParser(
+        prog=PROG,
+        description="Hand-eye calibration of a line-laser profile sensor from cylinder scans.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    sim = sub.add_parser("simulate", help="write a synthetic rosbag2 MCAP bag and truth.yaml")
+    sim.add_argument("out", help="bag directory to create (must not exist)")
+    sim.add_argument(
+        "--scenario", default="paper", help="preset: paper, ur_scancontrol, continuous"
+    )
+    sim.add_argument("--seed", type=int, default=0)
+    for flag, field, kind in SIMULATE_OPTIONS:
+        sim.add_argument(flag, dest=field, type=kind, default=None, help=f"scenario {field}")
+    layout = sim.add_mutually_exclusive_group()
+    layout.add_argument(
+        "--organised",
+        dest="organised",
+        action="store_true",
+        default=None,
+        help="organised profiles with NaN for invalid rays",
+    )
+    layout.add_argument(
+        "--dense",
+        dest="organised",
+        action="store_false",
+        help="dense profiles, invalid rays dropped",
+    )
+    sim.set_defaults(func=_cmd_simulate)
+
+    info = sub.add_parser("info", help="print what a bag holds")
+    info.add_argument("bag")
+    info.set_defaults(func=_cmd_info)
+
+    cal = sub.add_parser("calibrate", help="calibrate the hand-eye from a bag")
+    cal.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
+    cal.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
+    cal.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
+    cal.add_argument(
+        "--radius", type=_positive_float, help="cylinder radius, m (default: estimate)"
+    )
+    cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
+    cal.add_argument("--output", help="result YAML to write")
+    cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
+    cal.add_argument(
+        "--sync-tolerance",
+        type=_positive_float,
+        default=PairingConfig.sync_tolerance_s,
+        help="largest profile-to-pose stamp gap, s",
+    )
+    cal.add_argument(
+        "--clock-offset",
+        type=float,
+        default=0.0,
+        help="added to profile stamps to reach the pose clock, s",
+    )
+    cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
+    cal.add_argument("--json", action="store_true", help="print the result as JSON")
+    cal.add_argument("--progress", action="store_true", help="print progress on stderr")
+    cal.set_defaults(func=_cmd_calibrate)
+
+    demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
+    demo.add_argument("bags", nargs="?", default="bags")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.set_defaults(func=_cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit code."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args))
+    except CalibrationError as exc:
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"{PROG}: error: {exc.strerror or exc} ({exc.filename or ''})", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
