@@ -1,0 +1,372 @@
+"""Cleaning of one laser profile before the ellipse fit (cylinder paper §3.1, step 1).
+
+The paper filters each profile statistically before its RANSAC ellipse fit. Here the
+cleaning is, in order:
+
+1. Drop invalid returns: NaN or +-Inf in any coordinate (REP 117).
+2. Check that the points lie in the laser plane y = 0. A typical |y| above
+   ``max_abs_y_m`` means the cloud is probably not in the sensor frame; this is reported
+   (or the profile rejected, if so configured), never silently fixed.
+3. Range gate: keep ``min_depth_m <= z <= max_depth_m`` and ``|x| <= max_abs_x_m``.
+4. Sort the points by x (the scan direction) and split them into segments: points up to
+   ``MAX_BRIDGED_POINTS + 1`` apart in this order are linked when they are at most
+   ``max_gap_m`` apart in the x-z plane, so a few stray points do not split the arc.
+   Segments of fewer than ``min_segment_points`` points are dropped: this removes isolated
+   reflection spikes and small clusters, and separates the arc from a table or background
+   behind it. Optionally only the largest segment is kept.
+5. Spike filter, robust and independent of the shape (it works on the steep flanks of the
+   arc as on its top). For each point, lines are drawn through pairs of its neighbours in
+   the segment, ``spike_half_window`` on each side, taking only pairs that straddle the
+   point (one neighbour before, one after), or at a segment's two ends the pairs of its
+   nearest neighbours on the one side. The point's residual is the median of its
+   perpendicular distances to those lines: near zero on any smooth curve (the curvature
+   term is about k s^2 / 2 for spacing s and curvature k), large for a spike, and not
+   disturbed by one spike among the neighbours (the median ignores the pairs that contain
+   it; a good point next to a run of spikes may go). The noise scale is
+   sigma = 1.4826 * median(residuals) over the profile; a point is a spike when its
+   residual exceeds ``max(spike_factor * sigma, spike_floor_m)`` and also
+   ``spike_spacing_factor`` times the local point spacing (sparse flank points have a
+   larger curvature term and are kept unless clearly off the curve).
+
+The RANSAC ellipse fit that follows removes whatever outliers remain (a table plane that
+touches the arc, small spikes); cleaning only has to make its job easy and must never cut
+into the arc.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .errors import InputError, ProfileRejected
+from .types import BoolArray, FloatArray
+
+IntArray = NDArray[np.intp]
+
+#: Consecutive stray points (spikes) that a segment bridges over, see :func:`segment_labels`.
+MAX_BRIDGED_POINTS = 3
+#: 1 / Phi^-1(3/4): turns a median absolute deviation into a Gaussian sigma.
+MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class CleaningConfig:
+    """Profile cleaning parameters (SI units).
+
+    Attributes
+    ----------
+    min_points : int
+        Fewest points left after cleaning; fewer raise ProfileRejected.
+    max_abs_y_m : float
+        Largest typical |y| (90th percentile) of a cloud in the sensor frame, m. The laser
+        plane is y = 0; drivers report y = 0 or within microns.
+    reject_off_plane : bool
+        Reject a profile whose |y| exceeds ``max_abs_y_m`` instead of only warning.
+    min_depth_m, max_depth_m : float
+        Range gate on the depth z, m. The defaults (-inf, inf) disable it.
+    max_abs_x_m : float
+        Largest |x| kept (half the line width), m. The default inf disables it.
+    max_gap_m : float
+        Distance between consecutive points (sorted by x) that splits the scan line into
+        segments, m. The default 2 mm is well above the point spacing of a profiler on a
+        cylinder's steep flanks and below the size of a typical reflection spike or of the
+        step from the arc to a table behind it. inf disables the split.
+    min_segment_points : int
+        Segments with fewer points are dropped (isolated spikes and clusters). Must be at
+        least ``2 * spike_half_window + 1`` so that every spike window fits in a segment.
+    keep_largest_segment : bool
+        Keep only the segment with the most points (e.g. a cylinder before an empty
+        background). Off by default: a table can hold more points than the arc.
+    spike_half_window : int
+        Neighbours on each side used by the spike filter; 0 disables the filter.
+    spike_factor : float
+        Residual, in robust sigmas of the whole profile, above which a point is a spike.
+    spike_floor_m : float
+        Smallest spike threshold, m, so that noise-free or very clean data (sigma ~ 0)
+        does not turn the curvature term into spikes. 50 um suits profilers of 5-10 um
+        noise; RANSAC's inlier threshold handles smaller deviations.
+    spike_spacing_factor : float
+        Where the points are sparse (the arc's steep flanks, spacing s), a point is a spike
+        only if its residual also exceeds this times s: the residual of a smooth curve
+        grows as k s^2, and the flank points carry the arc's coverage.
+    """
+
+    min_points: int = 30
+    max_abs_y_m: float = 1e-3
+    reject_off_plane: bool = False
+    min_depth_m: float = -math.inf
+    max_depth_m: float = math.inf
+    max_abs_x_m: float = math.inf
+    max_gap_m: float = 2e-3
+    min_segment_points: int = 10
+    keep_largest_segment: bool = False
+    spike_half_window: int = 3
+    spike_factor: float = 6.0
+    spike_floor_m: float = 50e-6
+    spike_spacing_factor: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.min_points < 1:
+            raise ValueError(f"min_points must be >= 1, got {self.min_points}")
+        if not self.max_abs_y_m > 0.0:
+            raise ValueError(f"max_abs_y_m must be > 0 m, got {self.max_abs_y_m}")
+        if not self.min_depth_m < self.max_depth_m:
+            raise ValueError(
+                f"need min_depth_m < max_depth_m, got {self.min_depth_m} and {self.max_depth_m}"
+            )
+        if not self.max_abs_x_m > 0.0 or not self.max_gap_m > 0.0:
+            raise ValueError("max_abs_x_m and max_gap_m must be > 0 m (inf disables them)")
+        if self.spike_half_window < 0:
+            raise ValueError(f"spike_half_window must be >= 0, got {self.spike_half_window}")
+        if self.min_segment_points < 2 * self.spike_half_window + 1:
+            raise ValueError(
+                f"min_segment_points ({self.min_segment_points}) must be at least "
+                f"2 * spike_half_window + 1 = {2 * self.spike_half_window + 1}"
+            )
+        if not self.spike_factor > 0.0 or not self.spike_floor_m >= 0.0:
+            raise ValueError("spike_factor must be > 0 and spike_floor_m >= 0 m")
+        if not self.spike_spacing_factor >= 0.0:
+            raise ValueError(f"spike_spacing_factor must be >= 0, got {self.spike_spacing_factor}")
+
+
+@dataclass(frozen=True)
+class CleanedProfile:
+    """The result of :func:`clean_profile`.
+
+    Attributes
+    ----------
+    points : ndarray, shape (M, 3)
+        Kept points in the sensor frame, m, in input order (``input[mask]``).
+    mask : ndarray of bool, shape (N,)
+        Which input points were kept.
+    counts : dict of str to int
+        Points at each stage: ``input``, then removed as ``non_finite``, ``range_gate``,
+        ``small_segment``, ``other_segment`` (by ``keep_largest_segment``) and ``spike``,
+        and finally ``kept``.
+    typical_abs_y_m : float
+        90th percentile of |y| over the finite points, m (NaN if there are none).
+    spike_threshold_m : float
+        Residual above which points were called spikes where the points are dense, m (NaN
+        if the filter did not run).
+    warnings : tuple of str
+        Things the user should know (e.g. the cloud does not look like the sensor frame).
+    """
+
+    points: FloatArray
+    mask: BoolArray
+    counts: dict[str, int] = field(default_factory=dict)
+    typical_abs_y_m: float = math.nan
+    spike_threshold_m: float = math.nan
+    warnings: tuple[str, ...] = ()
+
+    @property
+    def points_xz(self) -> FloatArray:
+        """Kept points in the laser plane, shape (M, 2): (x, z), m."""
+        return np.asarray(self.points[:, [0, 2]], dtype=np.float64)
+
+
+def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
+    """Connected pieces of a scan line, bridging up to ``MAX_BRIDGED_POINTS`` stray points.
+
+    Points i and i + k (k = 1 .. MAX_BRIDGED_POINTS + 1) of the scan order are linked when
+    they are at most ``max_gap_m`` apart in the x-z plane; the pieces are the connected
+    components. A spike between two arc points is its own piece and does not split the
+    arc.
+
+    Parameters
+    ----------
+    xz : array-like, shape (N, 2)
+        Points in scan-line order (sorted by x), m.
+    max_gap_m : float
+
+    Returns
+    -------
+    labels : ndarray of int, shape (N,)
+        Piece of each point, numbered in order of first appearance.
+    """
+    p = np.asarray(xz, dtype=np.float64)
+    n = len(p)
+    rows, cols = [], []
+    for k in range(1, MAX_BRIDGED_POINTS + 2):
+        near = np.flatnonzero(np.linalg.norm(p[k:] - p[:-k], axis=1) <= max_gap_m)
+        rows.append(near)
+        cols.append(near + k)
+    row, col = np.concatenate(rows), np.concatenate(cols)
+    graph = coo_matrix((np.ones(len(row)), (row, col)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
+    _, first = np.unique(labels, return_index=True)
+    rank = np.empty(len(first), dtype=np.intp)
+    rank[np.argsort(first)] = np.arange(len(first))
+    return np.asarray(rank[labels], dtype=np.intp)
+
+
+def _runs(labels: IntArray) -> IntArray:
+    """Number the runs of equal consecutive labels (0, 0, 1, 1, 1, 2, ...)."""
+    change = np.concatenate([[0], (np.diff(labels) != 0).astype(np.intp)])
+    return np.asarray(np.cumsum(change), dtype=np.intp)
+
+
+def spike_residuals(
+    xz: ArrayLike, labels: ArrayLike, half_window: int
+) -> tuple[FloatArray, FloatArray]:
+    """Deviation of each point from its scan-line neighbours, and their spacing.
+
+    Parameters
+    ----------
+    xz : array-like, shape (N, 2)
+        Points in scan-line order (sorted by x), m.
+    labels : array-like of int, shape (N,)
+        Segment of each point, non-decreasing; every segment has at least
+        ``2 * half_window + 1`` points.
+    half_window : int
+        Neighbours on each side (w). A point's window is itself and the 2w points nearest
+        in the scan order within its segment (shifted inwards at the segment's ends).
+
+    Returns
+    -------
+    residual : ndarray, shape (N,)
+        Median perpendicular distance of the point to the lines through pairs of its
+        neighbours, m. Only pairs straddling the point are used, except for a segment's
+        first and last point, which use the pairs among their w + 1 nearest neighbours. A
+        pair of coincident neighbours counts as the distance to that neighbour.
+    spacing : ndarray, shape (N,)
+        Smallest distance between consecutive points of the window, m (a spike only
+        lengthens the gaps next to it).
+    """
+    p = np.asarray(xz, dtype=np.float64)
+    seg = np.asarray(labels, dtype=np.intp)
+    n, w = len(p), half_window
+    index = np.arange(n)
+    starts = np.searchsorted(seg, seg, side="left")
+    ends = np.searchsorted(seg, seg, side="right") - 1
+    low = np.clip(index - w, starts, ends - 2 * w)
+    window = low[:, None] + np.arange(2 * w + 1)
+    spacing = np.min(np.linalg.norm(np.diff(p[window], axis=1), axis=2), axis=1)
+
+    neighbours = window[window != index[:, None]].reshape(n, 2 * w)
+    first, second = np.triu_indices(2 * w, k=1)
+    a, b = p[neighbours[:, first]], p[neighbours[:, second]]
+    direction = b - a
+    length = np.linalg.norm(direction, axis=2)
+    offset = p[:, None, :] - a
+    cross = np.abs(direction[..., 0] * offset[..., 1] - direction[..., 1] * offset[..., 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        distance = np.where(length > 0.0, cross / length, np.linalg.norm(offset, axis=2))
+    after = neighbours > index[:, None]
+    straddles = after[:, first] != after[:, second]
+    # A segment's end point has neighbours on one side only: it uses the pairs among its
+    # w + 1 nearest, whose extrapolated curvature term stays close to that of the others.
+    near = np.abs(neighbours - index[:, None]) <= w + 1
+    at_end = ((index == starts) | (index == ends))[:, None] & near[:, first] & near[:, second]
+    distance = np.where(straddles | at_end, distance, np.nan)
+    residual = np.nanmedian(distance, axis=1)
+    return np.asarray(residual, dtype=np.float64), np.asarray(spacing, dtype=np.float64)
+
+
+def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
+    """Clean one profile: invalid points, range gate, segments, spikes (see module doc).
+
+    Parameters
+    ----------
+    points : array-like, shape (N, 3)
+        Profile points in the sensor frame, m; may hold NaN/Inf.
+    config : CleaningConfig
+
+    Returns
+    -------
+    CleanedProfile
+
+    Raises
+    ------
+    InputError
+        ``points`` is not an (N, 3) array.
+    ProfileRejected
+        Fewer than ``config.min_points`` points remain, or (with ``reject_off_plane``) the
+        points are not in the laser plane. The message gives the counts per stage.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise InputError(f"profile points must have shape (N, 3), got {p.shape}")
+    counts = {"input": len(p)}
+    keep = np.all(np.isfinite(p), axis=1)
+    counts["non_finite"] = int(len(p) - keep.sum())
+    warnings: list[str] = []
+
+    typical_abs_y = float(np.percentile(np.abs(p[keep, 1]), 90)) if keep.any() else math.nan
+    if typical_abs_y > config.max_abs_y_m:
+        message = (
+            f"90% of the points have |y| up to {typical_abs_y * 1e3:.2f} mm, above the "
+            f"{config.max_abs_y_m * 1e3:.2f} mm expected of the laser plane y = 0: the cloud "
+            "may not be in the sensor frame (check the frame_id and the driver's output frame)"
+        )
+        if config.reject_off_plane:
+            raise ProfileRejected(message)
+        warnings.append(message)
+
+    gate = keep.copy()
+    gate[keep] = (
+        (p[keep, 2] >= config.min_depth_m)
+        & (p[keep, 2] <= config.max_depth_m)
+        & (np.abs(p[keep, 0]) <= config.max_abs_x_m)
+    )
+    counts["range_gate"] = int(keep.sum() - gate.sum())
+
+    idx = np.flatnonzero(gate)
+    idx = idx[np.argsort(p[idx, 0], kind="stable")]
+    labels = segment_labels(p[idx][:, [0, 2]], config.max_gap_m)
+    big = np.bincount(labels, minlength=1)[labels] >= config.min_segment_points
+    # Without the stray pieces, each segment is a run of the scan line; a run can still be
+    # short where two large pieces interleave.
+    runs = _runs(labels[big])
+    long_run = np.bincount(runs, minlength=1)[runs] >= config.min_segment_points
+    big[big] = long_run
+    labels = runs[long_run]
+    counts["small_segment"] = int(len(idx) - big.sum())
+    idx = idx[big]
+    if config.keep_largest_segment and len(idx):
+        largest = labels == np.argmax(np.bincount(labels))
+        counts["other_segment"] = int(len(idx) - largest.sum())
+        idx, labels = idx[largest], labels[largest]
+    else:
+        counts["other_segment"] = 0
+
+    threshold = math.nan
+    if config.spike_half_window > 0 and len(idx):
+        residual, spacing = spike_residuals(p[idx][:, [0, 2]], labels, config.spike_half_window)
+        sigma = MAD_TO_SIGMA * float(np.median(residual))
+        threshold = max(config.spike_factor * sigma, config.spike_floor_m)
+        smooth = residual <= np.maximum(threshold, config.spike_spacing_factor * spacing)
+        counts["spike"] = int(len(idx) - smooth.sum())
+        idx = idx[smooth]
+    else:
+        counts["spike"] = 0
+
+    mask = np.zeros(len(p), dtype=np.bool_)
+    mask[idx] = True
+    counts["kept"] = int(mask.sum())
+    if counts["kept"] < config.min_points:
+        removed = ", ".join(
+            f"{counts[k]} {k.replace('_', ' ')}"
+            for k in ("non_finite", "range_gate", "small_segment", "other_segment", "spike")
+            if counts[k]
+        )
+        raise ProfileRejected(
+            f"only {counts['kept']} of {counts['input']} points are left after cleaning "
+            f"(removed: {removed or 'none'}), at least {config.min_points} are needed; "
+            "check that the laser line hits the cylinder and the range gate "
+            f"(z {config.min_depth_m:g} to {config.max_depth_m:g} m, "
+            f"|x| <= {config.max_abs_x_m:g} m)"
+        )
+    return CleanedProfile(
+        points=p[mask],
+        mask=mask,
+        counts=counts,
+        typical_abs_y_m=typical_abs_y,
+        spike_threshold_m=threshold,
+        warnings=tuple(warnings),
+    )
