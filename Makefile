@@ -2,16 +2,17 @@
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
-# Python 3.12 (Jazzy's own) where it can be found, else python3 >= 3.10.
-BASE_PYTHON ?= $(shell command -v python3.12 2>/dev/null || ls -d $$HOME/.pyenv/versions/3.12*/bin/python3.12 2>/dev/null | tail -n 1 || command -v python3)
+# Python 3.12 (Jazzy's own) where one runs, else python3 >= 3.10. Each candidate is tried,
+# because a pyenv shim can exist on PATH without a working interpreter behind it.
+BASE_PYTHON ?= $(shell for p in python3.12 $$HOME/.pyenv/versions/3.12*/bin/python3.12 python3; do \
+	$$p -c 'import sys; sys.exit(sys.version_info < (3, 10))' >/dev/null 2>&1 && { command -v $$p; break; }; done)
 
 .PHONY: demo test lint typecheck unit bench clean venv
 
 venv: $(STAMP)
 
 $(STAMP): requirements.txt setup.py setup.cfg
-	@test -n "$(BASE_PYTHON)" || { echo "no python3 found: install Python 3.12 or >= 3.10" >&2; exit 1; }
-	@$(BASE_PYTHON) -c 'import sys; sys.exit(sys.version_info < (3, 10))' || { echo "$(BASE_PYTHON) is older than 3.10" >&2; exit 1; }
+	@test -n "$(BASE_PYTHON)" || { echo "no Python >= 3.10 found: install Python 3.12" >&2; exit 1; }
 	test -x $(PY) || $(BASE_PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
 	$(PY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation -e .

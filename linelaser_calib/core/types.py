@@ -109,7 +109,7 @@ class EllipseFit:
     inliers : ndarray of bool, shape (N,)
         Inlier mask over the cleaned points handed to the fit.
     coverage_rad : float
-        Angular extent of the inlier arc around the centre, rad.
+        Angular extent of the inlier arc in the ellipse's parametric angle, rad.
     rms_m : float
         RMS algebraic-to-geometric residual of the inliers, m.
     """
@@ -141,6 +141,30 @@ class Cylinder:
     radius: float
 
 
+@dataclass(frozen=True)
+class SampleFit:
+    """What the solve used of one sample, kept for reports and markers.
+
+    Attributes
+    ----------
+    index : int
+        Profile index in the input stream.
+    stamp_ns : int
+    T_base_flange : ndarray, shape (4, 4)
+        Flange pose as paired (recorded, not corrected).
+    points : ndarray, shape (K, 3)
+        Ellipse inlier points in the sensor frame, m.
+    centre_xz : ndarray, shape (2,)
+        Ellipse centre in the sensor x-z plane, m.
+    """
+
+    index: int
+    stamp_ns: int
+    T_base_flange: FloatArray
+    points: FloatArray
+    centre_xz: FloatArray
+
+
 @dataclass
 class CalibrationResult:
     """The outcome of a calibration, written to files in one place (``linelaser_calib.io``).
@@ -169,6 +193,8 @@ class CalibrationResult:
     warnings : list of str
     history : dict of str to list of float
         Convergence traces for reports (e.g. ``pso_best``, ``galm_phi``, ``refine_cost``).
+    sample_fits : list of SampleFit
+        The fitted samples the final solve used (not written to result files).
     parent_frame, child_frame, base_frame : str
         Frame ids: flange, sensor and robot base.
     """
@@ -185,6 +211,7 @@ class CalibrationResult:
     radius_estimated: bool = False
     warnings: list[str] = field(default_factory=list)
     history: dict[str, list[float]] = field(default_factory=dict)
+    sample_fits: list[SampleFit] = field(default_factory=list)
     parent_frame: str = "tool0"
     child_frame: str = "laser"
     base_frame: str = "base_link"

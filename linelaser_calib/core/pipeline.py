@@ -1,0 +1,361 @@
+"""The calibration pipeline: pair, clean, fit ellipses, solve globally, refine, diagnose.
+
+This is the one pipeline. The CLI (offline, from a bag) and the calibration_service node
+(online, from collected samples) both call :func:`run_pipeline` or :func:`calibrate_samples`.
+
+Methods
+-------
+``paper``
+    The cylinder paper as published: RANSAC ellipse centres, centre-to-axis cost (eq. 12),
+    PSO + generalized-Lagrange-multiplier hybrid (Fig. 4).
+``default``
+    The paper's solve as a seed, then maximum likelihood on every inlier point with the
+    robot's per-sample pose error as nuisance parameters, outlier-sample rejection,
+    covariance and observability diagnostics (:mod:`linelaser_calib.core.refine`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from enum import Enum
+
+import numpy as np
+
+from .cylinder_model import centre_distances
+from .ellipse import EllipseConfig, fit_ellipse_ransac
+from .errors import DegenerateError, InputError, PairingError, ProfileRejected
+from .geometry import FloatArray, check_transform
+from .pairing import PairingConfig, pair_profiles
+from .profile import CleaningConfig, clean_profile
+from .pso_alm import HybridConfig, PaperSolution, solve_pso_galm
+from .refine import RefineConfig, refine_with_outlier_rejection
+from .types import CalibrationResult, EllipseFit, FlangePose, Profile, Rejection, Sample, SampleFit
+
+#: Progress callback: (stage name, done, total).
+Progress = Callable[[str, int, int], None]
+
+#: Fewest fitted samples the hand-eye plus axis can be solved from with any margin.
+MIN_SAMPLES = 8
+#: A profiler's depth is below this, m; larger values mean the data is in millimetres.
+MAX_PLAUSIBLE_DEPTH_M = 5.0
+#: A robot's flange is within this distance of its base, m.
+MAX_PLAUSIBLE_REACH_M = 20.0
+
+
+class Method(str, Enum):
+    """Calibration methods (the ``--method`` choices)."""
+
+    DEFAULT = "default"
+    PAPER = "paper"
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Every parameter of the pipeline; each stage's defaults are documented in its module.
+
+    Attributes
+    ----------
+    method : Method
+    radius_m : float or None
+        Cylinder radius, m; None estimates it.
+    seed : int
+        Seed of every random stage (RANSAC, PSO); runs are deterministic given it.
+    min_samples : int
+        Fewest fitted samples accepted.
+    initial_T_flange_sensor : ndarray, shape (4, 4), or None
+        Optional initial hand-eye (e.g. from CAD). When given, the default method starts its
+        refinement from it and the global solve only supplies the axis.
+    """
+
+    method: Method = Method.DEFAULT
+    radius_m: float | None = None
+    seed: int = 0
+    min_samples: int = MIN_SAMPLES
+    pairing: PairingConfig = field(default_factory=PairingConfig)
+    cleaning: CleaningConfig = field(default_factory=CleaningConfig)
+    ellipse: EllipseConfig = field(default_factory=EllipseConfig)
+    hybrid: HybridConfig = field(default_factory=HybridConfig)
+    refine: RefineConfig = field(default_factory=RefineConfig)
+    initial_T_flange_sensor: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        if self.radius_m is not None and not (np.isfinite(self.radius_m) and self.radius_m > 0):
+            raise InputError(
+                f"the cylinder radius must be a positive length in m, got {self.radius_m}"
+            )
+        if self.initial_T_flange_sensor is not None:
+            try:
+                check_transform(self.initial_T_flange_sensor, 1e-4)
+            except ValueError as exc:
+                raise InputError(f"the initial hand-eye is not a rigid transform: {exc}") from exc
+
+
+@dataclass
+class FittedSample:
+    """A sample with its cleaned points and fitted ellipse."""
+
+    sample: Sample
+    points: FloatArray
+    ellipse: EllipseFit
+
+    @property
+    def inlier_points(self) -> FloatArray:
+        """Inlier points (K, 3) in the sensor frame, m."""
+        return self.points[self.ellipse.inliers]
+
+    def record(self) -> SampleFit:
+        """The plain record kept in the result."""
+        s = self.sample
+        return SampleFit(
+            s.index, s.stamp_ns, s.T_base_flange, self.inlier_points, self.ellipse.centre_xz
+        )
+
+
+def _no_progress(stage: str, done: int, total: int) -> None:
+    """Default progress callback: silent."""
+
+
+def fit_sample(
+    sample: Sample,
+    config: PipelineConfig,
+    rng: np.random.Generator,
+    radius_m: float | None = None,
+) -> FittedSample | Rejection:
+    """Clean one sample's profile and fit its ellipse; a rejection says why it failed.
+
+    ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes.
+    """
+    try:
+        cleaned = clean_profile(sample.points, config.cleaning)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
+    try:
+        ellipse = fit_ellipse_ransac(cleaned.points_xz, config.ellipse, rng, radius_m)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
+    return FittedSample(sample, cleaned.points, ellipse)
+
+
+def fit_samples(
+    samples: list[Sample], config: PipelineConfig, progress: Progress = _no_progress
+) -> tuple[list[FittedSample], list[Rejection], float]:
+    """Fit every sample's ellipse and settle the radius.
+
+    Returns the fitted samples, the rejections and the radius (m): the configured one, or the
+    median semi-minor axis of the ellipses (a cylinder cut's semi-minor axis is its radius).
+
+    Raises
+    ------
+    InputError
+        When a configured radius disagrees with the profiles.
+    """
+    rng = np.random.default_rng(config.seed)
+    fitted: list[FittedSample] = []
+    rejections: list[Rejection] = []
+    for k, sample in enumerate(samples):
+        outcome = fit_sample(sample, config, rng, config.radius_m)
+        if isinstance(outcome, Rejection):
+            rejections.append(outcome)
+        else:
+            fitted.append(outcome)
+        progress("ellipse", k + 1, len(samples))
+    if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):
+        # Most profiles failed with the given radius: fit freely to tell the user why.
+        free = [fit_sample(s, config, np.random.default_rng(config.seed)) for s in samples]
+        free_fitted = [f for f in free if isinstance(f, FittedSample)]
+        if len(free_fitted) > len(fitted):
+            _check_radius(free_fitted, config.radius_m)
+    if not fitted:
+        return fitted, rejections, config.radius_m or 0.0
+    return fitted, rejections, _check_radius(fitted, config.radius_m)
+
+
+def check_units(samples: list[Sample]) -> None:
+    """Raise InputError when the data is evidently in millimetres rather than metres."""
+    depths = [float(np.nanmedian(np.abs(s.points[:, 2]))) for s in samples if s.points.size]
+    reach = [float(np.linalg.norm(s.T_base_flange[:3, 3])) for s in samples]
+    if depths and float(np.median(depths)) > MAX_PLAUSIBLE_DEPTH_M:
+        raise InputError(
+            f"the profile points have a median depth of {np.median(depths):.1f} m, which no "
+            "profiler measures: the profiles look recorded in millimetres. ROS (REP 103) uses "
+            "metres; rescale the points by 0.001 in the driver or when recording."
+        )
+    if reach and float(np.median(reach)) > MAX_PLAUSIBLE_REACH_M:
+        raise InputError(
+            f"the flange poses are a median {np.median(reach):.1f} m from the robot base: the "
+            "poses look recorded in millimetres. ROS (REP 103) uses metres; rescale the "
+            "positions by 0.001."
+        )
+
+
+def _check_radius(fitted: list[FittedSample], radius_m: float | None) -> float:
+    """Radius from the ellipses' semi-minor axes, checked against a given radius, m."""
+    measured = float(np.median([f.ellipse.semi_axes[1] for f in fitted]))
+    if radius_m is None:
+        return measured
+    if abs(measured - radius_m) > max(0.1 * radius_m, 0.002):
+        raise InputError(
+            f"the given radius {radius_m * 1e3:.2f} mm disagrees with the profiles, whose "
+            f"ellipses have a median semi-minor axis of {measured * 1e3:.2f} mm; check the "
+            "radius (metres, not the diameter) or omit it to estimate it."
+        )
+    return radius_m
+
+
+def calibrate_samples(
+    samples: list[Sample],
+    config: PipelineConfig,
+    rejected: list[Rejection] | None = None,
+    progress: Progress = _no_progress,
+) -> CalibrationResult:
+    """Calibrate from paired samples (the online path enters here).
+
+    Parameters
+    ----------
+    samples : list of Sample
+    config : PipelineConfig
+    rejected : list of Rejection, optional
+        Rejections from earlier stages (pairing), carried into the result.
+    progress : callable, optional
+
+    Raises
+    ------
+    InputError, DegenerateError, SolverError
+        With a message saying what to do.
+    """
+    rejections = list(rejected or [])
+    if not samples:
+        raise DegenerateError(
+            "no samples to calibrate from: collect profiles of the cylinder first"
+        )
+    check_units(samples)
+    fitted, fit_rejections, radius = fit_samples(samples, config, progress)
+    rejections += fit_rejections
+    if len(fitted) < config.min_samples:
+        raise DegenerateError(
+            f"only {len(fitted)} of {len(samples)} profiles gave a usable ellipse, and at least "
+            f"{config.min_samples} are needed. "
+            + _rejection_digest(rejections)
+            + "Scan the cylinder from more poses, with the laser line across the cylinder."
+        )
+    rng = np.random.default_rng(config.seed + 1)
+    centres = np.array([f.ellipse.centre_xz for f in fitted])
+    T_base_flange = np.stack([f.sample.T_base_flange for f in fitted])
+    progress("global solve", 0, 1)
+    seed_solution = solve_pso_galm(centres, T_base_flange, config.hybrid, rng)
+    progress("global solve", 1, 1)
+    if config.method is Method.PAPER:
+        return _paper_result(seed_solution, fitted, rejections, radius, config)
+    T_init = (
+        seed_solution.T_flange_sensor
+        if config.initial_T_flange_sensor is None
+        else np.asarray(config.initial_T_flange_sensor, dtype=np.float64)
+    )
+    cylinder0 = replace(seed_solution.cylinder, radius=radius)
+    progress("refine", 0, 1)
+    refined = refine_with_outlier_rejection(
+        [f.inlier_points for f in fitted],
+        T_base_flange,
+        T_init,
+        cylinder0,
+        config.refine,
+        radius_m=config.radius_m,
+    )
+    progress("refine", 1, 1)
+    indices = [f.sample.index for f in fitted]
+    for j, reason in refined.dropped:
+        f = fitted[j]
+        rejections.append(Rejection(f.sample.index, f.sample.stamp_ns, "outlier", reason))
+    used = [indices[j] for j in refined.used]
+    return CalibrationResult(
+        T_flange_sensor=refined.T_flange_sensor,
+        cylinder=refined.cylinder,
+        method=Method.DEFAULT.value,
+        samples_used=used,
+        samples_rejected=sorted(rejections, key=lambda r: r.index),
+        rms_residual_m=refined.rms_residual_m,
+        sample_residuals_m={indices[j]: r for j, r in refined.sample_residuals_m.items()},
+        uncertainty_translation_m=refined.sigma_translation_m,
+        uncertainty_rotation_rad=refined.sigma_rotation_rad,
+        radius_estimated=refined.radius_estimated,
+        warnings=list(refined.warnings),
+        history={**seed_solution.history, "refine_cost": list(refined.cost_history)},
+        sample_fits=[fitted[j].record() for j in refined.used],
+    )
+
+
+def _paper_result(
+    solution: PaperSolution,
+    fitted: list[FittedSample],
+    rejections: list[Rejection],
+    radius: float,
+    config: PipelineConfig,
+) -> CalibrationResult:
+    """CalibrationResult of the paper's method."""
+    T = solution.T_flange_sensor
+    cylinder = replace(solution.cylinder, radius=radius)
+    centres = np.array([f.ellipse.centre_xz for f in fitted])
+    T_base_flange = np.stack([f.sample.T_base_flange for f in fitted])
+    distances = centre_distances(centres, T_base_flange, T, cylinder)
+    return CalibrationResult(
+        T_flange_sensor=T,
+        cylinder=cylinder,
+        method=Method.PAPER.value,
+        samples_used=[f.sample.index for f in fitted],
+        samples_rejected=sorted(rejections, key=lambda r: r.index),
+        rms_residual_m=float(np.sqrt(np.mean(distances**2))),
+        sample_residuals_m={
+            f.sample.index: float(d) for f, d in zip(fitted, distances, strict=True)
+        },
+        radius_estimated=config.radius_m is None,
+        warnings=_seed_warnings(solution),
+        history=dict(solution.history),
+        sample_fits=[f.record() for f in fitted],
+    )
+
+
+def _seed_warnings(solution: PaperSolution) -> list[str]:
+    """Warnings about the global solve."""
+    if solution.accepted:
+        return []
+    return [
+        f"the global solve did not reach its acceptance level: the RMS centre-to-axis "
+        f"distance is {solution.rms_m * 1e3:.3f} mm; check the rejected samples and the poses"
+    ]
+
+
+def _rejection_digest(rejections: list[Rejection]) -> str:
+    """'Rejected: 3 x reason; ...' for error messages."""
+    if not rejections:
+        return ""
+    counts: dict[str, int] = {}
+    for r in rejections:
+        key = f"{r.stage}: {r.reason.split(' (')[0]}"
+        counts[key] = counts.get(key, 0) + 1
+    top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
+    return "Rejected: " + "; ".join(f"{n} x {k}" for k, n in top) + ". "
+
+
+def run_pipeline(
+    profiles: list[Profile],
+    poses: list[FlangePose],
+    config: PipelineConfig,
+    progress: Progress = _no_progress,
+) -> CalibrationResult:
+    """Pair profiles with flange poses, then :func:`calibrate_samples` (the offline path).
+
+    Raises
+    ------
+    PairingError
+        When no profile pairs with a pose; the message gives the median stamp offset.
+    """
+    if not profiles:
+        raise InputError("there are no profiles to calibrate from")
+    if not poses:
+        raise InputError("there are no flange poses to pair the profiles with")
+    paired = pair_profiles(profiles, poses, config.pairing)
+    progress("pairing", len(profiles), len(profiles))
+    if not paired.samples:
+        raise PairingError(paired.explain_nothing_paired(config.pairing))
+    return calibrate_samples(paired.samples, config, paired.rejected, progress)

@@ -1,0 +1,1036 @@
+"""Maximum-likelihood refinement of the hand-eye on every profile point (the default method).
+
+Model
+-----
+Sample j has profile points p_jk (sensor frame, m) and a reported flange pose T_j =
+``T_base_flange[j]``. The robot's pose error is a per-sample nuisance δ_j = (ω_j, τ_j): a
+rotation vector ω_j (rad) and a translation τ_j (m), both in the **flange frame** (right
+perturbation), so that the true flange pose is
+
+    T_j · D(δ_j),   D(δ) = [[Exp(ω), τ], [0, 1]],
+
+i.e. the flange's true orientation is R_j·Exp(ω_j) (a rotation about the flange origin) and
+its true position t_j + R_j·τ_j. For an isotropic robot error this is the same distribution as
+an error stated in the base frame, and it keeps rotation and translation errors decoupled
+(a base-frame rotation would swing the flange about the robot base). A point maps into the
+base frame as
+
+    x_jk = T_j · D(δ_j) · T_flange_sensor · p_jk.
+
+The cylinder has an axis point c, a unit direction d and a radius R. The residuals are
+
+- per point: (‖(I − d dᵀ)(x_jk − c)‖ − R) / σ_s, under a robust loss (Huber or soft-L1 with
+  a scale of ``loss_scale`` σ) against spikes;
+- per sample: the Gaussian priors ω_j / σ_r and τ_j / σ_t (no robust loss).
+
+Minimising their sum (``½ Σ loss + ½ Σ prior²``) is the joint maximum a-posteriori estimate of
+the hand-eye, axis, radius and pose corrections; in the linearised (Gaussian) model the
+hand-eye part equals the maximum-likelihood estimate with the corrections integrated out.
+
+Parametrisation and solver
+--------------------------
+Every iteration linearises around the current estimate in local coordinates:
+
+- hand-eye: ``R = R̂ · Exp(θ)`` (θ about the **sensor** axes), ``t = t̂ + ρ`` (ρ in the
+  **flange** frame);
+- axis: ``d = normalise(d̂ + a₁u + a₂v)``, ``c = ĉ + b₁u + b₂v`` with (u, v) ⟂ d̂ (4 numbers,
+  no singularity; the point is kept nearest to the data's centroid, which only slides it
+  along the axis);
+- radius: R = R̂ + r (only when estimated);
+- corrections: ω_j, τ_j additively (exact right Jacobian of Exp).
+
+The Jacobian is analytic and block-sparse: a point depends on the G = 10 or 11 global
+numbers and on its sample's 6. Levenberg–Marquardt (Marquardt scaling, Nielsen's damping
+update) with iteratively re-weighted robust weights solves the normal equations by a Schur
+complement: each sample's 6×6 block is inverted on its own and eliminated, leaving a G×G
+system. Cost and time grow linearly with the number of samples.
+
+Covariance
+----------
+The inverse of the Schur-complemented information (robust weights at the solution) is the
+covariance of the global numbers with every pose correction marginalised. The hand-eye block
+(6×6) is ordered ``[θ_x, θ_y, θ_z, ρ_x, ρ_y, ρ_z]``: θ small rotation angles (rad) about the
+sensor frame axes (right perturbation ``R = R̂·Exp(θ)``), ρ translation (m) in the flange
+frame.
+
+With ``estimate_variance_factors`` (the default) the two noise levels are re-estimated from
+the residuals before the covariance is formed (variance-component estimation): the point
+residuals give the sensor's factor s_s² = Σ robust point cost / r_points and the pose
+corrections give the robot's factor s_r² = Σ prior residual² / r_prior, where the
+redundancies r are the shares of the degrees of freedom that each group of observations
+keeps (r_prior = Σ_j (6 − tr(P·C_j⁻¹)), about 4 per sample, since a profile fixes 4 of its
+pose's 6 degrees of freedom; r_points = points − globals − r_prior). The covariance then uses
+σ_s·s_s and σ_r·s_r, σ_t·s_r (neither σ taken below 0.1 of the configured one). A single
+χ²/dof factor would be wrong here: the point χ² is about the sensor, while the hand-eye's
+uncertainty is mostly the robot's. On simulated data at the paper's noise the 1σ so formed
+holds the true error 71 % of the time per axis (bench/refine_study.py, 100 seeds).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
+from scipy.stats import chi2
+
+from .errors import DegenerateError, InputError, SolverError
+from .geometry import (
+    FloatArray,
+    check_transform,
+    orthonormal_basis,
+    transform_from_rotation_translation,
+)
+from .observability import (
+    Observability,
+    ObservabilityConfig,
+    analyse_observability,
+    pose_geometry,
+)
+from .types import Cylinder
+
+#: Robust losses: ρ(s) of the squared normalised residual s = (e / scale)².
+LOSSES = ("huber", "soft_l1", "linear")
+#: Number of hand-eye parameters (θ, ρ) and axis parameters (a, b) in the global block.
+N_HAND_EYE = 6
+N_AXIS = 4
+#: Parameters of one pose correction (ω, τ).
+N_LOCAL = 6
+#: Initial Levenberg–Marquardt damping, relative to the diagonal of the information.
+INITIAL_DAMPING = 1e-7
+#: Floor of the re-estimated variance factors: a σ is never taken as below 0.1 of the
+#: configured one (noise-free data would otherwise make the information singular).
+MIN_VARIANCE_FACTOR = 0.01
+#: Damping beyond which no step lowers the cost any more: a minimum to machine precision.
+MAX_DAMPING = 1e16
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Settings of the maximum-likelihood refinement.
+
+    Attributes
+    ----------
+    sensor_sigma_m : float
+        1σ of a profile point's distance to the surface, m. Default 5 µm: the paper's
+        SR6130 (±5 µm) and a scanCONTROL-class profiler at 0.1 m stand-off.
+    robot_sigma_t_m : float
+        1σ per axis of the flange position error, m. Default 0.1 mm: a UR5 (repeatability
+        ±0.1 mm; e-series ±0.03 mm) as in the paper.
+    robot_sigma_r_rad : float
+        1σ per axis of the flange orientation error, rad. Default 0.01 deg.
+    loss : str
+        ``huber`` (default: quadratic, hence fully efficient, for the 99.7 % of Gaussian
+        residuals inside 3σ, linear beyond), ``soft_l1`` or ``linear`` (least squares).
+    loss_scale : float
+        Where the robust loss turns from quadratic to linear, in units of σ_s. Default 3.
+    max_points_per_profile : int
+        Profiles with more points are subsampled evenly along the line (0 keeps all).
+        Default 200: at the paper's noise the robot error dominates, and 200 of 800 points
+        cost no measurable accuracy (bench/refine_study.py) for a 5× faster solve.
+    estimate_radius : bool
+        Estimate the radius even when ``radius_m`` is given (it is then the start value).
+        Without a ``radius_m`` the radius is always estimated.
+    max_iterations : int
+        Levenberg–Marquardt iterations (linearisations). Default 50.
+    tolerance : float
+        Stop when an accepted step lowers the cost by less than this fraction. Default 1e-10.
+    step_tolerance_m : float
+        Stop when no global parameter moves by more than this, m (rotations times the
+        lever). Default 1e-12 m.
+    min_samples : int
+        Fewest samples accepted. Default 6.
+    min_points_per_profile : int
+        Fewest points a profile must have. Default 10.
+    estimate_variance_factors : bool
+        Form the covariance with the sensor and robot noise levels re-estimated from the
+        residuals (see the module docstring), not the configured ones. Default True.
+    observability : ObservabilityConfig
+    outlier_zscore : float
+        A sample is an outlier when its RMS residual lies this many robust standard deviations
+        (1.4826 · MAD) above the median, or its pose correction's prior χ² does. Default 6.
+    outlier_min_rms_sigma : float
+        ... and its RMS residual also exceeds this many σ_s (so that clean data, whose RMS
+        values all equal σ_s, never loses a sample to a tiny MAD). Default 3.
+    outlier_prior_probability : float
+        A pose correction whose χ² (6 degrees of freedom) has a smaller upper-tail probability
+        than this is implausible for the robot's stated σ. Default 1e-6.
+    max_outlier_fraction : float
+        :func:`refine_with_outlier_rejection` drops at most this share of the samples.
+        Default 0.2.
+    point_outlier_sigmas : float
+        :func:`refine_with_outlier_rejection` removes points whose residual after the first
+        solve exceeds this many sensor σ (the re-estimated one, if larger), then solves
+        again: spikes that passed the ellipse RANSAC otherwise bias their sample's pose
+        correction. 0 disables. Default 6.
+    """
+
+    sensor_sigma_m: float = 5e-6
+    robot_sigma_t_m: float = 1e-4
+    robot_sigma_r_rad: float = float(np.deg2rad(0.01))
+    loss: str = "huber"
+    loss_scale: float = 3.0
+    max_points_per_profile: int = 200
+    estimate_radius: bool = False
+    max_iterations: int = 50
+    tolerance: float = 1e-10
+    step_tolerance_m: float = 1e-12
+    min_samples: int = 6
+    min_points_per_profile: int = 10
+    estimate_variance_factors: bool = True
+    observability: ObservabilityConfig = field(default_factory=ObservabilityConfig)
+    outlier_zscore: float = 6.0
+    outlier_min_rms_sigma: float = 3.0
+    outlier_prior_probability: float = 1e-6
+    max_outlier_fraction: float = 0.2
+    point_outlier_sigmas: float = 6.0
+
+    def __post_init__(self) -> None:
+        positive = {
+            "sensor_sigma_m": self.sensor_sigma_m,
+            "robot_sigma_t_m": self.robot_sigma_t_m,
+            "robot_sigma_r_rad": self.robot_sigma_r_rad,
+            "loss_scale": self.loss_scale,
+            "tolerance": self.tolerance,
+            "step_tolerance_m": self.step_tolerance_m,
+            "outlier_zscore": self.outlier_zscore,
+        }
+        for name, value in positive.items():
+            if not (np.isfinite(value) and value > 0.0):
+                raise InputError(f"RefineConfig.{name} must be positive and finite, got {value}")
+        if self.loss not in LOSSES:
+            raise InputError(f"RefineConfig.loss must be one of {LOSSES}, got {self.loss!r}")
+        if self.max_points_per_profile < 0 or self.max_iterations < 1:
+            raise InputError(
+                "RefineConfig.max_points_per_profile must be >= 0 and max_iterations >= 1, got "
+                f"{self.max_points_per_profile} and {self.max_iterations}"
+            )
+        if self.min_samples < 3 or self.min_points_per_profile < 3:
+            raise InputError("RefineConfig.min_samples and min_points_per_profile must be >= 3")
+        if not 0.0 <= self.max_outlier_fraction < 1.0:
+            raise InputError(
+                "RefineConfig.max_outlier_fraction must be in [0, 1), got "
+                f"{self.max_outlier_fraction}"
+            )
+        if not 0.0 < self.outlier_prior_probability < 1.0:
+            raise InputError("RefineConfig.outlier_prior_probability must be in (0, 1)")
+
+
+class DroppedSample(NamedTuple):
+    """A sample removed as an outlier: its index in the caller's list and why (µm, mm, deg)."""
+
+    sample_index: int
+    reason: str
+
+
+@dataclass
+class RefineResult:
+    """Outcome of :func:`refine` or :func:`refine_with_outlier_rejection`.
+
+    Per-sample arrays follow :attr:`used` (indices into the caller's sample list).
+
+    Attributes
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+    cylinder : Cylinder
+        Axis point closest to the base origin, unit direction (sign of the start value), radius.
+    radius_estimated : bool
+    covariance_hand_eye : ndarray, shape (6, 6)
+        Covariance of ``[θ (rad, about sensor x, y, z; R = R̂·Exp(θ)), ρ (m, flange frame;
+        t = t̂ + ρ)]``, pose corrections, axis and radius marginalised.
+    sigma_rotation_rad : ndarray, shape (3,)
+        1σ of θ, rad.
+    sigma_translation_m : ndarray, shape (3,)
+        1σ of ρ, m.
+    sigma_radius_m : float or None
+        1σ of the radius, when estimated.
+    used : list of int
+        Indices (into the caller's list) of the samples in the solve.
+    dropped : list of DroppedSample
+        Samples removed as outliers (by :func:`refine_with_outlier_rejection`).
+    sample_rms_m : ndarray, shape (M,)
+        RMS point-to-surface residual of each sample, m.
+    sample_rms_zscore : ndarray, shape (M,)
+        Robust z-score of ``sample_rms_m`` ((value − median) / (1.4826 · MAD)).
+    sample_prior_chi2 : ndarray, shape (M,)
+        ``|ω/σ_r|² + |τ/σ_t|²`` of each pose correction (≈ χ² with ≤ 6 dof if plausible).
+    sample_downweighted : ndarray, shape (M,)
+        Share of each sample's points beyond the robust loss scale.
+    pose_corrections : ndarray, shape (M, 6)
+        ``[ω (rad), τ (m)]`` per sample, flange frame: true pose = T_base_flange · D(δ).
+    rms_residual_m : float
+        RMS point-to-surface residual over all points, m.
+    chi2_dof : float
+        (robust point cost + prior cost) · 2 / (points − global parameters).
+    sensor_sigma_estimated_m : float
+        Sensor σ re-estimated from the point residuals, m (the configured one when
+        ``estimate_variance_factors`` is off).
+    robot_sigma_scale : float
+        Robot σ re-estimated from the pose corrections, as a multiple of the configured
+        σ_t and σ_r (1 when ``estimate_variance_factors`` is off).
+    cost_history : list of float
+        Cost after each accepted step, starting with the initial cost.
+    iterations : int
+        Linearisations performed.
+    converged : bool
+    n_points : int
+        Points in the solve after subsampling.
+    observability : Observability
+        Of the pose set for the configured noise levels (the design question "do these
+        poses suffice"), whereas the covariance uses the re-estimated ones.
+    warnings : list of str
+    """
+
+    T_flange_sensor: FloatArray
+    cylinder: Cylinder
+    radius_estimated: bool
+    covariance_hand_eye: FloatArray
+    sigma_rotation_rad: FloatArray
+    sigma_translation_m: FloatArray
+    sigma_radius_m: float | None
+    used: list[int]
+    dropped: list[DroppedSample]
+    sample_rms_m: FloatArray
+    sample_rms_zscore: FloatArray
+    sample_prior_chi2: FloatArray
+    sample_downweighted: FloatArray
+    pose_corrections: FloatArray
+    rms_residual_m: float
+    chi2_dof: float
+    sensor_sigma_estimated_m: float
+    robot_sigma_scale: float
+    cost_history: list[float]
+    iterations: int
+    converged: bool
+    n_points: int
+    observability: Observability
+    warnings: list[str]
+
+    @property
+    def sample_residuals_m(self) -> dict[int, float]:
+        """Per-sample RMS residual, m, keyed by the caller's sample index."""
+        return {j: float(r) for j, r in zip(self.used, self.sample_rms_m, strict=True)}
+
+
+# --------------------------------------------------------------------------------------
+# Problem data, state and residuals
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """Validated, subsampled data in a padded (samples × points) layout.
+
+    Sample j's points fill ``points[j, :counts[j]]``; the rest repeat its first point and are
+    masked out (residual and Jacobian rows zero), so that every per-point operation is a
+    batched array operation without gathers.
+    """
+
+    points: FloatArray  # (M, K, 3) sensor frame, m
+    mask: FloatArray  # (M, K) 1 for a real point, 0 for padding
+    counts: np.ndarray  # (M,) real points per sample
+    R_bf: FloatArray  # (M, 3, 3)
+    t_bf: FloatArray  # (M, 3)
+    estimate_radius: bool
+    config: RefineConfig
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.R_bf.shape[0])
+
+    @property
+    def n_global(self) -> int:
+        return N_HAND_EYE + N_AXIS + int(self.estimate_radius)
+
+
+@dataclass(frozen=True)
+class _State:
+    """Current estimate (absolute values, not increments)."""
+
+    R_fs: FloatArray  # (3, 3)
+    t_fs: FloatArray  # (3,)
+    point: FloatArray  # (3,) on the axis
+    direction: FloatArray  # (3,) unit
+    radius: float
+    omega: FloatArray  # (M, 3) rad, flange frame
+    tau: FloatArray  # (M, 3) m, flange frame
+
+
+class _Geometry(NamedTuple):
+    """Per-point intermediate quantities at one state."""
+
+    y: FloatArray  # (M, K, 3) point in the nominal flange frame, R_fs p + t_fs
+    RE: FloatArray  # (M, 3, 3) R_bf·Exp(ω) per sample
+    distance: FloatArray  # (M, K) distance to the axis, m
+    normal: FloatArray  # (M, K, 3) unit radial direction in the base frame
+    along: FloatArray  # (M, K) d · (x − c)
+
+
+def _exp_so3(omega: FloatArray) -> FloatArray:
+    """Rotation matrices (M, 3, 3) of rotation vectors (M, 3)."""
+    return np.asarray(Rotation.from_rotvec(omega).as_matrix())
+
+
+def _right_jacobian(omega: FloatArray) -> FloatArray:
+    """Right Jacobians (M, 3, 3) of SO(3): Exp(ω + dω) ≈ Exp(ω)·Exp(J_r(ω)·dω)."""
+    theta = np.linalg.norm(omega, axis=1)
+    small = theta < 1e-4
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
+    K = np.zeros((len(omega), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -omega[:, 2], omega[:, 1], -omega[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = omega[:, 2], -omega[:, 1], omega[:, 0]
+    return np.asarray(np.eye(3) - a[:, None, None] * K + b[:, None, None] * (K @ K))
+
+
+def _sample_transforms(problem: _Problem, state: _State) -> tuple[FloatArray, FloatArray]:
+    """Per-sample rotation R_bf·Exp(ω) (M, 3, 3) and the base position of the flange-frame
+    origin after correction, t_bf + R_bf·τ (M, 3)."""
+    RE = problem.R_bf @ _exp_so3(state.omega)
+    offset = problem.t_bf + np.einsum("mij,mj->mi", problem.R_bf, state.tau)
+    return RE, offset
+
+
+def _geometry(problem: _Problem, state: _State) -> _Geometry:
+    """Base-frame points and their relation to the axis."""
+    RE, offset = _sample_transforms(problem, state)
+    y = problem.points @ state.R_fs.T + state.t_fs
+    w = y @ RE.transpose(0, 2, 1) + (offset - state.point)[:, None, :]
+    along = w @ state.direction
+    radial = w - along[..., None] * state.direction
+    distance = np.sqrt(np.sum(radial**2, axis=2))
+    normal = radial / np.maximum(distance, 1e-300)[..., None]
+    return _Geometry(y, RE, distance, normal, along)
+
+
+def _residuals(problem: _Problem, state: _State, geo: _Geometry) -> tuple[FloatArray, FloatArray]:
+    """Normalised point residuals (M, K), zero on padding, and prior residuals (M, 6)."""
+    cfg = problem.config
+    e = (geo.distance - state.radius) * (problem.mask / cfg.sensor_sigma_m)
+    prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
+    return e, prior
+
+
+def _jacobians(problem: _Problem, state: _State, geo: _Geometry) -> tuple[FloatArray, FloatArray]:
+    """Analytic Jacobians of the normalised point residuals.
+
+    Returns
+    -------
+    J_global : ndarray, shape (M, K, G)
+        Columns θ (3), ρ (3), a (2), b (2) and, when estimated, the radius; zero on padding.
+    J_local : ndarray, shape (M, K, 6)
+        Columns ω (3), τ (3) of the point's own sample; zero on padding.
+    """
+    scale = (problem.mask / problem.config.sensor_sigma_m)[..., None]
+    n_base = geo.normal * scale
+    n_corrected = n_base @ problem.R_bf  # rows R_bfᵀ n: d r / d τ
+    n_flange = n_base @ geo.RE  # rows Exp(ω)ᵀ R_bfᵀ n: d r / d ρ
+    n_sensor = n_flange @ state.R_fs  # rows R_fsᵀ n_flange
+    u, v = orthonormal_basis(state.direction)
+    n_uv = n_base @ np.column_stack([u, v])
+    columns = [_cross(problem.points, n_sensor), n_flange, -geo.along[..., None] * n_uv, -n_uv]
+    if problem.estimate_radius:
+        columns.append(-scale)
+    J_omega = _cross(geo.y, n_flange) @ _right_jacobian(state.omega)
+    return np.concatenate(columns, axis=2), np.concatenate([J_omega, n_corrected], axis=2)
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Cross products of (..., 3) arrays (cheaper than numpy.cross on small last axes)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def _retract(
+    problem: _Problem, state: _State, step_global: FloatArray, step_local: FloatArray
+) -> _State:
+    """Apply increments in the local coordinates of :func:`_jacobians`."""
+    u, v = orthonormal_basis(state.direction)
+    direction = state.direction + step_global[6] * u + step_global[7] * v
+    return _State(
+        R_fs=state.R_fs @ _exp_so3(step_global[None, :3])[0],
+        t_fs=state.t_fs + step_global[3:6],
+        point=state.point + step_global[8] * u + step_global[9] * v,
+        direction=direction / np.linalg.norm(direction),
+        radius=state.radius + (float(step_global[10]) if problem.estimate_radius else 0.0),
+        omega=state.omega + step_local[:, :3],
+        tau=state.tau + step_local[:, 3:],
+    )
+
+
+def _data_centroid(problem: _Problem, state: _State) -> FloatArray:
+    """Mean of the profiles' centroids in the base frame (3,), m."""
+    RE, offset = _sample_transforms(problem, state)
+    means = np.sum(problem.points * problem.mask[..., None], axis=1) / problem.counts[:, None]
+    y = means @ state.R_fs.T + state.t_fs
+    return np.asarray(np.mean(np.einsum("mij,mj->mi", RE, y) + offset, axis=0))
+
+
+def _recentred(state: _State, centroid: FloatArray) -> _State:
+    """Slide the axis point along the axis to the point nearest ``centroid`` (same cylinder)."""
+    point = state.point + float((centroid - state.point) @ state.direction) * state.direction
+    return replace(state, point=point)
+
+
+# --------------------------------------------------------------------------------------
+# Robust loss, cost and normal equations
+
+
+def _loss(e: FloatArray, config: RefineConfig) -> tuple[FloatArray, FloatArray]:
+    """Robust cost terms c²·ρ(s) (twice the cost) and IRLS weights ρ'(s), shaped like ``e``."""
+    c = config.loss_scale
+    s = (e / c) ** 2
+    if config.loss == "linear":
+        return e**2, np.ones_like(e)
+    if config.loss == "huber":
+        root = np.sqrt(s)
+        inside = s <= 1.0
+        rho = np.where(inside, s, 2.0 * root - 1.0)
+        weight = np.where(inside, 1.0, 1.0 / np.maximum(root, 1.0))
+        return c**2 * rho, weight
+    root = np.sqrt(1.0 + s)
+    return c**2 * 2.0 * (root - 1.0), 1.0 / root
+
+
+def _cost(problem: _Problem, state: _State) -> float:
+    """½ Σ robust point cost + ½ Σ prior², dimensionless."""
+    e, prior = _residuals(problem, state, _geometry(problem, state))
+    rho, _ = _loss(e, problem.config)
+    return 0.5 * float(np.sum(rho) + np.sum(prior**2))
+
+
+@dataclass(frozen=True)
+class _Normal:
+    """Gauss-Newton normal equations H·δ = −g in block form (A, B_j, C_j)."""
+
+    A: FloatArray  # (G, G) global-global
+    B: FloatArray  # (M, G, 6) global-local per sample
+    C_data: FloatArray  # (M, 6, 6) local-local per sample, from the points only
+    prior_precision: FloatArray  # (6,) diagonal prior information of a pose correction
+    g_global: FloatArray  # (G,)
+    g_local: FloatArray  # (M, 6) priors included
+
+    def C(self, sensor_factor: float = 1.0, robot_factor: float = 1.0) -> FloatArray:
+        """Local blocks (M, 6, 6) with the point and prior information divided by the
+        sensor and robot variance factors."""
+        return np.asarray(
+            self.C_data / sensor_factor + np.diag(self.prior_precision / robot_factor)
+        )
+
+
+def _normal_equations(
+    problem: _Problem, state: _State, geo: _Geometry, weights: FloatArray | None = None
+) -> _Normal:
+    """Weighted normal equations at ``state``; ``weights`` None uses the robust IRLS weights."""
+    cfg = problem.config
+    e, prior = _residuals(problem, state, geo)
+    if weights is None:
+        _, weights = _loss(e, cfg)
+    J = np.concatenate(_jacobians(problem, state, geo), axis=2)
+    WJ = J * weights[..., None]
+    H = J.transpose(0, 2, 1) @ WJ
+    gradient = np.einsum("mkp,mk->mp", WJ, e)
+    G = problem.n_global
+    prior_info = np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
+    return _Normal(
+        A=H[:, :G, :G].sum(axis=0),
+        B=H[:, :G, G:],
+        C_data=H[:, G:, G:],
+        prior_precision=prior_info**2,
+        g_global=gradient[:, :G].sum(axis=0),
+        g_local=gradient[:, G:] + prior * prior_info,
+    )
+
+
+def _solve(normal: _Normal, damping: float) -> tuple[FloatArray, FloatArray]:
+    """Solve (H + damping·diag H)·δ = −g by eliminating each sample's block (Schur)."""
+    A = normal.A + damping * np.diag(np.diag(normal.A))
+    C = normal.C()
+    C = C + damping * np.einsum("mii->mi", C)[:, :, None] * np.eye(N_LOCAL)
+    C_inv = np.linalg.inv(C)
+    BC = normal.B @ C_inv
+    S = A - np.einsum("mgk,mhk->gh", BC, normal.B)
+    rhs = -normal.g_global + np.einsum("mgk,mk->g", BC, normal.g_local)
+    step_global = np.linalg.solve(S, rhs)
+    step_local = -np.einsum(
+        "mkl,ml->mk", C_inv, normal.g_local + np.einsum("mgk,g->mk", normal.B, step_global)
+    )
+    return step_global, step_local
+
+
+def _schur_information(
+    normal: _Normal, sensor_factor: float = 1.0, robot_factor: float = 1.0
+) -> FloatArray:
+    """Information (G, G) of the global parameters with the pose corrections marginalised,
+    the point and prior information divided by the sensor and robot variance factors."""
+    B = normal.B / sensor_factor
+    BC = B @ np.linalg.inv(normal.C(sensor_factor, robot_factor))
+    S = normal.A / sensor_factor - np.einsum("mgk,mhk->gh", BC, B)
+    return np.asarray(0.5 * (S + S.T))
+
+
+def _variance_factors(
+    normal: _Normal, point_cost: float, prior_cost: float, n_points: int, n_global: int
+) -> tuple[float, float]:
+    """Sensor and robot variance factors (s_s², s_r²) from the residuals and the redundancies
+    (see the module docstring); 1 where a group keeps less than one degree of freedom."""
+    C_inv = np.linalg.inv(normal.C())
+    r_prior = float(np.sum(N_LOCAL - np.einsum("mii,i->m", C_inv, normal.prior_precision)))
+    r_points = n_points - n_global - r_prior
+    sensor = point_cost / r_points if r_points >= 1.0 else 1.0
+    robot = prior_cost / r_prior if r_prior >= 1.0 else 1.0
+    return max(sensor, MIN_VARIANCE_FACTOR), max(robot, MIN_VARIANCE_FACTOR)
+
+
+def _marginal_hand_eye(information: FloatArray) -> FloatArray:
+    """Information (6, 6) of the hand-eye after eliminating the axis (and radius)."""
+    h, o = slice(0, N_HAND_EYE), slice(N_HAND_EYE, None)
+    S_oo = information[o, o]
+    return np.asarray(
+        information[h, h] - information[h, o] @ np.linalg.pinv(S_oo) @ information[o, h]
+    )
+
+
+# --------------------------------------------------------------------------------------
+# Input handling
+
+
+def _subsample(points: FloatArray, limit: int) -> FloatArray:
+    """At most ``limit`` points (0: all), evenly spaced along the profile order."""
+    if limit == 0 or len(points) <= limit:
+        return points
+    return np.asarray(points[np.round(np.linspace(0, len(points) - 1, limit)).astype(int)])
+
+
+def _build_problem(
+    samples_points: list[FloatArray],
+    T_base_flange: ArrayLike,
+    config: RefineConfig,
+    estimate_radius: bool,
+) -> _Problem:
+    """Validate the input (InputError/DegenerateError with advice) and stack it."""
+    T_all = np.asarray(T_base_flange, dtype=np.float64)
+    M = len(samples_points)
+    if T_all.shape != (M, 4, 4):
+        raise InputError(
+            f"T_base_flange must have shape ({M}, 4, 4), one pose per profile, got {T_all.shape}"
+        )
+    if config.min_samples > M:
+        raise DegenerateError(
+            f"{M} samples given, but the refinement needs at least {config.min_samples}: "
+            "scan the cylinder from more flange poses (20-50 diverse poses are typical)"
+        )
+    for j, T in enumerate(T_all):
+        try:
+            check_transform(T, tolerance=1e-4)
+        except ValueError as exc:
+            raise InputError(f"T_base_flange[{j}] is not a rigid transform: {exc}") from exc
+    stacked: list[FloatArray] = []
+    for j, p in enumerate(samples_points):
+        q = np.asarray(p, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != 3:
+            raise InputError(f"profile {j} must be an (N, 3) array of points, got shape {q.shape}")
+        if len(q) < config.min_points_per_profile:
+            raise InputError(
+                f"profile {j} has {len(q)} points, fewer than {config.min_points_per_profile}: "
+                "drop it or check the profile cleaning"
+            )
+        if not np.all(np.isfinite(q)):
+            raise InputError(f"profile {j} contains NaN or Inf: clean the profiles first")
+        stacked.append(_subsample(q, config.max_points_per_profile))
+    counts = np.array([len(q) for q in stacked])
+    K = int(counts.max())
+    points = np.empty((M, K, 3))
+    mask = np.zeros((M, K))
+    for j, q in enumerate(stacked):
+        points[j, : len(q)] = q
+        points[j, len(q) :] = q[0]
+        mask[j, : len(q)] = 1.0
+    return _Problem(
+        points=points,
+        mask=mask,
+        counts=counts,
+        R_bf=np.ascontiguousarray(T_all[:, :3, :3]),
+        t_bf=np.ascontiguousarray(T_all[:, :3, 3]),
+        estimate_radius=estimate_radius,
+        config=config,
+    )
+
+
+def _initial_state(
+    problem: _Problem, T_flange_sensor0: ArrayLike, cylinder0: Cylinder, radius: float
+) -> _State:
+    try:
+        T0 = check_transform(T_flange_sensor0, tolerance=1e-4)
+    except ValueError as exc:
+        raise InputError(f"the initial hand-eye is not a rigid transform: {exc}") from exc
+    d = np.asarray(cylinder0.direction, dtype=np.float64)
+    c = np.asarray(cylinder0.point, dtype=np.float64)
+    if d.shape != (3,) or c.shape != (3,) or not np.all(np.isfinite(np.concatenate([c, d]))):
+        raise InputError("the initial cylinder needs a finite point (3,) and direction (3,)")
+    if not np.linalg.norm(d) > 0.0:
+        raise InputError("the initial cylinder direction is zero")
+    if not (np.isfinite(radius) and radius > 0.0):
+        raise InputError(f"the cylinder radius must be a positive length in m, got {radius}")
+    M = problem.n_samples
+    return _State(
+        R_fs=T0[:3, :3].copy(),
+        t_fs=T0[:3, 3].copy(),
+        point=c,
+        direction=d / np.linalg.norm(d),
+        radius=float(radius),
+        omega=np.zeros((M, 3)),
+        tau=np.zeros((M, 3)),
+    )
+
+
+# --------------------------------------------------------------------------------------
+# The solve
+
+
+def _robust_zscore(values: FloatArray) -> FloatArray:
+    """(value − median) / (1.4826 · MAD), with the MAD floored at 1e-3 of the median."""
+    median = float(np.median(values))
+    mad = 1.4826 * float(np.median(np.abs(values - median)))
+    return np.asarray((values - median) / max(mad, 1e-3 * abs(median), 1e-300))
+
+
+def _lever(problem: _Problem) -> float:
+    """Median distance of the profile points from the sensor origin, m."""
+    lever = problem.config.observability.lever_m
+    if lever is not None:
+        return lever
+    return float(np.median(np.linalg.norm(problem.points, axis=2)[problem.mask > 0.0]))
+
+
+def _observability(problem: _Problem, state: _State, information: FloatArray) -> Observability:
+    T = transform_from_rotation_translation(state.R_fs, state.t_fs)
+    T_base_flange = np.zeros((problem.n_samples, 4, 4))
+    T_base_flange[:, :3, :3] = problem.R_bf
+    T_base_flange[:, :3, 3] = problem.t_bf
+    T_base_flange[:, 3, 3] = 1.0
+    return analyse_observability(
+        _marginal_hand_eye(information),
+        _lever(problem),
+        pose_geometry(T_base_flange, T, state.point, state.direction),
+        problem.config.observability,
+    )
+
+
+def _levenberg_marquardt(problem: _Problem, state: _State) -> tuple[_State, list[float], int, bool]:
+    """Minimise the cost from ``state``; returns the state, cost history, iterations, converged."""
+    cfg = problem.config
+    centroid = _data_centroid(problem, state)
+    state = _recentred(state, centroid)
+    cost = _cost(problem, state)
+    history = [cost]
+    damping, growth = INITIAL_DAMPING, 2.0
+    scale = np.ones(problem.n_global)
+    scale[:3] = _lever(problem)
+    converged = False
+    iterations = 0
+    normal = None
+    while iterations < cfg.max_iterations:
+        if normal is None:
+            normal = _normal_equations(problem, state, _geometry(problem, state))
+            iterations += 1
+        step_global, step_local = _solve(normal, damping)
+        if float(np.max(np.abs(step_global * scale))) < cfg.step_tolerance_m:
+            converged = True
+            break
+        candidate = _retract(problem, state, step_global, step_local)
+        new_cost = _cost(problem, candidate)
+        diag_step = np.concatenate(
+            [
+                np.diag(normal.A) * step_global,
+                np.einsum("mii->mi", normal.C()).ravel() * step_local.ravel(),
+            ]
+        )
+        step = np.concatenate([step_global, step_local.ravel()])
+        gradient = np.concatenate([normal.g_global, normal.g_local.ravel()])
+        predicted = 0.5 * float(damping * step @ diag_step - gradient @ step)
+        gain = (cost - new_cost) / predicted if predicted > 0.0 else -1.0
+        if gain > 0.0:
+            decrease = cost - new_cost
+            state, cost = _recentred(candidate, centroid), new_cost
+            history.append(cost)
+            normal = None
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+            growth = 2.0
+            if decrease <= cfg.tolerance * max(cost, 1e-300):
+                converged = True
+                break
+        else:
+            damping *= growth
+            growth *= 2.0
+            if damping > MAX_DAMPING:
+                converged = True
+                break
+    return state, history, iterations, converged
+
+
+def refine(
+    samples_points: list[FloatArray],
+    T_base_flange: ArrayLike,
+    T_flange_sensor0: ArrayLike,
+    cylinder0: Cylinder,
+    config: RefineConfig | None = None,
+    radius_m: float | None = None,
+) -> RefineResult:
+    """Maximum-likelihood hand-eye, axis and radius from every profile point.
+
+    Parameters
+    ----------
+    samples_points : list of ndarray, shape (N_j, 3)
+        Inlier profile points of each sample in the sensor frame, m.
+    T_base_flange : array-like, shape (M, 4, 4)
+        Reported flange poses, one per sample (translation in m).
+    T_flange_sensor0 : array-like, shape (4, 4)
+        Initial hand-eye, e.g. from the paper's solver (about 1 deg / 1 mm off); starts up to
+        about 5 deg / 10 mm off converge (measured on simulated data).
+    cylinder0 : Cylinder
+        Initial axis in the base frame; its radius is the start value when estimated.
+    config : RefineConfig, optional
+    radius_m : float, optional
+        Known radius, m (fixed unless ``config.estimate_radius``); None estimates it.
+
+    Returns
+    -------
+    RefineResult
+
+    Raises
+    ------
+    InputError
+        Malformed input.
+    DegenerateError
+        Too few samples, or poses that leave a hand-eye direction unobservable; the message
+        names the motion to add.
+    SolverError
+        The solve produced non-finite numbers.
+    """
+    cfg = RefineConfig() if config is None else config
+    estimate_radius = radius_m is None or cfg.estimate_radius
+    problem = _build_problem(samples_points, T_base_flange, cfg, estimate_radius)
+    state = _initial_state(
+        problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
+    )
+
+    geometric = _normal_equations(
+        problem, state, _geometry(problem, state), np.ones_like(problem.mask)
+    )
+    _observability(problem, state, _schur_information(geometric)).raise_if_unobservable()
+
+    state, history, iterations, converged = _levenberg_marquardt(problem, state)
+    if not (np.all(np.isfinite(state.R_fs)) and np.isfinite(history[-1])):
+        raise SolverError("the refinement produced non-finite values: check the initial estimate")
+    return _summarise(problem, state, history, iterations, converged)
+
+
+def _summarise(
+    problem: _Problem, state: _State, history: list[float], iterations: int, converged: bool
+) -> RefineResult:
+    """Covariance, observability and per-sample statistics at the solution."""
+    cfg = problem.config
+    geo = _geometry(problem, state)
+    e, prior = _residuals(problem, state, geo)
+    normal = _normal_equations(problem, state, geo)
+    rho, _ = _loss(e, cfg)
+    point_cost, prior_cost = float(np.sum(rho)), float(np.sum(prior**2))
+    n_points = int(problem.counts.sum())
+    chi2_dof = (point_cost + prior_cost) / max(n_points - problem.n_global, 1)
+    factors = (1.0, 1.0)
+    if cfg.estimate_variance_factors:
+        factors = _variance_factors(normal, point_cost, prior_cost, n_points, problem.n_global)
+    observability = _observability(problem, state, _schur_information(normal))
+    observability.raise_if_unobservable()
+    covariance = np.linalg.inv(_schur_information(normal, *factors))
+    sigma = np.sqrt(np.diag(covariance))
+
+    squares = np.sum((e * cfg.sensor_sigma_m) ** 2, axis=1)
+    sample_rms = np.sqrt(squares / problem.counts)
+    beyond = np.sum(np.abs(e) > cfg.loss_scale, axis=1)
+    cylinder_point = state.point - float(state.point @ state.direction) * state.direction
+    warnings = list(observability.warnings)
+    if not converged:
+        warnings.append(
+            f"the refinement stopped after {iterations} iterations without converging "
+            f"(cost {history[-1]:.6g}); the result may be inaccurate"
+        )
+    return RefineResult(
+        T_flange_sensor=transform_from_rotation_translation(state.R_fs, state.t_fs),
+        cylinder=Cylinder(
+            point=cylinder_point, direction=state.direction.copy(), radius=state.radius
+        ),
+        radius_estimated=problem.estimate_radius,
+        covariance_hand_eye=covariance[:N_HAND_EYE, :N_HAND_EYE],
+        sigma_rotation_rad=sigma[:3],
+        sigma_translation_m=sigma[3:6],
+        sigma_radius_m=float(sigma[-1]) if problem.estimate_radius else None,
+        used=list(range(problem.n_samples)),
+        dropped=[],
+        sample_rms_m=sample_rms,
+        sample_rms_zscore=_robust_zscore(sample_rms),
+        sample_prior_chi2=np.sum(prior**2, axis=1),
+        sample_downweighted=beyond / problem.counts,
+        pose_corrections=np.hstack([state.omega, state.tau]),
+        rms_residual_m=float(np.sqrt(np.sum(squares) / n_points)),
+        chi2_dof=chi2_dof,
+        sensor_sigma_estimated_m=cfg.sensor_sigma_m * float(np.sqrt(factors[0])),
+        robot_sigma_scale=float(np.sqrt(factors[1])),
+        cost_history=history,
+        iterations=iterations,
+        converged=converged,
+        n_points=n_points,
+        observability=observability,
+        warnings=warnings,
+    )
+
+
+# --------------------------------------------------------------------------------------
+# Outlier samples
+
+
+def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[tuple[float, int, str]]:
+    """Samples inconsistent with the rest: (severity, position in ``result.used``, reason),
+    most severe first."""
+    rms, z_rms = result.sample_rms_m, result.sample_rms_zscore
+    prior_chi2 = result.sample_prior_chi2
+    z_prior = _robust_zscore(np.sqrt(prior_chi2))
+    chi2_limit = float(chi2.isf(config.outlier_prior_probability, N_LOCAL))
+    median_rms = float(np.median(rms))
+    flagged = []
+    for j in range(len(rms)):
+        reasons = []
+        if (
+            z_rms[j] > config.outlier_zscore
+            and rms[j] > config.outlier_min_rms_sigma * config.sensor_sigma_m
+        ):
+            reasons.append(
+                f"its points lie {rms[j] * 1e6:.1f} um RMS off the cylinder (median sample "
+                f"{median_rms * 1e6:.1f} um, robust z {z_rms[j]:.0f})"
+            )
+        if prior_chi2[j] > chi2_limit and z_prior[j] > config.outlier_zscore:
+            omega, tau = result.pose_corrections[j, :3], result.pose_corrections[j, 3:]
+            reasons.append(
+                "fitting them needs a flange pose correction of "
+                f"{np.linalg.norm(tau) * 1e3:.2f} mm and {np.rad2deg(np.linalg.norm(omega)):.3f} "
+                f"deg (prior chi2 {prior_chi2[j]:.0f} > {chi2_limit:.0f} for the robot's 1 sigma "
+                f"of {config.robot_sigma_t_m * 1e3:.3f} mm and "
+                f"{np.rad2deg(config.robot_sigma_r_rad):.3f} deg)"
+            )
+        if reasons:
+            reason = (
+                "; ".join(reasons)
+                + ": the profile does not fit at its recorded flange pose (wrong pairing, motion "
+                "during the scan, or not the cylinder)"
+            )
+            flagged.append((max(float(z_rms[j]), float(z_prior[j])), j, reason))
+    return sorted(flagged, reverse=True)
+
+
+def point_residuals_m(
+    samples_points: list[FloatArray], T_base_flange: ArrayLike, result: RefineResult
+) -> list[FloatArray]:
+    """Signed point-to-surface distances at a solution, with its pose corrections.
+
+    Parameters
+    ----------
+    samples_points : list of ndarray, shape (N_j, 3)
+        Sensor-frame points of the samples in ``result.used`` (same order), m.
+    T_base_flange : array-like, shape (M, 4, 4)
+        Their reported flange poses.
+    result : RefineResult
+
+    Returns
+    -------
+    list of ndarray, shape (N_j,)
+        Distance to the axis minus the radius for every point, m.
+    """
+    T_all = np.asarray(T_base_flange, dtype=np.float64)
+    R_fs, t_fs = result.T_flange_sensor[:3, :3], result.T_flange_sensor[:3, 3]
+    c, d = result.cylinder.point, result.cylinder.direction
+    out = []
+    for p, T, delta in zip(samples_points, T_all, result.pose_corrections, strict=True):
+        R = T[:3, :3] @ _exp_so3(delta[None, :3])[0]
+        w = (np.asarray(p) @ R_fs.T + t_fs) @ R.T + (T[:3, 3] + T[:3, :3] @ delta[3:] - c)
+        radial = w - np.outer(w @ d, d)
+        out.append(np.sqrt(np.sum(radial**2, axis=1)) - result.cylinder.radius)
+    return out
+
+
+def _trim_points(
+    samples_points: list[FloatArray],
+    T_base_flange: FloatArray,
+    result: RefineResult,
+    limit_m: float,
+) -> tuple[list[FloatArray], int]:
+    """Drop points whose residual exceeds ``limit_m``; returns the samples and the count."""
+    residuals = point_residuals_m(samples_points, T_base_flange, result)
+    trimmed, removed = [], 0
+    for p, r in zip(samples_points, residuals, strict=True):
+        keep = np.abs(r) <= limit_m
+        removed += int(np.count_nonzero(~keep))
+        trimmed.append(np.asarray(p)[keep])
+    return trimmed, removed
+
+
+def refine_with_outlier_rejection(
+    samples_points: list[FloatArray],
+    T_base_flange: ArrayLike,
+    T_flange_sensor0: ArrayLike,
+    cylinder0: Cylinder,
+    config: RefineConfig | None = None,
+    radius_m: float | None = None,
+) -> RefineResult:
+    """:func:`refine`, then drop samples inconsistent with the rest and solve again.
+
+    After each solve a sample is an outlier when its RMS point residual or its pose
+    correction's prior χ² is far (``outlier_zscore`` robust standard deviations) above the
+    other samples' and implausible in absolute terms (``outlier_min_rms_sigma`` σ_s, or a χ²
+    tail probability below ``outlier_prior_probability``). All outliers of a round are dropped
+    (most severe first, at most ``max_outlier_fraction`` of the samples over all rounds, and
+    never below ``min_samples``) and the solve is repeated from the last solution until none
+    is left. Outliers left because of the cap are reported in the warnings.
+
+    Parameters and exceptions are those of :func:`refine`. The result's ``used`` and
+    ``dropped`` give indices into ``samples_points``.
+    """
+    cfg = RefineConfig() if config is None else config
+    T_all = np.asarray(T_base_flange, dtype=np.float64)
+    keep = list(range(len(samples_points)))
+    dropped: list[DroppedSample] = []
+    budget = min(
+        int(np.floor(cfg.max_outlier_fraction * len(samples_points))),
+        len(samples_points) - cfg.min_samples,
+    )
+    T0, start = T_flange_sensor0, cylinder0
+    points = list(samples_points)
+    if cfg.point_outlier_sigmas > 0.0:
+        first = refine(points, T_all, T0, start, cfg, radius_m)
+        sigma = max(cfg.sensor_sigma_m, first.sensor_sigma_estimated_m)
+        trimmed, removed = _trim_points(points, T_all, first, cfg.point_outlier_sigmas * sigma)
+        if removed and all(len(p) >= cfg.min_points_per_profile for p in trimmed):
+            points = trimmed
+        T0, start = first.T_flange_sensor, first.cylinder
+    while True:
+        result = refine([points[i] for i in keep], T_all[keep], T0, start, cfg, radius_m)
+        flagged = _outlier_samples(result, cfg)
+        room = budget - len(dropped)
+        if flagged and room <= 0:
+            result.warnings.append(
+                f"{len(flagged)} more sample(s) look like outliers but max_outlier_fraction "
+                f"{cfg.max_outlier_fraction:.2f} allows no more drops: "
+                + "; ".join(f"sample {keep[j]}: {reason}" for _, j, reason in flagged)
+            )
+        if not flagged or room <= 0:
+            break
+        drop = {j: reason for _, j, reason in flagged[:room]}
+        dropped.extend(DroppedSample(keep[j], reason) for j, reason in drop.items())
+        keep = [i for j, i in enumerate(keep) if j not in drop]
+        T0, start = result.T_flange_sensor, result.cylinder
+    result.used = keep
+    result.dropped = sorted(dropped)
+    return result
