@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -17,11 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from linelaser_calib.core.errors import CalibrationError, InputError
+from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
+from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.results import (
     read_result_yaml,
     read_truth_yaml,
@@ -29,25 +31,20 @@ from linelaser_calib.io.results import (
     write_result_yaml,
     write_truth_yaml,
 )
-from linelaser_calib.offline import calibrate_bag
+from linelaser_calib.offline import OfflineRun, calibrate_bag
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
 
 
 def _positive_float(text: str) -> float:
-    value = float(text)
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
     if not (np.isfinite(value) and value > 0.0):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
     return value
-
-
-def _xyz(text: str) -> tuple[float, float, float]:
-    parts = text.split(",")
-    if len(parts) != 3:
-        raise argparse.ArgumentTypeError(f"expected x,y,z in metres, got {text!r}")
-    x, y, z = (float(p) for p in parts)
-    return x, y, z
 
 
 # --- simulate -------------------------------------------------------------------------------
@@ -154,7 +151,13 @@ def _cmd_info(args: argparse.Namespace) -> int:
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     initial = None
     if args.initial is not None:
-        initial = read_result_yaml(args.initial).T_flange_sensor
+        try:
+            initial = read_result_yaml(args.initial).T_flange_sensor
+        except ResultFileError as exc:
+            raise ResultFileError(
+                f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
+                "written by linelaser-calib (its hand_eye section)"
+            ) from exc
     return PipelineConfig(
         method=Method(args.method),
         radius_m=args.radius,
@@ -183,31 +186,105 @@ class _StderrProgress:
             self.last_stage = stage
 
 
-def _cmd_calibrate(args: argparse.Namespace) -> int:
-    config = _pipeline_config(args)
-    run = calibrate_bag(
-        args.bag,
-        config,
-        profile_topic=args.profile_topic,
-        pose_topic=args.pose_topic,
-        flange_frame=args.flange_frame,
-        progress=_StderrProgress(args.progress),
-    )
+def _check_output(path: str, what: str, *, directory: bool = False) -> Path:
+    """Fail before calibrating when an output cannot be written where the user asked.
+
+    The directory that is to hold the output must exist (a typo should not create a tree of
+    directories); a file output must not be an existing directory.
+    """
+    target = Path(path)
+    parent = target.absolute().parent
+    if not parent.is_dir():
+        problem = "is not a directory" if parent.exists() else "does not exist"
+        raise InputError(
+            f"cannot write the {what} {target}: its directory {parent} {problem}; "
+            "create the directory first or fix the path"
+        )
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise InputError(
+            f"cannot write the {what} {target}: its directory {parent} is not writable; "
+            "choose another path"
+        )
+    if target.is_dir() != directory and target.exists():
+        kind = "an existing directory" if target.is_dir() else "an existing file"
+        raise InputError(f"cannot write the {what} {target}: it is {kind}; choose another path")
+    return target
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Validate every output of ``calibrate`` before the (possibly long) calibration."""
     if args.output is not None:
-        write_result_yaml(run.result, args.output)
+        _check_output(args.output, "result file (--output)")
+    if args.viz is not None:
+        if Path(args.viz).suffix != ".mcap":
+            raise InputError(
+                f"--viz writes an MCAP file; give a name ending in .mcap, not {args.viz}"
+            )
+        _check_output(args.viz, "visualisation file (--viz)")
+    if args.report is not None:
+        from linelaser_calib.report import require_matplotlib
+
+        _check_output(args.report, "report directory (--report)", directory=True)
+        require_matplotlib()
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    _check_outputs(args)
+    config = _pipeline_config(args)
+    progress = sys.stderr.isatty() if args.progress is None else args.progress
+    try:
+        run = calibrate_bag(
+            args.bag,
+            config,
+            profile_topic=args.profile_topic,
+            pose_topic=args.pose_topic,
+            flange_frame=args.flange_frame,
+            progress=_StderrProgress(progress),
+        )
+    except PairingError as exc:
+        raise PairingError(
+            f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
+        ) from exc
     truth_path = Path(args.bag) / "truth.yaml"
     truth = read_truth_yaml(truth_path) if truth_path.is_file() else None
+    written = []
+    if args.output is not None:
+        written.append(write_result_yaml(run.result, args.output))
+    if args.viz is not None or args.report is not None:
+        from linelaser_calib.report import write_report, write_viz_mcap
+
+        if args.viz is not None:
+            written.append(write_viz_mcap(args.viz, run.result))
+        if args.report is not None:
+            written.append(
+                write_report(args.report, run.result, inputs=_input_rows(run), truth=truth)
+            )
     if args.json:
         print(json.dumps(result_to_dict(run.result), indent=2))
     else:
-        print(
-            f"{run.bag.path}: {len(run.bag.profiles)} profiles on {run.bag.profile_topic}, "
-            f"{len(run.bag.poses)} poses on {run.bag.pose_topic}"
-        )
+        print(_input_line(run))
         print(format_summary(run.result, truth))
-        if args.output is not None:
-            print(f"Result written to {args.output}")
+        for path in written:
+            print(f"Wrote {path}")
     return 0
+
+
+def _input_rows(run: OfflineRun) -> list[tuple[str, str]]:
+    """What was calibrated, as (label, text) rows."""
+    bag = run.bag
+    return [
+        ("bag", str(bag.path)),
+        ("profiles", f"{len(bag.profiles)} on {bag.profile_topic} (frame {bag.sensor_frame})"),
+        ("flange poses", f"{len(bag.poses)} on {bag.pose_topic} (frame {bag.base_frame})"),
+    ]
+
+
+def _input_line(run: OfflineRun) -> str:
+    bag = run.bag
+    return (
+        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, "
+        f"{len(bag.poses)} poses on {bag.pose_topic}"
+    )
 
 
 # --- demo -----------------------------------------------------------------------------------
@@ -284,7 +361,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--radius", type=_positive_float, help="cylinder radius, m (default: estimate)"
     )
     cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
-    cal.add_argument("--output", help="result YAML to write")
+    cal.add_argument("--output", help="result YAML to write (its directory must exist)")
+    cal.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write an HTML report (index.html and PNG figures) into DIR (needs matplotlib)",
+    )
+    cal.add_argument(
+        "--viz",
+        metavar="OUT.mcap",
+        help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
+    )
     cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     cal.add_argument(
@@ -301,7 +388,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
-    cal.add_argument("--progress", action="store_true", help="print progress on stderr")
+    cal.add_argument(
+        "--progress",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="print progress on stderr (default: when stderr is a terminal)",
+    )
     cal.set_defaults(func=_cmd_calibrate)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.pipeline import PipelineConfig, Progress, run_pipeline
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import BagContents, read_bag
@@ -48,7 +49,8 @@ def calibrate_bag(
     Raises
     ------
     CalibrationError
-        Bag, pairing, data or solver problems, with a message saying what to do.
+        Bag, pairing, data or solver problems (e.g. every profile empty), with a message
+        saying what to do.
     """
     bag = read_bag(
         path,
@@ -56,6 +58,13 @@ def calibrate_bag(
         pose_topic=pose_topic,
         progress=lambda done, total: progress("reading", done, total),
     )
+    if all(len(p.points) == 0 for p in bag.profiles):
+        raise InputError(
+            f"all {len(bag.profiles)} profiles on {bag.profile_topic} in {bag.path} are empty "
+            "(no valid point, every return NaN/Inf): the sensor saw nothing. Check that the "
+            "cylinder is within the sensor's measuring range and the laser is on, then record "
+            "again"
+        )
     result = run_pipeline(bag.profiles, bag.poses, config, progress)
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame

@@ -1,24 +1,44 @@
-"""Human-readable text for a calibration result: mm and degrees, each number labelled."""
+"""Human-readable text for a calibration result: mm and degrees, each number labelled.
+
+The pieces (:func:`hand_eye_rows`, :func:`cylinder_text`, :func:`residual_rows`,
+:func:`rejection_lines`, :func:`truth_rows`) are shared by the text summary of the CLI
+(:func:`format_summary`) and the HTML report, so both say the same thing the same way.
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from linelaser_calib.core.geometry import (
+    FloatArray,
     quaternion_xyzw_from_matrix,
+    rotation_angle,
+    rotvec_from_matrix,
     rpy_from_matrix,
-    transform_error,
 )
 from linelaser_calib.core.types import CalibrationResult, Rejection
 from linelaser_calib.io.results import Truth
 
+#: How roll, pitch and yaw are defined (ROS, REP 103).
+RPY_CONVENTION = "fixed axes x-y-z, R = Rz(yaw) Ry(pitch) Rx(roll)"
+#: The axes of the rotation uncertainty and of the per-axis rotation error.
+ROTATION_AXES = "small angles about the sensor x, y, z axes"
 
-def _mm(values: np.ndarray) -> str:
-    return "[" + ", ".join(f"{v * 1e3:+.3f}" for v in values) + "] mm"
+#: (label, text) pairs of a table.
+Rows = list[tuple[str, str]]
 
 
-def _deg(values: np.ndarray) -> str:
-    return "[" + ", ".join(f"{np.degrees(v):+.4f}" for v in values) + "] deg"
+def mm_text(values: ArrayLike) -> str:
+    """``[+1.000, ...] mm`` from lengths in m."""
+    return "[" + ", ".join(f"{v * 1e3:+.3f}" for v in np.ravel(values)) + "] mm"
+
+
+def deg_text(values: ArrayLike, digits: int = 4) -> str:
+    """``[+1.0000, ...] deg`` from angles in rad."""
+    return "[" + ", ".join(f"{np.degrees(v):+.{digits}f}" for v in np.ravel(values)) + "] deg"
 
 
 def group_rejections(rejections: list[Rejection]) -> list[tuple[str, list[int]]]:
@@ -33,8 +53,8 @@ def one_line_summary(result: CalibrationResult) -> str:
     """A single line: translation, rotation, 1 sigma, samples and residual."""
     T = result.T_flange_sensor
     text = (
-        f"{result.parent_frame}->{result.child_frame} t={_mm(T[:3, 3])} "
-        f"rpy={_deg(rpy_from_matrix(T[:3, :3]))}"
+        f"{result.parent_frame}->{result.child_frame} t={mm_text(T[:3, 3])} "
+        f"rpy={deg_text(rpy_from_matrix(T[:3, :3]))}"
     )
     if result.uncertainty_translation_m is not None and result.uncertainty_rotation_rad is not None:
         text += (
@@ -48,6 +68,128 @@ def one_line_summary(result: CalibrationResult) -> str:
     return text
 
 
+def hand_eye_rows(result: CalibrationResult) -> Rows:
+    """The hand-eye T_flange_sensor: translation, roll/pitch/yaw, quaternion and 1 sigma."""
+    T = result.T_flange_sensor
+    rows = [
+        ("translation", mm_text(T[:3, 3])),
+        ("roll/pitch/yaw", f"{deg_text(rpy_from_matrix(T[:3, :3]))}  ({RPY_CONVENTION})"),
+        (
+            "rotation_xyzw",
+            "[" + ", ".join(f"{v:+.6f}" for v in quaternion_xyzw_from_matrix(T[:3, :3])) + "]",
+        ),
+    ]
+    sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+    if sigma_t is None and sigma_r is None:
+        rows.append(("1 sigma", f"not estimated by the {result.method} method"))
+    if sigma_t is not None:
+        rows.append(("1 sigma translation", f"{mm_text(sigma_t)} (flange x, y, z)"))
+    if sigma_r is not None:
+        rows.append(("1 sigma rotation", f"{deg_text(sigma_r)} ({ROTATION_AXES})"))
+    return rows
+
+
+def cylinder_text(result: CalibrationResult) -> str:
+    """The fitted cylinder: axis point, direction and radius, in the base frame."""
+    c = result.cylinder
+    return (
+        f"Cylinder in {result.base_frame}: point {mm_text(c.point)}, direction "
+        + "["
+        + ", ".join(f"{v:+.5f}" for v in c.direction)
+        + f"], radius {c.radius * 1e3:.3f} mm"
+        + (" (estimated)" if result.radius_estimated else " (given)")
+    )
+
+
+def residual_kind(result: CalibrationResult) -> str:
+    """What the method's residual measures."""
+    if result.method == "paper":
+        return "ellipse centre-to-axis distance"
+    return "point-to-surface distance, flange poses corrected for the estimated robot error"
+
+
+def residual_rows(result: CalibrationResult) -> Rows:
+    """RMS residual and the per-sample residual statistics, in µm."""
+    rows = [
+        (
+            "residual",
+            f"rms {result.rms_residual_m * 1e6:.1f} um over {len(result.samples_used)} "
+            f"samples used ({residual_kind(result)})",
+        )
+    ]
+    if result.sample_residuals_m:
+        values = np.array(list(result.sample_residuals_m.values())) * 1e6
+        rows.append(
+            (
+                "per-sample residual",
+                f"min {values.min():.1f} um, median {np.median(values):.1f} um, "
+                f"max {values.max():.1f} um",
+            )
+        )
+    return rows
+
+
+def rejection_lines(result: CalibrationResult) -> list[str]:
+    """One line per distinct rejection reason: count, stage, reason and profile indices."""
+    lines = []
+    for reason, indices in group_rejections(result.samples_rejected):
+        shown = ", ".join(str(i) for i in indices[:12]) + (" ..." if len(indices) > 12 else "")
+        lines.append(f"{len(indices)} x {reason}  [profiles {shown}]")
+    return lines
+
+
+@dataclass(frozen=True)
+class TruthError:
+    """Error of an estimated hand-eye against the truth.
+
+    Attributes
+    ----------
+    rotation_rad : float
+        Angle of R_truthᵀ R_estimate, rad.
+    translation_m : float
+        Distance between the translations, m.
+    rotation_axes_rad : ndarray, shape (3,)
+        Rotation vector θ of R_estimate = R_truth · Exp(θ), rad: small angles about the
+        sensor axes, as the 1 sigma rotation.
+    translation_axes_m : ndarray, shape (3,)
+        t_estimate − t_truth in the flange frame, m, as the 1 sigma translation.
+    """
+
+    rotation_rad: float
+    translation_m: float
+    rotation_axes_rad: FloatArray
+    translation_axes_m: FloatArray
+
+
+def truth_error(T_estimate: ArrayLike, T_truth: ArrayLike) -> TruthError:
+    """Error of ``T_estimate`` (4, 4) against ``T_truth`` (4, 4), both T_flange_sensor."""
+    A = np.asarray(T_estimate, dtype=np.float64)
+    B = np.asarray(T_truth, dtype=np.float64)
+    delta = B[:3, :3].T @ A[:3, :3]
+    offset = A[:3, 3] - B[:3, 3]
+    return TruthError(
+        rotation_angle(delta), float(np.linalg.norm(offset)), rotvec_from_matrix(delta), offset
+    )
+
+
+def truth_rows(result: CalibrationResult, truth: Truth) -> Rows:
+    """The error against the truth: totals and per axis, beside the 1 sigma when known."""
+    error = truth_error(result.T_flange_sensor, truth.T_flange_sensor)
+    rows = [
+        ("rotation", f"{np.degrees(error.rotation_rad):.4f} deg"),
+        ("translation", f"{error.translation_m * 1e3:.4f} mm"),
+        ("rotation per axis", f"{deg_text(error.rotation_axes_rad)} ({ROTATION_AXES})"),
+        ("translation per axis", f"{mm_text(error.translation_axes_m)} (flange x, y, z)"),
+    ]
+    sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+    if sigma_t is not None and sigma_r is not None:
+        ratios = np.abs(
+            np.concatenate([error.rotation_axes_rad / sigma_r, error.translation_axes_m / sigma_t])
+        )
+        rows.append(("largest error/sigma", f"{ratios.max():.2f} (per axis, |error| / 1 sigma)"))
+    return rows
+
+
 def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str:
     """Multi-line summary a person can act on.
 
@@ -57,57 +199,29 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
     truth : Truth, optional
         When given (simulated bags), the error against it is printed too.
     """
-    T = result.T_flange_sensor
+
+    def table(rows: Rows) -> list[str]:
+        return [f"  {label:<22}{text}" for label, text in rows]
+
     lines = [
         f"Hand-eye T_flange_sensor ({result.parent_frame} -> {result.child_frame}), "
         f"method {result.method}:",
-        f"  translation        {_mm(T[:3, 3])}",
-        f"  roll/pitch/yaw     {_deg(rpy_from_matrix(T[:3, :3]))}"
-        "  (fixed axes x-y-z, R = Rz(yaw) Ry(pitch) Rx(roll))",
-        "  rotation_xyzw      ["
-        + ", ".join(f"{v:+.6f}" for v in quaternion_xyzw_from_matrix(T[:3, :3]))
-        + "]",
+        *table(hand_eye_rows(result)),
+        cylinder_text(result),
+        "Residual:",
+        *table(residual_rows(result)),
     ]
-    if result.uncertainty_translation_m is not None:
-        lines.append(f"  1 sigma translation {_mm(result.uncertainty_translation_m)}")
-    if result.uncertainty_rotation_rad is not None:
-        lines.append(
-            f"  1 sigma rotation   {_deg(result.uncertainty_rotation_rad)} (about sensor x, y, z)"
-        )
-    c = result.cylinder
-    lines += [
-        f"Cylinder in {result.base_frame}: point {_mm(c.point)}, direction "
-        + "["
-        + ", ".join(f"{v:+.5f}" for v in c.direction)
-        + f"], radius {c.radius * 1e3:.3f} mm"
-        + (" (estimated)" if result.radius_estimated else " (given)"),
-    ]
-    residuals = result.sample_residuals_m
-    what = "centre-to-axis distance" if result.method == "paper" else "point-to-surface RMS"
+    cells = [f"#{i}:{v * 1e6:.1f}" for i, v in sorted(result.sample_residuals_m.items())]
+    if cells:
+        lines.append("  per-sample residual by profile index, um:")
+    for k in range(0, len(cells), 10):
+        lines.append("    " + " ".join(cells[k : k + 10]))
     lines.append(
-        f"Residual: rms {result.rms_residual_m * 1e6:.1f} um over "
-        f"{len(result.samples_used)} samples used"
+        f"Samples: {len(result.samples_used)} used, {len(result.samples_rejected)} rejected"
     )
-    if residuals:
-        values = np.array(list(residuals.values()))
-        lines.append(
-            f"  per-sample {what}, um: min {values.min() * 1e6:.1f}, median "
-            f"{np.median(values) * 1e6:.1f}, max {values.max() * 1e6:.1f}"
-        )
-        cells = [f"#{i}:{v * 1e6:.1f}" for i, v in sorted(residuals.items())]
-        for k in range(0, len(cells), 10):
-            lines.append("    " + " ".join(cells[k : k + 10]))
-    rejected = result.samples_rejected
-    lines.append(f"Samples rejected: {len(rejected)}")
-    for reason, indices in group_rejections(rejected):
-        shown = ", ".join(str(i) for i in indices[:12]) + (" ..." if len(indices) > 12 else "")
-        lines.append(f"  {len(indices)} x {reason}  [profiles {shown}]")
-    for warning in result.warnings:
-        lines.append(f"WARNING: {warning}")
+    lines += [f"  {line}" for line in rejection_lines(result)]
+    lines += [f"WARNING: {warning}" for warning in result.warnings]
     if truth is not None:
-        rot, trans = transform_error(T, truth.T_flange_sensor)
-        lines.append(
-            f"Error against truth: rotation {np.degrees(rot):.4f} deg, "
-            f"translation {trans * 1e3:.4f} mm"
-        )
+        lines.append("Error against truth:")
+        lines += table(truth_rows(result, truth))
     return "\n".join(lines)

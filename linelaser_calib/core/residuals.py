@@ -119,3 +119,19 @@ def sample_centre_distances(
     centres = np.array([f.centre_xz for f in fits])
     T_base_flange = np.stack([f.T_base_flange for f in fits])
     return centre_distances(centres, T_base_flange, T_flange_sensor, cylinder)
+
+
+def axis_extent(points_base: FloatArray, cylinder: Cylinder) -> tuple[FloatArray, float]:
+    """Centre (3,) in m and length in m of the axis piece that the points cover.
+
+    The length has a 10 % margin and is at least the diameter, so a cylinder drawn with it
+    covers the scanned part.
+    """
+    direction = cylinder.direction / np.linalg.norm(cylinder.direction)
+    minimum = 2.0 * cylinder.radius
+    if len(points_base) == 0:
+        return np.asarray(cylinder.point, dtype=np.float64), minimum
+    s = (points_base - cylinder.point) @ direction
+    lo, hi = float(np.min(s)), float(np.max(s))
+    centre = cylinder.point + 0.5 * (lo + hi) * direction
+    return np.asarray(centre, dtype=np.float64), max(1.1 * (hi - lo), minimum)
