@@ -21,7 +21,8 @@ import numpy as np
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
+from linelaser_calib.core.types import CalibrationResult, TargetPoint
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.results import (
@@ -47,6 +48,17 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _xyz(text: str) -> tuple[float, float, float]:
+    """Parse ``x,y,z`` (m)."""
+    try:
+        x, y, z = (float(p) for p in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected x,y,z in metres, got {text!r}") from None
+    if not all(np.isfinite([x, y, z])):
+        raise argparse.ArgumentTypeError(f"expected finite x,y,z in metres, got {text!r}")
+    return x, y, z
+
+
 # --- simulate -------------------------------------------------------------------------------
 
 
@@ -55,41 +67,76 @@ def simulate_to_bag(
 ) -> tuple[Path, Path]:
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
+    Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
+    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
     Returns the bag directory and the truth file.
     """
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.weld import (
+        WELD_PRESETS,
+        bumped_hand_eye,
+        simulate_weld,
+        weld_scenario_from_preset,
+    )
 
-    scenario = scenario_from_preset(scenario_name, **overrides)
-    data = simulate(scenario, seed)
+    weld = scenario_name in WELD_PRESETS
+    if weld:
+        weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
+        intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
+        cylinder, known_point = None, weld_data.truth.weld_point_m
+    else:
+        data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = data.scenario, data.profiles, data.poses
+        intensities, T_true = data.intensities, data.truth.T_flange_sensor
+        cylinder, known_point = data.truth.cylinder, None
     write_bag(
         out,
-        data.profiles,
-        data.poses,
+        profiles,
+        poses,
         profile_topic=scenario.profile_topic,
         pose_topic=scenario.pose_topic,
         sensor_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
         organised=scenario.organised,
-        intensities=data.intensities if scenario.intensity else None,
+        intensities=intensities if scenario.intensity else None,
     )
+    simulation: dict[str, object] = {
+        "scenario": scenario_name,
+        "seed": seed,
+        "overrides": overrides,
+        "profiles": len(profiles),
+        "poses": len(poses),
+        "command": simulate_command(out, scenario_name, seed, overrides),
+    }
+    if weld:
+        taught = weld_data.truth.taught_point_m
+        simulation["taught_point"] = taught
+        write_result_yaml(
+            CalibrationResult(
+                T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
+                cylinder=None,
+                method="initial",
+                samples_used=[],
+                samples_rejected=[],
+                rms_residual_m=0.0,
+                target_point=TargetPoint(np.asarray(taught), estimated=False),
+                parent_frame=scenario.flange_frame,
+                child_frame=scenario.sensor_frame,
+                base_frame=scenario.base_frame,
+            ),
+            out / "initial.yaml",
+        )
     truth = write_truth_yaml(
         out / "truth.yaml",
-        data.truth.T_flange_sensor,
-        data.truth.cylinder,
+        T_true,
+        cylinder,
+        known_point=known_point,
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
-        extra={
-            "simulation": {
-                "scenario": scenario_name,
-                "seed": seed,
-                "overrides": overrides,
-                "profiles": len(data.profiles),
-                "poses": len(data.poses),
-                "command": simulate_command(out, scenario_name, seed, overrides),
-            }
-        },
+        extra={"simulation": simulation},
     )
     return out, truth
 
@@ -160,6 +207,8 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
             ) from exc
     return PipelineConfig(
         method=Method(args.method),
+        target=Target(args.target),
+        known_point=None if args.point is None else np.array(args.point),
         radius_m=args.radius,
         seed=args.seed,
         pairing=PairingConfig(
@@ -328,7 +377,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim = sub.add_parser("simulate", help="write a synthetic rosbag2 MCAP bag and truth.yaml")
     sim.add_argument("out", help="bag directory to create (must not exist)")
     sim.add_argument(
-        "--scenario", default="paper", help="preset: paper, ur_scancontrol, continuous"
+        "--scenario",
+        default="paper",
+        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general",
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
@@ -361,6 +412,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--radius", type=_positive_float, help="cylinder radius, m (default: estimate)"
     )
     cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
+    cal.add_argument(
+        "--target",
+        choices=[t.value for t in Target],
+        default=Target.CYLINDER.value,
+        help="cylinder (default), or known_point: one fixed point such as a weld-seam corner",
+    )
+    cal.add_argument(
+        "--point",
+        type=_xyz,
+        help="known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    )
     cal.add_argument("--output", help="result YAML to write (its directory must exist)")
     cal.add_argument(
         "--report",

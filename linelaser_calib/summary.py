@@ -90,8 +90,16 @@ def hand_eye_rows(result: CalibrationResult) -> Rows:
 
 
 def cylinder_text(result: CalibrationResult) -> str:
-    """The fitted cylinder: axis point, direction and radius, in the base frame."""
+    """The fitted cylinder (axis point, direction, radius) or the known point, base frame."""
     c = result.cylinder
+    if c is None:
+        target = result.target_point
+        if target is None:
+            return "No target geometry in the result"
+        text = f"Known point in {result.base_frame}: {mm_text(target.point)}"
+        if target.estimated and target.sigma_m is not None:
+            return text + f" (estimated, 1 sigma {mm_text(target.sigma_m)})"
+        return text + (" (estimated)" if target.estimated else " (taught)")
     return (
         f"Cylinder in {result.base_frame}: point {mm_text(c.point)}, direction "
         + "["
@@ -103,6 +111,8 @@ def cylinder_text(result: CalibrationResult) -> str:
 
 def residual_kind(result: CalibrationResult) -> str:
     """What the method's residual measures."""
+    if result.target_point is not None:
+        return "distance of each view's corner, mapped into the base frame, from the point"
     if result.method == "paper":
         return "ellipse centre-to-axis distance"
     return "point-to-surface distance, flange poses corrected for the estimated robot error"

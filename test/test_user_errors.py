@@ -230,7 +230,7 @@ def test_profiles_of_a_plane_give_no_ellipse(
         capsys,
         "only 0 of 12 profiles gave a usable ellipse",
         "no plausible ellipse",
-        "laser line across the cylinder",
+        "laser line falls across the cylinder",
     )
 
 

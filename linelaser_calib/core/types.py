@@ -82,7 +82,7 @@ class Rejection:
         Profile index in the input stream.
     stamp_ns : int
     stage : str
-        ``pairing``, ``cleaning``, ``ellipse`` or ``outlier``.
+        ``pairing``, ``cleaning``, ``ellipse``, ``corner`` or ``outlier``.
     reason : str
         Human-readable reason, with units.
     """
@@ -142,6 +142,25 @@ class Cylinder:
 
 
 @dataclass(frozen=True)
+class TargetPoint:
+    """A fixed point (e.g. a weld-seam corner) in the base frame, for the known-point target.
+
+    Attributes
+    ----------
+    point : ndarray, shape (3,)
+        m.
+    estimated : bool
+        True if solved for, False if taught (given).
+    sigma_m : ndarray, shape (3,) or None
+        1-sigma per base axis when estimated, m.
+    """
+
+    point: FloatArray
+    estimated: bool
+    sigma_m: FloatArray | None = None
+
+
+@dataclass(frozen=True)
 class SampleFit:
     """What the solve used of one sample, kept for reports and markers.
 
@@ -173,8 +192,8 @@ class CalibrationResult:
     ----------
     T_flange_sensor : ndarray, shape (4, 4)
         The hand-eye (the paper's T_EL).
-    cylinder : Cylinder
-        Fitted cylinder in the base frame.
+    cylinder : Cylinder or None
+        Fitted cylinder in the base frame (cylinder target); None for the known-point target.
     method : str
         ``paper`` or ``default`` (maximum likelihood).
     samples_used : list of int
@@ -195,12 +214,14 @@ class CalibrationResult:
         Convergence traces for reports (e.g. ``pso_best``, ``galm_phi``, ``refine_cost``).
     sample_fits : list of SampleFit
         The fitted samples the final solve used (not written to result files).
+    target_point : TargetPoint or None
+        The fixed point of the known-point target (weld seam); None for the cylinder.
     parent_frame, child_frame, base_frame : str
         Frame ids: flange, sensor and robot base.
     """
 
     T_flange_sensor: FloatArray
-    cylinder: Cylinder
+    cylinder: Cylinder | None
     method: str
     samples_used: list[int]
     samples_rejected: list[Rejection]
@@ -212,6 +233,7 @@ class CalibrationResult:
     warnings: list[str] = field(default_factory=list)
     history: dict[str, list[float]] = field(default_factory=dict)
     sample_fits: list[SampleFit] = field(default_factory=list)
+    target_point: TargetPoint | None = None
     parent_frame: str = "tool0"
     child_frame: str = "laser"
     base_frame: str = "base_link"

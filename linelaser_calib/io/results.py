@@ -43,7 +43,7 @@ from linelaser_calib.core.geometry import (
     transform_from_translation_quaternion,
     translation_quaternion_from_transform,
 )
-from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection
+from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection, TargetPoint
 from linelaser_calib.io.errors import ResultFileError
 
 FloatArray = NDArray[np.float64]
@@ -68,19 +68,22 @@ class Truth:
     Attributes
     ----------
     T_flange_sensor : ndarray, shape (4, 4)
-    cylinder : Cylinder
-        In ``base_frame``, m.
+    cylinder : Cylinder or None
+        In ``base_frame``, m (cylinder scenes).
     parent_frame, child_frame, base_frame : str
     raw : dict
         The parsed YAML, including extra keys (scenario, seed, noise, ...).
+    known_point : ndarray, shape (3,) or None
+        The fixed point in ``base_frame``, m (known-point scenes such as a weld seam).
     """
 
     T_flange_sensor: FloatArray
-    cylinder: Cylinder
+    cylinder: Cylinder | None
     parent_frame: str
     child_frame: str
     base_frame: str
     raw: dict[str, Any]
+    known_point: FloatArray | None = None
 
 
 def _floats(values: ArrayLike) -> list[float]:
@@ -119,6 +122,29 @@ def _cylinder_section(cylinder: Cylinder, frame: str) -> dict[str, Any]:
         "direction": _floats(cylinder.direction),
         "radius": float(cylinder.radius),
     }
+
+
+def _known_point_section(target: TargetPoint, frame: str) -> dict[str, Any]:
+    return {
+        "frame": frame,
+        "point": _floats(target.point),
+        "estimated": bool(target.estimated),
+        "uncertainty_m": None if target.sigma_m is None else _floats(target.sigma_m),
+    }
+
+
+def _target_sections(
+    cylinder: Cylinder | None, known_point: TargetPoint | None, frame: str
+) -> dict[str, Any]:
+    """The ``cylinder`` and/or ``known_point`` sections (at least one is required)."""
+    if cylinder is None and known_point is None:
+        raise InputError("a result needs a cylinder or a known point; got neither")
+    sections: dict[str, Any] = {}
+    if cylinder is not None:
+        sections["cylinder"] = _cylinder_section(cylinder, frame)
+    if known_point is not None:
+        sections["known_point"] = _known_point_section(known_point, frame)
+    return sections
 
 
 def _write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Path:
@@ -161,7 +187,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     )
     return {
         "hand_eye": hand_eye,
-        "cylinder": _cylinder_section(result.cylinder, result.base_frame),
+        **_target_sections(result.cylinder, result.target_point, result.base_frame),
         "quality": {
             "method": result.method,
             "samples_used": len(result.samples_used),
@@ -209,8 +235,9 @@ def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
 def write_truth_yaml(
     path: str | Path,
     T_flange_sensor: ArrayLike,
-    cylinder: Cylinder,
+    cylinder: Cylinder | None,
     *,
+    known_point: ArrayLike | None = None,
     parent_frame: str = "tool0",
     child_frame: str = "laser",
     base_frame: str = "base_link",
@@ -223,8 +250,10 @@ def write_truth_yaml(
     path : str or Path
     T_flange_sensor : array-like, shape (4, 4)
         True hand-eye, translation in m.
-    cylinder : Cylinder
+    cylinder : Cylinder or None
         True cylinder in ``base_frame``, m.
+    known_point : array-like, shape (3,), optional
+        True fixed point in ``base_frame``, m (known-point scenes).
     parent_frame, child_frame, base_frame : str
     extra : mapping, optional
         Further top-level keys (scenario, seed, noise levels, ...); numpy values are
@@ -238,12 +267,17 @@ def write_truth_yaml(
         If the file cannot be written.
     """
     extra = dict(extra or {})
-    clash = sorted({"hand_eye", "cylinder"} & set(extra))
+    clash = sorted({"hand_eye", "cylinder", "known_point"} & set(extra))
     if clash:
         raise InputError(f"extra keys {clash} would overwrite the truth itself; rename them")
+    point = (
+        None
+        if known_point is None
+        else TargetPoint(np.asarray(known_point, dtype=np.float64), estimated=False)
+    )
     data = {
         "hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame),
-        "cylinder": _cylinder_section(cylinder, base_frame),
+        **_target_sections(cylinder, point, base_frame),
         **_plain(extra),
     }
     return _write_yaml_atomically(Path(path), _TRUTH_HEADER, data)
@@ -371,6 +405,27 @@ def _read_cylinder(fields: _Fields) -> tuple[Cylinder, str]:
     return cylinder, section.text("frame")
 
 
+def _read_known_point(fields: _Fields) -> tuple[TargetPoint, str]:
+    """The fixed point and its frame from the ``known_point`` section."""
+    section = fields.section("known_point")
+    sigma = None
+    if section.has("uncertainty_m") and section.get("uncertainty_m") is not None:
+        sigma = section.array("uncertainty_m", (3,))
+    point = section.array("point", (3,))
+    return TargetPoint(point, section.flag("estimated"), sigma), section.text("frame")
+
+
+def _read_targets(fields: _Fields) -> tuple[Cylinder | None, TargetPoint | None, str]:
+    """Cylinder and/or known point, and the base frame; at least one must be present."""
+    cylinder = target = None
+    frame = ""
+    if fields.has("known_point"):
+        target, frame = _read_known_point(fields)
+    if fields.has("cylinder") or target is None:
+        cylinder, frame = _read_cylinder(fields)
+    return cylinder, target, frame
+
+
 def _read_uncertainty(hand_eye: _Fields, key: str) -> FloatArray | None:
     if not hand_eye.has("uncertainty"):
         return None
@@ -392,7 +447,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
     """
     path, fields = _load(path)
     T, parent_frame, child_frame = _read_hand_eye(fields)
-    cylinder, base_frame = _read_cylinder(fields)
+    cylinder, target, base_frame = _read_targets(fields)
     hand_eye = fields.section("hand_eye")
     quality = fields.section("quality")
     rejected = []
@@ -428,6 +483,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         uncertainty_rotation_rad=_read_uncertainty(hand_eye, "rotation_rad"),
         radius_estimated=quality.flag("radius_estimated"),
         warnings=[str(w) for w in quality.items("warnings")],
+        target_point=target,
         parent_frame=parent_frame,
         child_frame=child_frame,
         base_frame=base_frame,
@@ -444,5 +500,6 @@ def read_truth_yaml(path: str | Path) -> Truth:
     """
     path, fields = _load(path)
     T, parent_frame, child_frame = _read_hand_eye(fields)
-    cylinder, base_frame = _read_cylinder(fields)
-    return Truth(T, cylinder, parent_frame, child_frame, base_frame, fields.data)
+    cylinder, target, base_frame = _read_targets(fields)
+    point = None if target is None else target.point
+    return Truth(T, cylinder, parent_frame, child_frame, base_frame, fields.data, point)

@@ -28,7 +28,8 @@ from linelaser_calib.core.residuals import (
     sample_centre_distances,
     sample_points_base,
 )
-from linelaser_calib.core.types import CalibrationResult
+from linelaser_calib.core.types import CalibrationResult, Cylinder
+from linelaser_calib.report.errors import require_cylinder
 
 matplotlib.use("Agg")
 
@@ -50,6 +51,8 @@ class ReportData:
     Attributes
     ----------
     result : CalibrationResult
+    cylinder : Cylinder
+        The result's fitted cylinder.
     indices : ndarray of int, shape (M,)
         Profile index of each fitted sample the solve used.
     centre_distances_m : ndarray, shape (M,)
@@ -63,6 +66,7 @@ class ReportData:
     """
 
     result: CalibrationResult
+    cylinder: Cylinder
     indices: IntArray
     centre_distances_m: FloatArray
     points_base: list[FloatArray]
@@ -79,16 +83,18 @@ class ReportData:
 
 def report_data(result: CalibrationResult) -> ReportData:
     """Map the result's sample fits into the base frame and measure their residuals."""
+    cylinder = require_cylinder(result)
     fits = result.sample_fits
     T = result.T_flange_sensor
     points = [sample_points_base(f, T) for f in fits]
     stacked = np.concatenate(points) if points else np.zeros((0, 3))
     return ReportData(
         result=result,
+        cylinder=cylinder,
         indices=np.array([f.index for f in fits], dtype=np.intp),
-        centre_distances_m=sample_centre_distances(fits, T, result.cylinder),
+        centre_distances_m=sample_centre_distances(fits, T, cylinder),
         points_base=points,
-        coordinates=cylinder_coordinates(stacked, result.cylinder),
+        coordinates=cylinder_coordinates(stacked, cylinder),
         sample_of_point=np.repeat(np.arange(len(points)), [len(p) for p in points]),
     )
 
@@ -151,7 +157,7 @@ def profiles_3d_figure(data: ReportData) -> Figure:
     """3-D view of the profiles in the base frame on the fitted cylinder, mm."""
     fig = _figure(7.0)
     ax = fig.add_subplot(projection="3d")
-    cylinder = data.result.cylinder
+    cylinder = data.cylinder
     if data.points_base:
         per_sample = max(1, MAX_3D_POINTS // len(data.points_base))
         for j, points in enumerate(data.points_base):

@@ -33,7 +33,7 @@ from rosbags.typesys.store import Typestore
 
 from linelaser_calib.core.residuals import axis_extent, sample_points_base
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.report.errors import ReportError
+from linelaser_calib.report.errors import ReportError, require_cylinder
 from msg_adapters import (
     cylinder_marker,
     marker_array,
@@ -101,8 +101,9 @@ def _write(writer: Writer, result: CalibrationResult) -> None:
     channels.write("tf_static", first, tf_message(transforms=[hand_eye]))
     points = [sample_points_base(f, result.T_flange_sensor) for f in fits]
     every = np.concatenate(points) if points else np.zeros((0, 3))
-    centre, length = axis_extent(every, result.cylinder)
-    marker = cylinder_marker(result.cylinder, length, base, types=types, centre=centre)
+    cylinder = require_cylinder(result)
+    centre, length = axis_extent(every, cylinder)
+    marker = cylinder_marker(cylinder, length, base, types=types, centre=centre)
     channels.write("markers", first, marker_array([marker], types=types))
     channels.write("cloud", first, pointcloud2_from_points(every, first, base, types=types))
     for fit, sample_points in zip(fits, points, strict=True):

@@ -64,6 +64,7 @@ from linelaser_calib.core.geometry import (
     matrix_from_rotvec,
     quaternion_xyzw_from_matrix,
     transform_from_rotation_translation,
+    transform_from_rotvec_translation,
 )
 from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.profiler import Trace, measure, ray_directions
@@ -680,3 +681,34 @@ def weld_scenario_from_preset(name: str, **overrides: Any) -> WeldScenario:
     own_overrides = {k: v for k, v in overrides.items() if k in own}
     rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
     return replace(preset, rig=rig, **own_overrides)
+
+
+def bumped_hand_eye(
+    T_flange_sensor: FloatArray,
+    rng: np.random.Generator,
+    angle_range_rad: tuple[float, float] = (np.radians(1.0), np.radians(2.0)),
+    shift_range_m: tuple[float, float] = (0.001, 0.003),
+) -> FloatArray:
+    """An old hand-eye for a re-assembled sensor: the truth turned and shifted at random.
+
+    Parameters
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+        The true hand-eye.
+    rng : numpy.random.Generator
+    angle_range_rad, shift_range_m : (2,) floats
+        Ranges of the rotation angle (rad, about a uniformly random axis) and of the
+        translation shift (m, in a uniformly random direction).
+
+    Returns
+    -------
+    ndarray, shape (4, 4)
+    """
+    axis = rng.normal(size=3)
+    shift = rng.normal(size=3)
+    angle = rng.uniform(*angle_range_rad)
+    length = rng.uniform(*shift_range_m)
+    bump = transform_from_rotvec_translation(
+        angle * axis / np.linalg.norm(axis), length * shift / np.linalg.norm(shift)
+    )
+    return np.asarray(T_flange_sensor @ bump)
