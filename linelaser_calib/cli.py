@@ -205,6 +205,16 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                 f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
                 "written by linelaser-calib (its hand_eye section)"
             ) from exc
+    if (
+        args.target == Target.KNOWN_POINT.value
+        and args.method == Method.PAPER.value
+        and (args.point is None or initial is None)
+    ):
+        raise InputError(
+            "--method paper with --target known_point corrects an old hand-eye against the "
+            "taught point: it needs --point x,y,z (the taught point, m, base frame) and "
+            "--initial FILE.yaml (the old hand-eye)"
+        )
     return PipelineConfig(
         method=Method(args.method),
         target=Target(args.target),
