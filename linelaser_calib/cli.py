@@ -14,6 +14,7 @@ import os
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -358,10 +359,25 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     for bag in bags:
         truth = read_truth_yaml(bag / "truth.yaml")
         for method in (Method.PAPER, Method.DEFAULT):
+            config = PipelineConfig(method=method, seed=args.seed)
+            target = "cylinder"
+            if truth.known_point is not None:
+                initial = read_result_yaml(bag / "initial.yaml")
+                taught = None if initial.target_point is None else initial.target_point.point
+                config = replace(
+                    config,
+                    target=Target.KNOWN_POINT,
+                    known_point=taught,
+                    initial_T_flange_sensor=initial.T_flange_sensor,
+                )
+                target = "known point, from initial.yaml"
+                if method is Method.PAPER:
+                    rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
+                    rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
             started = time.perf_counter()
-            run = calibrate_bag(bag, PipelineConfig(method=method, seed=args.seed))
+            run = calibrate_bag(bag, config)
             seconds = time.perf_counter() - started
-            print(f"=== {bag.name}, method {method.value} ({seconds:.2f} s) ===")
+            print(f"=== {bag.name} ({target}), method {method.value} ({seconds:.2f} s) ===")
             print(format_summary(run.result, truth))
             print()
             rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
