@@ -37,6 +37,8 @@ setup(
     entry_points={
         "console_scripts": [
             "linelaser-calib = linelaser_calib.cli:main",
+            "collector = linelaser_calib.nodes.collector:main",
+            "calibration_service = linelaser_calib.nodes.calibration_service:main",
         ],
     },
 )

@@ -384,8 +384,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
     print("Error against truth (hand-eye T_flange_sensor):")
     print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
-    for name, method, rot_deg, trans_mm, seconds in rows:
-        print(f"  {name:<28}{method:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+    for name, label, rot_deg, trans_mm, seconds in rows:
+        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
     return 0
 
 

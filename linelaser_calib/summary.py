@@ -49,22 +49,35 @@ def group_rejections(rejections: list[Rejection]) -> list[tuple[str, list[int]]]
     return sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0]))
 
 
-def one_line_summary(result: CalibrationResult) -> str:
-    """A single line: translation, rotation, 1 sigma, samples and residual."""
+def one_line_summary(result: CalibrationResult, samples_total: int) -> str:
+    """One line describing a calibration, every number with its unit.
+
+    Parameters
+    ----------
+    result : CalibrationResult
+    samples_total : int
+        Samples handed to the calibration (used + rejected).
+    """
     T = result.T_flange_sensor
+    t_mm = T[:3, 3] * 1e3
+    rpy_deg = np.degrees(rpy_from_matrix(T[:3, :3]))
     text = (
-        f"{result.parent_frame}->{result.child_frame} t={mm_text(T[:3, 3])} "
-        f"rpy={deg_text(rpy_from_matrix(T[:3, :3]))}"
+        f"T_flange_sensor ({result.parent_frame} -> {result.child_frame}): "
+        f"translation [{t_mm[0]:.3f}, {t_mm[1]:.3f}, {t_mm[2]:.3f}] mm, "
+        f"rpy [{rpy_deg[0]:.4f}, {rpy_deg[1]:.4f}, {rpy_deg[2]:.4f}] deg"
     )
-    if result.uncertainty_translation_m is not None and result.uncertainty_rotation_rad is not None:
+    sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+    if sigma_t is not None and sigma_r is not None:
         text += (
-            f" 1sigma {np.max(result.uncertainty_translation_m) * 1e3:.3f} mm/"
-            f"{np.degrees(np.max(result.uncertainty_rotation_rad)):.4f} deg"
+            f", 1-sigma (largest axis) {float(np.max(sigma_t)) * 1e3:.4f} mm, "
+            f"{float(np.degrees(np.max(sigma_r))):.4f} deg"
         )
     text += (
-        f"; {len(result.samples_used)} samples, rms {result.rms_residual_m * 1e6:.1f} um"
-        f" ({result.method})"
+        f"; {len(result.samples_used)} of {samples_total} samples used, "
+        f"rms residual {result.rms_residual_m * 1e6:.1f} um, method {result.method}"
     )
+    if result.warnings:
+        text += f"; {len(result.warnings)} warning(s): {result.warnings[0]}"
     return text
 
 

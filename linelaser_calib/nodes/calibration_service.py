@@ -1,0 +1,352 @@
+# mypy: disallow-untyped-calls=False
+# rclpy is only partly annotated: calling its untyped functions is expected here.
+"""ROS 2 node ``calibration_service``: accumulate the collector's samples, calibrate on request.
+
+- Subscribes ``linelaser_calib/samples/profile`` and ``linelaser_calib/samples/flange_pose``
+  (reliable, transient_local, ``max_samples`` deep: a late or restarted service receives the
+  whole session again) and joins them by exact stamp in a bounded
+  :class:`~linelaser_calib.nodes.sample_store.SampleStore`. A new collector session
+  (``linelaser_calib/session``) drops the samples of the previous one.
+- ``calibrate`` (std_srvs/Trigger) runs
+  :func:`~linelaser_calib.core.pipeline.calibrate_samples` in its own callback group on a
+  MultiThreadedExecutor, so samples keep arriving during a solve. A second call during a
+  solve, no samples, too few or degenerate samples answer ``success: false`` with the
+  reason; the node keeps running.
+- On success it answers a one-line summary, publishes ``linelaser_calib/hand_eye``
+  (TransformStamped ``flange_frame`` -> ``sensor_frame``, transient_local) and
+  ``linelaser_calib/markers`` (the fitted cylinder and the profiles mapped into
+  ``base_frame``), broadcasts ``/tf_static`` where ``tf2_ros`` is importable, and writes the
+  result YAML to ``output_path`` atomically. A failed calibration leaves the last good file.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+import traceback
+from pathlib import Path
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TransformStamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+from visualization_msgs.msg import MarkerArray
+
+from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
+from linelaser_calib.core.residuals import axis_extent
+from linelaser_calib.core.types import CalibrationResult
+from linelaser_calib.io import write_result_yaml
+from linelaser_calib.nodes.common import (
+    CALIBRATE_SERVICE,
+    HAND_EYE_TOPIC,
+    MARKERS_TOPIC,
+    SAMPLE_POSE_TOPIC,
+    SAMPLE_PROFILE_TOPIC,
+    SESSION_TOPIC,
+    ParamSpec,
+    declare_parameters,
+    latched_qos,
+    parameter_values,
+    run_node,
+)
+from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
+from linelaser_calib.summary import one_line_summary
+from msg_adapters import (
+    MessageError,
+    cylinder_marker,
+    flange_pose_from_pose_stamped,
+    marker_array,
+    points_marker,
+    profile_from_pointcloud2,
+    rclpy_types,
+    transform_stamped_from_matrix,
+)
+
+try:  # a full ROS install has tf2_ros; the PyPI wheels do not
+    from tf2_ros import StaticTransformBroadcaster
+except ImportError:
+    StaticTransformBroadcaster = None
+
+NODE_NAME = "calibration_service"
+#: Diagnostic value: complete samples held.
+KEY_SAMPLES = "samples"
+#: Most profile points drawn in the markers (evenly subsampled over the used samples).
+MAX_MARKER_POINTS = 5000
+_PIPELINE = PipelineConfig()
+
+#: Every parameter; all but the read-only ones are read at each calibration, so
+#: ``ros2 param set`` applies to the next one. config/calibration_service.yaml repeats the defaults.
+PARAMETERS = (
+    ParamSpec(
+        "radius",
+        0.0,
+        "Cylinder radius, m (half the diameter); 0 estimates it from the profiles.",
+        bounds=(0.0, 1.0),
+    ),
+    ParamSpec(
+        "output_path",
+        "~/.ros/linelaser_calib/hand_eye.yaml",
+        "Result YAML, replaced atomically after each successful calibration.",
+    ),
+    ParamSpec(
+        "method",
+        _PIPELINE.method.value,
+        "default: the paper's solve refined by maximum likelihood with covariance; paper: "
+        "the cylinder paper's method as published.",
+        choices=tuple(m.value for m in Method),
+    ),
+    ParamSpec(
+        "min_samples",
+        _PIPELINE.min_samples,
+        "Fewest samples with a usable ellipse that a calibration accepts.",
+        bounds=(3, 100000),
+    ),
+    ParamSpec(
+        "max_samples",
+        1000,
+        "Most samples kept (later ones are ignored, with one warning); also the depth of "
+        "the sample subscriptions.",
+        bounds=(1, 100000),
+        read_only=True,
+    ),
+    ParamSpec(
+        "seed",
+        _PIPELINE.seed,
+        "Seed of the random stages (RANSAC, PSO): equal inputs give equal results.",
+        bounds=(0, 2**31 - 1),
+    ),
+    ParamSpec(
+        "diagnostics_period_s",
+        1.0,
+        "Period of the /diagnostics status (samples held), s.",
+        bounds=(0.01, 60.0),
+        read_only=True,
+    ),
+    ParamSpec("base_frame", "base_link", "Robot base frame: frame of the cylinder and markers."),
+    ParamSpec("flange_frame", "tool0", "Flange frame: parent frame of the hand-eye."),
+    ParamSpec("sensor_frame", "laser", "Sensor frame: child frame of the hand-eye."),
+)
+
+
+class CalibrationServiceNode(Node):
+    """The ``calibration_service`` node; see the module docstring. ``kwargs`` go to ``Node``."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        p = declare_parameters(self, PARAMETERS)
+        self._types = rclpy_types()
+        self._store = SampleStore(int(p["max_samples"]))
+        self._busy = threading.Lock()
+
+        receive = MutuallyExclusiveCallbackGroup()
+        depth = int(p["max_samples"])
+        self._profile_sub = self.create_subscription(
+            PointCloud2,
+            SAMPLE_PROFILE_TOPIC,
+            self._on_profile,
+            latched_qos(depth),
+            callback_group=receive,
+        )
+        self._pose_sub = self.create_subscription(
+            PoseStamped,
+            SAMPLE_POSE_TOPIC,
+            self._on_pose,
+            latched_qos(depth),
+            callback_group=receive,
+        )
+        self.create_subscription(
+            String, SESSION_TOPIC, self._on_session, latched_qos(1), callback_group=receive
+        )
+        self._hand_eye_pub = self.create_publisher(TransformStamped, HAND_EYE_TOPIC, latched_qos(1))
+        self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, latched_qos(1))
+        self._tf_static = (
+            None if StaticTransformBroadcaster is None else StaticTransformBroadcaster(self)
+        )
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_timer(
+            p["diagnostics_period_s"], self._publish_diagnostics, callback_group=receive
+        )
+        self._service = self.create_service(
+            Trigger, CALIBRATE_SERVICE, self._on_calibrate, callback_group=ReentrantCallbackGroup()
+        )
+        self.get_logger().info(
+            f"collecting samples from {self._profile_sub.topic_name} and "
+            f"{self._pose_sub.topic_name}; call {self._service.service_name} to calibrate"
+        )
+
+    @property
+    def sample_count(self) -> int:
+        """Complete samples held (profile and flange pose of equal stamp)."""
+        return len(self._store)
+
+    # -- samples -------------------------------------------------------------------------
+
+    def _on_profile(self, msg: PointCloud2) -> None:
+        try:
+            profile = profile_from_pointcloud2(msg)
+        except MessageError as err:
+            self._bad_sample(err)
+            return
+        self._warn(self._store.add_profile(profile.stamp_ns, profile.points, profile.frame_id))
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        try:
+            pose = flange_pose_from_pose_stamped(msg)
+        except MessageError as err:
+            self._bad_sample(err)
+            return
+        self._warn(self._store.add_pose(pose.stamp_ns, pose.T_base_flange, pose.frame_id))
+
+    def _bad_sample(self, err: MessageError) -> None:
+        self.get_logger().warning(f"sample message ignored: {err}", throttle_duration_sec=10.0)
+
+    def _warn(self, warning: str | None) -> None:
+        if warning is not None:
+            self.get_logger().warning(warning)
+
+    def _on_session(self, msg: String) -> None:
+        dropped = self._store.set_session(msg.data)
+        if dropped:
+            self.get_logger().info(
+                f"the collector started session {msg.data}: dropped the {dropped} samples of "
+                "the previous session"
+            )
+
+    def _publish_diagnostics(self) -> None:
+        store = self._store
+        values = {
+            KEY_SAMPLES: len(store),
+            "samples repeated (ignored)": store.repeated,
+            "samples beyond max_samples (ignored)": store.ignored_full,
+            "unmatched halves dropped": store.dropped_unmatched,
+        }
+        full = store.ignored_full > 0
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if full else DiagnosticStatus.OK,
+            name=f"{self.get_name()}: samples",
+            message=(
+                f"{len(store)} samples held"
+                + (f"; max_samples ({store.max_samples}) reached" if full else "")
+            ),
+            hardware_id="",
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]
+            + [KeyValue(key="session", value=store.session or "")],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics_pub.publish(array)
+
+    # -- calibration ---------------------------------------------------------------------
+
+    def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        if not self._busy.acquire(blocking=False):
+            response.success = False
+            response.message = "a calibration is already running; call again when it has finished"
+            return response
+        try:
+            response.success, response.message = self._calibrate()
+        # The service must outlive a bug in the pipeline: log it in full and say so.
+        except Exception as err:
+            self.get_logger().error(f"calibration crashed (a bug):\n{traceback.format_exc()}")
+            response.success = False
+            response.message = (
+                f"internal error, please report it (traceback in the node log): "
+                f"{type(err).__name__}: {err}"
+            )
+        finally:
+            self._busy.release()
+        if response.success:  # (rclpy wants one severity per logging call site)
+            self.get_logger().info(f"calibrated: {response.message}")
+        else:
+            self.get_logger().warning(f"calibration failed: {response.message}")
+        return response
+
+    def _calibrate(self) -> tuple[bool, str]:
+        """Calibrate from the stored samples; (success, one-line message)."""
+        p = parameter_values(self, PARAMETERS)
+        samples = self._store.samples()
+        if not samples:
+            return False, (
+                f"no samples yet: none received on {self._profile_sub.topic_name} and "
+                f"{self._pose_sub.topic_name}; run the collector and scan the cylinder"
+            )
+        self.get_logger().info(f"calibrating from {len(samples)} samples (method {p['method']})")
+        start = time.monotonic()
+        try:
+            config = PipelineConfig(
+                method=Method(p["method"]),
+                radius_m=p["radius"] or None,
+                seed=p["seed"],
+                min_samples=p["min_samples"],
+            )
+            result = calibrate_samples(samples, config)
+        except CalibrationError as err:
+            return False, str(err)
+        result.parent_frame = p["flange_frame"]
+        result.child_frame = p["sensor_frame"]
+        result.base_frame = p["base_frame"]
+        summary = one_line_summary(result, len(samples))
+        self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")
+        self._publish(result)
+        output = Path(p["output_path"]).expanduser()
+        try:
+            write_result_yaml(result, output)
+        except CalibrationError as err:
+            return False, (
+                f"calibrated, but the result file was not written ({err}); the result is on "
+                f"{self._hand_eye_pub.topic_name}: {summary}"
+            )
+        return True, f"{summary}; written to {output}"
+
+    def _publish(self, result: CalibrationResult) -> None:
+        """Publish the hand-eye (topic and /tf_static) and the RViz markers."""
+        stamp_ns = self.get_clock().now().nanoseconds
+        transform = transform_stamped_from_matrix(
+            result.T_flange_sensor,
+            stamp_ns,
+            result.parent_frame,
+            result.child_frame,
+            types=self._types,
+        )
+        self._hand_eye_pub.publish(transform)
+        if self._tf_static is not None:
+            self._tf_static.sendTransform(transform)
+        points = points_in_base(result, MAX_MARKER_POINTS)
+        markers = [
+            points_marker(
+                points,
+                result.base_frame,
+                types=self._types,
+                size_m=0.0005,
+                stamp_ns=stamp_ns,
+                ns="profiles",
+            )
+        ]
+        if result.cylinder is not None:
+            centre, length = axis_extent(points, result.cylinder)
+            markers.append(
+                cylinder_marker(
+                    result.cylinder,
+                    length,
+                    result.base_frame,
+                    types=self._types,
+                    centre=centre,
+                    stamp_ns=stamp_ns,
+                )
+            )
+        self._markers_pub.publish(marker_array(markers, types=self._types))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run linelaser_calib calibration_service``."""
+    return run_node(CalibrationServiceNode, MultiThreadedExecutor, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,578 @@
+# mypy: disallow-untyped-calls=False
+# rclpy is only partly annotated: calling its untyped functions is expected here.
+"""ROS 2 node ``collector``: pair live profiles with flange poses, validate, persist, publish.
+
+Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and ``flange_pose``
+(``geometry_msgs/PoseStamped``); remap both to the driver's topics. The logic lives in
+:class:`~linelaser_calib.nodes.collection.LiveCollector`; this node wires it:
+
+- receive callbacks decode messages and pair profiles (cheap), on a SingleThreadedExecutor:
+  rclpy's MultiThreadedExecutor takes only a few hundred messages per second here, far
+  below a 500 Hz flange-pose stream, while the single-threaded one keeps up;
+- a validation thread cleans each paired profile and fits its ellipse (``fit_sample``), so a
+  slow fit never stalls reception;
+- every accepted sample is written to the session directory (one closed rosbag2 bag per
+  sample, a valid input to ``linelaser-calib calibrate``) before it is published on
+  ``linelaser_calib/samples/profile`` and ``linelaser_calib/samples/flange_pose`` with
+  identical stamps (reliable, transient_local, ``sample_history_depth`` deep, so a late or
+  restarted calibration service receives every sample of the session);
+- ``~/capture`` (std_srvs/Trigger) waits, as a coroutine that lets the executor run on, for
+  the next valid sample (``on_demand`` mode takes only these); ``~/clear`` starts a new
+  session directory and keeps the old one on disk;
+- ``/diagnostics`` carries the counts: received, paired, accepted, rejected and skipped per
+  reason. Each new reason is logged once;
+- with ``auto_calibrate_samples`` > 0 it calls ``calibrate`` once the session holds that many.
+"""
+
+from __future__ import annotations
+
+import datetime
+import threading
+import time
+from collections.abc import Generator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.task import Future
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import String
+from std_srvs.srv import Trigger
+
+from linelaser_calib.core.errors import CalibrationError, InputError
+from linelaser_calib.core.pairing import PairingConfig
+from linelaser_calib.core.pipeline import PipelineConfig, fit_sample
+from linelaser_calib.core.types import FlangePose, Profile, Rejection
+from linelaser_calib.io import BagError, SessionBagWriter, read_bag
+from linelaser_calib.io.bags import SESSION_MARKER
+from linelaser_calib.nodes.collection import (
+    CollectorConfig,
+    LiveCollector,
+    Mode,
+    PendingSample,
+)
+from linelaser_calib.nodes.common import (
+    CALIBRATE_SERVICE,
+    SAMPLE_POSE_TOPIC,
+    SAMPLE_PROFILE_TOPIC,
+    SESSION_TOPIC,
+    ParamSpec,
+    declare_parameters,
+    input_qos,
+    latched_qos,
+    run_node,
+)
+from msg_adapters import (
+    MessageError,
+    flange_pose_from_pose_stamped,
+    pointcloud2_from_points,
+    pose_stamped_from_flange_pose,
+    profile_from_pointcloud2,
+    rclpy_types,
+)
+
+NODE_NAME = "collector"
+_PAIRING = PairingConfig()
+_COLLECTOR = CollectorConfig()
+
+#: Every parameter (all read at start-up); config/collector.yaml repeats the defaults.
+PARAMETERS = (
+    ParamSpec(
+        "mode",
+        Mode.CONTINUOUS.value,
+        "continuous: every valid profile paired with a pose joins the session; on_demand: "
+        "only the next valid one after each ~/capture call (step-and-shoot cells).",
+        choices=tuple(m.value for m in Mode),
+        read_only=True,
+    ),
+    ParamSpec(
+        "reliable_inputs",
+        False,
+        "Subscribe profile and flange_pose with reliable QoS (nothing lost, needs reliable "
+        "publishers) instead of best effort (sensor-data QoS, matches any publisher).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "sync_tolerance_s",
+        _PAIRING.sync_tolerance_s,
+        "Largest gap between a profile stamp and a flange pose stamp used for it, s.",
+        bounds=(1e-4, 1.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "clock_offset_s",
+        _PAIRING.clock_offset_s,
+        "Added to every profile stamp to put it on the flange pose clock, s.",
+        bounds=(-60.0, 60.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "max_linear_speed_m_s",
+        _PAIRING.max_linear_speed_m_s,
+        "Profiles taken while the flange moved faster are rejected, m/s; 0 disables.",
+        bounds=(0.0, 10.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "max_angular_speed_rad_s",
+        _PAIRING.max_angular_speed_rad_s,
+        "Profiles taken while the flange turned faster are rejected, rad/s; 0 disables.",
+        bounds=(0.0, 10.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "speed_window_s",
+        _PAIRING.speed_window_s,
+        "Half-width of the window over which the flange speed is measured, s.",
+        bounds=(0.0, 1.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "pose_window_s",
+        _COLLECTOR.pose_window_s,
+        "Flange poses kept behind the newest one, s; a profile waits at most this long "
+        "(wall time) for the poses around its stamp.",
+        bounds=(0.05, 60.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "min_sample_interval_s",
+        _COLLECTOR.min_sample_interval_s,
+        "Skip paired profiles stamped less than this after the previous one validated, s; "
+        "0 validates every one (set e.g. 0.1 for a 100 Hz sensor).",
+        bounds=(0.0, 3600.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "validation_queue_size",
+        _COLLECTOR.validation_queue_size,
+        "Paired profiles waiting for validation; more are skipped and counted.",
+        bounds=(1, 100000),
+        read_only=True,
+    ),
+    ParamSpec(
+        "radius",
+        0.0,
+        "Cylinder radius, m, checked against each profile's ellipse; 0 accepts any radius.",
+        bounds=(0.0, 1.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "seed",
+        0,
+        "Seed of the RANSAC ellipse fits that validate the profiles.",
+        bounds=(0, 2**31 - 1),
+        read_only=True,
+    ),
+    ParamSpec(
+        "session_dir",
+        "~/.ros/linelaser_calib/sessions",
+        "Directory under which each session gets its own directory of sample bags "
+        "(session_YYYYmmdd_HHMMSS); sessions are never deleted or overwritten.",
+        read_only=True,
+    ),
+    ParamSpec(
+        "reload_session",
+        "",
+        "Empty: start an empty session. 'latest' or a session directory: start with that "
+        "session's samples (copied into the new session and republished).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "sample_history_depth",
+        1000,
+        "Samples kept by the transient_local sample topics for late or restarted "
+        "subscribers; make it at least the session size.",
+        bounds=(1, 100000),
+        read_only=True,
+    ),
+    ParamSpec(
+        "auto_calibrate_samples",
+        0,
+        "Call the calibrate service once when the session holds this many samples; 0: never.",
+        bounds=(0, 100000),
+        read_only=True,
+    ),
+    ParamSpec(
+        "capture_timeout_s",
+        5.0,
+        "How long ~/capture waits for a valid sample, s.",
+        bounds=(0.01, 3600.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "diagnostics_period_s",
+        1.0,
+        "Period of the /diagnostics status (and of the auto-calibrate check), s.",
+        bounds=(0.01, 60.0),
+        read_only=True,
+    ),
+)
+
+
+def find_latest_session(root: Path) -> Path:
+    """The newest session directory under ``root`` (names sort by start time).
+
+    Raises
+    ------
+    BagError
+        When ``root`` holds no session.
+    """
+    sessions = sorted(p for p in root.glob("session_*") if (p / SESSION_MARKER).is_file())
+    if not sessions:
+        raise BagError(f"reload_session is 'latest' but {root} holds no session to reload")
+    return sessions[-1]
+
+
+def new_session_path(root: Path, now: datetime.datetime) -> Path:
+    """``root/session_YYYYmmdd_HHMMSS``, with a numeric suffix if that exists already."""
+    base = root / now.strftime("session_%Y%m%d_%H%M%S")
+    path, k = base, 1
+    while path.exists():
+        k += 1
+        path = base.with_name(f"{base.name}_{k}")
+    return path
+
+
+def session_pairs(path: Path) -> list[tuple[Profile, FlangePose]]:
+    """The samples of a session: each profile with the flange pose of identical stamp."""
+    contents = read_bag(path)
+    poses = {pose.stamp_ns: pose for pose in contents.poses}
+    return [(p, poses[p.stamp_ns]) for p in contents.profiles if p.stamp_ns in poses]
+
+
+class CollectorNode(Node):
+    """The ``collector`` node; see the module docstring. ``kwargs`` go to ``rclpy.node.Node``."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        p = declare_parameters(self, PARAMETERS)
+        try:
+            pairing = PairingConfig(
+                sync_tolerance_s=p["sync_tolerance_s"],
+                clock_offset_s=p["clock_offset_s"],
+                max_linear_speed_m_s=p["max_linear_speed_m_s"],
+                max_angular_speed_rad_s=p["max_angular_speed_rad_s"],
+                speed_window_s=p["speed_window_s"],
+            )
+            config = CollectorConfig(
+                pairing=pairing,
+                pose_window_s=p["pose_window_s"],
+                mode=Mode(p["mode"]),
+                min_sample_interval_s=p["min_sample_interval_s"],
+                validation_queue_size=p["validation_queue_size"],
+            )
+        except ValueError as err:
+            raise InputError(f"invalid collector parameters: {err}") from err
+        self._pipeline = PipelineConfig(
+            radius_m=p["radius"] or None, seed=p["seed"], pairing=pairing
+        )
+        self._rng = np.random.default_rng(p["seed"])
+        self._types = rclpy_types()
+        self._collector = LiveCollector(config, self._log_new_reason)
+        self._history_depth = int(p["sample_history_depth"])
+        self._auto_calibrate_samples = int(p["auto_calibrate_samples"])
+        self._auto_calibrate_done = False
+        self._capture_timeout_s = float(p["capture_timeout_s"])
+        self._captured = threading.Event()
+        self._captured_text = ""
+        self._session_lock = threading.Lock()
+
+        self._session_pub = self.create_publisher(String, SESSION_TOPIC, latched_qos(1))
+        self._profile_pub = self.create_publisher(
+            PointCloud2, SAMPLE_PROFILE_TOPIC, latched_qos(self._history_depth)
+        )
+        self._pose_pub = self.create_publisher(
+            PoseStamped, SAMPLE_POSE_TOPIC, latched_qos(self._history_depth)
+        )
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        qos = input_qos(bool(p["reliable_inputs"]))
+        self._profile_sub = self.create_subscription(PointCloud2, "profile", self._on_profile, qos)
+        self._pose_sub = self.create_subscription(PoseStamped, "flange_pose", self._on_pose, qos)
+        # Its own group: while a capture waits, the default group (inputs, timers) runs on.
+        self.create_service(
+            Trigger, "~/capture", self._on_capture, callback_group=ReentrantCallbackGroup()
+        )
+        self.create_service(Trigger, "~/clear", self._on_clear)
+        self._calibrate_client = self.create_client(Trigger, CALIBRATE_SERVICE)
+        self.create_timer(p["diagnostics_period_s"], self._on_timer)
+
+        self._session_root = Path(p["session_dir"]).expanduser()
+        reload_from = self._reload_source(str(p["reload_session"]))
+        self._session = self._open_session(reload_from)
+        self._work = threading.Event()
+        self._stopping = threading.Event()
+        self._validator = threading.Thread(target=self._validate_loop, name="validation")
+        self._validator.start()
+        self.get_logger().info(
+            f"collecting in {config.mode.value} mode from {self._profile_sub.topic_name} and "
+            f"{self._pose_sub.topic_name} into {self._session.path}"
+        )
+
+    # -- sessions ------------------------------------------------------------------------
+
+    def _reload_source(self, value: str) -> Path | None:
+        if not value:
+            return None
+        if value == "latest":
+            return find_latest_session(self._session_root)
+        return Path(value).expanduser()
+
+    def _open_session(self, reload_from: Path | None) -> SessionBagWriter:
+        """Create a new session directory, optionally seeded with an old session's samples."""
+        pairs = session_pairs(reload_from) if reload_from is not None else []
+        writer = SessionBagWriter(
+            new_session_path(self._session_root, datetime.datetime.now()),
+            profile_topic=self._profile_sub.topic_name,
+            pose_topic=self._pose_sub.topic_name,
+            organised=False,
+        )
+        self._session_pub.publish(String(data=str(writer.path)))
+        for profile, pose in pairs:
+            writer.append(profile, pose)
+            self._publish_sample(profile, pose)
+        with self._collector.lock:
+            self._collector.clear(reloaded=len(pairs))
+        if reload_from is not None:
+            self.get_logger().info(
+                f"reloaded {len(pairs)} samples from {reload_from} into {writer.path}"
+            )
+        return writer
+
+    def _on_clear(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        with self._session_lock:
+            old = self._session
+            old.close()
+            for publisher in (self._profile_pub, self._pose_pub):
+                self.destroy_publisher(publisher)
+            self._profile_pub = self.create_publisher(
+                PointCloud2, SAMPLE_PROFILE_TOPIC, latched_qos(self._history_depth)
+            )
+            self._pose_pub = self.create_publisher(
+                PoseStamped, SAMPLE_POSE_TOPIC, latched_qos(self._history_depth)
+            )
+            try:
+                self._session = self._open_session(None)
+            except CalibrationError as err:
+                response.success = False
+                response.message = f"cannot start a new session: {err}"
+                return response
+            self._auto_calibrate_done = False
+        response.success = True
+        response.message = (
+            f"new session {self._session.path}; the previous session {old.path} "
+            f"({old.count} samples) is kept on disk"
+        )
+        self.get_logger().info(response.message)
+        return response
+
+    # -- reception -----------------------------------------------------------------------
+
+    def _on_profile(self, msg: PointCloud2) -> None:
+        now = time.monotonic()
+        try:
+            profile = profile_from_pointcloud2(msg)
+        except MessageError as err:
+            with self._collector.lock:
+                self._collector.reject_profile(str(err))
+            return
+        with self._collector.lock:
+            self._collector.add_profile(profile, now)
+            work = self._collector.has_work
+        if work:
+            self._work.set()
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        now = time.monotonic()
+        try:
+            pose = flange_pose_from_pose_stamped(msg)
+        except MessageError as err:
+            with self._collector.lock:
+                self._collector.reject_pose(str(err))
+            return
+        with self._collector.lock:
+            self._collector.add_pose(pose, now)
+            work = self._collector.has_work
+        if work:
+            self._work.set()
+
+    def _log_new_reason(self, key: str, message: str) -> None:
+        self.get_logger().warning(f"{message} [first of its kind; counted in /diagnostics]")
+
+    # -- validation and storage ----------------------------------------------------------
+
+    def _validate_loop(self) -> None:
+        """The validation thread: validate and store queued samples until the node stops."""
+        while not self._stopping.is_set():
+            self._work.wait(0.5)
+            self._work.clear()
+            while not self._stopping.is_set():
+                with self._collector.lock:
+                    pending = self._collector.next_to_validate()
+                if pending is None:
+                    break
+                outcome = fit_sample(pending.sample, self._pipeline, self._rng)
+                if isinstance(outcome, Rejection):
+                    with self._collector.lock:
+                        self._collector.reject_validated(outcome)
+                else:
+                    self._store(pending)
+
+    def _store(self, pending: PendingSample) -> None:
+        """Admit a valid sample: persist it, then publish it."""
+        sample = pending.sample
+        profile = Profile(sample.stamp_ns, sample.points, pending.sensor_frame)
+        pose = FlangePose(sample.stamp_ns, sample.T_base_flange, pending.base_frame)
+        with self._session_lock:
+            with self._collector.lock:
+                capturing = self._collector.capture_pending
+                if not self._collector.admit(pending):
+                    return
+                captured = capturing and not self._collector.capture_pending
+            try:
+                path = self._session.append(profile, pose)
+            except BagError as err:
+                self.get_logger().error(str(err))
+                with self._collector.lock:
+                    self._collector.revoke("session", str(err))
+                return
+            self._publish_sample(profile, pose)
+        if captured:
+            self._captured_text = f"captured sample {path.name} (stamp {sample.stamp_ns} ns)"
+            self._captured.set()
+            executor = self.executor
+            if executor is not None:
+                executor.wake()
+
+    def _publish_sample(self, profile: Profile, pose: FlangePose) -> None:
+        """Publish one sample on the two sample topics, both stamped with the profile stamp."""
+        self._pose_pub.publish(
+            pose_stamped_from_flange_pose(
+                FlangePose(profile.stamp_ns, pose.T_base_flange, pose.frame_id), types=self._types
+            )
+        )
+        self._profile_pub.publish(
+            pointcloud2_from_points(
+                profile.points,
+                profile.stamp_ns,
+                profile.frame_id,
+                types=self._types,
+                organised=False,
+            )
+        )
+
+    # -- capture -------------------------------------------------------------------------
+
+    async def _on_capture(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        """Wait for the next valid sample without blocking the executor."""
+        with self._collector.lock:
+            if self._collector.capture_pending:
+                response.success = False
+                response.message = "a capture is already pending; wait for its answer"
+                return response
+            self._captured.clear()
+            self._collector.arm_capture()
+        deadline = time.monotonic() + self._capture_timeout_s
+        alarm = self.create_timer(self._capture_timeout_s, lambda: None)
+        try:
+            while not self._captured.is_set() and time.monotonic() < deadline:
+                await _NextWake()
+        finally:
+            self.destroy_timer(alarm)
+        if self._captured.is_set():
+            response.success = True
+            response.message = self._captured_text
+            return response
+        with self._collector.lock:
+            self._collector.cancel_capture()
+            last = self._collector.last_rejection or "none (are profiles and poses arriving?)"
+        response.success = False
+        response.message = (
+            f"no valid sample within {self._capture_timeout_s:g} s; last rejection: {last}"
+        )
+        return response
+
+    # -- periodic: late pairing, diagnostics, auto-calibration ---------------------------
+
+    def _on_timer(self) -> None:
+        with self._collector.lock:
+            self._collector.release(time.monotonic())
+            work = self._collector.has_work
+            values = self._collector.diagnostic_values()
+            last = self._collector.last_rejection
+            session_samples = self._collector.session_samples
+            received = self._collector.received
+        if work:
+            self._work.set()
+        self._publish_diagnostics(values, received, session_samples, last)
+        if (
+            self._auto_calibrate_samples
+            and not self._auto_calibrate_done
+            and session_samples >= self._auto_calibrate_samples
+            and self._calibrate_client.service_is_ready()
+        ):
+            self._auto_calibrate_done = True
+            self.get_logger().info(
+                f"the session holds {session_samples} samples: calling "
+                f"{self._calibrate_client.service_name}"
+            )
+            future = self._calibrate_client.call_async(Trigger.Request())
+            future.add_done_callback(self._on_calibrated)
+
+    def _on_calibrated(self, future: Future) -> None:
+        result = future.result()
+        if result is None:
+            self.get_logger().error(f"{self._calibrate_client.service_name} call failed")
+        elif result.success:
+            self.get_logger().info(f"calibrated: {result.message}")
+        else:
+            self.get_logger().warning(f"calibration failed: {result.message}")
+
+    def _publish_diagnostics(
+        self, values: dict[str, str], received: int, session_samples: int, last: str
+    ) -> None:
+        if received and not session_samples:
+            level = DiagnosticStatus.WARN
+            message = f"no sample accepted yet; last rejection: {last or 'none'}"
+        else:
+            level = DiagnosticStatus.OK
+            message = f"{session_samples} samples in session {self._session.path}"
+        status = DiagnosticStatus(
+            level=level,
+            name=f"{self.get_name()}: collection",
+            message=message,
+            hardware_id=self._profile_sub.topic_name,
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics_pub.publish(array)
+
+    def destroy_node(self) -> None:
+        """Stop validating, close the session (every sample is on disk), destroy the node."""
+        self._stopping.set()
+        self._work.set()
+        self._validator.join()
+        self._session.close()
+        super().destroy_node()
+
+
+class _NextWake:
+    """Awaitable that hands control back to the executor until its next wake-up."""
+
+    def __await__(self) -> Generator[None, None, None]:
+        yield
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run linelaser_calib collector``."""
+    return run_node(CollectorNode, SingleThreadedExecutor, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

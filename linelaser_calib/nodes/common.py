@@ -1,0 +1,181 @@
+# mypy: disallow-untyped-calls=False
+# rclpy is only partly annotated: calling its untyped functions is expected here.
+"""What both nodes share: QoS profiles, parameter declaration from a table, the entry point.
+
+Parameters are declared from a table of :class:`ParamSpec` rows, each with a
+``ParameterDescriptor`` (description, numeric range, read-only flag); ``config/<node>.yaml``
+repeats the defaults for ``--params-file`` and a test keeps the two in agreement.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import rclpy
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.exceptions import ParameterException
+from rclpy.executors import Executor, ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.utilities import try_shutdown
+
+from linelaser_calib.core.errors import CalibrationError
+
+#: History of each input subscription (profiles, flange poses): a burst this long is absorbed.
+INPUT_DEPTH = 1000
+#: Topics of the collected samples (published by the collector, read by the service).
+SAMPLE_PROFILE_TOPIC = "linelaser_calib/samples/profile"
+SAMPLE_POSE_TOPIC = "linelaser_calib/samples/flange_pose"
+#: The collector's current session directory (std_msgs/String, latched).
+SESSION_TOPIC = "linelaser_calib/session"
+#: Results of the calibration service.
+HAND_EYE_TOPIC = "linelaser_calib/hand_eye"
+MARKERS_TOPIC = "linelaser_calib/markers"
+#: The service (std_srvs/Trigger) that runs a calibration; relative, so it follows namespaces.
+CALIBRATE_SERVICE = "calibrate"
+
+
+def input_qos(reliable: bool) -> QoSProfile:
+    """QoS of the ``profile`` and ``flange_pose`` subscriptions.
+
+    Best effort (the sensor-data profile with a deep history) matches every publisher;
+    reliable loses nothing but needs a reliable publisher.
+    """
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=INPUT_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.VOLATILE,
+    )
+
+
+def latched_qos(depth: int) -> QoSProfile:
+    """Reliable, transient_local, keep-last ``depth``: late joiners get the last ``depth``."""
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=depth,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    )
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One declared parameter.
+
+    Attributes
+    ----------
+    name : str
+    default : bool, int, float or str
+        Its type is the parameter's type (write floats as ``0.0`` in YAML).
+    description : str
+        Shown by ``ros2 param describe``; give the unit.
+    bounds : (low, high) or None
+        Inclusive numeric range, enforced by rclpy.
+    choices : tuple of str
+        Allowed values of a string parameter.
+    read_only : bool
+        True when the node uses the value only at start-up.
+    """
+
+    name: str
+    default: bool | int | float | str
+    description: str
+    bounds: tuple[float, float] | None = None
+    choices: tuple[str, ...] = ()
+    read_only: bool = False
+
+    def descriptor(self) -> ParameterDescriptor:
+        """The ``ParameterDescriptor`` declared for this parameter."""
+        text = self.description
+        if self.choices:
+            text += f" One of: {', '.join(self.choices)}."
+        descriptor = ParameterDescriptor(description=text, read_only=self.read_only)
+        if self.bounds is not None and isinstance(self.default, float):
+            descriptor.floating_point_range = [
+                FloatingPointRange(from_value=self.bounds[0], to_value=self.bounds[1], step=0.0)
+            ]
+        elif self.bounds is not None and isinstance(self.default, int):
+            descriptor.integer_range = [
+                IntegerRange(from_value=int(self.bounds[0]), to_value=int(self.bounds[1]), step=1)
+            ]
+        return descriptor
+
+
+def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
+    """Declare every parameter, check string choices, and return the values in effect.
+
+    A later ``ros2 param set`` with a value outside ``choices`` is refused.
+
+    Raises
+    ------
+    CalibrationError
+        When a value given at start-up (``--params-file``, ``-p``) is not one of its choices.
+    """
+    for spec in specs:
+        node.declare_parameter(spec.name, spec.default, spec.descriptor())
+    by_name = {spec.name: spec for spec in specs}
+
+    def check(parameters: list[Parameter]) -> SetParametersResult:
+        for parameter in parameters:
+            spec = by_name.get(parameter.name)
+            if spec is not None and spec.choices and parameter.value not in spec.choices:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f"{parameter.name} must be one of {list(spec.choices)}",
+                )
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(check)
+    values = parameter_values(node, specs)
+    for spec in specs:
+        if spec.choices and values[spec.name] not in spec.choices:
+            raise CalibrationError(
+                f"parameter {spec.name} is {values[spec.name]!r}; it must be one of "
+                f"{list(spec.choices)}"
+            )
+    return values
+
+
+def parameter_values(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
+    """Current values of the declared parameters, by name."""
+    return {spec.name: node.get_parameter(spec.name).value for spec in specs}
+
+
+def run_node(
+    make_node: Callable[[], Node],
+    make_executor: Callable[[], Executor],
+    args: list[str] | None = None,
+) -> int:
+    """Entry point body: init, build the node, spin it on its executor, clean up.
+
+    Ctrl-C and external shutdown end the spin quietly. A :class:`CalibrationError` or a
+    rejected parameter while the node starts is printed as one line; the exit status is 1.
+    """
+    rclpy.init(args=args)
+    node: Node | None = None
+    status = 0
+    try:
+        node = make_node()
+        executor = make_executor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (CalibrationError, ParameterException) as err:
+        print(f"error: {err}", file=sys.stderr)
+        status = 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        try_shutdown()
+    return status

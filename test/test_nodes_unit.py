@@ -1,0 +1,629 @@
+"""Node logic: pairing and counting in the collector, the service's sample store and summary,
+parameter files against the declarations, and the calibrate service's answers in-process."""
+
+from __future__ import annotations
+
+import importlib.util
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+from geometry_msgs.msg import PoseStamped
+from rclpy.context import Context
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.parameter import Parameter
+from ros_helpers import (
+    REPO_ROOT,
+    RosProbe,
+    init_context,
+    new_domain_id,
+    reliable_qos,
+    wait_for,
+)
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import PointCloud2
+
+from linelaser_calib.core.errors import CalibrationError, DegenerateError
+from linelaser_calib.core.geometry import (
+    apply_transform,
+    invert_transform,
+    transform_error,
+    transform_from_rotation_translation,
+    transform_from_rotvec_translation,
+)
+from linelaser_calib.core.pairing import NS_PER_S, PairingConfig
+from linelaser_calib.core.residuals import axis_extent
+from linelaser_calib.core.types import (
+    CalibrationResult,
+    Cylinder,
+    FlangePose,
+    Profile,
+    Rejection,
+    SampleFit,
+)
+from linelaser_calib.io import SessionBagWriter, read_bag, read_result_yaml
+from linelaser_calib.nodes import calibration_service, collector
+from linelaser_calib.nodes.collection import (
+    SKIP_BACKLOG,
+    SKIP_CLEARED,
+    SKIP_INTERVAL,
+    SKIP_NOT_CAPTURED,
+    CollectorConfig,
+    LiveCollector,
+    Mode,
+    reason_key,
+)
+from linelaser_calib.nodes.sample_store import (
+    SampleStore,
+    points_in_base,
+)
+from linelaser_calib.sim import scenario_from_preset, simulate
+from linelaser_calib.summary import one_line_summary
+from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
+
+T0 = 1_700_000_000 * NS_PER_S
+T_REST = transform_from_rotvec_translation([0.1, -0.2, 0.3], [0.4, 0.1, 0.5])
+
+
+def ns(t_s: float) -> int:
+    return T0 + round(t_s * NS_PER_S)
+
+
+def resting_poses(start_s: float, stop_s: float, rate_hz: float = 125.0) -> list[FlangePose]:
+    """The flange at rest at T_REST, reported at rate_hz."""
+    n = round((stop_s - start_s) * rate_hz) + 1
+    return [FlangePose(ns(start_s + k / rate_hz), T_REST) for k in range(n)]
+
+
+def profile(t_s: float) -> Profile:
+    return Profile(ns(t_s), np.zeros((4, 3)), frame_id="laser")
+
+
+class Logged:
+    """Collects (key, message) pairs passed to on_new_reason."""
+
+    def __init__(self) -> None:
+        self.calls: list[tuple[str, str]] = []
+
+    def __call__(self, key: str, message: str) -> None:
+        self.calls.append((key, message))
+
+
+def make_collector(**config: Any) -> tuple[LiveCollector, Logged]:
+    logged = Logged()
+    return LiveCollector(CollectorConfig(**config), logged), logged
+
+
+def feed_poses(c: LiveCollector, poses: list[FlangePose], now_s: float = 0.0) -> None:
+    for pose in poses:
+        c.add_pose(pose, now_s)
+
+
+def drain(c: LiveCollector, admit: bool = True) -> list[int]:
+    """Validate everything queued (admitting or rejecting); profile indices admitted."""
+    admitted = []
+    while (pending := c.next_to_validate()) is not None:
+        if admit:
+            if c.admit(pending):
+                admitted.append(pending.sample.index)
+        else:
+            c.reject_validated(
+                Rejection(pending.sample.index, pending.sample.stamp_ns, "ellipse", "bad")
+            )
+    return admitted
+
+
+def assert_all_counted(c: LiveCollector) -> None:
+    assert c.received == c.accepted + c.rejected.total + c.skipped.total + c.pending
+
+
+# -- collector logic --------------------------------------------------------------------------
+
+
+def test_reason_key_replaces_numbers_but_not_names() -> None:
+    assert (
+        reason_key("pairing", "robot moving at 12.3 mm/s (limit 5.0 mm/s, +1e-3 s)")
+        == "pairing: robot moving at # mm/s (limit # mm/s, # s)"
+    )
+    assert reason_key("message", "PointCloud2 field 'z' is float32") == (
+        "message: PointCloud2 field 'z' is float32"
+    )
+
+
+def test_profile_waits_until_the_poses_around_it_arrived() -> None:
+    c, _ = make_collector()
+    feed_poses(c, resting_poses(0.0, 1.0))
+    c.add_profile(profile(0.995), now_s=0.0)
+    assert (c.paired, c.pending) == (0, 1)
+    feed_poses(c, resting_poses(1.008, 1.024))
+    assert (c.paired, c.pending) == (1, 1)
+    pending = c.next_to_validate()
+    assert pending is not None
+    assert pending.sample.stamp_ns == ns(0.995)
+    np.testing.assert_allclose(pending.sample.T_base_flange, T_REST, atol=1e-12)
+    assert (pending.sensor_frame, pending.base_frame) == ("laser", "base_link")
+    assert c.admit(pending)
+    assert (c.accepted, c.session_samples, c.pending) == (1, 1, 0)
+    assert_all_counted(c)
+
+
+def test_profile_without_poses_is_rejected_after_waiting_the_pose_window() -> None:
+    c, logged = make_collector(pose_window_s=1.0)
+    c.add_profile(profile(0.0), now_s=100.0)
+    c.release(now_s=100.5)
+    assert c.pending == 1
+    c.release(now_s=101.1)
+    assert (c.pending, c.rejected.total) == (0, 1)
+    assert logged.calls == [
+        ("pairing: no flange pose received", "pairing: no flange pose received")
+    ]
+
+
+def test_each_rejection_reason_is_counted_and_logged_once() -> None:
+    c, logged = make_collector()
+    feed_poses(c, resting_poses(0.0, 2.0))
+    for t in (1.0, 0.5, 0.4, 1.1):  # the 2nd and 3rd go backwards
+        c.add_profile(profile(t), now_s=0.0)
+    c.reject_profile("PointCloud2 row_step 10 B is inconsistent with width 3")
+    c.reject_profile("PointCloud2 row_step 12 B is inconsistent with width 4")
+    drain(c)
+    counts = c.rejected.counts()
+    backwards = [k for k in counts if k.startswith("stamp:")]
+    assert len(backwards) == 1 and counts[backwards[0]] == 2
+    assert counts["message: PointCloud2 row_step # B is inconsistent with width #"] == 2
+    assert len(logged.calls) == 2
+    assert logged.calls[1][1] == "message: PointCloud2 row_step 10 B is inconsistent with width 3"
+    assert (c.received, c.accepted) == (6, 2)
+    assert_all_counted(c)
+
+
+def test_pose_clock_jumping_back_resets_the_buffer() -> None:
+    c, _ = make_collector(pose_window_s=2.0)
+    feed_poses(c, resting_poses(10.0, 12.0))
+    feed_poses(c, resting_poses(0.0, 0.2))
+    assert list(c.pose_rejected.counts().values()) == [1]
+    assert "jumped back" in next(iter(c.pose_rejected.counts()))
+    assert len(c.poses) == 26
+    c.add_profile(profile(0.1), now_s=0.0)
+    assert c.paired == 1
+
+
+def test_moving_robot_and_missing_poses_are_rejected_with_reasons() -> None:
+    c, _ = make_collector()
+    moving = [
+        FlangePose(ns(k / 125), transform_from_rotvec_translation([0, 0, 0], [0.1 * k / 125, 0, 0]))
+        for k in range(126)
+    ]
+    feed_poses(c, moving)
+    c.add_profile(profile(0.5), now_s=0.0)  # moving at 100 mm/s
+    feed_poses(c, resting_poses(5.0, 6.0))
+    c.add_profile(profile(3.0), now_s=0.0)  # no pose within 20 ms
+    stages = sorted(k.split(":")[1].strip().split(" ")[0] for k in c.rejected.counts())
+    assert stages == ["no", "robot"]
+    assert c.paired == 0
+    assert_all_counted(c)
+
+
+def test_every_profile_is_counted_once_in_a_random_stream() -> None:
+    rng = np.random.default_rng(7)
+    c, _ = make_collector(validation_queue_size=3, min_sample_interval_s=0.05)
+    now = 0.0
+    t = 0.0
+    for _ in range(400):
+        t += float(rng.uniform(0.001, 0.03))
+        now += 0.01
+        kind = rng.integers(0, 10)
+        if kind < 6:
+            c.add_pose(FlangePose(ns(t), T_REST), now)
+        elif kind < 8:
+            c.add_profile(profile(t - float(rng.uniform(-0.01, 0.1))), now)
+        elif kind < 9:
+            c.reject_profile("garbage")
+        elif rng.random() < 0.5:
+            drain(c, admit=bool(rng.random() < 0.5))
+        assert_all_counted(c)
+    c.release(now + 10.0)
+    drain(c)
+    assert c.pending == 0
+    assert_all_counted(c)
+    assert c.accepted > 0 and c.rejected.total > 0 and c.skipped.total > 0
+
+
+def test_on_demand_takes_only_the_next_valid_sample_after_a_capture() -> None:
+    c, _ = make_collector(mode=Mode.ON_DEMAND)
+    feed_poses(c, resting_poses(0.0, 1.9))
+    c.add_profile(profile(0.5), now_s=0.0)
+    assert c.skipped.counts() == {f"skipped: {SKIP_NOT_CAPTURED}": 1}
+    c.arm_capture()
+    c.add_profile(profile(1.0), now_s=0.0)
+    c.add_profile(profile(1.5), now_s=0.0)
+    first, second = c.next_to_validate(), c.next_to_validate()
+    assert first is not None and second is not None
+    c.reject_validated(Rejection(1, first.sample.stamp_ns, "ellipse", "arc too short"))
+    assert c.capture_pending
+    assert c.admit(second)
+    assert not c.capture_pending
+    c.add_profile(profile(1.8), now_s=0.0)
+    assert drain(c) == []
+    assert (c.accepted, c.skipped.total) == (1, 2)
+    assert_all_counted(c)
+
+
+def test_min_interval_and_a_full_validation_queue_skip_profiles() -> None:
+    c, _ = make_collector(min_sample_interval_s=0.1, validation_queue_size=2)
+    feed_poses(c, resting_poses(0.0, 1.5))
+    for k in range(30):
+        c.add_profile(profile(0.5 + k * 0.02), now_s=0.0)  # 50 Hz
+    counts = c.skipped.counts()
+    assert counts[f"skipped: {SKIP_INTERVAL}"] == 8  # 20 ms and 40, 60, 80 ms after 0 and 5
+    assert counts[f"skipped: {SKIP_BACKLOG}"] == 20  # every later one: the queue holds 0 and 5
+    assert drain(c) == [0, 5]
+    assert_all_counted(c)
+
+
+def test_clear_keeps_earlier_profiles_out_of_the_new_session() -> None:
+    c, _ = make_collector()
+    feed_poses(c, resting_poses(0.0, 1.0))
+    c.add_profile(profile(0.5), now_s=0.0)  # paired, awaiting validation
+    c.add_profile(profile(0.995), now_s=0.0)  # waiting for poses
+    c.clear(reloaded=3)
+    feed_poses(c, resting_poses(1.008, 1.1))
+    assert drain(c) == []
+    assert c.skipped.counts() == {f"skipped: {SKIP_CLEARED}": 2}
+    assert c.session_samples == 3
+    c.add_profile(profile(1.05), now_s=0.0)
+    assert drain(c) == [2]
+    assert c.session_samples == 4
+    assert_all_counted(c)
+
+
+def test_collector_config_rejects_a_pose_window_shorter_than_the_pairing_horizon() -> None:
+    with pytest.raises(ValueError, match="pose_window_s"):
+        CollectorConfig(pairing=PairingConfig(sync_tolerance_s=0.5), pose_window_s=0.2)
+
+
+# -- sample store and summary -----------------------------------------------------------------
+
+
+def test_store_joins_halves_by_exact_stamp_in_either_order() -> None:
+    store = SampleStore(10)
+    points = np.ones((3, 3))
+    assert store.add_profile(ns(1.0), points, "laser") is None
+    store.add_pose(ns(2.0), T_REST, "base_link")
+    assert len(store) == 0
+    store.add_pose(ns(1.0), T_REST, "base_link")
+    store.add_profile(ns(2.0), 2 * points, "laser")
+    store.add_profile(ns(1.0), points, "laser")  # replayed by transient_local
+    store.add_profile(ns(3.0), points, "laser")  # unmatched
+    samples = store.samples()
+    assert [(s.index, s.stamp_ns) for s in samples] == [(0, ns(1.0)), (1, ns(2.0))]
+    np.testing.assert_array_equal(samples[1].points, 2 * points)
+    np.testing.assert_array_equal(samples[0].T_base_flange, T_REST)
+    assert store.repeated == 1
+
+
+def test_store_is_bounded_and_warns_once() -> None:
+    store = SampleStore(3)
+    warnings = []
+    for k in range(6):
+        store.add_pose(ns(k), T_REST, "base_link")
+        warnings.append(store.add_profile(ns(k), np.zeros((2, 3)), "laser"))
+    assert len(store) == 3
+    assert [w is not None for w in warnings] == [False, False, False, True, False, False]
+    assert "max_samples (3)" in str(warnings[3])
+    assert store.ignored_full == 3
+    for k in range(10, 15):
+        store.add_profile(ns(k), np.zeros((2, 3)), "laser")
+    assert store.dropped_unmatched == 2
+
+
+def test_store_drops_samples_when_the_collector_session_changes() -> None:
+    store = SampleStore(10)
+    store.add_pose(ns(1.0), T_REST, "base_link")
+    store.add_profile(ns(1.0), np.zeros((2, 3)), "laser")
+    assert store.set_session("/s/session_1") == 0
+    assert store.set_session("/s/session_1") == 0
+    assert len(store) == 1
+    assert store.set_session("/s/session_2") == 1
+    assert len(store) == 0
+
+
+def known_result() -> CalibrationResult:
+    R = Rotation.from_euler("xyz", [10.0, -5.0, 95.0], degrees=True).as_matrix()
+    return CalibrationResult(
+        T_flange_sensor=transform_from_rotation_translation(R, [0.012, -0.085, 0.095]),
+        cylinder=Cylinder(np.array([0.45, 0.15, 0.0]), np.array([0.0, 0.0, 1.0]), 0.02),
+        method="default",
+        samples_used=list(range(28)),
+        samples_rejected=[],
+        rms_residual_m=6.5e-6,
+        uncertainty_translation_m=np.array([1e-5, 2e-5, 0.5e-5]),
+        uncertainty_rotation_rad=np.radians([0.001, 0.003, 0.002]),
+    )
+
+
+def test_summary_line_gives_every_number_with_its_unit() -> None:
+    text = one_line_summary(known_result(), 30)
+    assert "\n" not in text
+    assert "tool0 -> laser" in text
+    assert "translation [12.000, -85.000, 95.000] mm" in text
+    assert "rpy [10.0000, -5.0000, 95.0000] deg" in text
+    assert "1-sigma (largest axis) 0.0200 mm, 0.0030 deg" in text
+    assert "28 of 30 samples used" in text
+    assert "rms residual 6.5 um" in text
+
+
+def test_marker_points_lie_on_the_cylinder_and_respect_the_budget() -> None:
+    rng = np.random.default_rng(3)
+    result = known_result()
+    cylinder = result.cylinder
+    assert cylinder is not None
+    for k in range(4):
+        T_base_flange = transform_from_rotvec_translation(
+            rng.normal(0, 0.5, 3), rng.normal([0.4, 0.1, 0.3], 0.05)
+        )
+        angle = rng.uniform(0, 2 * np.pi, 400)
+        height = rng.uniform(0.02, 0.08, 400)
+        surface = np.column_stack(
+            [0.45 + 0.02 * np.cos(angle), 0.15 + 0.02 * np.sin(angle), height]
+        )
+        T_sensor_base = invert_transform(T_base_flange @ result.T_flange_sensor)
+        points = apply_transform(T_sensor_base, surface)
+        result.sample_fits.append(SampleFit(k, ns(k), T_base_flange, points, np.zeros(2)))
+    points = points_in_base(result, max_points=500)
+    assert 400 <= len(points) <= 500
+    distance = np.linalg.norm(points[:, :2] - [0.45, 0.15], axis=1)
+    np.testing.assert_allclose(distance, cylinder.radius, atol=1e-9)
+    centre, length = axis_extent(points, cylinder)
+    assert centre[2] == pytest.approx(0.05, abs=0.003)
+    assert length == pytest.approx(1.1 * 0.06, abs=0.005)
+
+
+# -- launch file ----------------------------------------------------------------------------------
+
+
+def test_launch_file_imports_without_the_launch_packages() -> None:
+    if importlib.util.find_spec("launch_ros") is not None:
+        pytest.skip("launch_ros is installed: `ros2 launch` exercises the launch file")
+    spec = importlib.util.spec_from_file_location(
+        "linelaser_calib_launch", REPO_ROOT / "launch" / "linelaser_calib.launch.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    with pytest.raises(RuntimeError, match="ros2 run linelaser_calib collector"):
+        module.generate_launch_description()
+
+
+# -- in-process nodes (rclpy, private DDS domain) ------------------------------------------------
+
+
+@pytest.fixture
+def ros_context() -> Iterator[tuple[Context, int]]:
+    domain = new_domain_id()
+    context = init_context(domain)
+    try:
+        yield context, domain
+    finally:
+        context.try_shutdown()
+
+
+NODES = {
+    "collector": (collector.CollectorNode, collector.PARAMETERS),
+    "calibration_service": (
+        calibration_service.CalibrationServiceNode,
+        calibration_service.PARAMETERS,
+    ),
+}
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize("name", sorted(NODES))
+def test_parameter_file_matches_the_declarations(
+    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("HOME", str(tmp_path))  # the collector's default session_dir is ~/...
+    path = REPO_ROOT / "config" / f"{name}.yaml"
+    in_file = yaml.safe_load(path.read_text(encoding="utf-8"))["/**"]["ros__parameters"]
+    node_class, specs = NODES[name]
+    assert sorted(in_file) == sorted(spec.name for spec in specs)
+    for spec in specs:
+        value = in_file[spec.name]
+        assert type(value) is type(spec.default) and value == spec.default, spec.name
+        descriptor = spec.descriptor()
+        assert descriptor.description, spec.name
+        if spec.bounds is not None:
+            ranges = descriptor.floating_point_range or descriptor.integer_range
+            assert ranges[0].from_value <= spec.default <= ranges[0].to_value, spec.name
+    # The file as rcl parses it (--params-file): every value accepted with its declared type.
+    context = init_context(new_domain_id(), ["--ros-args", "--params-file", str(path)])
+    try:
+        node = node_class(context=context)
+        try:
+            declared = {
+                n: p.value
+                for n, p in node._parameters.items()
+                if n not in ("use_sim_time", "start_type_description_service")
+            }
+            assert declared == in_file
+        finally:
+            node.destroy_node()
+    finally:
+        context.try_shutdown()
+
+
+@pytest.mark.ros
+def test_collector_refuses_an_unknown_mode(
+    ros_context: tuple[Context, int], tmp_path: Path
+) -> None:
+    context, _ = ros_context
+    with pytest.raises(CalibrationError, match="mode is 'sideways'; it must be one of"):
+        collector.CollectorNode(
+            context=context,
+            parameter_overrides=[
+                Parameter("mode", value="sideways"),
+                Parameter("session_dir", value=str(tmp_path)),
+            ],
+        )
+
+
+@pytest.fixture(scope="module")
+def real_samples() -> list[tuple[Profile, FlangePose]]:
+    """Three simulated samples (profile and flange pose at its stamp)."""
+    data = simulate(scenario_from_preset("ur_scancontrol", n_poses=3), seed=5)
+    return [
+        (p, FlangePose(p.stamp_ns, T, "base_link"))
+        for p, T in zip(data.profiles, data.truth.T_base_flange_recorded, strict=True)
+    ]
+
+
+class ServiceUnderTest:
+    """A calibration_service node spun in-process, with a probe to call it."""
+
+    def __init__(self, context: Context, domain: int, output: Path) -> None:
+        self.node = calibration_service.CalibrationServiceNode(
+            context=context, parameter_overrides=[Parameter("output_path", value=str(output))]
+        )
+        self.executor = MultiThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        self.probe = RosProbe(domain)
+
+    def send(self, samples: list[tuple[Profile, FlangePose]]) -> None:
+        types = rclpy_types()
+        node = self.probe.node
+        qos = reliable_qos(100, latched=True)
+        profiles = node.create_publisher(PointCloud2, "linelaser_calib/samples/profile", qos)
+        poses = node.create_publisher(PoseStamped, "linelaser_calib/samples/flange_pose", qos)
+        for p, pose in samples:
+            profiles.publish(pointcloud2_from_points(p.points, p.stamp_ns, "laser", types=types))
+            poses.publish(pose_stamped_from_flange_pose(pose, types=types))
+        wait_for(lambda: self.node.sample_count == len(samples), 20.0, "the samples")
+
+    def close(self) -> None:
+        self.probe.close()
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def service(ros_context: tuple[Context, int], tmp_path: Path) -> Iterator[ServiceUnderTest]:
+    context, domain = ros_context
+    under_test = ServiceUnderTest(context, domain, tmp_path / "hand_eye.yaml")
+    try:
+        yield under_test
+    finally:
+        under_test.close()
+
+
+@pytest.mark.ros
+def test_calibrate_without_samples_says_so(service: ServiceUnderTest) -> None:
+    answer = service.probe.call("calibrate")
+    assert not answer.success
+    assert "no samples yet" in answer.message
+
+
+@pytest.mark.ros
+def test_calibrate_with_too_few_samples_gives_the_pipeline_reason(
+    service: ServiceUnderTest, real_samples: list[tuple[Profile, FlangePose]]
+) -> None:
+    service.send(real_samples)
+    answer = service.probe.call("calibrate")
+    assert not answer.success
+    assert "at least 8" in answer.message
+    assert not (Path(service.node.get_parameter("output_path").value)).exists()
+
+
+@pytest.mark.ros
+def test_a_second_call_during_a_solve_is_refused_and_failures_keep_the_last_file(
+    service: ServiceUnderTest,
+    real_samples: list[tuple[Profile, FlangePose]],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    truth = known_result()
+    release = threading.Event()
+    behaviour: dict[str, Any] = {"raise": None}
+
+    def fake_calibrate(samples: list[Any], config: Any, **_: Any) -> CalibrationResult:
+        assert len(samples) == len(real_samples)
+        if behaviour["raise"] is not None:
+            raise behaviour["raise"]
+        release.wait(20.0)
+        truth.samples_used = [s.index for s in samples]
+        return truth
+
+    monkeypatch.setattr(calibration_service, "calibrate_samples", fake_calibrate)
+    service.send(real_samples)
+    first = service.probe.call_async("calibrate")
+    time.sleep(0.3)
+    second = service.probe.call("calibrate", timeout_s=5.0)
+    assert not second.success and "already running" in second.message
+    assert not first.done()
+    release.set()
+    wait_for(first.done, 20.0, "the first calibration")
+    answer = first.result()
+    assert answer.success, answer.message
+    assert "3 of 3 samples used" in answer.message
+    output = Path(service.node.get_parameter("output_path").value)
+    written = read_result_yaml(output)
+    assert max(transform_error(written.T_flange_sensor, truth.T_flange_sensor)) < 1e-9
+    assert max(transform_error(service.probe.hand_eye(), truth.T_flange_sensor)) < 1e-6
+    before = output.read_bytes()
+
+    behaviour["raise"] = DegenerateError("the poses only translate: rotate the sensor")
+    answer = service.probe.call("calibrate")
+    assert (answer.success, answer.message) == (
+        False,
+        "the poses only translate: rotate the sensor",
+    )
+    behaviour["raise"] = ZeroDivisionError("a bug")
+    answer = service.probe.call("calibrate")
+    assert not answer.success and "internal error" in answer.message
+    assert output.read_bytes() == before
+    assert not service.probe.call("calibrate").success  # still answering
+
+
+@pytest.mark.ros
+def test_collector_reloads_the_latest_session_into_a_new_one_and_republishes_it(
+    ros_context: tuple[Context, int],
+    tmp_path: Path,
+    real_samples: list[tuple[Profile, FlangePose]],
+) -> None:
+    context, domain = ros_context
+    root = tmp_path / "sessions"
+    with SessionBagWriter(root / "session_20200101_000000") as old:
+        for p, pose in real_samples[:2]:
+            old.append(p, pose)
+    with SessionBagWriter(root / "session_20250101_000000") as latest:
+        for p, pose in real_samples:
+            latest.append(p, pose)
+    node = collector.CollectorNode(
+        context=context,
+        parameter_overrides=[
+            Parameter("session_dir", value=str(root)),
+            Parameter("reload_session", value="latest"),
+        ],
+    )
+    probe = RosProbe(domain)
+    try:
+        received: list[int] = []
+        probe.node.create_subscription(
+            PoseStamped,
+            "linelaser_calib/samples/flange_pose",
+            lambda msg: received.append(msg.header.stamp.sec * NS_PER_S + msg.header.stamp.nanosec),
+            reliable_qos(100, latched=True),
+        )
+        stamps = [p.stamp_ns for p, _ in real_samples]
+        wait_for(lambda: sorted(received) == stamps, 20.0, "the republished samples")
+        (new,) = set(root.glob("session_*")) - {old.path, latest.path}
+        assert [p.stamp_ns for p in read_bag(new).profiles] == stamps
+        assert len(read_bag(latest.path).profiles) == len(stamps)  # the source is untouched
+    finally:
+        probe.close()
+        node.destroy_node()

@@ -1,0 +1,358 @@
+"""End to end over DDS: recorded scans replayed into the collector and calibration_service
+processes, checked against the simulator's ground truth.
+
+Each test runs its nodes as separate processes on a private ROS domain, replays a recording
+from the test process, and waits on the nodes' /diagnostics counts instead of sleeping.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from ros_helpers import (
+    PACKAGE,
+    REPO_ROOT,
+    NodeProcess,
+    Processes,
+    Recording,
+    RosProbe,
+    colcon_install,
+    module_command,
+    new_domain_id,
+    params,
+    processes,
+    wait_for,
+)
+from visualization_msgs.msg import MarkerArray
+
+from linelaser_calib.core.geometry import transform_error, transform_from_rotvec_translation
+from linelaser_calib.core.types import Cylinder, FlangePose
+from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
+from linelaser_calib.nodes.collection import SKIP_NOT_CAPTURED
+from linelaser_calib.sim import scenario_from_preset, simulate
+from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+#: Bounds on the hand-eye error of the default method (it reaches ~0.02 mm / 0.005 deg here).
+MAX_TRANSLATION_ERROR_M = 0.5e-3
+MAX_ROTATION_ERROR_RAD = math.radians(0.1)
+#: A step-and-shoot scan of 16 poses in about 7 s, short enough to replay in real time.
+SHORT_SCAN = {
+    "n_poses": 16,
+    "dwell_s": 0.1,
+    "min_move_s": 0.15,
+    "move_speed_m_s": 0.5,
+    "move_angular_speed_rad_s": 3.0,
+    "margin_s": 0.1,
+}
+COLLECTOR = "linelaser_calib.nodes.collector"
+SERVICE = "linelaser_calib.nodes.calibration_service"
+
+
+@dataclass(frozen=True)
+class Replay:
+    """A recording and the true hand-eye and cylinder behind it."""
+
+    recording: Recording
+    T_flange_sensor: np.ndarray
+    cylinder: Cylinder
+
+    def half(self) -> int:
+        """Index of the message that splits the profiles in two halves."""
+        profiles = [k for k, (_, is_profile, _) in enumerate(self.recording.messages) if is_profile]
+        return profiles[len(profiles) // 2]
+
+
+@pytest.fixture(scope="module")
+def short_replay() -> Replay:
+    data = simulate(scenario_from_preset("ur_scancontrol", **SHORT_SCAN), seed=2)
+    truth = data.truth
+    return Replay(
+        Recording.from_data(data.profiles, data.poses), truth.T_flange_sensor, truth.cylinder
+    )
+
+
+@pytest.fixture(scope="module")
+def committed_replay() -> Replay:
+    """The shortest committed bag of a cylinder scan (its truth.yaml has a cylinder)."""
+    truths = {
+        p.parent: read_truth_yaml(p) for p in sorted((REPO_ROOT / "bags").glob("*/truth.yaml"))
+    }
+    bags = [bag for bag, truth in truths.items() if truth.cylinder is not None]
+    assert bags, "no committed cylinder bag with truth.yaml under bags/"
+
+    def duration(bag: Path) -> int:
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text(encoding="utf-8"))
+        return int(meta["rosbag2_bagfile_information"]["duration"]["nanoseconds"])
+
+    bag = min(bags, key=duration)
+    contents = read_bag(bag)
+    recording = Recording.from_data(
+        contents.profiles, contents.poses, contents.sensor_frame, contents.base_frame
+    )
+    truth = truths[bag]
+    assert truth.cylinder is not None
+    return Replay(recording, truth.T_flange_sensor, truth.cylinder)
+
+
+@dataclass
+class Graph:
+    """The test's ROS graph: the probe, the node processes and a scratch directory."""
+
+    probe: RosProbe
+    procs: Processes
+    tmp: Path
+
+    def collector(self, *ros_args: str, argv: list[str] | None = None) -> NodeProcess:
+        """Start the collector; its session_dir and output go under ``tmp`` whatever the
+        other arguments say (``-p`` given last wins over ``--params-file``)."""
+        base = argv or module_command(COLLECTOR)
+        extra = params(session_dir=str(self.tmp / "sessions"), diagnostics_period_s=0.2)
+        return self.procs.start("collector", [*base, *ros_args, *extra])
+
+    def service(self, *ros_args: str, argv: list[str] | None = None) -> NodeProcess:
+        base = argv or module_command(SERVICE)
+        extra = params(output_path=str(self.tmp / "hand_eye.yaml"), diagnostics_period_s=0.2)
+        return self.procs.start("calibration_service", [*base, *ros_args, *extra])
+
+    def sessions(self) -> list[Path]:
+        return sorted((self.tmp / "sessions").glob("session_*"))
+
+
+@pytest.fixture
+def graph(tmp_path: Path) -> Iterator[Graph]:
+    domain = new_domain_id()
+    probe = RosProbe(domain)
+    try:
+        with processes(tmp_path, domain) as procs:
+            yield Graph(probe, procs, tmp_path)
+    finally:
+        probe.close()
+
+
+def samples_used(message: str) -> tuple[int, int]:
+    """(used, total) from a calibrate summary."""
+    found = re.search(r"(\d+) of (\d+) samples used", message)
+    assert found, message
+    return int(found[1]), int(found[2])
+
+
+def check_against_truth(T: np.ndarray, truth: np.ndarray, label: str) -> None:
+    rotation, translation = transform_error(T, truth)
+    print(
+        f"{label}: hand-eye error {translation * 1e3:.4f} mm, {math.degrees(rotation):.4f} deg "
+        f"(bounds {MAX_TRANSLATION_ERROR_M * 1e3} mm, {math.degrees(MAX_ROTATION_ERROR_RAD)} deg)"
+    )
+    assert translation < MAX_TRANSLATION_ERROR_M
+    assert rotation < MAX_ROTATION_ERROR_RAD
+
+
+def check_markers(markers: MarkerArray, cylinder: Cylinder) -> None:
+    """The cylinder marker has the true diameter; the mapped profiles lie on the true surface."""
+    by_ns = {m.ns: m for m in markers.markers}
+    assert by_ns["cylinder"].scale.x == pytest.approx(2 * cylinder.radius, abs=2e-4)
+    points = np.array([[p.x, p.y, p.z] for p in by_ns["profiles"].points])
+    assert 100 < len(points) <= 5000
+    offset = points - cylinder.point
+    radial = offset - np.outer(offset @ cylinder.direction, cylinder.direction)
+    distance = np.linalg.norm(radial, axis=1)
+    assert np.median(np.abs(distance - cylinder.radius)) < 0.1e-3
+
+
+def settled(values: dict[str, str]) -> int:
+    """Accepted samples, after checking that every received profile is accounted for."""
+    received, accepted = int(values["profiles received"]), int(values["samples accepted"])
+    rejected, skipped = int(values["profiles rejected"]), int(values["profiles skipped"])
+    assert int(values["profiles pending"]) == 0
+    assert received == accepted + rejected + skipped, values
+    return accepted
+
+
+def test_colcon_nodes_calibrate_a_live_scan_replayed_at_1x(
+    graph: Graph, short_replay: Replay, tmp_path_factory: pytest.TempPathFactory
+) -> None:
+    install = colcon_install(tmp_path_factory.mktemp("colcon"))
+    env = install.env(graph.procs.env)
+    config = install.prefix / "share" / PACKAGE / "config"
+    exe = {
+        name: str(install.executable(name, env)) for name in ("collector", "calibration_service")
+    }
+    graph.procs.env = env
+    collector = graph.collector(
+        "--params-file",
+        str(config / "collector.yaml"),
+        *params(auto_calibrate_samples=12),
+        "-r",
+        "profile:=/scancontrol_pointcloud",
+        "-r",
+        "flange_pose:=/tcp_pose_broadcaster/pose",
+        argv=[exe["collector"], "--ros-args"],
+    )
+    graph.service(
+        "--params-file",
+        str(config / "calibration_service.yaml"),
+        argv=[exe["calibration_service"], "--ros-args"],
+    )
+    probe = graph.probe
+    player = probe.player("/scancontrol_pointcloud", "/tcp_pose_broadcaster/pose")
+    player.wait_matched()
+    sent = player.play(short_replay.recording, rate=1.0)
+    values = probe.wait_counts(30.0, profiles_received=sent, profiles_pending=0)
+    accepted = settled(values)
+    assert accepted >= sent - 1, values  # best-effort input QoS, yet nothing was lost
+    wait_for(lambda: "calibrated:" in collector.log(), 30.0, "the automatic calibration")
+    probe.wait_counts(10.0, node="calibration_service", samples=accepted)
+
+    answer = probe.call("/calibrate")
+    assert answer.success, answer.message + graph.procs.logs()
+    assert "\n" not in answer.message
+    assert samples_used(answer.message)[1] == accepted
+    T = probe.hand_eye()
+    check_against_truth(T, short_replay.T_flange_sensor, "colcon nodes, 1x")
+    written = read_result_yaml(graph.tmp / "hand_eye.yaml")
+    assert max(transform_error(written.T_flange_sensor, T)) < 1e-6
+    check_markers(probe.latched(MarkerArray, "linelaser_calib/markers"), short_replay.cylinder)
+    (session,) = graph.sessions()
+    assert len(read_bag(session).profiles) == accepted
+
+
+def test_restarted_service_gets_every_sample_again_at_10x(
+    graph: Graph, committed_replay: Replay
+) -> None:
+    graph.collector(*params(reliable_inputs=True))
+    service = graph.service()
+    probe = graph.probe
+    player = probe.player()
+    player.wait_matched()
+    half = committed_replay.half()
+    first = player.play(committed_replay.recording, rate=10.0, stop=half)
+    accepted_first = settled(probe.wait_counts(20.0, profiles_received=first, profiles_pending=0))
+    probe.wait_counts(10.0, node="calibration_service", samples=accepted_first)
+    service.kill()
+
+    graph.service()
+    sent = first + player.play(committed_replay.recording, rate=10.0, start=half)
+    accepted = settled(probe.wait_counts(20.0, profiles_received=sent, profiles_pending=0))
+    assert accepted == sent
+    probe.wait_counts(20.0, node="calibration_service", samples=accepted)
+    answer = probe.call("/calibrate")
+    assert answer.success, answer.message + graph.procs.logs()
+    assert samples_used(answer.message)[1] == accepted
+    check_against_truth(probe.hand_eye(), committed_replay.T_flange_sensor, "after a restart")
+
+
+def test_on_demand_capture_and_clear(graph: Graph, committed_replay: Replay) -> None:
+    graph.collector(*params(reliable_inputs=True, mode="on_demand"))
+    graph.service()
+    probe = graph.probe
+    player = probe.player()
+    player.wait_matched()
+    half = committed_replay.half()
+    first = player.play(committed_replay.recording, rate=10.0, stop=half)
+    values = probe.wait_counts(20.0, profiles_received=first, profiles_pending=0)
+    assert settled(values) == 0
+    assert int(values[f"skipped: {SKIP_NOT_CAPTURED}"]) == first
+
+    capture = probe.call_async("/collector/capture")
+    sent = first + player.play(committed_replay.recording, rate=10.0, start=half)
+    wait_for(capture.done, 10.0, "the capture")
+    assert capture.result().success, capture.result().message
+    assert "captured sample sample_000000" in capture.result().message
+    values = probe.wait_counts(20.0, profiles_received=sent, profiles_pending=0)
+    assert settled(values) == 1
+    probe.wait_counts(10.0, node="calibration_service", samples=1)
+
+    answer = probe.call("/collector/clear")
+    assert answer.success, answer.message
+    old, new = graph.sessions()
+    assert len(read_bag(old).profiles) == 1  # kept on disk
+    assert str(new) in answer.message
+    probe.wait_counts(10.0, node="calibration_service", samples=0)
+    answer = probe.call("/calibrate")
+    assert not answer.success and "no samples yet" in answer.message
+
+
+def test_bad_messages_are_counted_and_logged_once_and_no_node_crashes(graph: Graph) -> None:
+    collector = graph.collector(*params(reliable_inputs=True))
+    service = graph.service()
+    probe = graph.probe
+    player = probe.player()
+    player.wait_matched()
+    types = rclpy_types()
+    data = simulate(scenario_from_preset("ur_scancontrol", **SHORT_SCAN), seed=2)
+    good = data.profiles[:2]
+    T_rest = [data.truth.T_base_flange_recorded[0], data.truth.T_base_flange_recorded[1]]
+
+    def cloud(points: np.ndarray, stamp_ns: int) -> object:
+        return pointcloud2_from_points(points, stamp_ns, "laser", types=types)
+
+    def poses_around(stamp_ns: int, T: np.ndarray) -> None:
+        for k in range(-12, 13):
+            pose = FlangePose(stamp_ns + k * 8_000_000, T)
+            player.publish_pose(pose_stamped_from_flange_pose(pose, types=types))
+
+    def profile_count(expected: int) -> None:
+        probe.wait_counts(20.0, profiles_received=expected, profiles_pending=0)
+
+    # A valid sample, then a NaN-only profile at a paired stamp.
+    poses_around(good[0].stamp_ns, T_rest[0])
+    player.publish_profile(cloud(good[0].points, good[0].stamp_ns))
+    nan_only = np.full((640, 3), np.nan)
+    player.publish_profile(cloud(nan_only, good[0].stamp_ns + 1_000_000))
+    # Inconsistent layouts: a row_step that disagrees (3 times), then no z field.
+    for _ in range(3):
+        bad = cloud(good[0].points, good[0].stamp_ns + 2_000_000)
+        bad.row_step += 4
+        player.publish_profile(bad)
+    no_z = cloud(good[0].points, good[0].stamp_ns + 3_000_000)
+    no_z.fields = no_z.fields[:2]
+    player.publish_profile(no_z)
+    # A profile stamped before the previous one.
+    player.publish_profile(cloud(good[0].points, good[0].stamp_ns - 5_000_000))
+    profile_count(7)
+    # Zero quaternions, then a second valid sample and its NaN-only twin.
+    for k in range(3):
+        zero = pose_stamped_from_flange_pose(
+            FlangePose(good[0].stamp_ns + (200 + k) * 1_000_000, T_rest[0]), types=types
+        )
+        zero.pose.orientation.w = 0.0
+        zero.pose.orientation.x = zero.pose.orientation.y = zero.pose.orientation.z = 0.0
+        player.publish_pose(zero)
+    poses_around(good[1].stamp_ns, T_rest[1])
+    player.publish_profile(cloud(good[1].points, good[1].stamp_ns))
+    player.publish_profile(cloud(nan_only, good[1].stamp_ns + 1_000_000))
+    profile_count(9)
+    # The pose clock jumps back (a replay restarted).
+    jump = FlangePose(
+        good[0].stamp_ns - 60 * 10**9, transform_from_rotvec_translation([0] * 3, [0.4, 0, 0.4])
+    )
+    player.publish_pose(pose_stamped_from_flange_pose(jump, types=types))
+
+    values = probe.wait_counts(20.0, profiles_received=9, poses_rejected=4)
+    assert settled(values) == 2
+
+    def count(*words: str) -> int:
+        return sum(int(v) for k, v in values.items() if all(w in k for w in words))
+
+    assert count("rejected message:", "row_step") == 3
+    assert count("rejected message:", "no field") == 1
+    assert count("rejected cleaning:") == 2
+    assert count("rejected stamp:") == 1
+    assert count("rejected pose:", "orientation") == 3
+    assert count("rejected pose:", "jumped back") == 1
+    log = collector.log()
+    assert log.count("row_step") == 1, log  # logged once, counted thrice
+    assert collector.alive() and service.alive()
+    probe.wait_counts(10.0, node="calibration_service", samples=2)
+    answer = probe.call("/calibrate")
+    assert not answer.success and "at least 8" in answer.message
+    assert collector.alive() and service.alive()
+    assert "Traceback" not in graph.procs.logs()
