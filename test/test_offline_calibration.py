@@ -1,0 +1,57 @@
+"""Offline calibration of simulated bags against truth: both methods, any names and sizes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from linelaser_calib.cli import main
+from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
+
+BAGS = Path(__file__).resolve().parent.parent / "bags"
+
+#: Bounds on the hand-eye error (deg, mm) per method, well above what each method reaches at
+#: the committed bags' noise (bench/accuracy.py gives the measured RMS).
+BOUNDS = {"paper": (1.5, 2.0), "default": (0.02, 0.1)}
+
+
+@pytest.mark.parametrize("method", ["paper", "default"])
+@pytest.mark.parametrize("bag", ["paper", "ur_scancontrol"])
+def test_committed_bag_recovers_truth(bag: str, method: str, tmp_path: Path) -> None:
+    out = tmp_path / "result.yaml"
+    assert main(["calibrate", str(BAGS / bag), "--method", method, "--output", str(out)]) == 0
+    result, truth = read_result_yaml(out), read_truth_yaml(BAGS / bag / "truth.yaml")
+    rot, trans = transform_error(result.T_flange_sensor, truth.T_flange_sensor)
+    max_deg, max_mm = BOUNDS[method]
+    assert np.degrees(rot) < max_deg and trans * 1e3 < max_mm
+    assert result.cylinder is not None and truth.cylinder is not None
+    assert result.cylinder.radius == pytest.approx(truth.cylinder.radius, abs=2e-4)
+    assert abs(result.cylinder.direction @ truth.cylinder.direction) > np.cos(np.radians(1.0))
+    if method == "default":
+        assert result.uncertainty_translation_m is not None
+        assert np.all(result.uncertainty_translation_m < 1e-3)
+
+
+def test_other_names_radius_and_axis(tmp_path: Path) -> None:
+    bag = tmp_path / "custom"
+    args = ["simulate", str(bag), "--scenario", "paper", "--seed", "11", "--poses", "20"]
+    args += ["--points", "300", "--radius", "0.03", "--profile-topic", "/scanner/cloud"]
+    args += ["--pose-topic", "/robot/tcp", "--sensor-frame", "scanner", "--base-frame", "world"]
+    assert main(args) == 0
+    out = tmp_path / "result.yaml"
+    assert main(["calibrate", str(bag), "--flange-frame", "flange", "--output", str(out)]) == 0
+    result, truth = read_result_yaml(out), read_truth_yaml(bag / "truth.yaml")
+    assert (result.parent_frame, result.child_frame, result.base_frame) == (
+        "flange",
+        "scanner",
+        "world",
+    )
+    rot, trans = transform_error(result.T_flange_sensor, truth.T_flange_sensor)
+    assert np.degrees(rot) < 0.05 and trans < 1e-4
+    assert result.cylinder is not None
+    assert result.cylinder.radius == pytest.approx(0.03, abs=1e-4)
+    assert main(["calibrate", str(bag), "--radius", "0.03", "--output", str(out)]) == 0
+    assert read_result_yaml(out).cylinder.radius == 0.03  # type: ignore[union-attr]
