@@ -155,13 +155,16 @@ def module_command(module: str, *ros_args: str) -> list[str]:
 
 
 def params(**values: Any) -> list[str]:
-    """``-p name:=value`` arguments (strings quoted, as the values are read as YAML)."""
+    """``-p name:=value`` arguments (strings quoted, as the values are read as YAML; a list
+    or tuple of numbers becomes a double array)."""
     out: list[str] = []
     for name, value in values.items():
         if isinstance(value, bool):
             text = str(value).lower()
         elif isinstance(value, int | float):
             text = repr(value)
+        elif isinstance(value, list | tuple):
+            text = "[" + ",".join(repr(float(v)) for v in value) + "]"
         else:
             text = f"'{value}'"
         out += ["-p", f"{name}:={text}"]

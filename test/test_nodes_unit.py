@@ -1,5 +1,6 @@
-"""Node logic: pairing and counting in the collector, the service's sample store and summary,
-parameter files against the declarations, and the calibrate service's answers in-process."""
+"""Node logic: pairing, validation and counting in the collector, the service's sample store,
+summary and pipeline configuration, parameter files against the declarations, and the
+calibrate service's answers in-process."""
 
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ from ros_helpers import (
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import PointCloud2
 
-from linelaser_calib.core.errors import CalibrationError, DegenerateError
+from linelaser_calib.core.errors import CalibrationError, DegenerateError, InputError
 from linelaser_calib.core.geometry import (
     apply_transform,
     invert_transform,
@@ -36,7 +37,9 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_rotvec_translation,
 )
+from linelaser_calib.core.known_point import KnownPointConfig, extract_corner
 from linelaser_calib.core.pairing import NS_PER_S, PairingConfig
+from linelaser_calib.core.pipeline import Method, PipelineConfig, Target, validate_sample
 from linelaser_calib.core.residuals import axis_extent
 from linelaser_calib.core.types import (
     CalibrationResult,
@@ -44,9 +47,10 @@ from linelaser_calib.core.types import (
     FlangePose,
     Profile,
     Rejection,
+    Sample,
     SampleFit,
 )
-from linelaser_calib.io import SessionBagWriter, read_bag, read_result_yaml
+from linelaser_calib.io import ResultFileError, SessionBagWriter, read_bag, read_result_yaml
 from linelaser_calib.nodes import calibration_service, collector
 from linelaser_calib.nodes.collection import (
     SKIP_BACKLOG,
@@ -58,16 +62,20 @@ from linelaser_calib.nodes.collection import (
     Mode,
     reason_key,
 )
+from linelaser_calib.nodes.common import parameter_values
 from linelaser_calib.nodes.sample_store import (
     SampleStore,
     points_in_base,
 )
 from linelaser_calib.sim import scenario_from_preset, simulate
+from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
 from linelaser_calib.summary import one_line_summary
 from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
 
 T0 = 1_700_000_000 * NS_PER_S
 T_REST = transform_from_rotvec_translation([0.1, -0.2, 0.3], [0.4, 0.1, 0.5])
+#: The committed weld-seam bag's old hand-eye and taught point.
+WELD_INITIAL = REPO_ROOT / "bags" / "weld_seam" / "initial.yaml"
 
 
 def ns(t_s: float) -> int:
@@ -287,6 +295,54 @@ def test_collector_config_rejects_a_pose_window_shorter_than_the_pairing_horizon
         CollectorConfig(pairing=PairingConfig(sync_tolerance_s=0.5), pose_window_s=0.2)
 
 
+# -- validation of each sample (what the collector accepts) --------------------------------------
+
+
+def simulated_samples(profiles: list[Profile], T_base_flange: np.ndarray) -> list[Sample]:
+    """Each simulated profile paired with its recorded flange pose."""
+    return [
+        Sample(k, p.stamp_ns, T, p.points)
+        for k, (p, T) in enumerate(zip(profiles, T_base_flange, strict=True))
+    ]
+
+
+def validation_stages(samples: list[Sample], config: PipelineConfig) -> list[str | None]:
+    """The rejection stage of each sample (None: valid)."""
+    rng = np.random.default_rng(0)
+    outcomes = [validate_sample(s, config, rng) for s in samples]
+    return [None if r is None else r.stage for r in outcomes]
+
+
+def test_validate_sample_accepts_cylinder_arcs_and_checks_the_radius() -> None:
+    data = simulate(scenario_from_preset("ur_scancontrol", n_poses=6), seed=4)
+    samples = simulated_samples(data.profiles, data.truth.T_base_flange_recorded)
+    radius = data.truth.cylinder.radius
+    assert validation_stages(samples, PipelineConfig()) == [None] * 6
+    assert validation_stages(samples, PipelineConfig(radius_m=radius)) == [None] * 6
+    assert validation_stages(samples, PipelineConfig(radius_m=2 * radius)) == ["ellipse"] * 6
+
+
+def test_validate_sample_finds_the_weld_corner_and_rejects_profiles_without_one() -> None:
+    data = simulate_weld(weld_scenario_from_preset("weld_seam_general", n_poses=6), seed=4)
+    truth = data.truth
+    samples = simulated_samples(data.profiles, truth.T_base_flange_recorded)
+    known_point = PipelineConfig(target=Target.KNOWN_POINT)
+    assert validation_stages(samples, known_point) == [None] * 6
+    for sample, corner in zip(samples, truth.corner_true_sensor, strict=True):
+        found = extract_corner(sample, KnownPointConfig(), np.random.default_rng(0))
+        assert not isinstance(found, Rejection)
+        np.testing.assert_allclose(found.corner_xz, corner[[0, 2]], atol=20e-6)
+    # One flank only: the other flank's points (by the simulator's labels) made invalid.
+    one_flank = [
+        Sample(s.index, s.stamp_ns, s.T_base_flange, np.where(f[:, None] == 1, s.points, np.nan))
+        for s, f in zip(samples, truth.flank, strict=True)
+    ]
+    assert validation_stages(one_flank, known_point) == ["corner"] * 6
+    nan_only = Sample(0, 0, T_REST, np.full((640, 3), np.nan))
+    assert validation_stages([nan_only], known_point) == ["cleaning"]
+    assert validation_stages(samples, PipelineConfig()) == ["ellipse"] * 6  # no cylinder
+
+
 # -- sample store and summary -----------------------------------------------------------------
 
 
@@ -384,6 +440,53 @@ def test_marker_points_lie_on_the_cylinder_and_respect_the_budget() -> None:
     assert length == pytest.approx(1.1 * 0.06, abs=0.005)
 
 
+# -- the service's pipeline configuration ---------------------------------------------------------
+
+
+def service_values(**overrides: Any) -> dict[str, Any]:
+    """calibration_service parameter values: the declared defaults with ``overrides``."""
+    values = {spec.name: spec.default for spec in calibration_service.PARAMETERS}
+    assert set(overrides) <= set(values), set(overrides) - set(values)
+    return {**values, **overrides}
+
+
+def test_service_builds_the_known_point_configuration_from_its_parameters() -> None:
+    initial = read_result_yaml(WELD_INITIAL)
+    assert initial.target_point is not None
+    default = calibration_service.pipeline_config(service_values())
+    assert (default.target, default.method) == (Target.CYLINDER, Method.DEFAULT)
+    assert default.known_point is None and default.initial_T_flange_sensor is None
+    config = calibration_service.pipeline_config(
+        service_values(
+            target="known_point",
+            method="paper",
+            known_point=tuple(initial.target_point.point),
+            initial_hand_eye_path=str(WELD_INITIAL),
+        )
+    )
+    assert (config.target, config.method) == (Target.KNOWN_POINT, Method.PAPER)
+    assert config.known_point is not None and config.initial_T_flange_sensor is not None
+    np.testing.assert_array_equal(config.known_point, initial.target_point.point)
+    np.testing.assert_array_equal(config.initial_T_flange_sensor, initial.T_flange_sensor)
+
+
+def test_service_configuration_errors_name_the_parameters(tmp_path: Path) -> None:
+    with pytest.raises(ResultFileError, match=r"cannot use initial_hand_eye_path: .*missing\.yaml"):
+        calibration_service.pipeline_config(
+            service_values(initial_hand_eye_path=str(tmp_path / "missing.yaml"))
+        )
+    garbage = tmp_path / "garbage.yaml"
+    garbage.write_text("hand_eye: {translation: [1, 2]}\n", encoding="utf-8")
+    with pytest.raises(ResultFileError, match=r"initial_hand_eye_path: .*garbage\.yaml"):
+        calibration_service.pipeline_config(service_values(initial_hand_eye_path=str(garbage)))
+    given = {"known_point": (0.55, 0.1, 0.02), "initial_hand_eye_path": str(WELD_INITIAL)}
+    for missing in ({"known_point": ()}, {"initial_hand_eye_path": ""}):
+        with pytest.raises(InputError, match=r"set known_point to .* and initial_hand_eye_path"):
+            calibration_service.pipeline_config(
+                service_values(target="known_point", method="paper", **{**given, **missing})
+            )
+
+
 # -- launch file ----------------------------------------------------------------------------------
 
 
@@ -433,7 +536,7 @@ def test_parameter_file_matches_the_declarations(
     node_class, specs = NODES[name]
     assert sorted(in_file) == sorted(spec.name for spec in specs)
     for spec in specs:
-        value = in_file[spec.name]
+        value = tuple(in_file[spec.name]) if spec.is_array else in_file[spec.name]
         assert type(value) is type(spec.default) and value == spec.default, spec.name
         descriptor = spec.descriptor()
         assert descriptor.description, spec.name
@@ -445,12 +548,11 @@ def test_parameter_file_matches_the_declarations(
     try:
         node = node_class(context=context)
         try:
-            declared = {
-                n: p.value
-                for n, p in node._parameters.items()
-                if n not in ("use_sim_time", "start_type_description_service")
+            undeclared = set(node._parameters) - set(in_file)
+            assert undeclared == {"use_sim_time", "start_type_description_service"}
+            assert parameter_values(node, specs) == {
+                spec.name: spec.value(in_file[spec.name]) for spec in specs
             }
-            assert declared == in_file
         finally:
             node.destroy_node()
     finally:
@@ -470,6 +572,39 @@ def test_collector_refuses_an_unknown_mode(
                 Parameter("session_dir", value=str(tmp_path)),
             ],
         )
+
+
+@pytest.mark.ros
+def test_known_point_parameter_takes_an_empty_array_or_three_numbers(
+    ros_context: tuple[Context, int],
+) -> None:
+    context, _ = ros_context
+    with pytest.raises(
+        CalibrationError,
+        match=r"known_point is \[0\.5, 0\.1\]; it must be \[\] or an array of 3 finite",
+    ):
+        calibration_service.CalibrationServiceNode(
+            context=context, parameter_overrides=[Parameter("known_point", value=[0.5, 0.1])]
+        )
+    node = calibration_service.CalibrationServiceNode(context=context)
+    try:
+        for value, accepted in (
+            ([0.55, 0.1, 0.02], True),
+            ([1, 0, 0], True),
+            ([0.5, 0.1], False),
+            ([0.5, float("nan"), 0.1], False),
+            ("0.5, 0.1, 0.0", False),
+            ([], True),
+        ):
+            (outcome,) = node.set_parameters([Parameter("known_point", value=value)])
+            assert outcome.successful is accepted, (value, outcome.reason)
+            if accepted:
+                expected = tuple(float(v) for v in value)
+                assert parameter_values(node, calibration_service.PARAMETERS)["known_point"] == (
+                    expected
+                )
+    finally:
+        node.destroy_node()
 
 
 @pytest.fixture(scope="module")
@@ -538,6 +673,19 @@ def test_calibrate_with_too_few_samples_gives_the_pipeline_reason(
     assert not answer.success
     assert "at least 8" in answer.message
     assert not (Path(service.node.get_parameter("output_path").value)).exists()
+
+
+@pytest.mark.ros
+def test_calibrate_with_an_unreadable_initial_hand_eye_says_why(
+    service: ServiceUnderTest, real_samples: list[tuple[Profile, FlangePose]], tmp_path: Path
+) -> None:
+    service.send(real_samples)
+    missing = tmp_path / "old_hand_eye.yaml"
+    service.node.set_parameters([Parameter("initial_hand_eye_path", value=str(missing))])
+    answer = service.probe.call("calibrate")
+    assert not answer.success
+    assert answer.message.startswith("cannot use initial_hand_eye_path: ")
+    assert str(missing) in answer.message
 
 
 @pytest.mark.ros

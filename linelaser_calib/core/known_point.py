@@ -1227,33 +1227,55 @@ class KnownPointResult:
     corners: list[CornerSample]
 
 
+def extract_corner(
+    sample: Sample, config: KnownPointConfig, rng: np.random.Generator
+) -> CornerSample | Rejection:
+    """Clean one sample's profile and fit its V corner; a rejection says why it failed.
+
+    Parameters
+    ----------
+    sample : Sample
+        Profile (sensor frame, m) paired with its flange pose.
+    config : KnownPointConfig
+        Its ``cleaning`` and ``corner`` settings apply.
+    rng : numpy.random.Generator
+        For the RANSAC line fits.
+
+    Returns
+    -------
+    CornerSample or Rejection
+        A rejection has stage ``cleaning`` or ``corner``.
+    """
+    try:
+        cleaned = clean_profile(sample.points, config.cleaning)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
+    try:
+        fit: CornerFit = fit_corner(cleaned.points_xz, config.corner, rng)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "corner", str(exc))
+    return CornerSample(
+        sample.index,
+        sample.stamp_ns,
+        np.asarray(sample.T_base_flange, dtype=np.float64),
+        fit.corner_xz,
+        fit.covariance_xz,
+        cleaned.points[fit.inliers.any(axis=0)],
+    )
+
+
 def extract_corners(
     samples: list[Sample], config: KnownPointConfig, rng: np.random.Generator
 ) -> tuple[list[CornerSample], list[Rejection]]:
-    """Clean every sample's profile and fit its V corner; rejections say why one failed."""
+    """:func:`extract_corner` of every sample: the corners and the rejections."""
     corners: list[CornerSample] = []
     rejections: list[Rejection] = []
     for sample in samples:
-        try:
-            cleaned = clean_profile(sample.points, config.cleaning)
-        except ProfileRejected as exc:
-            rejections.append(Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc)))
-            continue
-        try:
-            fit: CornerFit = fit_corner(cleaned.points_xz, config.corner, rng)
-        except ProfileRejected as exc:
-            rejections.append(Rejection(sample.index, sample.stamp_ns, "corner", str(exc)))
-            continue
-        corners.append(
-            CornerSample(
-                sample.index,
-                sample.stamp_ns,
-                np.asarray(sample.T_base_flange, dtype=np.float64),
-                fit.corner_xz,
-                fit.covariance_xz,
-                cleaned.points[fit.inliers.any(axis=0)],
-            )
-        )
+        outcome = extract_corner(sample, config, rng)
+        if isinstance(outcome, Rejection):
+            rejections.append(outcome)
+        else:
+            corners.append(outcome)
     return corners, rejections
 
 

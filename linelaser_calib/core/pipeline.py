@@ -26,7 +26,7 @@ from .cylinder_model import centre_distances
 from .ellipse import EllipseConfig, fit_ellipse_ransac
 from .errors import DegenerateError, InputError, PairingError, ProfileRejected
 from .geometry import FloatArray, check_transform
-from .known_point import KnownPointConfig, calibrate_known_point
+from .known_point import CornerSample, KnownPointConfig, calibrate_known_point, extract_corner
 from .pairing import PairingConfig, pair_profiles
 from .profile import CleaningConfig, clean_profile
 from .pso_alm import HybridConfig, PaperSolution, solve_pso_galm
@@ -168,6 +168,30 @@ def fit_sample(
     except ProfileRejected as exc:
         return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
     return FittedSample(sample, cleaned.points, ellipse)
+
+
+def validate_sample(
+    sample: Sample, config: PipelineConfig, rng: np.random.Generator
+) -> Rejection | None:
+    """Whether one sample is usable for ``config.target``; a rejection says why it is not.
+
+    The same checks the calibration applies to each sample (the collector validates live
+    profiles with it): ``cylinder``, the cleaning and ellipse fit of :func:`fit_sample`,
+    the semi-axes bounded by ``config.radius_m`` when given; ``known_point``, the cleaning
+    and V-corner fit of :func:`~linelaser_calib.core.known_point.extract_corner`.
+
+    Returns
+    -------
+    Rejection or None
+        None when the sample is usable.
+    """
+    if config.target is Target.KNOWN_POINT:
+        outcome: CornerSample | FittedSample | Rejection = extract_corner(
+            sample, config.known_point_config, rng
+        )
+    else:
+        outcome = fit_sample(sample, config, rng, config.radius_m)
+    return outcome if isinstance(outcome, Rejection) else None
 
 
 def fit_samples(

@@ -9,14 +9,19 @@
   (``linelaser_calib/session``) drops the samples of the previous one.
 - ``calibrate`` (std_srvs/Trigger) runs
   :func:`~linelaser_calib.core.pipeline.calibrate_samples` in its own callback group on a
-  MultiThreadedExecutor, so samples keep arriving during a solve. A second call during a
-  solve, no samples, too few or degenerate samples answer ``success: false`` with the
-  reason; the node keeps running.
+  MultiThreadedExecutor, so samples keep arriving during a solve. The pipeline
+  configuration is built from the parameters at each call (:func:`pipeline_config`):
+  ``target`` cylinder or known_point (a weld-seam corner, with the taught ``known_point``
+  or estimating it), ``method``, and an optional initial hand-eye read from
+  ``initial_hand_eye_path``. A second call during a solve, no samples, too few or
+  degenerate samples, or an unusable initial hand-eye file answer ``success: false`` with
+  the reason; the node keeps running.
 - On success it answers a one-line summary, publishes ``linelaser_calib/hand_eye``
   (TransformStamped ``flange_frame`` -> ``sensor_frame``, transient_local) and
-  ``linelaser_calib/markers`` (the fitted cylinder and the profiles mapped into
-  ``base_frame``), broadcasts ``/tf_static`` where ``tf2_ros`` is importable, and writes the
-  result YAML to ``output_path`` atomically. A failed calibration leaves the last good file.
+  ``linelaser_calib/markers`` (in ``base_frame``: the fitted cylinder and the profiles
+  mapped through the result, or a sphere at the known point), broadcasts ``/tf_static``
+  where ``tf2_ros`` is importable, and writes the result YAML to ``output_path``
+  atomically. A failed calibration leaves the last good file.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import traceback
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -35,13 +41,13 @@ from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
-from visualization_msgs.msg import MarkerArray
+from visualization_msgs.msg import Marker, MarkerArray
 
-from linelaser_calib.core.errors import CalibrationError
-from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
+from linelaser_calib.core.errors import CalibrationError, InputError
+from linelaser_calib.core.pipeline import Method, PipelineConfig, Target, calibrate_samples
 from linelaser_calib.core.residuals import axis_extent
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.io import write_result_yaml
+from linelaser_calib.io import ResultFileError, read_result_yaml, write_result_yaml
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
     HAND_EYE_TOPIC,
@@ -78,16 +84,39 @@ NODE_NAME = "calibration_service"
 KEY_SAMPLES = "samples"
 #: Most profile points drawn in the markers (evenly subsampled over the used samples).
 MAX_MARKER_POINTS = 5000
+#: Diameter of the sphere marker at the known point, m.
+KNOWN_POINT_MARKER_M = 0.004
 _PIPELINE = PipelineConfig()
 
 #: Every parameter; all but the read-only ones are read at each calibration, so
 #: ``ros2 param set`` applies to the next one. config/calibration_service.yaml repeats the defaults.
 PARAMETERS = (
     ParamSpec(
+        "target",
+        _PIPELINE.target.value,
+        "What was scanned: cylinder (the cylinder paper) or known_point (one fixed point such "
+        "as a weld-seam corner seen from many poses, the weld-seam paper).",
+        choices=tuple(t.value for t in Target),
+    ),
+    ParamSpec(
         "radius",
         0.0,
         "Cylinder radius, m (half the diameter); 0 estimates it from the profiles.",
         bounds=(0.0, 1.0),
+    ),
+    ParamSpec(
+        "known_point",
+        (),
+        "The fixed point [x, y, z], m, in base_frame, e.g. taught with the tool tip "
+        "(known_point target); [] estimates it. method paper needs it.",
+        sizes=(0, 3),
+    ),
+    ParamSpec(
+        "initial_hand_eye_path",
+        "",
+        "Result YAML whose hand_eye is the initial (old) hand-eye, e.g. an earlier result; "
+        "'' for none. The default method starts from it; the paper method with target "
+        "known_point corrects it and needs it.",
     ),
     ParamSpec(
         "output_path",
@@ -98,13 +127,14 @@ PARAMETERS = (
         "method",
         _PIPELINE.method.value,
         "default: the paper's solve refined by maximum likelihood with covariance; paper: "
-        "the cylinder paper's method as published.",
+        "the method of the target's paper as published.",
         choices=tuple(m.value for m in Method),
     ),
     ParamSpec(
         "min_samples",
         _PIPELINE.min_samples,
-        "Fewest samples with a usable ellipse that a calibration accepts.",
+        "Fewest samples with a usable ellipse that a calibration accepts (cylinder target; "
+        f"known_point needs {_PIPELINE.known_point_config.min_samples} corners).",
         bounds=(3, 100000),
     ),
     ParamSpec(
@@ -132,6 +162,48 @@ PARAMETERS = (
     ParamSpec("flange_frame", "tool0", "Flange frame: parent frame of the hand-eye."),
     ParamSpec("sensor_frame", "laser", "Sensor frame: child frame of the hand-eye."),
 )
+
+
+def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
+    """The pipeline configuration from the parameter values in effect (by name).
+
+    Raises
+    ------
+    CalibrationError
+        ``initial_hand_eye_path`` cannot be read as a result file, or ``method`` paper with
+        ``target`` known_point lacks the taught point or the initial hand-eye.
+    """
+    initial = None
+    if values["initial_hand_eye_path"]:
+        path = Path(values["initial_hand_eye_path"]).expanduser()
+        try:
+            initial = read_result_yaml(path).T_flange_sensor
+        except ResultFileError as err:
+            raise ResultFileError(
+                f"cannot use initial_hand_eye_path: {err} (it must name a result YAML with a "
+                "hand_eye section, e.g. an earlier calibration's output_path, or be '' for none)"
+            ) from err
+    target, method = Target(values["target"]), Method(values["method"])
+    point = np.array(values["known_point"]) if values["known_point"] else None
+    if (
+        target is Target.KNOWN_POINT
+        and method is Method.PAPER
+        and (point is None or initial is None)
+    ):
+        raise InputError(
+            "method paper with target known_point corrects an old hand-eye against the taught "
+            "point: set known_point to [x, y, z] (m, base frame) and initial_hand_eye_path to "
+            "the old hand-eye's result YAML, or use method default"
+        )
+    return PipelineConfig(
+        method=method,
+        target=target,
+        known_point=point,
+        radius_m=values["radius"] or None,
+        seed=values["seed"],
+        min_samples=values["min_samples"],
+        initial_T_flange_sensor=initial,
+    )
 
 
 class CalibrationServiceNode(Node):
@@ -274,18 +346,15 @@ class CalibrationServiceNode(Node):
         if not samples:
             return False, (
                 f"no samples yet: none received on {self._profile_sub.topic_name} and "
-                f"{self._pose_sub.topic_name}; run the collector and scan the cylinder"
+                f"{self._pose_sub.topic_name}; run the collector and scan the "
+                + p["target"].replace("_", " ")
             )
-        self.get_logger().info(f"calibrating from {len(samples)} samples (method {p['method']})")
+        self.get_logger().info(
+            f"calibrating from {len(samples)} samples (target {p['target']}, method {p['method']})"
+        )
         start = time.monotonic()
         try:
-            config = PipelineConfig(
-                method=Method(p["method"]),
-                radius_m=p["radius"] or None,
-                seed=p["seed"],
-                min_samples=p["min_samples"],
-            )
-            result = calibrate_samples(samples, config)
+            result = calibrate_samples(samples, pipeline_config(p))
         except CalibrationError as err:
             return False, str(err)
         result.parent_frame = p["flange_frame"]
@@ -317,17 +386,20 @@ class CalibrationServiceNode(Node):
         self._hand_eye_pub.publish(transform)
         if self._tf_static is not None:
             self._tf_static.sendTransform(transform)
+        # Clear what an earlier calibration drew (e.g. a cylinder before a known point).
+        markers = [Marker(action=Marker.DELETEALL)]
         points = points_in_base(result, MAX_MARKER_POINTS)
-        markers = [
-            points_marker(
-                points,
-                result.base_frame,
-                types=self._types,
-                size_m=0.0005,
-                stamp_ns=stamp_ns,
-                ns="profiles",
+        if len(points):
+            markers.append(
+                points_marker(
+                    points,
+                    result.base_frame,
+                    types=self._types,
+                    size_m=0.0005,
+                    stamp_ns=stamp_ns,
+                    ns="profiles",
+                )
             )
-        ]
         if result.cylinder is not None:
             centre, length = axis_extent(points, result.cylinder)
             markers.append(
@@ -338,6 +410,19 @@ class CalibrationServiceNode(Node):
                     types=self._types,
                     centre=centre,
                     stamp_ns=stamp_ns,
+                )
+            )
+        if result.target_point is not None:
+            markers.append(
+                points_marker(
+                    result.target_point.point[np.newaxis],
+                    result.base_frame,
+                    types=self._types,
+                    size_m=KNOWN_POINT_MARKER_M,
+                    spheres=True,
+                    stamp_ns=stamp_ns,
+                    ns="known_point",
+                    color=(1.0, 0.85, 0.0, 1.0),
                 )
             )
         self._markers_pub.publish(marker_array(markers, types=self._types))

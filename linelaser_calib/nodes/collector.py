@@ -9,8 +9,9 @@ Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and ``flange_pose``
 - receive callbacks decode messages and pair profiles (cheap), on a SingleThreadedExecutor:
   rclpy's MultiThreadedExecutor takes only a few hundred messages per second here, far
   below a 500 Hz flange-pose stream, while the single-threaded one keeps up;
-- a validation thread cleans each paired profile and fits its ellipse (``fit_sample``), so a
-  slow fit never stalls reception;
+- a validation thread checks each paired profile as the calibration will use it
+  (``validate_sample``: cleaning, then the ellipse of a cylinder or, with ``target``
+  ``known_point``, the V corner of a weld seam), so a slow fit never stalls reception;
 - every accepted sample is written to the session directory (one closed rosbag2 bag per
   sample, a valid input to ``linelaser-calib calibrate``) before it is published on
   ``linelaser_calib/samples/profile`` and ``linelaser_calib/samples/flange_pose`` with
@@ -46,8 +47,8 @@ from std_srvs.srv import Trigger
 
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import PipelineConfig, fit_sample
-from linelaser_calib.core.types import FlangePose, Profile, Rejection
+from linelaser_calib.core.pipeline import PipelineConfig, Target, validate_sample
+from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter, read_bag
 from linelaser_calib.io.bags import SESSION_MARKER
 from linelaser_calib.nodes.collection import (
@@ -82,6 +83,14 @@ _COLLECTOR = CollectorConfig()
 
 #: Every parameter (all read at start-up); config/collector.yaml repeats the defaults.
 PARAMETERS = (
+    ParamSpec(
+        "target",
+        Target.CYLINDER.value,
+        "What the profiles scan, which decides how each is validated: cylinder (an elliptical "
+        "arc) or known_point (a V-shaped weld seam whose corner is the fixed point).",
+        choices=tuple(t.value for t in Target),
+        read_only=True,
+    ),
     ParamSpec(
         "mode",
         Mode.CONTINUOUS.value,
@@ -158,14 +167,15 @@ PARAMETERS = (
     ParamSpec(
         "radius",
         0.0,
-        "Cylinder radius, m, checked against each profile's ellipse; 0 accepts any radius.",
+        "Cylinder radius, m, checked against each profile's ellipse; 0 accepts any radius "
+        "(cylinder target only).",
         bounds=(0.0, 1.0),
         read_only=True,
     ),
     ParamSpec(
         "seed",
         0,
-        "Seed of the RANSAC ellipse fits that validate the profiles.",
+        "Seed of the RANSAC fits (ellipse or corner) that validate the profiles.",
         bounds=(0, 2**31 - 1),
         read_only=True,
     ),
@@ -270,7 +280,10 @@ class CollectorNode(Node):
         except ValueError as err:
             raise InputError(f"invalid collector parameters: {err}") from err
         self._pipeline = PipelineConfig(
-            radius_m=p["radius"] or None, seed=p["seed"], pairing=pairing
+            target=Target(p["target"]),
+            radius_m=p["radius"] or None,
+            seed=p["seed"],
+            pairing=pairing,
         )
         self._rng = np.random.default_rng(p["seed"])
         self._types = rclpy_types()
@@ -310,8 +323,9 @@ class CollectorNode(Node):
         self._validator = threading.Thread(target=self._validate_loop, name="validation")
         self._validator.start()
         self.get_logger().info(
-            f"collecting in {config.mode.value} mode from {self._profile_sub.topic_name} and "
-            f"{self._pose_sub.topic_name} into {self._session.path}"
+            f"collecting in {config.mode.value} mode (target {self._pipeline.target.value}) "
+            f"from {self._profile_sub.topic_name} and {self._pose_sub.topic_name} into "
+            f"{self._session.path}"
         )
 
     # -- sessions ------------------------------------------------------------------------
@@ -416,12 +430,12 @@ class CollectorNode(Node):
                     pending = self._collector.next_to_validate()
                 if pending is None:
                     break
-                outcome = fit_sample(pending.sample, self._pipeline, self._rng)
-                if isinstance(outcome, Rejection):
-                    with self._collector.lock:
-                        self._collector.reject_validated(outcome)
-                else:
+                rejection = validate_sample(pending.sample, self._pipeline, self._rng)
+                if rejection is None:
                     self._store(pending)
+                else:
+                    with self._collector.lock:
+                        self._collector.reject_validated(rejection)
 
     def _store(self, pending: PendingSample) -> None:
         """Admit a valid sample: persist it, then publish it."""

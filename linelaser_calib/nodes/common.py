@@ -5,10 +5,16 @@
 Parameters are declared from a table of :class:`ParamSpec` rows, each with a
 ``ParameterDescriptor`` (description, numeric range, read-only flag); ``config/<node>.yaml``
 repeats the defaults for ``--params-file`` and a test keeps the two in agreement.
+
+ROS 2 cannot type an empty array: rclpy takes ``[]`` for a byte array and rcl's YAML parser
+reads ``[]`` as no value at all. A number-array parameter is therefore declared with dynamic
+typing, and :meth:`ParamSpec.problem` (run at start-up and on every ``ros2 param set``)
+accepts only numbers, in one of its allowed counts.
 """
 
 from __future__ import annotations
 
+import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -75,8 +81,9 @@ class ParamSpec:
     Attributes
     ----------
     name : str
-    default : bool, int, float or str
-        Its type is the parameter's type (write floats as ``0.0`` in YAML).
+    default : bool, int, float, str or tuple of float
+        Its type is the parameter's type (write floats as ``0.0`` in YAML); a tuple is a
+        number array (``[x, y, z]`` in YAML).
     description : str
         Shown by ``ros2 param describe``; give the unit.
     bounds : (low, high) or None
@@ -85,21 +92,31 @@ class ParamSpec:
         Allowed values of a string parameter.
     read_only : bool
         True when the node uses the value only at start-up.
+    sizes : tuple of int
+        Allowed element counts of a number array (e.g. ``(0, 3)``: empty or a 3-vector).
     """
 
     name: str
-    default: bool | int | float | str
+    default: bool | int | float | str | tuple[float, ...]
     description: str
     bounds: tuple[float, float] | None = None
     choices: tuple[str, ...] = ()
     read_only: bool = False
+    sizes: tuple[int, ...] = ()
+
+    @property
+    def is_array(self) -> bool:
+        """True for a number-array parameter."""
+        return isinstance(self.default, tuple)
 
     def descriptor(self) -> ParameterDescriptor:
         """The ``ParameterDescriptor`` declared for this parameter."""
         text = self.description
         if self.choices:
             text += f" One of: {', '.join(self.choices)}."
-        descriptor = ParameterDescriptor(description=text, read_only=self.read_only)
+        descriptor = ParameterDescriptor(
+            description=text, read_only=self.read_only, dynamic_typing=self.is_array
+        )
         if self.bounds is not None and isinstance(self.default, float):
             descriptor.floating_point_range = [
                 FloatingPointRange(from_value=self.bounds[0], to_value=self.bounds[1], step=0.0)
@@ -110,45 +127,73 @@ class ParamSpec:
             ]
         return descriptor
 
+    def problem(self, value: Any) -> str | None:
+        """What is wrong with ``value`` for this parameter, or None when it is acceptable.
+
+        rclpy checks types and ranges itself; this checks string choices and number arrays
+        (``None`` is rcl's reading of an empty YAML array).
+        """
+        if self.choices and value not in self.choices:
+            return f"{self.name} is {value!r}; it must be one of {list(self.choices)}"
+        if not self.is_array or value is None:
+            return None
+        numbers = (
+            isinstance(value, Sequence)
+            and not isinstance(value, str)
+            and all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value
+            )
+        )
+        if numbers and len(value) in self.sizes:
+            return None
+        shown = list(value) if isinstance(value, Sequence) and not isinstance(value, str) else value
+        allowed = " or ".join(
+            "[]" if n == 0 else f"an array of {n} finite numbers" for n in self.sizes
+        )
+        return f"{self.name} is {shown!r}; it must be {allowed}"
+
+    def value(self, raw: Any) -> Any:
+        """The value the node uses: a number array as a tuple of float, others unchanged."""
+        if not self.is_array:
+            return raw
+        return () if raw is None else tuple(float(v) for v in raw)
+
 
 def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
-    """Declare every parameter, check string choices, and return the values in effect.
+    """Declare every parameter, check it (:meth:`ParamSpec.problem`), return the values in effect.
 
-    A later ``ros2 param set`` with a value outside ``choices`` is refused.
+    A later ``ros2 param set`` with a value that :meth:`ParamSpec.problem` refuses is refused.
 
     Raises
     ------
     CalibrationError
-        When a value given at start-up (``--params-file``, ``-p``) is not one of its choices.
+        When a value given at start-up (``--params-file``, ``-p``) is not acceptable.
     """
     for spec in specs:
-        node.declare_parameter(spec.name, spec.default, spec.descriptor())
+        default = list(spec.default) if isinstance(spec.default, tuple) else spec.default
+        node.declare_parameter(spec.name, default, spec.descriptor())
     by_name = {spec.name: spec for spec in specs}
 
     def check(parameters: list[Parameter]) -> SetParametersResult:
         for parameter in parameters:
             spec = by_name.get(parameter.name)
-            if spec is not None and spec.choices and parameter.value not in spec.choices:
-                return SetParametersResult(
-                    successful=False,
-                    reason=f"{parameter.name} must be one of {list(spec.choices)}",
-                )
+            problem = None if spec is None else spec.problem(parameter.value)
+            if problem is not None:
+                return SetParametersResult(successful=False, reason=problem)
         return SetParametersResult(successful=True)
 
     node.add_on_set_parameters_callback(check)
-    values = parameter_values(node, specs)
     for spec in specs:
-        if spec.choices and values[spec.name] not in spec.choices:
-            raise CalibrationError(
-                f"parameter {spec.name} is {values[spec.name]!r}; it must be one of "
-                f"{list(spec.choices)}"
-            )
-    return values
+        problem = spec.problem(node.get_parameter(spec.name).value)
+        if problem is not None:
+            raise CalibrationError(f"parameter {problem}")
+    return parameter_values(node, specs)
 
 
 def parameter_values(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
-    """Current values of the declared parameters, by name."""
-    return {spec.name: node.get_parameter(spec.name).value for spec in specs}
+    """Current values of the declared parameters, by name (see :meth:`ParamSpec.value`)."""
+    return {spec.name: spec.value(node.get_parameter(spec.name).value) for spec in specs}
 
 
 def run_node(
