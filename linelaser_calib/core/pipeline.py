@@ -438,6 +438,7 @@ def _known_point_result(
         config.method.value,
         np.random.default_rng(config.seed),
     )
+    used = set(outcome.samples_used)
     return CalibrationResult(
         T_flange_sensor=outcome.T_flange_sensor,
         cylinder=None,
@@ -453,4 +454,9 @@ def _known_point_result(
         target_point=TargetPoint(
             outcome.point_base, outcome.point_estimated, outcome.uncertainty_point_m
         ),
+        sample_fits=[
+            SampleFit(c.index, c.stamp_ns, c.T_base_flange, c.points, c.corner_xz)
+            for c in outcome.corners
+            if c.index in used
+        ],
     )

@@ -172,9 +172,10 @@ class SampleFit:
     T_base_flange : ndarray, shape (4, 4)
         Flange pose as paired (recorded, not corrected).
     points : ndarray, shape (K, 3)
-        Ellipse inlier points in the sensor frame, m.
+        Inlier points in the sensor frame, m (ellipse inliers; for the known-point target, the
+        points of the two V lines).
     centre_xz : ndarray, shape (2,)
-        Ellipse centre in the sensor x-z plane, m.
+        Ellipse centre in the sensor x-z plane, m (for the known-point target, the V corner).
     """
 
     index: int
