@@ -74,6 +74,14 @@ def latched_qos(depth: int) -> QoSProfile:
     )
 
 
+PARAMETER_TABLE_HEADER = "| name | default | allowed | read | description |\n|---|---|---|---|---|"
+
+
+def markdown_parameter_table(specs: Sequence[ParamSpec]) -> str:
+    """A node's parameters as a Markdown table (the README's parameter reference)."""
+    return "\n".join([PARAMETER_TABLE_HEADER, *(spec.markdown_row() for spec in specs)])
+
+
 @dataclass(frozen=True)
 class ParamSpec:
     """One declared parameter.
@@ -108,6 +116,24 @@ class ParamSpec:
     def is_array(self) -> bool:
         """True for a number-array parameter."""
         return isinstance(self.default, tuple)
+
+    def markdown_row(self) -> str:
+        """This parameter as a row of the README's parameter tables."""
+        default = (
+            "[" + ", ".join(str(v) for v in self.default) + "]"
+            if self.is_array
+            else repr(self.default)
+        )
+        allowed = ""
+        if self.choices:
+            allowed = " \\| ".join(f"`{c}`" for c in self.choices)
+        elif self.bounds is not None:
+            allowed = f"{self.bounds[0]:g} to {self.bounds[1]:g}"
+        elif self.sizes:
+            allowed = " or ".join(f"{n} numbers" for n in self.sizes)
+        when = "start-up" if self.read_only else "any time"
+        text = self.description.replace("|", "\\|")
+        return f"| `{self.name}` | `{default}` | {allowed} | {when} | {text} |"
 
     def descriptor(self) -> ParameterDescriptor:
         """The ``ParameterDescriptor`` declared for this parameter."""
