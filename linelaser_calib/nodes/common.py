@@ -119,11 +119,9 @@ class ParamSpec:
 
     def markdown_row(self) -> str:
         """This parameter as a row of the README's parameter tables."""
-        default = (
-            "[" + ", ".join(str(v) for v in self.default) + "]"
-            if self.is_array
-            else repr(self.default)
-        )
+        default = repr(self.default)
+        if isinstance(self.default, tuple):
+            default = "[" + ", ".join(str(v) for v in self.default) + "]"
         allowed = ""
         if self.choices:
             allowed = " \\| ".join(f"`{c}`" for c in self.choices)
