@@ -8,8 +8,9 @@ import numpy as np
 
 from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.poses import sample_sensor_poses
-from linelaser_calib.sim.profiler import measure, trace
+from linelaser_calib.sim.profiler import Measurement, measure, trace
 from linelaser_calib.sim.robot import (
+    Motion,
     draw_errors,
     jitter_transforms,
     plan_motion,
@@ -106,6 +107,43 @@ class SimulatedData:
         return self.truth.scenario
 
 
+def recorded_pose_stream(
+    rng: np.random.Generator, scenario: Scenario, motion: Motion, errors: FloatArray
+) -> list[FlangePose]:
+    """The robot's flange-pose stream at ``robot_rate_hz`` over the whole motion.
+
+    Each message is the reported pose (true pose with the shot's error ``errors``) times a
+    per-message jitter, stamped on the pose clock from ``epoch_ns``.
+    """
+    period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
+    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
+    stream_ns = np.arange(n_stream, dtype=np.int64) * period_ns
+    stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
+    stream = stream @ jitter_transforms(rng, scenario, n_stream)
+    return [
+        FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
+        for s, T in zip(stream_ns, stream, strict=True)
+    ]
+
+
+def published_profiles(
+    scenario: Scenario, acq_ns: Int64Array, measured: Measurement
+) -> tuple[Int64Array, list[Profile], list[FloatArray | None]]:
+    """Profile stamps (acquisition + latency), profiles and intensities as published.
+
+    Organised profiles keep every ray (NaN when invalid); dense ones keep the valid rays.
+    """
+    stamps = scenario.epoch_ns + acq_ns + round(scenario.latency_s * 1e9)
+    profiles, intensities = [], []
+    for k in range(len(acq_ns)):
+        keep = slice(None) if scenario.organised else measured.valid[k]
+        profiles.append(
+            Profile(int(stamps[k]), measured.points[k][keep], frame_id=scenario.sensor_frame)
+        )
+        intensities.append(None if measured.intensity is None else measured.intensity[k][keep])
+    return stamps, profiles, intensities
+
+
 def simulate(scenario: Scenario, seed: int) -> SimulatedData:
     """Simulate a calibration run; deterministic for a given scenario and seed.
 
@@ -126,30 +164,13 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
     motion = plan_motion(sampled.T_base_sensor, scenario)
     errors = draw_errors(rng, scenario, len(sampled.T_base_sensor))
 
-    period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
     acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
     t_shot = acq_ns / 1e9
     T_sensor_shot = motion.T_base_sensor(t_shot)
     traced = trace(scene, scenario, T_sensor_shot)
     measured = measure(rng, scenario, traced)
-
-    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
-    stream_ns = np.arange(n_stream, dtype=np.int64) * period_ns
-    stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
-    stream = stream @ jitter_transforms(rng, scenario, n_stream)
-
-    stamps = scenario.epoch_ns + acq_ns + round(scenario.latency_s * 1e9)
-    profiles, intensities = [], []
-    for k in range(len(acq_ns)):
-        keep = slice(None) if scenario.organised else measured.valid[k]
-        profiles.append(
-            Profile(int(stamps[k]), measured.points[k][keep], frame_id=scenario.sensor_frame)
-        )
-        intensities.append(None if measured.intensity is None else measured.intensity[k][keep])
-    poses = [
-        FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
-        for s, T in zip(stream_ns, stream, strict=True)
-    ]
+    poses = recorded_pose_stream(rng, scenario, motion, errors)
+    stamps, profiles, intensities = published_profiles(scenario, acq_ns, measured)
     truth = SimulationTruth(
         scenario=scenario,
         seed=seed,

@@ -68,9 +68,10 @@ from linelaser_calib.core.geometry import (
 )
 from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.profiler import Trace, measure, ray_directions
-from linelaser_calib.sim.robot import StepMotion, draw_errors, jitter_transforms, reported_flange
+from linelaser_calib.sim.robot import StepMotion, draw_errors, reported_flange
 from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
+from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
 
 Vec3 = tuple[float, float, float]
 
@@ -563,30 +564,13 @@ def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
     motion = StepMotion.plan(views, rig)
     errors = draw_errors(rng, rig, len(views))
 
-    period_ns = max(1, round(1e9 / rig.robot_rate_hz))
     acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
     t_shot = acq_ns / 1e9
     T_sensor_shot = motion.T_base_sensor(t_shot)
     traced, flank = trace_groove(groove, rig, T_sensor_shot)
     measured = measure(rng, rig, traced)
-
-    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
-    stream_ns = np.arange(n_stream, dtype=np.int64) * period_ns
-    stream = reported_flange(motion, rig, errors, stream_ns / 1e9)
-    stream = stream @ jitter_transforms(rng, rig, n_stream)
-
-    stamps = rig.epoch_ns + acq_ns + round(rig.latency_s * 1e9)
-    profiles, intensities = [], []
-    for k in range(len(acq_ns)):
-        keep = slice(None) if rig.organised else measured.valid[k]
-        profiles.append(
-            Profile(int(stamps[k]), measured.points[k][keep], frame_id=rig.sensor_frame)
-        )
-        intensities.append(None if measured.intensity is None else measured.intensity[k][keep])
-    poses = [
-        FlangePose(int(rig.epoch_ns + s), T, frame_id=rig.base_frame)
-        for s, T in zip(stream_ns, stream, strict=True)
-    ]
+    poses = recorded_pose_stream(rng, rig, motion, errors)
+    stamps, profiles, intensities = published_profiles(rig, acq_ns, measured)
     corner_base = groove.seam_point_in_plane(T_sensor_shot)
     corner_sensor = np.einsum(
         "kji,kj->ki", T_sensor_shot[:, :3, :3], corner_base - T_sensor_shot[:, :3, 3]
