@@ -98,7 +98,7 @@ from .geometry import (
     rotvec_from_matrix,
     transform_from_rotation_translation,
 )
-from .observability import _canonical_basis
+from .observability import poor_directions, scaled_eigen
 from .profile import CleaningConfig, clean_profile
 from .refine import (
     INITIAL_DAMPING,
@@ -1098,11 +1098,7 @@ def analyse_known_point(
     T = np.asarray(T_base_flange, dtype=np.float64)
     X = np.asarray(T_flange_sensor, dtype=np.float64)
     lever = float(np.median(np.linalg.norm(c, axis=1)))
-    scale = np.array([lever] * 3 + [1.0] * 3)
-    scaled = np.asarray(information_data, dtype=np.float64) / np.outer(scale, scale)
-    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (scaled + scaled.T))
-    floor = float(np.finfo(float).eps) * 6.0 * max(float(eigenvalues[-1]), 0.0)
-    sigma = np.where(eigenvalues > floor, 1.0 / np.sqrt(np.maximum(eigenvalues, floor)), np.inf)
+    _, eigenvectors, sigma = scaled_eigen(np.asarray(information_data, dtype=np.float64), lever)
 
     R = T[:, :3, :3]
     R_mean = project_to_so3(np.sum(R, axis=0))
@@ -1114,25 +1110,12 @@ def analyse_known_point(
     collinear = bool(corner_spread[1] < COLLINEAR_RATIO * corner_spread[0])
     inputs = (lever, X[:3, :3], line, collinear, spread < SAME_ORIENTATION_RAD, point_estimated)
 
-    directions: list[HandEyeDirection] = []
-    for status, low, high in (
-        ("unobservable", cfg.unobservable_sigma_m, np.inf),
-        ("weak", cfg.weak_sigma_m, cfg.unobservable_sigma_m),
-    ):
-        chosen = (sigma > low) & (sigma <= high)
-        if not np.any(chosen):
-            continue
-        basis = eigenvectors[:, chosen]
-        for v in _canonical_basis(basis).T:
-            weights = (basis.T @ v) ** 2
-            finite = np.isfinite(sigma[chosen])
-            variance = (
-                float(np.sum(weights[finite] * sigma[chosen][finite] ** 2))
-                if np.all(finite | (weights < 1e-12))
-                else math.inf
-            )
-            s = math.sqrt(variance)
-            directions.append(HandEyeDirection(v, s, status, _describe(v, inputs, status, s)))
+    directions = [
+        HandEyeDirection(
+            d.vector, d.sigma_m, d.status, _describe(d.vector, inputs, d.status, d.sigma_m)
+        )
+        for d in poor_directions(eigenvectors, sigma, cfg.weak_sigma_m, cfg.unobservable_sigma_m)
+    ]
     return KnownPointObservability(
         sigma_m=np.asarray(np.sort(sigma)[::-1], dtype=np.float64),
         lever_m=lever,

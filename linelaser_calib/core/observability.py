@@ -35,6 +35,7 @@ the cut angle between the laser plane and the axis for rotations.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -325,6 +326,66 @@ def _canonical_basis(V: FloatArray) -> FloatArray:
     return np.asarray(V @ Qt.T)
 
 
+def scaled_eigen(
+    information: FloatArray, lever_m: float
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Eigen-decomposition of a hand-eye information matrix in length units.
+
+    Parameters
+    ----------
+    information : ndarray, shape (6, 6)
+        Information of ``[θ (rad, sensor axes), ρ (m, flange axes)]``.
+    lever_m : float
+        Length converting rotation (rad) to displacement (m).
+
+    Returns
+    -------
+    eigenvalues : ndarray, shape (6,), ascending
+    eigenvectors : ndarray, shape (6, 6)
+        Columns in scaled units (rotation times the lever, then translation).
+    sigma_m : ndarray, shape (6,)
+        1-sigma along each eigenvector, m; inf where the information is a numerical zero.
+    """
+    scale = np.array([lever_m] * 3 + [1.0] * 3)
+    scaled = np.asarray(information, dtype=np.float64) / np.outer(scale, scale)
+    eigenvalues, eigenvectors = np.linalg.eigh(0.5 * (scaled + scaled.T))
+    # Eigenvalues below eps * largest are numerical zeros: the direction has no information.
+    floor = float(np.finfo(float).eps) * max(float(eigenvalues[-1]), 0.0) * 6.0
+    sigma = np.where(eigenvalues > floor, 1.0 / np.sqrt(np.maximum(eigenvalues, floor)), np.inf)
+    return eigenvalues, eigenvectors, np.asarray(sigma, dtype=np.float64)
+
+
+class PoorDirection(NamedTuple):
+    """A hand-eye direction (6,) in scaled units, its 1-sigma (m) and ``weak``/``unobservable``."""
+
+    vector: FloatArray
+    sigma_m: float
+    status: str
+
+
+def poor_directions(
+    eigenvectors: FloatArray, sigma_m: FloatArray, weak_sigma_m: float, unobservable_sigma_m: float
+) -> list[PoorDirection]:
+    """Unobservable (1-sigma above ``unobservable_sigma_m``) and weak directions, unobservable
+    first, each subspace re-expressed so that a direction is mostly rotation or mostly
+    translation (:func:`_canonical_basis`)."""
+    found: list[PoorDirection] = []
+    for status, low, high in (
+        ("unobservable", unobservable_sigma_m, np.inf),
+        ("weak", weak_sigma_m, unobservable_sigma_m),
+    ):
+        chosen = (sigma_m > low) & (sigma_m <= high)
+        if not np.any(chosen):
+            continue
+        basis = eigenvectors[:, chosen]
+        for v in _canonical_basis(basis).T:
+            weights = (basis.T @ v) ** 2
+            share = weights > 1e-12
+            variance = float(np.sum(weights[share] * sigma_m[chosen][share] ** 2))
+            found.append(PoorDirection(v, float(np.sqrt(variance)), status))
+    return found
+
+
 def analyse_observability(
     information: FloatArray,
     lever_m: float,
@@ -342,29 +403,15 @@ def analyse_observability(
     geometry : PoseGeometry
     config : ObservabilityConfig
     """
-    scale = np.array([lever_m] * 3 + [1.0] * 3)
-    scaled = information / np.outer(scale, scale)
-    scaled = 0.5 * (scaled + scaled.T)
-    eigenvalues, eigenvectors = np.linalg.eigh(scaled)
-    # Eigenvalues below eps * largest are numerical zeros: the direction has no information.
-    floor = float(np.finfo(float).eps) * max(float(eigenvalues[-1]), 0.0) * 6.0
-    with np.errstate(divide="ignore"):
-        sigma = np.where(eigenvalues > floor, 1.0 / np.sqrt(np.maximum(eigenvalues, floor)), np.inf)
-    directions: list[Direction] = []
-    for status, low, high in (
-        ("unobservable", config.unobservable_sigma_m, np.inf),
-        ("weak", config.weak_sigma_m, config.unobservable_sigma_m),
-    ):
-        chosen = (sigma > low) & (sigma <= high)
-        if not np.any(chosen):
-            continue
-        basis = eigenvectors[:, chosen]
-        for v in _canonical_basis(basis).T:
-            weights = (basis.T @ v) ** 2
-            share = weights > 1e-12
-            variance = float(np.sum(weights[share] * sigma[chosen][share] ** 2))
-            text = describe_direction(v, lever_m, geometry, status)
-            directions.append(Direction(v, float(np.sqrt(variance)), status, text))
+    eigenvalues, eigenvectors, sigma = scaled_eigen(information, lever_m)
+    directions = [
+        Direction(
+            d.vector, d.sigma_m, d.status, describe_direction(d.vector, lever_m, geometry, d.status)
+        )
+        for d in poor_directions(
+            eigenvectors, sigma, config.weak_sigma_m, config.unobservable_sigma_m
+        )
+    ]
     return Observability(
         eigenvalues=eigenvalues,
         eigenvectors=eigenvectors,
