@@ -17,6 +17,7 @@ is rejected (the pose is then unreliable by latency times speed).
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -137,7 +138,7 @@ class PoseBuffer:
     def add(self, pose: FlangePose) -> None:
         """Insert one pose in stamp order (duplicates of an existing stamp are ignored)."""
         stamps = self._stamps
-        i = int(np.searchsorted(stamps, pose.stamp_ns))
+        i = bisect_left(stamps, pose.stamp_ns)
         if i < len(stamps) and stamps[i] == pose.stamp_ns:
             self.duplicates += 1
             return
@@ -146,7 +147,7 @@ class PoseBuffer:
         stamps.insert(i, pose.stamp_ns)
         self._transforms.insert(i, pose.T_base_flange)
         if self._max_age_ns is not None:
-            cut = int(np.searchsorted(stamps, stamps[-1] - self._max_age_ns))
+            cut = bisect_left(stamps, stamps[-1] - self._max_age_ns)
             if cut > 0:
                 del stamps[:cut]
                 del self._transforms[:cut]
@@ -177,7 +178,7 @@ class PoseBuffer:
         """Signed offset from ``stamp_ns`` to the nearest pose stamp, ns."""
         if not self._stamps:
             return None
-        i = int(np.searchsorted(self._stamps, stamp_ns))
+        i = bisect_left(self._stamps, stamp_ns)
         candidates = [self._stamps[j] - stamp_ns for j in (i - 1, i) if 0 <= j < len(self)]
         return min(candidates, key=abs)
 
@@ -193,7 +194,7 @@ class PoseBuffer:
         stamps = self._stamps
         if not stamps:
             return "no flange pose received"
-        i = int(np.searchsorted(stamps, stamp_ns))
+        i = bisect_left(stamps, stamp_ns)
         if i < len(stamps) and stamps[i] == stamp_ns:
             return self._transforms[i]
         before = i - 1 if i > 0 and stamp_ns - stamps[i - 1] <= tolerance_ns else None

@@ -42,6 +42,10 @@ Departures, each with its switch in :class:`HybridConfig`:
      has no a1 ⊥ a3 constraint) and the unit norms hold exactly.
    - Restarts: if the polished RMS centre-to-axis distance exceeds ``accept_rms_m``, the
      hybrid runs again from a new swarm, up to ``max_restarts`` times, keeping the best.
+     They stop early when a swarm ends on the best solution again (polished RMS equal to
+     within ``same_minimum_rtol``): two independent swarms agreeing is the sign of the
+     global minimum of data that cannot reach ``accept_rms_m``, e.g. noisy centres or one
+     wrong centre, where more swarms only cost time (~0.5 s each).
    - Early acceptance (``accept_early=True``, off by default): g_best is polished whenever
      it changes, and the swarm stops as soon as the polished RMS distance is at most
      ``accept_rms_m``. A seed for the maximum-likelihood refinement only has to land in its
@@ -503,6 +507,9 @@ class HybridConfig:
         Largest polished RMS centre-to-axis distance that ends the restarts, m.
     max_restarts : int
         Extra swarms tried when a run is not accepted.
+    same_minimum_rtol : float
+        Restarts stop when a swarm's polished RMS distance equals the best one to this
+        relative tolerance (the same minimum found twice); 0 disables.
     accept_early : bool
         Polish g_best whenever it changes and end the swarm once the polished RMS distance
         is at most ``accept_rms_m`` (module docstring, departure 4). Not with ``faithful``.
@@ -517,6 +524,7 @@ class HybridConfig:
     length_unit_m: float | None = None
     accept_rms_m: float = 5e-4
     max_restarts: int = 8
+    same_minimum_rtol: float = 1e-3
     accept_early: bool = False
 
     def __post_init__(self) -> None:
@@ -531,6 +539,8 @@ class HybridConfig:
             raise InputError(
                 "translation_bound_m and accept_rms_m must be positive and max_restarts >= 0"
             )
+        if not self.same_minimum_rtol >= 0.0:
+            raise InputError(f"same_minimum_rtol must be >= 0, got {self.same_minimum_rtol}")
 
 
 @dataclass(frozen=True)
@@ -659,6 +669,8 @@ def solve_pso_galm(
             restarts += 1
             x, _, polished = _hybrid(problem, lower, upper, psi, config, rng, run)
             x, rms = polished or _polish(problem, x)
+            if abs(rms - best_rms) < config.same_minimum_rtol * best_rms:
+                break
             if rms < best_rms:
                 best_x, best_rms = x, rms
         accepted = best_rms <= config.accept_rms_m

@@ -43,8 +43,10 @@ from numpy.typing import NDArray
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
+from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io.errors import BagError
 from msg_adapters import (
@@ -56,6 +58,7 @@ from msg_adapters import (
     rosbags_types,
     stamp_ns_from_msg,
 )
+from msg_adapters.message_types import NS_PER_S
 
 PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
@@ -548,21 +551,124 @@ def _raw_messages(
         yield item
 
 
-def _convert(
-    topic: str, msgtype: str, log_ns: int, raw: Any
-) -> Profile | FlangePose | SkippedMessage:
-    """Decode one profile or pose message; a malformed one becomes a :class:`SkippedMessage`."""
+def _decode(topic: str, msgtype: str, log_ns: int, raw: Any) -> Any:
+    """Deserialise one message; undecodable bytes become a :class:`SkippedMessage`."""
     try:
-        msg: Any = _typestore().deserialize_cdr(raw, msgtype)
+        return _typestore().deserialize_cdr(raw, msgtype)
     # Corrupt message bytes make the deserialiser raise various errors; skip the message.
     except Exception as err:
         return SkippedMessage(topic, log_ns, f"cannot decode the message: {err}")
+
+
+def _profile(topic: str, msg: Any) -> Profile | SkippedMessage:
+    """Profile of a decoded PointCloud2; a malformed one becomes a :class:`SkippedMessage`."""
     try:
-        if msgtype == PROFILE_TYPE:
-            return profile_from_pointcloud2(msg)
-        return flange_pose_from_pose_stamped(msg)
+        return profile_from_pointcloud2(msg)
     except MessageError as err:
         return SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err))
+
+
+class _PoseRecords(NamedTuple):
+    """PoseStamped fields parsed in a batch; rows with ``parsed`` False are not filled."""
+
+    parsed: NDArray[np.bool_]  # (K,)
+    stamps_ns: NDArray[np.int64]  # (K,)
+    frame_ids: list[str]
+    values: NDArray[np.float64]  # (K, 7): position x, y, z (m), orientation x, y, z, w
+
+
+def _parse_pose_stamped(raws: Sequence[bytes]) -> _PoseRecords:
+    """Parse serialised PoseStamped messages in one vectorised pass (a bag holds thousands).
+
+    Little-endian CDR (what ROS 2 middlewares write on little-endian hosts: x86, ARM) of a
+    PoseStamped is fixed but for the frame id: after the 4-byte encapsulation header
+    (0, 1, options), int32 sec and uint32 nanosec, uint32 length of frame_id counting its
+    NUL, the bytes, zero padding to 8 (relative to the payload), then 7 float64. Messages
+    of one size share one array view. A message that does not have exactly this layout
+    (big-endian, trailing bytes, a bad length or frame id) is left unparsed for the generic
+    decoder.
+    """
+    count = len(raws)
+    parsed = np.zeros(count, dtype=np.bool_)
+    stamps = np.zeros(count, dtype=np.int64)
+    values = np.full((count, 7), np.nan)
+    frame_ids = [""] * count
+    sizes = np.fromiter((len(r) for r in raws), dtype=np.int64, count=count)
+    for size in np.unique(sizes):
+        rows = np.flatnonzero(sizes == size)
+        if size < 4 + 12 + 1 + 56:
+            continue
+        joined = b"".join(raws[int(i)] for i in rows)
+        block = np.frombuffer(joined, dtype=np.uint8).reshape(len(rows), int(size))
+        length = block[:, 12:16].copy().view("<u4")[:, 0].astype(np.int64)
+        data_start = 4 + (12 + length + 7) // 8 * 8
+        layout = (block[:, 0] == 0) & (block[:, 1] == 1) & (length >= 1)
+        layout &= data_start + 56 == size
+        for n in np.unique(length[layout]):
+            sub = np.flatnonzero(layout & (length == n))
+            frames, inverse = np.unique(block[sub, 16 : 16 + n], axis=0, return_inverse=True)
+            names: list[str | None] = []
+            for frame in frames:
+                try:
+                    names.append(bytes(frame[:-1]).decode() if frame[-1] == 0 else None)
+                except UnicodeDecodeError:
+                    names.append(None)
+            inverse = inverse.ravel()
+            keep = np.array([name is not None for name in names])[inverse]
+            sub, inverse = sub[keep], inverse[keep]
+            start = int(4 + (12 + n + 7) // 8 * 8)
+            sec = block[sub, 4:8].copy().view("<i4")[:, 0].astype(np.int64)
+            nanosec = block[sub, 8:12].copy().view("<u4")[:, 0].astype(np.int64)
+            parsed[rows[sub]] = True
+            stamps[rows[sub]] = sec * NS_PER_S + nanosec
+            values[rows[sub]] = block[sub, start : start + 56].copy().view("<f8")
+            for row, name_index in zip(rows[sub], inverse, strict=True):
+                frame_ids[row] = str(names[name_index])
+    return _PoseRecords(parsed, stamps, frame_ids, values)
+
+
+def _flange_poses(
+    topic: str, raws: Sequence[bytes], log_ns: Sequence[int]
+) -> list[FlangePose | SkippedMessage]:
+    """Flange poses of serialised PoseStamped messages, parsed and converted in one batch.
+
+    A bag holds thousands of poses (125-500 Hz): the batch costs ~2 µs per pose instead of
+    ~30 µs for decoding and converting each message. A message that the batch cannot parse
+    (:func:`_parse_pose_stamped`), or whose position or quaternion fails the checks of
+    :func:`~msg_adapters.flange_pose_from_pose_stamped` (non-finite, zero or non-unit
+    quaternion), is decoded by rosbags and converted by that function, which says why it
+    is unusable.
+
+    Returns
+    -------
+    list of FlangePose or SkippedMessage
+        One per message, in order.
+    """
+    records = _parse_pose_stamped(raws)
+    position, q_xyzw = records.values[:, :3], records.values[:, 3:]
+    norm = np.linalg.norm(q_xyzw, axis=1)
+    with np.errstate(invalid="ignore"):
+        good = records.parsed & np.all(np.isfinite(records.values), axis=1) & (norm >= 1e-12)
+        good &= np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE
+    T = np.zeros((len(raws), 4, 4))
+    T[:, 3, 3] = 1.0
+    if good.any():
+        T[good, :3, :3] = Rotation.from_quat(q_xyzw[good] / norm[good, None]).as_matrix()
+    T[:, :3, 3] = position
+    out: list[FlangePose | SkippedMessage] = []
+    for k in range(len(raws)):
+        if good[k]:
+            out.append(FlangePose(int(records.stamps_ns[k]), T[k], records.frame_ids[k]))
+            continue
+        msg = _decode(topic, POSE_TYPE, log_ns[k], raws[k])
+        if isinstance(msg, SkippedMessage):
+            out.append(msg)
+            continue
+        try:
+            out.append(flange_pose_from_pose_stamped(msg))
+        except MessageError as err:
+            out.append(SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err)))
+    return out
 
 
 def read_bag(
@@ -609,24 +715,38 @@ def read_bag(
     wanted = {(chosen_profile, PROFILE_TYPE), (chosen_pose, POSE_TYPE)}
     total = sum(t.msgcount for t in summary.topics if (t.topic, t.msgtype) in wanted)
 
-    profiles: list[Profile] = []
-    poses: list[FlangePose] = []
-    skipped: list[SkippedMessage] = []
+    decoded: list[Profile | SkippedMessage | None] = []  # None: a pose, converted below
+    pose_raws: list[bytes] = []
+    pose_log_ns: list[int] = []
     done = 0
     for part in parts:
         with _open_part(part, bag) as reader:
             connections = [c for c in reader.connections if (c.topic, c.msgtype) in wanted]
             for conn, log_ns, raw in _raw_messages(reader, connections, bag, part):
-                item = _convert(conn.topic, conn.msgtype, log_ns, raw)
-                if isinstance(item, Profile):
-                    profiles.append(item)
-                elif isinstance(item, FlangePose):
-                    poses.append(item)
+                if conn.msgtype == PROFILE_TYPE:
+                    msg = _decode(conn.topic, conn.msgtype, log_ns, raw)
+                    decoded.append(
+                        msg if isinstance(msg, SkippedMessage) else _profile(conn.topic, msg)
+                    )
                 else:
-                    skipped.append(item)
+                    decoded.append(None)
+                    pose_raws.append(bytes(raw))
+                    pose_log_ns.append(log_ns)
                 done += 1
                 if progress is not None:
                     progress(done, total)
+    converted = iter(_flange_poses(chosen_pose, pose_raws, pose_log_ns))
+    profiles: list[Profile] = []
+    poses: list[FlangePose] = []
+    skipped: list[SkippedMessage] = []
+    for item in decoded:
+        entry = next(converted) if item is None else item
+        if isinstance(entry, Profile):
+            profiles.append(entry)
+        elif isinstance(entry, FlangePose):
+            poses.append(entry)
+        else:
+            skipped.append(entry)
 
     for items, topic, what in ((profiles, chosen_profile, "profile"), (poses, chosen_pose, "pose")):
         if not items:
