@@ -409,3 +409,65 @@ def test_empty_session_says_so(tmp_path: Path) -> None:
     SessionBagWriter(tmp_path / "session").close()
     with pytest.raises(BagError, match="holds no samples yet"):
         read_bag(tmp_path / "session")
+
+
+def test_fast_pose_decoding_equals_the_message_adapter() -> None:
+    """The batch PoseStamped parser against rosbags + flange_pose_from_pose_stamped."""
+    from rosbags.typesys import Stores, get_typestore
+
+    from linelaser_calib.io.bags import SkippedMessage, _flange_poses
+    from msg_adapters import MessageError, flange_pose_from_pose_stamped
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types = store.types
+    rng = np.random.default_rng(17)
+    frames = ["base_link", "b", "world_ünïcode", "x" * 13, "robot/base", ""]
+    raws: list[bytes] = []
+    for k in range(120):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        if k % 17 == 3:
+            q = np.zeros(4)  # zero quaternion: rejected by both
+        if k % 19 == 5:
+            q = q * 1.0004  # slightly non-unit: normalised by both
+        position = rng.normal(size=3)
+        if k % 23 == 7:
+            position[1] = np.nan
+        msg = types["geometry_msgs/msg/PoseStamped"](
+            header=types["std_msgs/msg/Header"](
+                stamp=types["builtin_interfaces/msg/Time"](
+                    sec=int(rng.integers(0, 2**31 - 1)), nanosec=int(rng.integers(0, 10**9))
+                ),
+                frame_id=frames[k % len(frames)],
+            ),
+            pose=types["geometry_msgs/msg/Pose"](
+                position=types["geometry_msgs/msg/Point"](*position),
+                orientation=types["geometry_msgs/msg/Quaternion"](*q),
+            ),
+        )
+        raw = bytes(store.serialize_cdr(msg, "geometry_msgs/msg/PoseStamped"))
+        if k % 29 == 11:
+            raw = raw[:-5]  # truncated
+        if k % 31 == 13:
+            raw = raw + b"\0" * 8  # trailing bytes: left to the generic decoder
+        raws.append(raw)
+    fast = _flange_poses("/pose", raws, list(range(len(raws))))
+    assert len(fast) == len(raws)
+    skipped = 0
+    for k, (raw, got) in enumerate(zip(raws, fast, strict=True)):
+        try:
+            expected = flange_pose_from_pose_stamped(
+                store.deserialize_cdr(raw, "geometry_msgs/msg/PoseStamped")
+            )
+        except MessageError:
+            assert isinstance(got, SkippedMessage), k
+            skipped += 1
+            continue
+        except Exception:
+            assert isinstance(got, SkippedMessage), k  # undecodable bytes
+            skipped += 1
+            continue
+        assert not isinstance(got, SkippedMessage), (k, got)
+        assert got.stamp_ns == expected.stamp_ns and got.frame_id == expected.frame_id
+        np.testing.assert_allclose(got.T_base_flange, expected.T_base_flange, atol=1e-12)
+    assert skipped >= 10

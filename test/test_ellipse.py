@@ -266,3 +266,28 @@ def test_sampson_distance_approximates_the_normal_offset() -> None:
     offset = 20e-6
     distance = sampson_distance(true_conic(centre, angle), on + offset * normal)
     np.testing.assert_allclose(distance, offset, rtol=2e-3)
+
+
+def test_regression_table_line_never_captures_the_ellipse() -> None:
+    """Arcs with the table in view (cylinder standing on it): RANSAC once accepted large
+    ellipses hugging the table line; every accepted fit must have the radius as semi-minor
+    axis and lie on the true arc."""
+    from linelaser_calib.core.pipeline import FittedSample, PipelineConfig, fit_sample
+    from linelaser_calib.core.types import Sample
+    from linelaser_calib.sim import random_scenario, simulate
+
+    fitted = 0
+    for seed in range(4):
+        scenario = random_scenario(
+            np.random.default_rng(500 + seed), background="table", n_poses=12, resolution=400
+        )
+        data = simulate(scenario, seed)
+        radius = data.truth.cylinder.radius
+        rng = np.random.default_rng(seed)
+        for k, profile in enumerate(data.profiles):
+            sample = Sample(k, profile.stamp_ns, data.truth.T_base_flange_true[k], profile.points)
+            outcome = fit_sample(sample, PipelineConfig(), rng)
+            if isinstance(outcome, FittedSample):
+                fitted += 1
+                assert abs(outcome.ellipse.semi_axes[1] - radius) < 2e-4, (seed, k)
+    assert fitted >= 30
