@@ -223,7 +223,10 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         radius_m=args.radius,
         seed=args.seed,
         pairing=PairingConfig(
-            sync_tolerance_s=args.sync_tolerance, clock_offset_s=args.clock_offset
+            sync_tolerance_s=args.sync_tolerance,
+            clock_offset_s=args.clock_offset,
+            max_linear_speed_m_s=args.max_speed,
+            max_angular_speed_rad_s=args.max_angular_speed,
         ),
         initial_T_flange_sensor=initial,
     )
@@ -473,6 +476,19 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=0.0,
         help="added to profile stamps to reach the pose clock, s",
+    )
+    cal.add_argument(
+        "--max-speed",
+        type=float,
+        default=PairingConfig.max_linear_speed_m_s,
+        help="reject profiles taken while the flange moved faster, m/s; 0 accepts any "
+        "(continuous scanning with a good clock)",
+    )
+    cal.add_argument(
+        "--max-angular-speed",
+        type=float,
+        default=PairingConfig.max_angular_speed_rad_s,
+        help="reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
     )
     cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
     cal.add_argument("--json", action="store_true", help="print the result as JSON")

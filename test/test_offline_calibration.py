@@ -55,3 +55,17 @@ def test_other_names_radius_and_axis(tmp_path: Path) -> None:
     assert result.cylinder.radius == pytest.approx(0.03, abs=1e-4)
     assert main(["calibrate", str(bag), "--radius", "0.03", "--output", str(out)]) == 0
     assert read_result_yaml(out).cylinder.radius == 0.03  # type: ignore[union-attr]
+
+
+def test_continuous_motion_needs_the_speed_gate_opened_and_the_latency(tmp_path: Path) -> None:
+    """Continuous scanning (4 ms profile latency): rejected as moving by default; with the
+    gate open and the clock offset given, the hand-eye is recovered."""
+    bag = tmp_path / "continuous"
+    assert main(["simulate", str(bag), "--scenario", "continuous", "--seed", "3"]) == 0
+    truth = read_truth_yaml(bag / "truth.yaml")
+    out = tmp_path / "result.yaml"
+    assert main(["calibrate", str(bag), "--output", str(out)]) == 1
+    args = ["calibrate", str(bag), "--max-speed", "0", "--max-angular-speed", "0"]
+    assert main([*args, "--clock-offset", "-0.004", "--output", str(out)]) == 0
+    rot, trans = transform_error(read_result_yaml(out).T_flange_sensor, truth.T_flange_sensor)
+    assert np.degrees(rot) < 0.05 and trans < 1e-4
