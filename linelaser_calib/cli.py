@@ -49,6 +49,19 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _offset(text: str) -> float | str:
+    """Parse a clock offset in s, or ``auto``."""
+    if text == "auto":
+        return text
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds or 'auto', got {text!r}") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected finite seconds, got {text!r}")
+    return value
+
+
 def _xyz(text: str) -> tuple[float, float, float]:
     """Parse ``x,y,z`` (m)."""
     try:
@@ -224,7 +237,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
-            clock_offset_s=args.clock_offset,
+            clock_offset_s=0.0 if args.clock_offset == "auto" else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
@@ -302,6 +315,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             profile_topic=args.profile_topic,
             pose_topic=args.pose_topic,
             flange_frame=args.flange_frame,
+            estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
         )
     except PairingError as exc:
@@ -473,9 +487,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal.add_argument(
         "--clock-offset",
-        type=float,
+        type=_offset,
         default=0.0,
-        help="added to profile stamps to reach the pose clock, s",
+        help="added to profile stamps to reach the pose clock, s; 'auto' estimates it "
+        "(continuous scanning with latency)",
     )
     cal.add_argument(
         "--max-speed",

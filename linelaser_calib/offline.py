@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.pipeline import PipelineConfig, Progress, run_pipeline
+from linelaser_calib.core.pipeline import (
+    PipelineConfig,
+    Progress,
+    estimate_clock_offset,
+    run_pipeline,
+)
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import BagContents, read_bag
 
@@ -30,6 +35,7 @@ def calibrate_bag(
     profile_topic: str | None = None,
     pose_topic: str | None = None,
     flange_frame: str = "tool0",
+    estimate_offset: bool = False,
     progress: Progress = _silent,
 ) -> OfflineRun:
     """Calibrate from a bag holding profiles (PointCloud2) and flange poses (PoseStamped).
@@ -43,6 +49,10 @@ def calibrate_bag(
         Auto-detected by message type when there is exactly one topic of each type.
     flange_frame : str
         Frame id of the flange (PoseStamped does not carry it).
+    estimate_offset : bool
+        Estimate the clock offset between profile and pose stamps (continuous scanning,
+        :func:`~linelaser_calib.core.pipeline.estimate_clock_offset`), starting from the
+        configured one.
     progress : callable, optional
         Called as ``progress(stage, done, total)``.
 
@@ -65,7 +75,13 @@ def calibrate_bag(
             "cylinder is within the sensor's measuring range and the laser is on, then record "
             "again"
         )
+    if estimate_offset:
+        progress("clock offset", 0, 1)
+        offset = estimate_clock_offset(bag.profiles, bag.poses, config)
+        config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
+        progress("clock offset", 1, 1)
     result = run_pipeline(bag.profiles, bag.poses, config, progress)
+    result.clock_offset_estimated = estimate_offset
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame
     result.base_frame = bag.base_frame

@@ -243,6 +243,11 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
         f"Samples: {len(result.samples_used)} used, {len(result.samples_rejected)} rejected"
     )
     lines += [f"  {line}" for line in rejection_lines(result)]
+    if result.clock_offset_s or result.clock_offset_estimated:
+        how = "estimated from the data" if result.clock_offset_estimated else "given"
+        lines.append(
+            f"Clock offset added to profile stamps: {result.clock_offset_s * 1e3:+.2f} ms ({how})"
+        )
     lines += [f"WARNING: {warning}" for warning in result.warnings]
     if truth is not None:
         lines.append("Error against truth:")

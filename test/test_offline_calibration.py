@@ -69,3 +69,22 @@ def test_continuous_motion_needs_the_speed_gate_opened_and_the_latency(tmp_path:
     assert main([*args, "--clock-offset", "-0.004", "--output", str(out)]) == 0
     rot, trans = transform_error(read_result_yaml(out).T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot) < 0.05 and trans < 1e-4
+
+
+def test_clock_offset_is_estimated_for_continuous_scanning(tmp_path: Path) -> None:
+    """--clock-offset auto finds the 4 ms profile latency and gives the accuracy of the true
+    offset; a step-and-shoot bag keeps 0 (nothing moves during a profile)."""
+    bag = tmp_path / "continuous"
+    assert main(["simulate", str(bag), "--scenario", "continuous", "--seed", "5"]) == 0
+    out = tmp_path / "result.yaml"
+    args = ["calibrate", str(bag), "--max-speed", "0", "--max-angular-speed", "0"]
+    assert main([*args, "--clock-offset", "auto", "--output", str(out)]) == 0
+    result = read_result_yaml(out)
+    assert result.clock_offset_estimated
+    assert result.clock_offset_s == pytest.approx(-0.004, abs=2e-4)
+    truth = read_truth_yaml(bag / "truth.yaml")
+    rot, trans = transform_error(result.T_flange_sensor, truth.T_flange_sensor)
+    assert np.degrees(rot) < 0.05 and trans < 1e-4
+    step = BAGS / "ur_scancontrol"
+    assert main(["calibrate", str(step), "--clock-offset", "auto", "--output", str(out)]) == 0
+    assert read_result_yaml(out).clock_offset_s == 0.0

@@ -24,13 +24,13 @@ import numpy as np
 
 from .cylinder_model import centre_distances
 from .ellipse import EllipseConfig, fit_ellipse_ransac
-from .errors import DegenerateError, InputError, PairingError, ProfileRejected
+from .errors import CalibrationError, DegenerateError, InputError, PairingError, ProfileRejected
 from .geometry import FloatArray, check_transform
 from .known_point import CornerSample, KnownPointConfig, calibrate_known_point, extract_corner
-from .pairing import PairingConfig, pair_profiles
+from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .profile import CleaningConfig, clean_profile
 from .pso_alm import HybridConfig, PaperSolution, solve_pso_galm
-from .refine import RefineConfig, refine_with_outlier_rejection
+from .refine import RefineConfig, refine, refine_with_outlier_rejection
 from .types import (
     CalibrationResult,
     EllipseFit,
@@ -49,6 +49,8 @@ Progress = Callable[[str, int, int], None]
 MIN_SAMPLES = 8
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
 MAX_PLAUSIBLE_DEPTH_M = 5.0
+#: Points per profile in the refinements of the clock-offset search.
+OFFSET_SEARCH_POINTS = 50
 #: A robot's flange is within this distance of its base, m.
 MAX_PLAUSIBLE_REACH_M = 20.0
 
@@ -423,6 +425,7 @@ def run_pipeline(
         raise PairingError(paired.explain_nothing_paired(config.pairing))
     result = calibrate_samples(paired.samples, config, paired.rejected, progress)
     result.warnings[:0] = paired.notes
+    result.clock_offset_s = config.pairing.clock_offset_s
     return result
 
 
@@ -460,3 +463,92 @@ def _known_point_result(
             if c.index in used
         ],
     )
+
+
+def estimate_clock_offset(
+    profiles: list[Profile],
+    poses: list[FlangePose],
+    config: PipelineConfig,
+    half_range_s: float = 0.05,
+    tolerance_s: float = 1e-4,
+) -> float:
+    """The clock offset (s) between profile and pose stamps that fits the cylinder best.
+
+    In continuous scanning a profile stamped with latency τ is paired with the pose the
+    flange had τ earlier or later, and every profile lands slightly off the cylinder. The
+    refinement's cost (maximum likelihood over every point, robot pose error modelled) is
+    evaluated at offsets within ``half_range_s`` of ``config.pairing.clock_offset_s``: a grid
+    of 11, then a golden-section search to ``tolerance_s``. The ellipses and the seed solve do
+    not depend on the offset and are computed once. Where the cost is flat (step-and-shoot:
+    the flange stands still at every profile) the configured offset is returned.
+
+    Raises
+    ------
+    PairingError, DegenerateError
+        As :func:`run_pipeline` would for the same data.
+    """
+    if config.target is not Target.CYLINDER:
+        raise InputError("the clock offset is estimated from cylinder scans only")
+    start = config.pairing.clock_offset_s
+    moving = replace(config.pairing, max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
+    paired = pair_profiles(profiles, poses, moving)
+    if not paired.samples:
+        raise PairingError(paired.explain_nothing_paired(config.pairing))
+    fitted, rejections, radius = fit_samples(paired.samples, config)
+    if len(fitted) < config.min_samples:
+        raise DegenerateError(
+            f"only {len(fitted)} profiles gave a usable ellipse; at least {config.min_samples} "
+            "are needed to estimate the clock offset. " + _rejection_digest(rejections)
+        )
+    T_paired = np.stack([f.sample.T_base_flange for f in fitted])
+    centres = np.array([f.ellipse.centre_xz for f in fitted])
+    seed = solve_pso_galm(
+        centres, T_paired, config.seed_hybrid, np.random.default_rng(config.seed + 1)
+    )
+    cylinder0 = replace(seed.cylinder, radius=radius)
+    points = [f.inlier_points for f in fitted]
+    buffer = PoseBuffer()
+    buffer.extend(poses)
+    tolerance_ns = round(config.pairing.sync_tolerance_s * NS_PER_S)
+    # A few dozen points per profile pin the offset as well as all of them (faster search).
+    light = replace(config.refine, max_points_per_profile=OFFSET_SEARCH_POINTS)
+
+    def cost(offset_s: float) -> float:
+        shift = round(offset_s * NS_PER_S)
+        found = [buffer.pose_at(f.sample.stamp_ns + shift, tolerance_ns) for f in fitted]
+        if any(isinstance(T, str) for T in found):
+            return float("inf")
+        try:
+            refined = refine(
+                points,
+                np.stack(found),
+                seed.T_flange_sensor,
+                cylinder0,
+                light,
+                config.radius_m,
+            )
+        except CalibrationError:
+            return float("inf")
+        return refined.cost_history[-1]
+
+    grid = np.linspace(start - half_range_s, start + half_range_s, 11)
+    costs = np.array([cost(float(t)) for t in grid])
+    finite = costs[np.isfinite(costs)]
+    if finite.size == 0 or float(np.max(finite) - np.min(finite)) < 1.0:
+        return start
+    best = int(np.argmin(costs))
+    step = float(grid[1] - grid[0])
+    lo, hi = float(grid[best]) - step, float(grid[best]) + step
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    a, b = hi - ratio * (hi - lo), lo + ratio * (hi - lo)
+    cost_a, cost_b = cost(a), cost(b)
+    while hi - lo > tolerance_s:
+        if cost_a < cost_b:
+            hi, b, cost_b = b, a, cost_a
+            a = hi - ratio * (hi - lo)
+            cost_a = cost(a)
+        else:
+            lo, a, cost_a = a, b, cost_b
+            b = lo + ratio * (hi - lo)
+            cost_b = cost(b)
+    return 0.5 * (lo + hi)

@@ -217,6 +217,10 @@ class CalibrationResult:
         The fitted samples the final solve used (not written to result files).
     target_point : TargetPoint or None
         The fixed point of the known-point target (weld seam); None for the cylinder.
+    clock_offset_s : float
+        Offset added to the profile stamps to pair them with the poses, s.
+    clock_offset_estimated : bool
+        True when that offset was estimated from the data (continuous scanning).
     parent_frame, child_frame, base_frame : str
         Frame ids: flange, sensor and robot base.
     """
@@ -235,6 +239,8 @@ class CalibrationResult:
     history: dict[str, list[float]] = field(default_factory=dict)
     sample_fits: list[SampleFit] = field(default_factory=list)
     target_point: TargetPoint | None = None
+    clock_offset_s: float = 0.0
+    clock_offset_estimated: bool = False
     parent_frame: str = "tool0"
     child_frame: str = "laser"
     base_frame: str = "base_link"

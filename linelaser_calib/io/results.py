@@ -203,6 +203,8 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             "rms_residual_m": float(result.rms_residual_m),
             "warnings": [str(w) for w in result.warnings],
             "radius_estimated": bool(result.radius_estimated),
+            "clock_offset_s": float(result.clock_offset_s),
+            "clock_offset_estimated": bool(result.clock_offset_estimated),
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
@@ -482,6 +484,8 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         uncertainty_translation_m=_read_uncertainty(hand_eye, "translation_m"),
         uncertainty_rotation_rad=_read_uncertainty(hand_eye, "rotation_rad"),
         radius_estimated=quality.flag("radius_estimated"),
+        clock_offset_s=quality.number("clock_offset_s") if quality.has("clock_offset_s") else 0.0,
+        clock_offset_estimated=quality.flag("clock_offset_estimated"),
         warnings=[str(w) for w in quality.items("warnings")],
         target_point=target,
         parent_frame=parent_frame,
