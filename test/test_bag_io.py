@@ -471,3 +471,28 @@ def test_fast_pose_decoding_equals_the_message_adapter() -> None:
         assert got.stamp_ns == expected.stamp_ns and got.frame_id == expected.frame_id
         np.testing.assert_allclose(got.T_base_flange, expected.T_base_flange, atol=1e-12)
     assert skipped >= 10
+
+
+def test_sqlite3_bags_read_like_mcap_bags(tmp_path: Path) -> None:
+    """rosbag2's other storage (SQLite3, the default before Iron) gives the same contents."""
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    bags = Path(__file__).resolve().parent.parent / "bags"
+    source, target = bags / "ur_scancontrol", tmp_path / "sqlite_bag"
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with (
+        Reader(source) as reader,
+        Writer(target, version=8, storage_plugin=StoragePlugin.SQLITE3) as writer,
+    ):
+        connections = {
+            c.id: writer.add_connection(c.topic, c.msgtype, typestore=store)
+            for c in reader.connections
+        }
+        for connection, stamp, raw in reader.messages():
+            writer.write(connections[connection.id], stamp, raw)
+    mcap, sqlite = read_bag(source), read_bag(target)
+    assert len(sqlite.profiles) == len(mcap.profiles) and len(sqlite.poses) == len(mcap.poses)
+    for a, b in zip(mcap.profiles, sqlite.profiles, strict=True):
+        assert a.stamp_ns == b.stamp_ns
+        np.testing.assert_array_equal(a.points, b.points)
