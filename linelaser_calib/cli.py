@@ -23,6 +23,7 @@ from linelaser_calib.core.errors import CalibrationError, InputError, PairingErr
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
+from linelaser_calib.core.refine import RefineConfig
 from linelaser_calib.core.types import CalibrationResult, TargetPoint
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
@@ -240,6 +241,11 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
             clock_offset_s=0.0 if args.clock_offset == "auto" else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
+        ),
+        refine=RefineConfig(
+            sensor_sigma_m=args.sensor_sigma,
+            robot_sigma_t_m=args.robot_sigma_t,
+            robot_sigma_r_rad=args.robot_sigma_r,
         ),
         initial_T_flange_sensor=initial,
     )
@@ -504,6 +510,24 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=PairingConfig.max_angular_speed_rad_s,
         help="reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
+    )
+    cal.add_argument(
+        "--sensor-sigma",
+        type=_positive_float,
+        default=RefineConfig.sensor_sigma_m,
+        help="profiler noise, 1 sigma, m (default method; re-estimated from the residuals)",
+    )
+    cal.add_argument(
+        "--robot-sigma-t",
+        type=_positive_float,
+        default=RefineConfig.robot_sigma_t_m,
+        help="robot pose error per pose, 1 sigma per axis, m (default: UR-class 0.1 mm)",
+    )
+    cal.add_argument(
+        "--robot-sigma-r",
+        type=_positive_float,
+        default=RefineConfig.robot_sigma_r_rad,
+        help="robot orientation error per pose, 1 sigma per axis, rad (default 0.01 deg)",
     )
     cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
