@@ -98,7 +98,7 @@ from .geometry import (
     rotvec_from_matrix,
     transform_from_rotation_translation,
 )
-from .observability import poor_directions, scaled_eigen
+from .observability import Direction, poor_directions, scaled_eigen
 from .profile import CleaningConfig, clean_profile
 from .refine import (
     INITIAL_DAMPING,
@@ -900,34 +900,6 @@ def refine_known_point(
 
 
 @dataclass(frozen=True)
-class HandEyeDirection:
-    """One hand-eye direction the views determine poorly or not at all.
-
-    Attributes
-    ----------
-    vector : ndarray, shape (6,)
-        Unit vector in scaled units: rotation times the lever about the sensor x, y, z axes,
-        then translation along the flange x, y, z axes.
-    sigma_m : float
-        Its 1σ from the views alone, m (inf: no information).
-    status : str
-        ``weak`` or ``unobservable``.
-    description : str
-        The motion in plain words and the views that would determine it.
-    """
-
-    vector: FloatArray
-    sigma_m: float
-    status: str
-    description: str
-
-    @property
-    def is_rotation(self) -> bool:
-        """Mostly a rotation (else mostly a translation)."""
-        return _is_rotation(self.vector)
-
-
-@dataclass(frozen=True)
 class KnownPointObservability:
     """What the views determine of the hand-eye (see the module docstring).
 
@@ -938,7 +910,7 @@ class KnownPointObservability:
         the lever), largest first.
     lever_m : float
         Median distance of the corners from the sensor origin, m.
-    directions : list of HandEyeDirection
+    directions : list of Direction
         Unobservable ones first, then weak ones.
     orientation_spread_rad : float
         Largest angle between a flange orientation and their mean, rad.
@@ -950,13 +922,13 @@ class KnownPointObservability:
 
     sigma_m: FloatArray
     lever_m: float
-    directions: list[HandEyeDirection]
+    directions: list[Direction]
     orientation_spread_rad: float
     corner_spread_m: FloatArray
     point_estimated: bool
 
     @property
-    def unobservable(self) -> list[HandEyeDirection]:
+    def unobservable(self) -> list[Direction]:
         """Directions the views cannot determine."""
         return [d for d in self.directions if d.status == "unobservable"]
 
@@ -982,8 +954,8 @@ class KnownPointObservability:
                 text + f". The views determine the whole hand-eye (worst direction 1 sigma "
                 f"{worst:.3f} mm at a {self.lever_m * 1e3:.0f} mm lever)."
             )
-        texts = [d.description for d in missing if d.is_rotation]
-        shifts = [d.description for d in missing if not d.is_rotation]
+        texts = [d.description for d in missing if _is_rotation(d.vector)]
+        shifts = [d.description for d in missing if not _is_rotation(d.vector)]
         if self.point_estimated and len(shifts) > 1:
             same = self.orientation_spread_rad < SAME_ORIENTATION_RAD
             shifts = [
@@ -1111,9 +1083,7 @@ def analyse_known_point(
     inputs = (lever, X[:3, :3], line, collinear, spread < SAME_ORIENTATION_RAD, point_estimated)
 
     directions = [
-        HandEyeDirection(
-            d.vector, d.sigma_m, d.status, _describe(d.vector, inputs, d.status, d.sigma_m)
-        )
+        Direction(d.vector, d.sigma_m, d.status, _describe(d.vector, inputs, d.status, d.sigma_m))
         for d in poor_directions(eigenvectors, sigma, cfg.weak_sigma_m, cfg.unobservable_sigma_m)
     ]
     return KnownPointObservability(
