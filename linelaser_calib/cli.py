@@ -13,7 +13,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 
@@ -47,6 +47,16 @@ def _positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text!r}") from None
     if not (np.isfinite(value) and value > 0.0):
         raise argparse.ArgumentTypeError(f"expected a positive number, got {text}")
+    return value
+
+
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
+    if not (np.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
     return value
 
 
@@ -414,6 +424,42 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 # --- parser ---------------------------------------------------------------------------------
 
+#: Numeric options of ``calibrate`` for the pairing gate and the default method's priors:
+#: (flag, parser, default, help).
+CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = (
+    (
+        "--max-speed",
+        _non_negative_float,
+        PairingConfig.max_linear_speed_m_s,
+        "reject profiles taken while the flange moved faster, m/s; 0 accepts any "
+        "(continuous scanning with a good clock)",
+    ),
+    (
+        "--max-angular-speed",
+        _non_negative_float,
+        PairingConfig.max_angular_speed_rad_s,
+        "reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
+    ),
+    (
+        "--sensor-sigma",
+        _positive_float,
+        RefineConfig.sensor_sigma_m,
+        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals)",
+    ),
+    (
+        "--robot-sigma-t",
+        _positive_float,
+        RefineConfig.robot_sigma_t_m,
+        "robot pose error per pose, 1 sigma per axis, m (default: UR-class 0.1 mm)",
+    ),
+    (
+        "--robot-sigma-r",
+        _positive_float,
+        RefineConfig.robot_sigma_r_rad,
+        "robot orientation error per pose, 1 sigma per axis, rad (default 0.01 deg)",
+    ),
+)
+
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
@@ -498,37 +544,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="added to profile stamps to reach the pose clock, s; 'auto' estimates it "
         "(continuous scanning with latency)",
     )
-    cal.add_argument(
-        "--max-speed",
-        type=float,
-        default=PairingConfig.max_linear_speed_m_s,
-        help="reject profiles taken while the flange moved faster, m/s; 0 accepts any "
-        "(continuous scanning with a good clock)",
-    )
-    cal.add_argument(
-        "--max-angular-speed",
-        type=float,
-        default=PairingConfig.max_angular_speed_rad_s,
-        help="reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
-    )
-    cal.add_argument(
-        "--sensor-sigma",
-        type=_positive_float,
-        default=RefineConfig.sensor_sigma_m,
-        help="profiler noise, 1 sigma, m (default method; re-estimated from the residuals)",
-    )
-    cal.add_argument(
-        "--robot-sigma-t",
-        type=_positive_float,
-        default=RefineConfig.robot_sigma_t_m,
-        help="robot pose error per pose, 1 sigma per axis, m (default: UR-class 0.1 mm)",
-    )
-    cal.add_argument(
-        "--robot-sigma-r",
-        type=_positive_float,
-        default=RefineConfig.robot_sigma_r_rad,
-        help="robot orientation error per pose, 1 sigma per axis, rad (default 0.01 deg)",
-    )
+    for flag, parse, default, text in CALIBRATE_NUMBERS:
+        cal.add_argument(flag, type=parse, default=default, help=text)
     cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(

@@ -88,3 +88,19 @@ def test_clock_offset_is_estimated_for_continuous_scanning(tmp_path: Path) -> No
     step = BAGS / "ur_scancontrol"
     assert main(["calibrate", str(step), "--clock-offset", "auto", "--output", str(out)]) == 0
     assert read_result_yaml(out).clock_offset_s == 0.0
+
+
+def test_robot_and_sensor_priors_reach_the_refinement(tmp_path: Path) -> None:
+    """bags/ur_scancontrol was simulated with a 0.03 mm / 0.003 deg robot and an 8 um sensor;
+    giving those priors instead of the UR-class defaults makes the estimate better."""
+    bag, out = BAGS / "ur_scancontrol", tmp_path / "result.yaml"
+    truth = read_truth_yaml(bag / "truth.yaml").T_flange_sensor
+    assert main(["calibrate", str(bag), "--output", str(out)]) == 0
+    _, default_error = transform_error(read_result_yaml(out).T_flange_sensor, truth)
+    priors = ["--robot-sigma-t", "3e-5", "--robot-sigma-r", str(np.radians(0.003))]
+    priors += ["--sensor-sigma", "8e-6"]
+    assert main(["calibrate", str(bag), *priors, "--output", str(out)]) == 0
+    _, matched_error = transform_error(read_result_yaml(out).T_flange_sensor, truth)
+    assert matched_error < default_error
+    with pytest.raises(SystemExit):
+        main(["calibrate", str(bag), "--max-speed", "-1"])
