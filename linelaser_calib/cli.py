@@ -24,7 +24,7 @@ from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
 from linelaser_calib.core.refine import RefineConfig
-from linelaser_calib.core.types import CalibrationResult, TargetPoint
+from linelaser_calib.core.types import CalibrationResult, KnownPoint
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.results import (
@@ -146,7 +146,7 @@ def simulate_to_bag(
                 samples_used=[],
                 samples_rejected=[],
                 rms_residual_m=0.0,
-                target_point=TargetPoint(np.asarray(taught), estimated=False),
+                known_point=KnownPoint(np.asarray(taught), estimated=False),
                 parent_frame=scenario.flange_frame,
                 child_frame=scenario.sensor_frame,
                 base_frame=scenario.base_frame,
@@ -396,7 +396,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             target = "cylinder"
             if truth.known_point is not None:
                 initial = read_result_yaml(bag / "initial.yaml")
-                taught = None if initial.target_point is None else initial.target_point.point
+                taught = None if initial.known_point is None else initial.known_point.point
                 config = replace(
                     config,
                     target=Target.KNOWN_POINT,

@@ -106,7 +106,7 @@ def cylinder_text(result: CalibrationResult) -> str:
     """The fitted cylinder (axis point, direction, radius) or the known point, base frame."""
     c = result.cylinder
     if c is None:
-        target = result.target_point
+        target = result.known_point
         if target is None:
             return "No target geometry in the result"
         text = f"Known point in {result.base_frame}: {mm_text(target.point)}"
@@ -124,7 +124,7 @@ def cylinder_text(result: CalibrationResult) -> str:
 
 def residual_kind(result: CalibrationResult) -> str:
     """What the method's residual measures."""
-    if result.target_point is not None:
+    if result.known_point is not None:
         return "distance of each view's corner, mapped into the base frame, from the point"
     if result.method == "paper":
         return "ellipse centre-to-axis distance"

@@ -27,10 +27,10 @@ def test_known_point_corrects_the_bumped_hand_eye(
 ) -> None:
     truth = read_truth_yaml(weld_bag / "truth.yaml")
     initial = read_result_yaml(weld_bag / "initial.yaml")
-    assert truth.known_point is not None and initial.target_point is not None
+    assert truth.known_point is not None and initial.known_point is not None
     rot0, trans0 = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot0) > 0.9 and trans0 > 0.9e-3  # the old hand-eye is off
-    taught = ",".join(str(v) for v in initial.target_point.point)
+    taught = ",".join(str(v) for v in initial.known_point.point)
     out = tmp_path / "result.yaml"
     code = main(
         [
@@ -50,8 +50,8 @@ def test_known_point_corrects_the_bumped_hand_eye(
     )
     assert code == 0
     result = read_result_yaml(out)
-    assert result.cylinder is None and result.target_point is not None
-    np.testing.assert_allclose(result.target_point.point, initial.target_point.point)
+    assert result.cylinder is None and result.known_point is not None
+    np.testing.assert_allclose(result.known_point.point, initial.known_point.point)
     rot, trans = transform_error(result.T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot) < rot_deg and trans * 1e3 < trans_mm
     assert rot < rot0 and trans < trans0

@@ -452,7 +452,7 @@ def service_values(**overrides: Any) -> dict[str, Any]:
 
 def test_service_builds_the_known_point_configuration_from_its_parameters() -> None:
     initial = read_result_yaml(WELD_INITIAL)
-    assert initial.target_point is not None
+    assert initial.known_point is not None
     default = calibration_service.pipeline_config(service_values())
     assert (default.target, default.method) == (Target.CYLINDER, Method.DEFAULT)
     assert default.known_point is None and default.initial_T_flange_sensor is None
@@ -460,13 +460,13 @@ def test_service_builds_the_known_point_configuration_from_its_parameters() -> N
         service_values(
             target="known_point",
             method="paper",
-            known_point=tuple(initial.target_point.point),
+            known_point=tuple(initial.known_point.point),
             initial_hand_eye_path=str(WELD_INITIAL),
         )
     )
     assert (config.target, config.method) == (Target.KNOWN_POINT, Method.PAPER)
     assert config.known_point is not None and config.initial_T_flange_sensor is not None
-    np.testing.assert_array_equal(config.known_point, initial.target_point.point)
+    np.testing.assert_array_equal(config.known_point, initial.known_point.point)
     np.testing.assert_array_equal(config.initial_T_flange_sensor, initial.T_flange_sensor)
 
 

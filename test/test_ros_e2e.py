@@ -298,8 +298,8 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     contents = read_bag(WELD_BAG)
     initial = read_result_yaml(WELD_BAG / "initial.yaml")
     truth = read_truth_yaml(WELD_BAG / "truth.yaml")
-    assert initial.target_point is not None
-    taught = initial.target_point.point
+    assert initial.known_point is not None
+    taught = initial.known_point.point
     graph.collector(*params(reliable_inputs=True, target="known_point"))
     graph.service(
         *params(
@@ -332,9 +332,9 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     )
     written = read_result_yaml(graph.tmp / "hand_eye.yaml")
     assert max(transform_error(written.T_flange_sensor, T)) < 1e-6
-    assert written.cylinder is None and written.target_point is not None
-    assert not written.target_point.estimated
-    np.testing.assert_allclose(written.target_point.point, taught, atol=1e-12)
+    assert written.cylinder is None and written.known_point is not None
+    assert not written.known_point.estimated
+    np.testing.assert_allclose(written.known_point.point, taught, atol=1e-12)
     markers = probe.latched(MarkerArray, "linelaser_calib/markers")
     (sphere,) = [m for m in markers.markers if m.ns == "known_point"]
     assert sphere.type == sphere.SPHERE_LIST and sphere.header.frame_id == contents.base_frame

@@ -35,11 +35,11 @@ from .types import (
     CalibrationResult,
     EllipseFit,
     FlangePose,
+    KnownPoint,
     Profile,
     Rejection,
     Sample,
     SampleFit,
-    TargetPoint,
 )
 
 #: Progress callback: (stage name, done, total).
@@ -454,7 +454,7 @@ def _known_point_result(
         uncertainty_rotation_rad=outcome.uncertainty_rotation_rad,
         warnings=list(outcome.warnings),
         history=dict(outcome.history),
-        target_point=TargetPoint(
+        known_point=KnownPoint(
             outcome.point_base, outcome.point_estimated, outcome.uncertainty_point_m
         ),
         sample_fits=[

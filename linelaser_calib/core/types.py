@@ -142,7 +142,7 @@ class Cylinder:
 
 
 @dataclass(frozen=True)
-class TargetPoint:
+class KnownPoint:
     """A fixed point (e.g. a weld-seam corner) in the base frame, for the known-point target.
 
     Attributes
@@ -215,7 +215,7 @@ class CalibrationResult:
         Convergence traces for reports (e.g. ``pso_best``, ``galm_phi``, ``refine_cost``).
     sample_fits : list of SampleFit
         The fitted samples the final solve used (not written to result files).
-    target_point : TargetPoint or None
+    known_point : KnownPoint or None
         The fixed point of the known-point target (weld seam); None for the cylinder.
     clock_offset_s : float
         Offset added to the profile stamps to pair them with the poses, s.
@@ -238,7 +238,7 @@ class CalibrationResult:
     warnings: list[str] = field(default_factory=list)
     history: dict[str, list[float]] = field(default_factory=dict)
     sample_fits: list[SampleFit] = field(default_factory=list)
-    target_point: TargetPoint | None = None
+    known_point: KnownPoint | None = None
     clock_offset_s: float = 0.0
     clock_offset_estimated: bool = False
     parent_frame: str = "tool0"

@@ -43,7 +43,7 @@ from linelaser_calib.core.geometry import (
     transform_from_translation_quaternion,
     translation_quaternion_from_transform,
 )
-from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection, TargetPoint
+from linelaser_calib.core.types import CalibrationResult, Cylinder, KnownPoint, Rejection
 from linelaser_calib.io.errors import ResultFileError
 
 FloatArray = NDArray[np.float64]
@@ -124,7 +124,7 @@ def _cylinder_section(cylinder: Cylinder, frame: str) -> dict[str, Any]:
     }
 
 
-def _known_point_section(target: TargetPoint, frame: str) -> dict[str, Any]:
+def _known_point_section(target: KnownPoint, frame: str) -> dict[str, Any]:
     return {
         "frame": frame,
         "point": _floats(target.point),
@@ -134,7 +134,7 @@ def _known_point_section(target: TargetPoint, frame: str) -> dict[str, Any]:
 
 
 def _target_sections(
-    cylinder: Cylinder | None, known_point: TargetPoint | None, frame: str
+    cylinder: Cylinder | None, known_point: KnownPoint | None, frame: str
 ) -> dict[str, Any]:
     """The ``cylinder`` and/or ``known_point`` sections (at least one is required)."""
     if cylinder is None and known_point is None:
@@ -187,7 +187,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     )
     return {
         "hand_eye": hand_eye,
-        **_target_sections(result.cylinder, result.target_point, result.base_frame),
+        **_target_sections(result.cylinder, result.known_point, result.base_frame),
         "quality": {
             "method": result.method,
             "samples_used": len(result.samples_used),
@@ -275,7 +275,7 @@ def write_truth_yaml(
     point = (
         None
         if known_point is None
-        else TargetPoint(np.asarray(known_point, dtype=np.float64), estimated=False)
+        else KnownPoint(np.asarray(known_point, dtype=np.float64), estimated=False)
     )
     data = {
         "hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame),
@@ -407,17 +407,17 @@ def _read_cylinder(fields: _Fields) -> tuple[Cylinder, str]:
     return cylinder, section.text("frame")
 
 
-def _read_known_point(fields: _Fields) -> tuple[TargetPoint, str]:
+def _read_known_point(fields: _Fields) -> tuple[KnownPoint, str]:
     """The fixed point and its frame from the ``known_point`` section."""
     section = fields.section("known_point")
     sigma = None
     if section.has("uncertainty_m") and section.get("uncertainty_m") is not None:
         sigma = section.array("uncertainty_m", (3,))
     point = section.array("point", (3,))
-    return TargetPoint(point, section.flag("estimated"), sigma), section.text("frame")
+    return KnownPoint(point, section.flag("estimated"), sigma), section.text("frame")
 
 
-def _read_targets(fields: _Fields) -> tuple[Cylinder | None, TargetPoint | None, str]:
+def _read_targets(fields: _Fields) -> tuple[Cylinder | None, KnownPoint | None, str]:
     """Cylinder and/or known point, and the base frame; at least one must be present."""
     cylinder = target = None
     frame = ""
@@ -487,7 +487,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         clock_offset_s=quality.number("clock_offset_s") if quality.has("clock_offset_s") else 0.0,
         clock_offset_estimated=quality.flag("clock_offset_estimated"),
         warnings=[str(w) for w in quality.items("warnings")],
-        target_point=target,
+        known_point=target,
         parent_frame=parent_frame,
         child_frame=child_frame,
         base_frame=base_frame,

@@ -412,10 +412,10 @@ class CalibrationServiceNode(Node):
                     stamp_ns=stamp_ns,
                 )
             )
-        if result.target_point is not None:
+        if result.known_point is not None:
             markers.append(
                 points_marker(
-                    result.target_point.point[np.newaxis],
+                    result.known_point.point[np.newaxis],
                     result.base_frame,
                     types=self._types,
                     size_m=KNOWN_POINT_MARKER_M,
