@@ -1,9 +1,10 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration) and ``demo`` (calibrate the committed bags and show
-the error against their truth). Exit code 0 means success; a user error prints one
-paragraph on stderr and exits with 1; a usage error exits with 2.
+``calibrate`` (the offline calibration), ``plan`` (the next flange poses to scan from) and
+``demo`` (calibrate the committed bags and show the error against their truth). Exit code 0
+means success; a user error prints one paragraph on stderr and exits with 1; a usage error
+exits with 2.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from linelaser_calib.core.errors import CalibrationError, InputError, PairingErr
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.planning import Plan, PlanConstraints, plan_for_target, plannable
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
@@ -31,10 +33,11 @@ from linelaser_calib.io.results import (
     read_result_yaml,
     read_truth_yaml,
     result_to_dict,
+    write_plan_yaml,
     write_result_yaml,
     write_truth_yaml,
 )
-from linelaser_calib.offline import OfflineRun, calibrate_bag
+from linelaser_calib.offline import OfflineRun, bag_samples, calibrate_bag
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
@@ -244,17 +247,20 @@ SETTING_FLAGS = {
 }
 
 
+def _initial_hand_eye(path: str) -> np.ndarray:
+    """The hand-eye (4, 4) of ``--initial FILE.yaml``."""
+    try:
+        return read_result_yaml(path).T_flange_sensor
+    except ResultFileError as exc:
+        raise ResultFileError(
+            f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
+            "written by linelaser-calib (its hand_eye section)"
+        ) from exc
+
+
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
-    initial = None
-    if args.initial is not None:
-        try:
-            initial = read_result_yaml(args.initial).T_flange_sensor
-        except ResultFileError as exc:
-            raise ResultFileError(
-                f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
-                "written by linelaser-calib (its hand_eye section)"
-            ) from exc
+    initial = None if args.initial is None else _initial_hand_eye(args.initial)
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
@@ -498,6 +504,146 @@ TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
 )
 
 
+# --- plan -----------------------------------------------------------------------------------
+
+
+def _numbers(text: str) -> list[float]:
+    """Parse comma-separated finite numbers."""
+    try:
+        values = [float(p) for p in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers a,b,..., got {text!r}") from None
+    if not all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
+
+
+def _span(text: str) -> tuple[float, float]:
+    """Parse ``lo,hi`` (m)."""
+    values = _numbers(text)
+    if len(values) != 2 or not values[0] < values[1]:
+        raise argparse.ArgumentTypeError(f"expected LO,HI in metres with LO < HI, got {text!r}")
+    return values[0], values[1]
+
+
+def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
+    return PlanConstraints(
+        z_min_m=args.range[0],
+        z_max_m=args.range[1],
+        fan_half_angle_rad=float(np.deg2rad(args.fan_deg)),
+        reach_centre_m=args.reach_centre,
+        reach_half_extent_m=args.reach,
+        table_height_m=None if args.no_table else args.table_height,
+    )
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    if args.output is not None:
+        _check_output(args.output, "plan file (--output)")
+    target = get_target(args.target)
+    plannable(target)
+    section = None
+    if args.from_result is not None:
+        if args.initial is not None or args.cylinder is not None:
+            raise InputError(
+                "--from gives the hand-eye and the target's placement; omit --initial and "
+                "--cylinder"
+            )
+        result = read_result_yaml(args.from_result)
+        if result.target.key != target.name:
+            raise InputError(
+                f"{args.from_result} holds a {result.target.key} result, not a {target.name} "
+                f"one; choose --target {result.target.key}"
+            )
+        T_flange_sensor, section = result.T_flange_sensor, result.target
+    elif args.initial is not None:
+        T_flange_sensor = _initial_hand_eye(args.initial)
+    else:
+        raise InputError(
+            "plan needs the current hand-eye: give --from RESULT.yaml (a calibration of this "
+            "set-up), or --initial FILE.yaml (e.g. from CAD, within ~5 mm and ~5 deg) with "
+            "--cylinder or a bag of 3 or more exploratory scans; the planner does not yet "
+            "estimate the hand-eye from exploratory scans alone"
+        )
+    if section is None and args.cylinder is None and args.bag is None:
+        raise InputError(
+            "plan needs the target's placement: give --from RESULT.yaml, --cylinder "
+            "px,py,pz,dx,dy,dz (m, base frame), or a bag of 3 or more exploratory scans"
+        )
+    given = {
+        "radius_m": args.radius,
+        "sensor_sigma_m": args.sensor_sigma,
+        "robot_sigma_t_m": args.robot_sigma_t,
+        "robot_sigma_r_rad": args.robot_sigma_r,
+    }
+    settings = {name: value for name, value in given.items() if value is not None}
+    config = configure(target, "default", settings, SETTING_FLAGS)
+    samples = (
+        []
+        if args.bag is None
+        else bag_samples(
+            args.bag,
+            PairingConfig(),
+            profile_topic=args.profile_topic,
+            pose_topic=args.pose_topic,
+        )
+    )
+    goal = None
+    if args.goal_mm is not None or args.goal_deg is not None:
+        goal = (
+            np.inf if args.goal_mm is None else args.goal_mm * 1e-3,
+            np.inf if args.goal_deg is None else float(np.deg2rad(args.goal_deg)),
+        )
+    started = time.monotonic()
+    plan = plan_for_target(
+        target,
+        config,
+        T_flange_sensor,
+        args.n,
+        samples=samples,
+        section=section,
+        numbers=args.cylinder,
+        extent=args.axial_range,
+        constraints=_plan_constraints(args),
+        goal=goal,
+        seed=args.seed,
+    )
+    elapsed = time.monotonic() - started
+    print(format_plan(plan, elapsed))
+    if args.output is not None:
+        print(f"Wrote {write_plan_yaml(plan, args.output)}")
+    return 0
+
+
+def format_plan(plan: Plan, elapsed_s: float) -> str:
+    """The plan as a table: pose, flange position (mm), predicted 1 sigma after it."""
+    lines = [
+        f"{len(plan.poses)} poses chosen from {plan.candidates} feasible candidates in "
+        f"{elapsed_s:.2f} s (D-optimal on the hand-eye's information)."
+    ]
+    if plan.sigma_translation_m is not None and plan.sigma_rotation_rad is not None:
+        lines.append(
+            "Predicted 1 sigma from the scans taken: "
+            f"{np.array2string(plan.sigma_translation_m * 1e3, precision=4)} mm, "
+            f"{np.array2string(np.rad2deg(plan.sigma_rotation_rad), precision=4)} deg"
+        )
+    lines.append(
+        f"{'pose':>4}  {'flange position x, y, z (mm)':>30}  "
+        f"{'1 sigma translation (mm)':>26}  {'1 sigma rotation (deg)':>26}"
+    )
+    for k, pose in enumerate(plan.poses, 1):
+        p = pose.T_base_flange[:3, 3] * 1e3
+        t = pose.sigma_translation_m * 1e3
+        r = np.rad2deg(pose.sigma_rotation_rad)
+        lines.append(
+            f"{k:>4}  {p[0]:9.1f} {p[1]:9.1f} {p[2]:9.1f}   "
+            f"{t[0]:8.4f} {t[1]:8.4f} {t[2]:8.4f}  {r[0]:8.4f} {r[1]:8.4f} {r[2]:8.4f}"
+        )
+    if plan.goal_reached:
+        lines.append("The goal is reached: the predicted 1 sigma is within it.")
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
@@ -588,6 +734,71 @@ def build_parser() -> argparse.ArgumentParser:
         help="print progress on stderr (default: when stderr is a terminal)",
     )
     cal.set_defaults(func=_cmd_calibrate)
+
+    plan = sub.add_parser("plan", help="plan the next flange poses that most reduce the 1 sigma")
+    plan.add_argument(
+        "bag", nargs="?", help="rosbag2 directory, .mcap file or session of the scans so far"
+    )
+    plan.add_argument("--target", choices=target_names(), default=DEFAULT_TARGET)
+    plan.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
+    plan.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
+    plan.add_argument(
+        "--from",
+        dest="from_result",
+        metavar="RESULT.yaml",
+        help="a result of this set-up: the hand-eye and the target's placement",
+    )
+    plan.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    plan.add_argument(
+        "--cylinder",
+        type=_numbers,
+        help="px,py,pz,dx,dy,dz: a point on the cylinder axis and its direction (base frame, m)",
+    )
+    plan.add_argument(
+        "--axial-range",
+        type=_span,
+        help="LO,HI: the span of the shaft to scan, m along the axis (upwards) from its point "
+        "nearest the base origin (default: the span the scans cover)",
+    )
+    plan.add_argument("--n", type=int, default=10, help="poses to plan (default 10)")
+    plan.add_argument("--goal-mm", type=_positive_float, help="stop at this 1 sigma, mm")
+    plan.add_argument("--goal-deg", type=_positive_float, help="stop at this 1 sigma, deg")
+    plan.add_argument(
+        "--range",
+        type=_span,
+        default=(PlanConstraints.z_min_m, PlanConstraints.z_max_m),
+        help="measuring range of the profiler, m (default 0.07,0.15)",
+    )
+    plan.add_argument(
+        "--fan-deg",
+        type=_positive_float,
+        default=float(np.rad2deg(PlanConstraints.fan_half_angle_rad)),
+        help="half opening of the laser fan, deg (default 25)",
+    )
+    plan.add_argument(
+        "--reach-centre",
+        type=_xyz,
+        help="centre of the flange's reach box, x,y,z in m (default: the first scan's flange)",
+    )
+    plan.add_argument(
+        "--reach",
+        type=_positive_float,
+        default=PlanConstraints.reach_half_extent_m,
+        help="half side of the reach box, m (default 0.25)",
+    )
+    plan.add_argument(
+        "--table-height",
+        type=float,
+        default=PlanConstraints.table_height_m,
+        help="base z of the table; sensor and flange stay above it, m (default 0)",
+    )
+    plan.add_argument("--no-table", action="store_true", help="no table below the target")
+    for flag, parse_setting, text in TARGET_OPTIONS:
+        if flag != "--point":
+            plan.add_argument(flag, type=parse_setting, default=None, help=text)
+    plan.add_argument("--seed", type=int, default=0, help="seed of the candidate poses")
+    plan.add_argument("--output", help="plan YAML to write (its directory must exist)")
+    plan.set_defaults(func=_cmd_plan)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
     demo.add_argument("bags", nargs="?", default="bags")

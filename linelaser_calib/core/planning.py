@@ -52,12 +52,15 @@ import numpy as np
 from .errors import DegenerateError, InputError
 from .geometry import FloatArray, invert_transform
 from .solver import N_HAND_EYE
-from .types import BoolArray
+from .targets.base import Target
+from .types import BoolArray, Sample
 
 #: Prior information added to every global parameter before planning from no samples
 #: (1 per rad² and per m²): negligible next to one profile's (~1e8), it only keeps the
 #: information invertible.
 WEAK_PRIOR_INFORMATION = 1.0
+#: The base frame's upward direction (REP 103: z up); the table is a plane of constant z.
+UP = np.array([0.0, 0.0, 1.0])
 #: Candidates drawn per pose to plan.
 CANDIDATES_PER_POSE = 60
 #: Fewest candidates drawn.
@@ -87,9 +90,7 @@ class PlanConstraints:
         Half side of the reach box, m. Default 0.25.
     table_height_m : float or None
         Height (base z) of the table; the sensor and flange origins must stay
-        ``clearance_m`` above it. None: no table.
-    up : (3,) floats
-        The base frame's upward direction. Default +z.
+        ``clearance_m`` above it. Default 0 (the robot stands on the table); None: no table.
     max_view_up : float
         Largest upward component of the sensor's viewing direction (its z axis): 0 (default)
         forbids a laser pointing upwards.
@@ -108,7 +109,6 @@ class PlanConstraints:
     reach_centre_m: tuple[float, float, float] | None = None
     reach_half_extent_m: float = 0.25
     table_height_m: float | None = 0.0
-    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
     max_view_up: float = 0.0
     robot_cone_rad: float = math.radians(30.0)
     clearance_m: float = 0.03
@@ -141,8 +141,35 @@ class Plannable(Protocol):
     """What a target provides to be planned for (see the module docstring).
 
     ``placement`` is the target's own object: its rough pose and finite extent in the base
-    frame (for the cylinder: axis, radius and the axial span of the shaft).
+    frame (for the cylinder: axis, radius and the axial span of the shaft). ``extent`` is a
+    target-specific span (the cylinder's axial span (lo, hi), m) or None: taken from the
+    points of the samples then. A target offers a planner through its ``planner`` attribute.
     """
+
+    numbers_flag: str
+    numbers_help: str
+
+    def placement_from_section(
+        self, section: Any, config: Any, extent: Any, points_base: FloatArray | None
+    ) -> Any:
+        """The placement from a result's section (a calibration of the same set-up)."""
+        ...
+
+    def placement_from_numbers(
+        self, numbers: list[float], config: Any, extent: Any, points_base: FloatArray | None
+    ) -> Any:
+        """The placement from numbers the user typed (``numbers_flag``, SI units)."""
+        ...
+
+    def placement_from_features(
+        self, features: list[Any], T_flange_sensor: FloatArray, config: Any, extent: Any
+    ) -> Any:
+        """The rough placement from a few exploratory scans and an initial hand-eye."""
+        ...
+
+    def sample_points(self, features: list[Any]) -> list[FloatArray]:
+        """The points (N_j, 3) of each feature the default problem uses, sensor frame, m."""
+        ...
 
     def ray_depths(
         self, placement: Any, T_base_sensor: FloatArray, directions: FloatArray
@@ -260,8 +287,7 @@ def feasible(
     sensor = T_base_sensor[:, :3, 3]
     flange = (T_base_sensor @ invert_transform(T_flange_sensor))[:, :3, 3]
     ok = np.all(np.abs(flange - reach_centre_m) <= constraints.reach_half_extent_m, axis=1)
-    up = np.asarray(constraints.up, dtype=np.float64)
-    up = up / np.linalg.norm(up)
+    up = UP
     if constraints.table_height_m is not None:
         floor = constraints.table_height_m + constraints.clearance_m
         ok &= (sensor @ up >= floor) & (flange @ up >= floor)
@@ -396,3 +422,98 @@ def plan_poses(
         if reached:
             break
     return Plan(chosen, start[0], start[1], reached, len(T_sensor))
+
+
+def plannable(target: Target[Any]) -> Plannable:
+    """The target's planner.
+
+    Raises
+    ------
+    InputError
+        The target has none.
+    """
+    planner: Plannable | None = getattr(target, "planner", None)
+    if planner is None:
+        raise InputError(
+            f"poses cannot be planned for the {target.title} target yet; plan for a cylinder "
+            "(--target cylinder)"
+        )
+    return planner
+
+
+def plan_for_target(
+    target: Target[Any],
+    config: Any,
+    T_flange_sensor: FloatArray,
+    n: int,
+    *,
+    samples: list[Sample] | None = None,
+    section: Any = None,
+    numbers: list[float] | None = None,
+    extent: Any = None,
+    constraints: PlanConstraints | None = None,
+    goal: tuple[float, float] | None = None,
+    seed: int = 0,
+) -> Plan:
+    """Plan poses for a target from its rough placement and the samples taken so far.
+
+    The placement comes from ``section`` (a result's target section), else from ``numbers``
+    (the target's ``numbers_flag``), else from the samples' features (exploratory scans)
+    with ``T_flange_sensor`` as the initial hand-eye.
+
+    Parameters
+    ----------
+    target : Target
+    config : target config
+    T_flange_sensor : ndarray, shape (4, 4)
+        Current or initial hand-eye.
+    n : int
+    samples : list of Sample, optional
+        Samples already taken (their information is the planner's start).
+    section, numbers, extent : optional
+        See above and :class:`Plannable`.
+    constraints : PlanConstraints, optional
+    goal : (float, float), optional
+        (translation m, rotation rad).
+    seed : int
+
+    Raises
+    ------
+    InputError, DegenerateError
+        No placement can be formed, or no pose is feasible.
+    """
+    planner = plannable(target)
+    features: list[Any] = []
+    if samples:
+        features, _ = target.extract(samples, config, seed, lambda *_: None)
+    points = planner.sample_points(features)
+    T_current = np.array([f.T_base_flange for f in features]).reshape(-1, 4, 4)
+    T_sensor = T_current @ T_flange_sensor
+    points_base = (
+        np.concatenate([p @ T[:3, :3].T + T[:3, 3] for p, T in zip(points, T_sensor, strict=True)])
+        if points
+        else None
+    )
+    if section is not None:
+        placement = planner.placement_from_section(section, config, extent, points_base)
+    elif numbers is not None:
+        placement = planner.placement_from_numbers(numbers, config, extent, points_base)
+    else:
+        if not features:
+            raise DegenerateError(
+                f"none of the {len(samples or [])} exploratory scans shows the {target.title}: "
+                f"scan it from 3 or more poses first, or give its placement with "
+                f"{planner.numbers_flag} or --from RESULT.yaml"
+            )
+        placement = planner.placement_from_features(features, T_flange_sensor, config, extent)
+    return plan_poses(
+        planner,
+        placement,
+        T_flange_sensor,
+        config,
+        n,
+        np.random.default_rng(seed),
+        constraints,
+        (points, T_current) if points else None,
+        goal,
+    )

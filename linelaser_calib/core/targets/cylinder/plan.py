@@ -41,11 +41,11 @@ from typing import Any
 
 import numpy as np
 
-from ...types import Cylinder
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, orthonormal_basis
-from ...planning import PlanConstraints
+from ...planning import UP, PlanConstraints
 from ...solver import Linearisation, Residuals, normal_equations
+from ...types import Cylinder
 from .config import CylinderConfig
 from .features import FittedSample
 from .refine import build_problem, initial_state
@@ -90,37 +90,84 @@ class CylinderPlacement:
 
 
 def placement(
-    point: FloatArray,
-    direction: FloatArray,
-    radius_m: float,
-    axial_range_m: tuple[float, float],
-    up: FloatArray,
+    cylinder: Cylinder,
+    axial_range_m: tuple[float, float] | None,
+    points_base: FloatArray | None = None,
 ) -> CylinderPlacement:
-    """A placement with the point moved to the one nearest the base origin and the direction
-    turned up; ``axial_range_m`` is measured from that point."""
-    d = np.asarray(direction, dtype=np.float64)
-    if d.shape != (3,) or not np.linalg.norm(d) > 0.0:
-        raise InputError(f"the cylinder direction must be 3 numbers, not zero, got {direction}")
+    """A placement with the axis point moved to the one nearest the base origin and the
+    direction turned up (``axial_range_m`` is measured from that point); without a span,
+    the span the points (N, 3; base frame, m) cover.
+
+    Raises
+    ------
+    InputError
+        A bad cylinder, or neither a span nor points.
+    """
+    d = np.asarray(cylinder.direction, dtype=np.float64)
+    c = np.asarray(cylinder.point, dtype=np.float64)
+    if d.shape != (3,) or c.shape != (3,) or not np.all(np.isfinite(np.concatenate([c, d]))):
+        raise InputError(
+            f"the cylinder needs a finite point and direction of 3 numbers each, got "
+            f"{cylinder.point} and {cylinder.direction}"
+        )
+    if not np.linalg.norm(d) > 0.0:
+        raise InputError("the cylinder direction must not be zero")
     d = d / np.linalg.norm(d)
-    if d @ up < 0.0:
+    if d @ UP < 0.0:
         d = -d
-    c = np.asarray(point, dtype=np.float64)
     c = c - (c @ d) * d
-    return CylinderPlacement(Cylinder(c, d, float(radius_m)), axial_range_m)
+    if axial_range_m is None:
+        if points_base is None:
+            raise InputError(
+                "the planner needs the span of the shaft that can be scanned: give "
+                "--axial-range LO,HI (m along the axis, upwards, from its point nearest the "
+                "base origin) or scans of the shaft"
+            )
+        along = (points_base - c) @ d
+        axial_range_m = (float(np.min(along)), float(np.max(along)))
+    return CylinderPlacement(Cylinder(c, d, float(cylinder.radius)), axial_range_m)
 
 
-def axial_span(
-    cylinder: Cylinder, points_base: FloatArray, up: FloatArray
-) -> tuple[float, float]:
-    """The span (lo, hi) along the upward axis covered by points (N, 3) in the base frame, m."""
-    d = cylinder.direction if cylinder.direction @ up >= 0.0 else -cylinder.direction
-    c = cylinder.point - (cylinder.point @ d) * d
-    along = (points_base - c) @ d
-    return float(np.min(along)), float(np.max(along))
+def _radius(config: CylinderConfig) -> float:
+    if config.radius_m is None:
+        raise InputError(
+            "the planner needs the cylinder's radius: give --radius (m) or a result YAML (--from)"
+        )
+    return config.radius_m
 
 
 class CylinderPlanner:
     """:class:`~linelaser_calib.core.planning.Plannable` for the cylinder (module docstring)."""
+
+    numbers_flag = "--cylinder"
+    numbers_help = "px,py,pz,dx,dy,dz: a point on the axis and its direction (base frame, m)"
+
+    def placement_from_section(
+        self, section: Any, config: Any, extent: Any, points_base: FloatArray | None
+    ) -> CylinderPlacement:
+        """From a result's ``cylinder`` section."""
+        return placement(section.cylinder, extent, points_base)
+
+    def placement_from_numbers(
+        self, numbers: list[float], config: Any, extent: Any, points_base: FloatArray | None
+    ) -> CylinderPlacement:
+        """From ``px,py,pz,dx,dy,dz`` (m) and the configured radius."""
+        if len(numbers) != 6:
+            raise InputError(
+                f"{self.numbers_flag} takes 6 numbers, {self.numbers_help}; got {len(numbers)}"
+            )
+        values = np.asarray(numbers, dtype=np.float64)
+        return placement(Cylinder(values[:3], values[3:], _radius(config)), extent, points_base)
+
+    def placement_from_features(
+        self, features: list[Any], T_flange_sensor: FloatArray, config: Any, extent: Any
+    ) -> CylinderPlacement:
+        """From exploratory scans (:func:`rough_placement`)."""
+        return rough_placement(features, T_flange_sensor, _radius(config), extent)
+
+    def sample_points(self, features: list[Any]) -> list[FloatArray]:
+        """Each ellipse's inlier points."""
+        return [f.inlier_points for f in features]
 
     def ray_depths(
         self, placement: Any, T_base_sensor: FloatArray, directions: FloatArray
@@ -233,7 +280,6 @@ def rough_placement(
     T_flange_sensor: FloatArray,
     radius_m: float,
     axial_range_m: tuple[float, float] | None,
-    up: FloatArray,
 ) -> CylinderPlacement:
     """The cylinder from exploratory scans and an initial hand-eye (module docstring).
 
@@ -247,7 +293,6 @@ def rough_placement(
     axial_range_m : (float, float), optional
         Scannable span (m from the axis point nearest the base origin, upwards); None: the
         span the scans' points cover.
-    up : ndarray, shape (3,)
 
     Raises
     ------
@@ -280,13 +325,9 @@ def rough_placement(
         total = aligned.sum(axis=0)
         if np.linalg.norm(total) > best_length:
             best, best_length = total, float(np.linalg.norm(total))
-    point = np.mean(centres, axis=0)
-    if axial_range_m is None:
-        cylinder = Cylinder(point, best / np.linalg.norm(best), radius_m)
-        hits = [
-            f.inlier_points @ (f.T_base_flange @ T_flange_sensor)[:3, :3].T
-            + (f.T_base_flange @ T_flange_sensor)[:3, 3]
-            for f in features
-        ]
-        axial_range_m = axial_span(cylinder, np.concatenate(hits), up)
-    return placement(point, best, radius_m, axial_range_m, up)
+    hits = []
+    for f in features:
+        T_base_sensor = f.T_base_flange @ T_flange_sensor
+        hits.append(f.inlier_points @ T_base_sensor[:3, :3].T + T_base_sensor[:3, 3])
+    axis = Cylinder(np.mean(centres, axis=0), best, radius_m)
+    return placement(axis, axial_range_m, np.concatenate(hits))
