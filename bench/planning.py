@@ -1,0 +1,318 @@
+"""Pose planning on the simulator: planned poses against random rule-abiding ones.
+
+Sections (each simulates scans with the package simulator's ray caster, sensor noise and
+robot pose errors, then calibrates them with the package pipeline, default method, radius
+known):
+
+``curve``
+    ``ur_scancontrol`` at the cylinder paper's noise (robot 0.1 mm and 0.01 deg, sensor 5 um,
+    1 sigma). Random: the simulator's own sampler (the paper's rules, ``sim/poses.py``), 50
+    poses, calibrated on the first k. Planned: 3 exploratory scans (the first 3 random
+    poses) and an initial hand-eye 2 mm / 1 deg off (a CAD guess), then rounds of planned
+    poses (5, then 4 at a time), each round planned from the calibration of all scans so far.
+    RMS over seeds of the true hand-eye error and of the predicted 1 sigma against the
+    number of poses.
+``cold``
+    Random upright scenes (``random_scenario`` with a vertical shaft on a table, the
+    paper's cut-angle rules, random hand-eye, profiler, noise): 3 exploratory scans and an
+    initial hand-eye 2 mm / 1 deg off, then 17 planned poses in rounds. Success: a result
+    within 0.1 mm and 0.02 deg of the truth.
+``speed``
+    Median time of planning 10 poses (from a result and 20 scans; and from a given axis with
+    no scan).
+
+Run from the repository root (not part of the test suite)::
+
+    .venv/bin/python bench/planning.py                # 20 seeds, 50 scenes
+    .venv/bin/python bench/planning.py --quick        # 4 seeds, 8 scenes
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.geometry import (
+    FloatArray,
+    invert_transform,
+    transform_error,
+    transform_from_rotvec_translation,
+)
+from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
+from linelaser_calib.core.planning import PlanConstraints, plan_for_target
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.cylinder import CylinderConfig
+from linelaser_calib.core.types import CalibrationResult, Sample
+from linelaser_calib.sim import Scenario, random_scenario, scenario_from_preset
+from linelaser_calib.sim.poses import sample_sensor_poses
+from linelaser_calib.sim.profiler import measure, trace
+from linelaser_calib.sim.robot import draw_errors
+from linelaser_calib.sim.scene import Scene
+
+PAPER_NOISE = {
+    "sigma_depth_m": 5e-6,
+    "sigma_lateral_m": 5e-6,
+    "robot_sigma_translation_m": 1e-4,
+    "robot_sigma_rotation_rad": math.radians(0.01),
+}
+RANDOM_COUNTS = (8, 12, 16, 20, 30, 50)
+#: Planned poses per round after the 3 exploratory scans: totals 8, 12, 16, 20.
+ROUNDS = (5, 4, 4, 4)
+EXPLORATORY = 3
+INITIAL_ERROR = (2e-3, math.radians(1.0))
+SUCCESS = (0.1e-3, math.radians(0.02))
+TARGET = get_target("cylinder")
+
+
+@dataclass
+class Point:
+    """One calibration: poses used, true errors (deg, mm), predicted 1 sigma (deg, mm)."""
+
+    poses: int
+    error_deg: float
+    error_mm: float
+    sigma_deg: float
+    sigma_mm: float
+
+
+def constraints_of(scenario: Scenario, reach_centre: FloatArray) -> PlanConstraints:
+    """The planner's constraints for the simulated profiler."""
+    return PlanConstraints(
+        z_min_m=scenario.z_min_m,
+        z_max_m=scenario.z_max_m,
+        fan_half_angle_rad=scenario.fan_half_angle_rad,
+        resolution=scenario.resolution,
+        reach_centre_m=(float(reach_centre[0]), float(reach_centre[1]), float(reach_centre[2])),
+        table_height_m=float(scenario.cylinder_base_m[2]),
+        clearance_m=scenario.clearance_m,
+    )
+
+
+def scan(
+    rng: np.random.Generator,
+    scenario: Scenario,
+    scene: Scene,
+    T_base_flange: FloatArray,
+    first_index: int,
+) -> list[Sample]:
+    """Profiles at commanded flange poses (K, 4, 4): the robot misses each by its random
+    error, the recorded pose is the commanded one."""
+    errors = draw_errors(rng, scenario, len(T_base_flange))
+    E = np.stack([transform_from_rotvec_translation(e[3:], e[:3]) for e in errors])
+    true_flange = T_base_flange @ np.stack([invert_transform(e) for e in E])
+    measured = measure(
+        rng, scenario, trace(scene, scenario, true_flange @ scenario.T_flange_sensor)
+    )
+    return [
+        Sample(
+            first_index + k,
+            (first_index + k) * 1_000_000_000,
+            T_base_flange[k],
+            measured.points[k][measured.valid[k]],
+        )
+        for k in range(len(T_base_flange))
+    ]
+
+
+def calibrate(samples: list[Sample], radius: float, seed: int) -> CalibrationResult | None:
+    config = PipelineConfig(target_config=CylinderConfig(radius_m=radius), seed=seed)
+    try:
+        return calibrate_samples(samples, config)
+    except CalibrationError:
+        return None
+
+
+def point(result: CalibrationResult | None, T_true: FloatArray, poses: int) -> Point:
+    if result is None:
+        return Point(poses, math.nan, math.nan, math.nan, math.nan)
+    rotation, translation = transform_error(result.T_flange_sensor, T_true)
+    assert result.uncertainty_rotation_rad is not None
+    assert result.uncertainty_translation_m is not None
+    return Point(
+        poses,
+        math.degrees(rotation),
+        translation * 1e3,
+        math.degrees(float(np.linalg.norm(result.uncertainty_rotation_rad))),
+        float(np.linalg.norm(result.uncertainty_translation_m)) * 1e3,
+    )
+
+
+def initial_guess(rng: np.random.Generator, T_true: FloatArray) -> FloatArray:
+    """The truth moved by INITIAL_ERROR in random directions (a CAD hand-eye)."""
+    t_dir, r_dir = rng.normal(size=(2, 3))
+    bump = transform_from_rotvec_translation(
+        r_dir / np.linalg.norm(r_dir) * INITIAL_ERROR[1],
+        t_dir / np.linalg.norm(t_dir) * INITIAL_ERROR[0],
+    )
+    return np.asarray(T_true @ bump)
+
+
+def planned_run(
+    scenario: Scenario, seed: int, rounds: tuple[int, ...]
+) -> tuple[list[Point], CalibrationResult | None]:
+    """3 exploratory scans, then rounds of planned poses; a point after each round."""
+    rng = np.random.default_rng(seed)
+    scene = Scene.from_scenario(scenario)
+    T_true = scenario.T_flange_sensor
+    explore = sample_sensor_poses(rng, replace(scenario, n_poses=EXPLORATORY), scene)
+    samples = scan(rng, scenario, scene, explore.T_base_sensor @ invert_transform(T_true), 0)
+    constraints = constraints_of(scenario, samples[0].T_base_flange[:3, 3])
+    config = CylinderConfig(radius_m=scenario.cylinder_radius_m)
+    span = (0.0, scenario.cylinder_length_m)
+    T_estimate, section = initial_guess(rng, T_true), None
+    points, result = [], None
+    for n in rounds:
+        plan = plan_for_target(
+            TARGET,
+            config,
+            T_estimate,
+            n,
+            samples=samples,
+            section=section,
+            extent=span,
+            constraints=constraints,
+            seed=seed + len(samples),
+        )
+        T_flange = np.stack([p.T_base_flange for p in plan.poses])
+        samples += scan(rng, scenario, scene, T_flange, len(samples))
+        result = calibrate(samples, scenario.cylinder_radius_m, seed)
+        points.append(point(result, T_true, len(samples)))
+        if result is not None:
+            T_estimate, section = result.T_flange_sensor, result.target
+    return points, result
+
+
+def random_run(scenario: Scenario, seed: int) -> list[Point]:
+    rng = np.random.default_rng(seed)
+    scene = Scene.from_scenario(scenario)
+    T_true = scenario.T_flange_sensor
+    poses = sample_sensor_poses(rng, replace(scenario, n_poses=max(RANDOM_COUNTS)), scene)
+    samples = scan(rng, scenario, scene, poses.T_base_sensor @ invert_transform(T_true), 0)
+    return [
+        point(calibrate(samples[:k], scenario.cylinder_radius_m, seed), T_true, k)
+        for k in RANDOM_COUNTS
+    ]
+
+
+def _rms(values: list[float]) -> float:
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.sqrt(np.mean(np.square(finite)))) if finite else math.nan
+
+
+def curve(seeds: int) -> None:
+    scenario = scenario_from_preset("ur_scancontrol", **PAPER_NOISE)
+    planned = [planned_run(scenario, seed, ROUNDS)[0] for seed in range(seeds)]
+    randoms = [random_run(scenario, seed) for seed in range(seeds)]
+    print(f"\n### Hand-eye accuracy against poses ({seeds} seeds, ur_scancontrol, paper noise)\n")
+    print("RMS over seeds; 1 sigma is the norm of the predicted per-axis 1 sigma.\n")
+    print("| poses | kind | error deg | error mm | 1 sigma deg | 1 sigma mm | failed |")
+    print("|---|---|---|---|---|---|---|")
+    rows = [("planned", [run[i] for run in planned]) for i in range(len(ROUNDS))]
+    rows += [("random", [run[i] for run in randoms]) for i in range(len(RANDOM_COUNTS))]
+    for kind, runs in sorted(rows, key=lambda r: (r[1][0].poses, r[0])):
+        failed = sum(not np.isfinite(p.error_deg) for p in runs)
+        print(
+            f"| {runs[0].poses} | {kind} | {_rms([p.error_deg for p in runs]):.4f} | "
+            f"{_rms([p.error_mm for p in runs]):.4f} | {_rms([p.sigma_deg for p in runs]):.4f} | "
+            f"{_rms([p.sigma_mm for p in runs]):.4f} | {failed} |"
+        )
+
+
+def upright_scene(rng: np.random.Generator) -> Scenario:
+    """A random scene with a vertical shaft standing on a table 0.35-0.6 m from the robot."""
+    distance, bearing = rng.uniform(0.35, 0.6), rng.uniform(-math.pi, math.pi)
+    base = (distance * math.cos(bearing), distance * math.sin(bearing), 0.0)
+    return random_scenario(
+        rng,
+        axis_direction=(0.0, 0.0, 1.0),
+        cylinder_base_m=base,
+        background="table",
+        pose_mode="paper",
+        n_poses=EXPLORATORY,
+    )
+
+
+def cold(scenes: int) -> None:
+    rng = np.random.default_rng(1000)
+    outcomes = []
+    for k in range(scenes):
+        scenario = upright_scene(rng)
+        try:
+            points, result = planned_run(scenario, k, (5, 4, 4, 4))
+        except CalibrationError as exc:
+            outcomes.append((False, f"scene {k}: {exc}"[:160]))
+            continue
+        if result is None:
+            outcomes.append((False, f"scene {k}: no result"))
+            continue
+        rotation, translation = transform_error(result.T_flange_sensor, scenario.T_flange_sensor)
+        ok = translation <= SUCCESS[0] and rotation <= SUCCESS[1]
+        outcomes.append(
+            (ok, f"scene {k}: {points[-1].error_mm:.4f} mm, {points[-1].error_deg:.4f} deg")
+        )
+    successes = sum(ok for ok, _ in outcomes)
+    print(f"\n### Cold start: 3 exploratory scans + 17 planned poses, {scenes} random scenes\n")
+    print(
+        f"success (error <= {SUCCESS[0] * 1e3:.2f} mm and {math.degrees(SUCCESS[1]):.2f} deg): "
+        f"{successes}/{scenes} = {100.0 * successes / scenes:.0f} %"
+    )
+    for ok, text in outcomes:
+        if not ok:
+            print(f"  FAILED {text}")
+
+
+def speed() -> None:
+    scenario = scenario_from_preset("ur_scancontrol", **PAPER_NOISE)
+    rng = np.random.default_rng(0)
+    scene = Scene.from_scenario(scenario)
+    T_true = scenario.T_flange_sensor
+    poses = sample_sensor_poses(rng, replace(scenario, n_poses=20), scene)
+    samples = scan(rng, scenario, scene, poses.T_base_sensor @ invert_transform(T_true), 0)
+    result = calibrate(samples, scenario.cylinder_radius_m, 0)
+    assert result is not None
+    config = CylinderConfig(radius_m=scenario.cylinder_radius_m)
+    constraints = constraints_of(scenario, samples[0].T_base_flange[:3, 3])
+    span = (0.0, scenario.cylinder_length_m)
+    cases = {
+        "from a result and 20 scans": {"samples": samples, "section": result.target},
+        "from a given axis, no scan": {"numbers": [0.45, 0.15, 0.0, 0.0, 0.0, 1.0]},
+    }
+    print("\n### Planning 10 poses (median of 5, s)\n")
+    for name, inputs in cases.items():
+        times = []
+        for _ in range(5):
+            started = time.perf_counter()
+            plan_for_target(
+                TARGET,
+                config,
+                result.T_flange_sensor,
+                10,
+                extent=span,
+                constraints=constraints,
+                **inputs,  # type: ignore[arg-type]
+            )
+            times.append(time.perf_counter() - started)
+        print(f"- {name}: {np.median(times):.3f} s")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--only", choices=("curve", "cold", "speed"))
+    args = parser.parse_args()
+    seeds, scenes = (4, 8) if args.quick else (20, 50)
+    if args.only in (None, "speed"):
+        speed()
+    if args.only in (None, "curve"):
+        curve(seeds)
+    if args.only in (None, "cold"):
+        cold(scenes)
+
+
+if __name__ == "__main__":
+    main()
