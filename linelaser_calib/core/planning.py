@@ -52,7 +52,7 @@ import numpy as np
 from .errors import DegenerateError, InputError
 from .geometry import FloatArray, invert_transform
 from .solver import N_HAND_EYE
-from .targets.base import Target
+from .targets.base import Shape, Target
 from .types import BoolArray, Sample
 
 #: Prior information added to every global parameter before planning from no samples
@@ -422,6 +422,28 @@ def plan_poses(
         if reached:
             break
     return Plan(chosen, start[0], start[1], reached, len(T_sensor))
+
+
+def fan_shape(plan: Plan, constraints: PlanConstraints) -> Shape:
+    """The laser fan of every planned pose as line segments (for RViz markers): from the
+    sensor origin to both ends of the measuring window, and the window's near and far edges.
+    """
+    tan_fan = math.tan(constraints.fan_half_angle_rad)
+    z_lo, z_hi = constraints.z_min_m, constraints.z_max_m
+    window = np.array(
+        [
+            [-tan_fan * z_lo, 0.0, z_lo],
+            [tan_fan * z_lo, 0.0, z_lo],
+            [-tan_fan * z_hi, 0.0, z_hi],
+            [tan_fan * z_hi, 0.0, z_hi],
+        ]
+    )
+    local = np.array([[0.0, 0.0, 0.0], window[2], [0.0, 0.0, 0.0], window[3], *window])
+    segments = [
+        local @ pose.T_base_sensor[:3, :3].T + pose.T_base_sensor[:3, 3] for pose in plan.poses
+    ]
+    points = np.concatenate(segments) if segments else np.zeros((0, 3))
+    return Shape("line", points, 0.0005, "planned_fans", (1.0, 0.2, 0.2, 0.8))
 
 
 def plannable(target: Target[Any]) -> Plannable:
