@@ -71,13 +71,16 @@ TARGET = get_target("cylinder")
 
 @dataclass
 class Point:
-    """One calibration: poses used, true errors (deg, mm), predicted 1 sigma (deg, mm)."""
+    """One calibration: poses used, true errors (deg, mm), its 1 sigma (deg, mm), and the
+    planner's prediction of that 1 sigma before the poses were scanned (deg, mm)."""
 
     poses: int
     error_deg: float
     error_mm: float
     sigma_deg: float
     sigma_mm: float
+    planner_deg: float = math.nan
+    planner_mm: float = math.nan
 
 
 def constraints_of(scenario: Scenario, reach_centre: FloatArray) -> PlanConstraints:
@@ -181,7 +184,10 @@ def planned_run(
         T_flange = np.stack([p.T_base_flange for p in plan.poses])
         samples += scan(rng, scenario, scene, T_flange, len(samples))
         result = calibrate(samples, scenario.cylinder_radius_m, seed)
-        points.append(point(result, T_true, len(samples)))
+        last = point(result, T_true, len(samples))
+        last.planner_deg = math.degrees(float(np.linalg.norm(plan.poses[-1].sigma_rotation_rad)))
+        last.planner_mm = float(np.linalg.norm(plan.poses[-1].sigma_translation_m)) * 1e3
+        points.append(last)
         if result is not None:
             T_estimate, section = result.T_flange_sensor, result.target
     return points, result
@@ -209,9 +215,15 @@ def curve(seeds: int) -> None:
     planned = [planned_run(scenario, seed, ROUNDS)[0] for seed in range(seeds)]
     randoms = [random_run(scenario, seed) for seed in range(seeds)]
     print(f"\n### Hand-eye accuracy against poses ({seeds} seeds, ur_scancontrol, paper noise)\n")
-    print("RMS over seeds; 1 sigma is the norm of the predicted per-axis 1 sigma.\n")
-    print("| poses | kind | error deg | error mm | 1 sigma deg | 1 sigma mm | failed |")
-    print("|---|---|---|---|---|---|---|")
+    print(
+        "RMS over seeds; 1 sigma is the norm of the per-axis 1 sigma of the calibration; "
+        "planner: the planner's prediction of it before the scans (configured noise).\n"
+    )
+    print(
+        "| poses | kind | error deg | error mm | 1 sigma deg | 1 sigma mm | planner deg | "
+        "planner mm | failed |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
     rows = [("planned", [run[i] for run in planned]) for i in range(len(ROUNDS))]
     rows += [("random", [run[i] for run in randoms]) for i in range(len(RANDOM_COUNTS))]
     for kind, runs in sorted(rows, key=lambda r: (r[1][0].poses, r[0])):
@@ -219,7 +231,8 @@ def curve(seeds: int) -> None:
         print(
             f"| {runs[0].poses} | {kind} | {_rms([p.error_deg for p in runs]):.4f} | "
             f"{_rms([p.error_mm for p in runs]):.4f} | {_rms([p.sigma_deg for p in runs]):.4f} | "
-            f"{_rms([p.sigma_mm for p in runs]):.4f} | {failed} |"
+            f"{_rms([p.sigma_mm for p in runs]):.4f} | {_rms([p.planner_deg for p in runs]):.4f} | "
+            f"{_rms([p.planner_mm for p in runs]):.4f} | {failed} |"
         )
 
 

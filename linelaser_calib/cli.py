@@ -23,7 +23,14 @@ from linelaser_calib.core.errors import CalibrationError, InputError, PairingErr
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
-from linelaser_calib.core.planning import Plan, PlanConstraints, plan_for_target, plannable
+from linelaser_calib.core.planning import (
+    Plan,
+    PlanConstraints,
+    SigmaPoint,
+    plan_for_target,
+    plannable,
+    predicted_curve,
+)
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
@@ -540,9 +547,15 @@ def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
 def _cmd_plan(args: argparse.Namespace) -> int:
     if args.output is not None:
         _check_output(args.output, "plan file (--output)")
+    if args.figure is not None:
+        from linelaser_calib.report import require_matplotlib
+
+        _check_output(args.figure, "figure (--figure)")
+        require_matplotlib()
     target = get_target(args.target)
     plannable(target)
     section = None
+    achieved: list[SigmaPoint] = []
     if args.from_result is not None:
         if args.initial is not None or args.cylinder is not None:
             raise InputError(
@@ -556,6 +569,9 @@ def _cmd_plan(args: argparse.Namespace) -> int:
                 f"one; choose --target {result.target.key}"
             )
         T_flange_sensor, section = result.T_flange_sensor, result.target
+        sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+        if sigma_t is not None and sigma_r is not None:
+            achieved = [(len(result.samples_used), sigma_t, sigma_r)]
     elif args.initial is not None:
         T_flange_sensor = _initial_hand_eye(args.initial)
     else:
@@ -612,6 +628,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     print(format_plan(plan, elapsed))
     if args.output is not None:
         print(f"Wrote {write_plan_yaml(plan, args.output)}")
+    if args.figure is not None:
+        from linelaser_calib.report.figures import DPI, sigma_curve_figure
+
+        sigma_curve_figure(predicted_curve(plan), achieved).savefig(args.figure, dpi=DPI)
+        print(f"Wrote {args.figure}")
     return 0
 
 
@@ -798,6 +819,12 @@ def build_parser() -> argparse.ArgumentParser:
             plan.add_argument(flag, type=parse_setting, default=None, help=text)
     plan.add_argument("--seed", type=int, default=0, help="seed of the candidate poses")
     plan.add_argument("--output", help="plan YAML to write (its directory must exist)")
+    plan.add_argument(
+        "--figure",
+        metavar="FILE.png",
+        help="plot the predicted 1 sigma against the number of poses, with the one --from's "
+        "result achieved (needs matplotlib)",
+    )
     plan.set_defaults(func=_cmd_plan)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")

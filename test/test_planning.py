@@ -185,6 +185,14 @@ def test_plan_command_writes_the_poses(
     assert max(written["poses"][-1]["predicted_sigma"]["translation_m"]) < 1e-3
 
 
+def test_plan_figure_shows_the_predicted_curve(calibrated: Path, tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    figure = tmp_path / "sigma.png"
+    argv = ["plan", "--from", str(calibrated), "--axial-range", "0,0.1", "--n", "5"]
+    assert main([*argv, "--reach-centre", "0.35,0.15,0.25", "--figure", str(figure)]) == 0
+    assert figure.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 @pytest.mark.parametrize(
     ("extra", "message"),
     [

@@ -208,6 +208,10 @@ class Plannable(Protocol):
         ...
 
 
+#: One point of a 1σ curve: (poses taken, 1σ translation (3,) m, 1σ rotation (3,) rad).
+SigmaPoint = tuple[int, FloatArray, FloatArray]
+
+
 @dataclass(frozen=True)
 class PlannedPose:
     """One planned pose and the predicted 1σ of the hand-eye once it is taken.
@@ -242,6 +246,8 @@ class Plan:
         The last pose's predicted 1σ is within the goal.
     candidates : int
         Feasible candidates the poses were chosen from.
+    taken : int
+        Samples already taken that the plan starts from.
     """
 
     poses: list[PlannedPose]
@@ -249,6 +255,21 @@ class Plan:
     sigma_rotation_rad: FloatArray | None
     goal_reached: bool
     candidates: int
+    taken: int
+
+
+def predicted_curve(plan: Plan) -> list[SigmaPoint]:
+    """(poses, 1σ translation (3,) m, 1σ rotation (3,) rad) after each planned pose, counting
+    the samples taken before them; poses whose hand-eye is not yet determined (fewer than 3
+    in all) are left out. The first point is the samples' own, when they determine it."""
+    start: list[SigmaPoint] = []
+    if plan.sigma_translation_m is not None and plan.sigma_rotation_rad is not None:
+        start = [(plan.taken, plan.sigma_translation_m, plan.sigma_rotation_rad)]
+    return start + [
+        (plan.taken + k + 1, pose.sigma_translation_m, pose.sigma_rotation_rad)
+        for k, pose in enumerate(plan.poses)
+        if plan.taken + k + 1 >= 3
+    ]
 
 
 def marginal_hand_eye(information: FloatArray) -> FloatArray:
@@ -421,7 +442,7 @@ def plan_poses(
         )
         if reached:
             break
-    return Plan(chosen, start[0], start[1], reached, len(T_sensor))
+    return Plan(chosen, start[0], start[1], reached, len(T_sensor), len(points))
 
 
 def fan_shape(plan: Plan, constraints: PlanConstraints) -> Shape:
