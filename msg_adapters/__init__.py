@@ -24,7 +24,7 @@ from msg_adapters.pointcloud2 import (
     profile_from_pointcloud2,
 )
 from msg_adapters.pose import flange_pose_from_pose_stamped, pose_stamped_from_flange_pose
-from msg_adapters.transform import transform_stamped_from_matrix
+from msg_adapters.transform import stamped_transform_from_msg, transform_stamped_from_matrix
 
 __all__ = [
     "DecodedCloud",
@@ -41,6 +41,7 @@ __all__ = [
     "profile_from_pointcloud2",
     "rclpy_types",
     "rosbags_types",
+    "stamped_transform_from_msg",
     "stamp_ns_from_msg",
     "time_msg_from_ns",
     "transform_stamped_from_matrix",

@@ -1,12 +1,25 @@
-"""``geometry_msgs/msg/TransformStamped`` from a 4x4 transform (e.g. the hand-eye result)."""
+"""``geometry_msgs/msg/TransformStamped`` <-> 4x4 transforms (the hand-eye result, /tf)."""
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from numpy.typing import ArrayLike
 
-from msg_adapters.message_types import TypeResolver, header_msg, vector_fields
+from linelaser_calib.core.geometry import (
+    check_quaternion_xyzw,
+    transform_from_translation_quaternion,
+)
+from linelaser_calib.core.tf import StampedTransform
+from msg_adapters.errors import MessageError
+from msg_adapters.message_types import (
+    TypeResolver,
+    header_msg,
+    stamp_ns_from_msg,
+    vector_fields,
+    vector_from_msg,
+)
 from msg_adapters.pose import checked_translation_quaternion
 
 
@@ -44,4 +57,28 @@ def transform_stamped_from_matrix(
             translation=types("geometry_msgs/msg/Vector3")(**vector_fields(translation)),
             rotation=types("geometry_msgs/msg/Quaternion")(**vector_fields(q_xyzw, "xyzw")),
         ),
+    )
+
+
+def stamped_transform_from_msg(msg: Any) -> StampedTransform:
+    """The transform of a ``geometry_msgs/msg/TransformStamped`` (e.g. one of a /tf message).
+
+    Raises
+    ------
+    MessageError
+        For a NaN translation or a zero, NaN or non-unit rotation quaternion; the message
+        names the frames and the stamp.
+    """
+    stamp_ns = stamp_ns_from_msg(msg.header.stamp)
+    parent, child = str(msg.header.frame_id), str(msg.child_frame_id)
+    what = f"TransformStamped {parent} -> {child} at stamp {stamp_ns} ns"
+    translation = vector_from_msg(msg.transform.translation)
+    if not np.all(np.isfinite(translation)):
+        raise MessageError(f"{what}: translation contains NaN or Inf: {translation} m")
+    try:
+        q_xyzw = check_quaternion_xyzw(vector_from_msg(msg.transform.rotation, "xyzw"))
+    except ValueError as err:
+        raise MessageError(f"{what}: invalid rotation: {err}") from None
+    return StampedTransform(
+        stamp_ns, parent, child, transform_from_translation_quaternion(translation, q_xyzw)
     )
