@@ -393,8 +393,7 @@ def _input_rows(run: OfflineRun) -> list[tuple[str, str]]:
 def _input_line(run: OfflineRun) -> str:
     bag = run.bag
     return (
-        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, "
-        f"{run.poses.description}"
+        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, {run.poses.description}"
     )
 
 
