@@ -1,8 +1,9 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration) and ``demo`` (calibrate the committed bags and show
-the error against their truth). Exit code 0 means success; a user error prints one
+``calibrate`` (the offline calibration), ``export`` (a result as a URDF joint, a static TF
+command or a launch file) and ``demo`` (calibrate the committed bags and show the error
+against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -397,6 +398,16 @@ def _input_line(run: OfflineRun) -> str:
     )
 
 
+# --- export ---------------------------------------------------------------------------------
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from linelaser_calib.export import ExportFormat, export_text
+
+    print(export_text(read_result_yaml(args.result), ExportFormat(args.format)))
+    return 0
+
+
 # --- demo -----------------------------------------------------------------------------------
 
 
@@ -616,6 +627,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="print progress on stderr (default: when stderr is a terminal)",
     )
     cal.set_defaults(func=_cmd_calibrate)
+
+    export = sub.add_parser(
+        "export", help="print a result as a URDF joint, a static TF command or a launch file"
+    )
+    export.add_argument("result", help="result YAML written by calibrate")
+    export.add_argument(
+        "--format",
+        choices=["urdf", "static-tf", "launch"],
+        required=True,
+        help="urdf: a fixed <joint>; static-tf: the static_transform_publisher command line; "
+        "launch: a Python launch file publishing it",
+    )
+    export.set_defaults(func=_cmd_export)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
     demo.add_argument("bags", nargs="?", default="bags")
