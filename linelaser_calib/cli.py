@@ -101,10 +101,9 @@ def simulate_to_bag(
     (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
     Returns the bag directory and the truth file.
     """
-    from linelaser_calib.sim.tf_chain import ur_tf_tree
-
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
         bumped_hand_eye,

@@ -94,10 +94,8 @@ def urdf_joint(result: CalibrationResult) -> str:
 
 def static_tf_command(result: CalibrationResult) -> str:
     """The ``ros2 run tf2_ros static_transform_publisher ...`` command line (Jazzy flags)."""
-    return " ".join(
-        ["ros2", "run", "tf2_ros", "static_transform_publisher"]
-        + static_transform_arguments(result)
-    )
+    words = ["ros2", "run", "tf2_ros", "static_transform_publisher"]
+    return " ".join([*words, *static_transform_arguments(result)])
 
 
 _LAUNCH_BODY = """

@@ -41,8 +41,8 @@ __all__ = [
     "profile_from_pointcloud2",
     "rclpy_types",
     "rosbags_types",
-    "stamped_transform_from_msg",
     "stamp_ns_from_msg",
+    "stamped_transform_from_msg",
     "time_msg_from_ns",
     "transform_stamped_from_matrix",
 ]

@@ -4,8 +4,8 @@ Reading accepts any layout the message definition allows: fields in any order an
 offset, extra fields and padding bytes, FLOAT32 or FLOAT64 coordinates, either byte order,
 organised (height > 1) or dense clouds. Invalid points (REP 117: NaN or +-Inf in x, y or z,
 and the depths z a driver uses as a sentinel for no return, such as Keyence's -999.999 mm or
-0, when given) are dropped unless the caller asks to keep the organised layout. A layout that contradicts
-itself raises :class:`~msg_adapters.errors.MessageError` naming the inconsistency.
+0, when given) are dropped unless the caller asks to keep the organised layout. A layout that
+contradicts itself raises :class:`~msg_adapters.errors.MessageError` naming the inconsistency.
 
 Points are rows of an (N, 3) float64 array in the message frame, in metres; the row order
 is the message's row-major point order (``index = row * width + column``).

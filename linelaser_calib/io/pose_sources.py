@@ -1,4 +1,4 @@
-"""Flange poses of a recording from the chosen :class:`~linelaser_calib.core.pose_source.PoseSource`.
+"""Flange poses of a recording, from the chosen pose source (``PoseSource``).
 
 Each source is one function ``(bag, request) -> FlangePoses`` in :data:`POSE_SOURCES`;
 the profiles always come from :func:`~linelaser_calib.io.bags.read_bag`.
