@@ -19,6 +19,7 @@ from linelaser_calib.core.tf import (
     TfChainError,
     TransformTree,
     base_frame_warning,
+    live_flange_poses,
 )
 from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io.bags import read_bag, write_bag
@@ -165,3 +166,22 @@ def test_poses_in_ur_base_warn_when_the_run_says_base_link(
     assert main(["calibrate", str(bag), "--base-frame", "base", "--output", str(quiet)]) == 0
     assert not any("180 deg about z" in w for w in read_result_yaml(quiet).warnings)
     assert "180 deg about z" in capsys.readouterr().out
+
+
+def test_live_tf_messages_give_the_flange_poses_once_tf_static_arrived() -> None:
+    rng = np.random.default_rng(5)
+    stream = [FlangePose(k * 8 * MS, random_transform(rng)) for k in range(6)]
+    dynamic, static = ur_tf_tree(stream, "base_link", "tool0")
+    tree = TransformTree(max_age_s=1.0)
+    poses, problems = live_flange_poses(tree, dynamic[:3], "base_link", "tool0", 0.02)
+    assert poses == [] and "cannot build the TF chain from base_link to tool0" in problems[0]
+    tree.extend(static, static=True)
+    received = []
+    for k in range(1, 6):  # one message per stamp, as robot_state_publisher sends
+        poses, problems = live_flange_poses(
+            tree, dynamic[3 * k : 3 * k + 3], "base_link", "tool0", 0.02
+        )
+        assert problems == [] and [p.stamp_ns for p in poses] == [stream[k].stamp_ns]
+        received += poses
+    for got, sent in zip(received, stream[1:], strict=True):
+        np.testing.assert_allclose(got.T_base_flange, sent.T_base_flange, atol=1e-12)

@@ -273,6 +273,42 @@ class TransformTree:
         return poses
 
 
+def live_flange_poses(
+    tree: TransformTree,
+    transforms: list[StampedTransform],
+    base_frame: str,
+    flange_frame: str,
+    tolerance_s: float,
+) -> tuple[list[FlangePose], list[str]]:
+    """Add one ``/tf`` message's transforms; the flange poses it completes, and problems.
+
+    Each stamp of a transform that moves a link of the chain gives one flange pose, the
+    other dynamic links interpolated there (the live counterpart of
+    :meth:`TransformTree.flange_poses`).
+
+    Returns
+    -------
+    poses : list of FlangePose
+        In stamp order, in ``base_frame``.
+    problems : list of str
+        Why no pose came (the chain is incomplete, e.g. /tf_static not received yet).
+    """
+    tree.extend(transforms, static=False)
+    try:
+        up, down = tree.chain(base_frame, flange_frame)
+    except TfChainError as err:
+        return [], [str(err)]
+    moving = {e.child for e in up + down if not e.static}
+    poses, problems = [], []
+    for stamp in sorted({t.stamp_ns for t in transforms if t.child in moving}):
+        T = tree.lookup(base_frame, flange_frame, stamp, tolerance_s)
+        if isinstance(T, str):
+            problems.append(f"no flange pose from /tf at stamp {stamp} ns: {T}")
+        else:
+            poses.append(FlangePose(stamp, T, base_frame))
+    return poses, problems
+
+
 def base_frame_warning(pose_frame: str, expected_base: str) -> str | None:
     """A warning when flange poses come in UR's ``base`` but the run expects ``base_link``.
 
