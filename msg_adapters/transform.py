@@ -4,23 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from numpy.typing import ArrayLike
 
-from linelaser_calib.core.geometry import (
-    check_quaternion_xyzw,
-    transform_from_translation_quaternion,
-)
 from linelaser_calib.core.tf import StampedTransform
-from msg_adapters.errors import MessageError
-from msg_adapters.message_types import (
-    TypeResolver,
-    header_msg,
-    stamp_ns_from_msg,
-    vector_fields,
-    vector_from_msg,
-)
-from msg_adapters.pose import checked_translation_quaternion
+from msg_adapters.message_types import TypeResolver, header_msg, stamp_ns_from_msg, vector_fields
+from msg_adapters.pose import checked_translation_quaternion, transform_from_vector_quaternion_msgs
 
 
 def transform_stamped_from_matrix(
@@ -72,13 +60,7 @@ def stamped_transform_from_msg(msg: Any) -> StampedTransform:
     stamp_ns = stamp_ns_from_msg(msg.header.stamp)
     parent, child = str(msg.header.frame_id), str(msg.child_frame_id)
     what = f"TransformStamped {parent} -> {child} at stamp {stamp_ns} ns"
-    translation = vector_from_msg(msg.transform.translation)
-    if not np.all(np.isfinite(translation)):
-        raise MessageError(f"{what}: translation contains NaN or Inf: {translation} m")
-    try:
-        q_xyzw = check_quaternion_xyzw(vector_from_msg(msg.transform.rotation, "xyzw"))
-    except ValueError as err:
-        raise MessageError(f"{what}: invalid rotation: {err}") from None
-    return StampedTransform(
-        stamp_ns, parent, child, transform_from_translation_quaternion(translation, q_xyzw)
+    T = transform_from_vector_quaternion_msgs(
+        msg.transform.translation, msg.transform.rotation, what
     )
+    return StampedTransform(stamp_ns, parent, child, T)

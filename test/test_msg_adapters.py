@@ -38,6 +38,7 @@ from msg_adapters import (
     rclpy_types,
     rosbags_types,
     stamp_ns_from_msg,
+    stamped_transform_from_msg,
     time_msg_from_ns,
     transform_stamped_from_matrix,
 )
@@ -460,6 +461,18 @@ def test_transform_stamped_carries_the_transform(types: Any) -> None:
     )
     with pytest.raises(MessageError, match="not a proper rotation"):
         transform_stamped_from_matrix(np.diag([1.0, 2.0, 1.0, 1.0]), 0, "a", "b", types=types)
+
+
+def test_tf_transforms_read_back_with_frames_and_stamp(types: Any) -> None:
+    T = random_transform(np.random.default_rng(9))
+    msg = transform_stamped_from_matrix(T, 1_700_000_000_000_000_042, "tool0", "laser", types=types)
+    read = stamped_transform_from_msg(msg)
+    assert (read.stamp_ns, read.parent, read.child) == (1_700_000_000_000_000_042, "tool0", "laser")
+    np.testing.assert_allclose(read.T_parent_child, T, atol=1e-12)
+    msg.transform.rotation.w = 0.0
+    msg.transform.rotation.x = msg.transform.rotation.y = msg.transform.rotation.z = 0.0
+    with pytest.raises(MessageError, match="TransformStamped tool0 -> laser at stamp"):
+        stamped_transform_from_msg(msg)
 
 
 def test_cylinder_marker_axis_is_the_local_z(types: Any) -> None:
