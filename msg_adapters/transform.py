@@ -2,12 +2,23 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
 from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
 
+from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
 from linelaser_calib.core.tf import StampedTransform
-from msg_adapters.message_types import TypeResolver, header_msg, stamp_ns_from_msg, vector_fields
+from msg_adapters.errors import MessageError
+from msg_adapters.message_types import (
+    TypeResolver,
+    header_msg,
+    stamp_ns_from_msg,
+    vector_fields,
+    vector_from_msg,
+)
 from msg_adapters.pose import checked_translation_quaternion, transform_from_vector_quaternion_msgs
 
 
@@ -64,3 +75,52 @@ def stamped_transform_from_msg(msg: Any) -> StampedTransform:
         msg.transform.translation, msg.transform.rotation, what
     )
     return StampedTransform(stamp_ns, parent, child, T)
+
+
+def stamped_transforms_from_msgs(msgs: Sequence[Any]) -> list[StampedTransform | str]:
+    """:func:`stamped_transform_from_msg` of many TransformStamped at once (a /tf recording).
+
+    The quaternions are checked and turned into matrices in one vectorised pass; a message
+    that fails a check goes through :func:`stamped_transform_from_msg` for its reason.
+
+    Returns
+    -------
+    list of StampedTransform or str
+        One per message, in order; a str is why that message is unusable.
+    """
+    count = len(msgs)
+    values = np.array(
+        [
+            vector_from_msg(m.transform.translation).tolist()
+            + vector_from_msg(m.transform.rotation, "xyzw").tolist()
+            for m in msgs
+        ],
+        dtype=np.float64,
+    ).reshape(count, 7)
+    norm = np.linalg.norm(values[:, 3:], axis=1)
+    with np.errstate(invalid="ignore"):
+        good = np.all(np.isfinite(values), axis=1) & (
+            np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE
+        )
+    T = np.zeros((count, 4, 4))
+    T[:, 3, 3] = 1.0
+    T[:, :3, 3] = values[:, :3]
+    if good.any():
+        T[good, :3, :3] = Rotation.from_quat(values[good, 3:] / norm[good, None]).as_matrix()
+    out: list[StampedTransform | str] = []
+    for k, msg in enumerate(msgs):
+        if not good[k]:
+            try:
+                out.append(stamped_transform_from_msg(msg))
+            except MessageError as err:
+                out.append(str(err))
+            continue
+        out.append(
+            StampedTransform(
+                stamp_ns_from_msg(msg.header.stamp),
+                str(msg.header.frame_id),
+                str(msg.child_frame_id),
+                T[k],
+            )
+        )
+    return out

@@ -39,6 +39,7 @@ from msg_adapters import (
     rosbags_types,
     stamp_ns_from_msg,
     stamped_transform_from_msg,
+    stamped_transforms_from_msgs,
     time_msg_from_ns,
     transform_stamped_from_matrix,
 )
@@ -469,10 +470,17 @@ def test_tf_transforms_read_back_with_frames_and_stamp(types: Any) -> None:
     read = stamped_transform_from_msg(msg)
     assert (read.stamp_ns, read.parent, read.child) == (1_700_000_000_000_000_042, "tool0", "laser")
     np.testing.assert_allclose(read.T_parent_child, T, atol=1e-12)
+    good = transform_stamped_from_matrix(T, 7, "base_link", "tool0", types=types)
     msg.transform.rotation.w = 0.0
     msg.transform.rotation.x = msg.transform.rotation.y = msg.transform.rotation.z = 0.0
     with pytest.raises(MessageError, match="TransformStamped tool0 -> laser at stamp"):
         stamped_transform_from_msg(msg)
+    first, bad, last = stamped_transforms_from_msgs([good, msg, good])
+    assert isinstance(bad, str) and "zero quaternion" in bad
+    for item in (first, last):
+        assert not isinstance(item, str)
+        assert (item.stamp_ns, item.parent, item.child) == (7, "base_link", "tool0")
+        np.testing.assert_allclose(item.T_parent_child, T, atol=1e-12)
 
 
 def test_cylinder_marker_axis_is_the_local_z(types: Any) -> None:

@@ -14,6 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.tf import StampedTransform, TransformTree, base_frame_warning
@@ -30,7 +31,7 @@ from linelaser_calib.io.bags import (
     _raw_messages,
 )
 from linelaser_calib.io.errors import BagError
-from msg_adapters import MessageError, stamp_ns_from_msg, stamped_transform_from_msg
+from msg_adapters import stamp_ns_from_msg, stamped_transforms_from_msgs
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,7 @@ def read_tf(path: str | Path) -> TfRecording:
     static: list[StampedTransform] = []
     skipped: list[SkippedMessage] = []
     topics: set[str] = set()
+    items: list[tuple[str, list[Any]]] = []
     for part in _bag_parts(bag):
         with _open_part(part, bag) as reader:
             connections = [
@@ -117,13 +119,16 @@ def read_tf(path: str | Path) -> TfRecording:
                 if isinstance(msg, SkippedMessage):
                     skipped.append(msg)
                     continue
-                into = static if conn.topic == TF_STATIC_TOPIC else dynamic
-                for item in msg.transforms:
-                    try:
-                        into.append(stamped_transform_from_msg(item))
-                    except MessageError as err:
-                        stamp = stamp_ns_from_msg(item.header.stamp)
-                        skipped.append(SkippedMessage(conn.topic, stamp, str(err)))
+                items.append((conn.topic, msg.transforms))
+    topic_of = [topic for topic, transforms in items for _ in transforms]
+    messages = [m for _, transforms in items for m in transforms]
+    for topic, msg, converted in zip(
+        topic_of, messages, stamped_transforms_from_msgs(messages), strict=True
+    ):
+        if isinstance(converted, str):
+            skipped.append(SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), converted))
+        else:
+            (static if topic == TF_STATIC_TOPIC else dynamic).append(converted)
     if not dynamic and not static:
         raise BagError(
             f"bag {bag} holds no {TF_TYPE} on {TF_TOPIC} or {TF_STATIC_TOPIC} (its topics: "

@@ -21,7 +21,7 @@ from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.tf import StampedTransform, TransformTree, live_flange_poses
 from linelaser_calib.core.types import FlangePose
 from linelaser_calib.nodes.common import latched_qos
-from msg_adapters import MessageError, stamped_transform_from_msg
+from msg_adapters import stamped_transforms_from_msgs
 
 try:  # a full ROS install has tf2_msgs; the PyPI wheels do not
     from tf2_msgs.msg import TFMessage
@@ -85,11 +85,11 @@ class TfPoseInput:
 
     def _transforms(self, msg: Any) -> list[StampedTransform]:
         transforms = []
-        for item in msg.transforms:
-            try:
-                transforms.append(stamped_transform_from_msg(item))
-            except MessageError as err:
-                self._on_problem(str(err))
+        for item in stamped_transforms_from_msgs(msg.transforms):
+            if isinstance(item, str):
+                self._on_problem(item)
+            else:
+                transforms.append(item)
         return transforms
 
     def _on_tf_static(self, msg: Any) -> None:
