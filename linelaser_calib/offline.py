@@ -75,6 +75,11 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
+    if pose_source is not PoseSource.POSE and pose_topic is not None:
+        raise InputError(
+            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
+            f"--pose-source {pose_source.value}: drop --pose-topic, or use --pose-source pose"
+        )
     bag = read_bag(
         path,
         profile_topic=profile_topic,

@@ -150,6 +150,9 @@ def test_pose_source_tf_reports_a_recording_without_tf_static(
     assert "tool0" in err and "wrist_3_link <- forearm_link (dynamic" in err
     assert "ros2 run tf2_ros tf2_echo base_link tool0" in err
     assert "Traceback" not in err and not out.exists()
+    argv = ["calibrate", str(tf_bag), "--pose-source", "tf", "--pose-topic", "/flange_pose"]
+    assert main(argv) == 1
+    assert "drop --pose-topic" in capsys.readouterr().err
 
 
 def test_poses_in_ur_base_warn_when_the_run_says_base_link(
