@@ -75,6 +75,11 @@ def test_a_second_parent_is_refused_and_reported() -> None:
     tree.add(StampedTransform(5, "world", "tool0", np.eye(4)), static=False)
     assert tree.parent_of("tool0") == "base_link"
     assert any("tool0 has parent base_link" in c for c in tree.conflicts)
+    batch = [StampedTransform(s, "a" if s % 2 else "b", "c", np.eye(4)) for s in range(1, 7)]
+    tree.extend(batch, static=False)
+    assert tree.parent_of("c") == "a"
+    assert [p.stamp_ns for p in tree.flange_poses("a", "c", 1.0)] == [1, 3, 5]
+    assert any("c has parent a but transforms give it parent b" in c for c in tree.conflicts)
 
 
 def test_missing_static_transform_names_frames_gap_and_the_tf2_echo_command() -> None:

@@ -110,18 +110,17 @@ class TransformTree:
             self.add(items[0], static=False)
             entry = self._dynamic.get(child)
             parent = None if entry is None else entry[0]
-            entry_buffer = None if entry is None else entry[1]
-            rest = [t for t in items[1:] if t.parent != parent or entry_buffer is None]
-            for transform in rest:
-                self.add(transform, static=False)
-            if entry_buffer is not None:
-                entry_buffer.extend(
+            if entry is not None:
+                entry[1].extend(
                     [
                         FlangePose(t.stamp_ns, t.T_parent_child, t.parent)
                         for t in items[1:]
                         if t.parent == parent
                     ]
                 )
+            for transform in items[1:]:
+                if transform.parent != parent:
+                    self.add(transform, static=False)  # refused: records the conflict
 
     def parent_of(self, frame: str) -> str | None:
         """Parent of ``frame``, or None for a root or an unknown frame."""
