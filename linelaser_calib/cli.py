@@ -1,8 +1,9 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration) and ``demo`` (calibrate the committed bags and show
-the error against their truth). Exit code 0 means success; a user error prints one
+``calibrate`` (the offline calibration), ``export`` (a result as a URDF joint, a static TF
+command or a launch file) and ``demo`` (calibrate the committed bags and show the error
+against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -22,6 +23,7 @@ from linelaser_calib.core.errors import CalibrationError, InputError, PairingErr
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
@@ -99,12 +101,15 @@ def _xyz(text: str) -> tuple[float, float, float]:
 
 
 def simulate_to_bag(
-    out: Path, scenario_name: str, seed: int, overrides: dict[str, object]
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
 ) -> tuple[Path, Path]:
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
     truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    With ``tf`` the flange poses are also written as a robot_state_publisher-style
+    ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
+    (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
     Returns the bag directory and the truth file.
     """
     from linelaser_calib.core.targets.base import ResultSection
@@ -112,6 +117,7 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.known_point import KnownPoint
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
         bumped_hand_eye,
@@ -130,6 +136,9 @@ def simulate_to_bag(
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
         target = CylinderSection(data.truth.cylinder)
+    tf_dynamic, tf_static = (
+        ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
+    )
     write_bag(
         out,
         profiles,
@@ -140,6 +149,8 @@ def simulate_to_bag(
         base_frame=scenario.base_frame,
         organised=scenario.organised,
         intensities=intensities if scenario.intensity else None,
+        tf=tf_dynamic,
+        tf_static=tf_static,
     )
     simulation: dict[str, object] = {
         "scenario": scenario_name,
@@ -147,7 +158,7 @@ def simulate_to_bag(
         "overrides": overrides,
         "profiles": len(profiles),
         "poses": len(poses),
-        "command": simulate_command(out, scenario_name, seed, overrides),
+        "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
         taught = weld_data.truth.taught_point_m
@@ -195,7 +206,9 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
 )
 
 
-def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[str, object]) -> str:
+def simulate_command(
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
+) -> str:
     """The ``linelaser-calib simulate`` command line that regenerates a bag."""
     flags = {field: flag for flag, field, _ in SIMULATE_OPTIONS}
     words = [PROG, "simulate", str(out), "--scenario", scenario_name, "--seed", str(seed)]
@@ -204,6 +217,8 @@ def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[s
             words.append("--organised" if value else "--dense")
         else:
             words += [flags[field], str(value)]
+    if tf:
+        words.append("--tf")
     return " ".join(words)
 
 
@@ -215,7 +230,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     }
     if args.organised is not None:
         overrides["organised"] = args.organised
-    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides)
+    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides, tf=args.tf)
     print(f"wrote {bag} and {truth}")
     print(format_bag_info(bag_info(bag)))
     return 0
@@ -353,6 +368,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             flange_frame=args.flange_frame,
             estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
+            pose_source=PoseSource(args.pose_source),
+            base_frame=args.base_frame,
+            invalid_values_m=tuple(args.invalid_value),
         )
     except PairingError as exc:
         raise PairingError(
@@ -388,16 +406,25 @@ def _input_rows(run: OfflineRun) -> list[tuple[str, str]]:
     return [
         ("bag", str(bag.path)),
         ("profiles", f"{len(bag.profiles)} on {bag.profile_topic} (frame {bag.sensor_frame})"),
-        ("flange poses", f"{len(bag.poses)} on {bag.pose_topic} (frame {bag.base_frame})"),
+        ("flange poses", run.poses.description),
     ]
 
 
 def _input_line(run: OfflineRun) -> str:
     bag = run.bag
     return (
-        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, "
-        f"{len(bag.poses)} poses on {bag.pose_topic}"
+        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, {run.poses.description}"
     )
+
+
+# --- export ---------------------------------------------------------------------------------
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from linelaser_calib.export import ExportFormat, export_text
+
+    print(export_text(read_result_yaml(args.result), ExportFormat(args.format)))
+    return 0
 
 
 # --- demo -----------------------------------------------------------------------------------
@@ -498,6 +525,45 @@ TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
 )
 
 
+def _sentinel(text: str) -> float:
+    """Parse a sentinel depth, m (finite)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a depth in metres, got {text!r}") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(
+            f"NaN and +-Inf are always no return; give a finite depth, got {text!r}"
+        )
+    return value
+
+
+def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
+    """Where the flange poses come from, the frames, and the profiler's no-return value."""
+    cal.add_argument(
+        "--pose-source",
+        choices=[s.value for s in PoseSource],
+        default=PoseSource.POSE.value,
+        help="flange poses from a PoseStamped topic (pose, default) or from the /tf + "
+        "/tf_static chain --base-frame -> --flange-frame (tf)",
+    )
+    cal.add_argument(
+        "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
+    )
+    cal.add_argument(
+        "--flange-frame", default="tool0", help="frame id of the flange (end of the TF chain)"
+    )
+    cal.add_argument(
+        "--invalid-value",
+        type=_sentinel,
+        action="append",
+        default=[],
+        metavar="M",
+        help="a depth z, m, that the profiler sends for no return besides NaN/Inf, e.g. "
+        "-0.999999 (Keyence's -999.999 mm) or 0; repeat for several",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
@@ -529,6 +595,11 @@ def build_parser() -> argparse.ArgumentParser:
         dest="organised",
         action="store_false",
         help="dense profiles, invalid rays dropped",
+    )
+    sim.add_argument(
+        "--tf",
+        action="store_true",
+        help="also write the flange poses as a /tf chain (UR-like links) with /tf_static",
     )
     sim.set_defaults(func=_cmd_simulate)
 
@@ -579,7 +650,7 @@ def build_parser() -> argparse.ArgumentParser:
         cal.add_argument(flag, type=parse, default=default, help=text)
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
-    cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
+    _add_pose_source_arguments(cal)
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(
         "--progress",
@@ -588,6 +659,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="print progress on stderr (default: when stderr is a terminal)",
     )
     cal.set_defaults(func=_cmd_calibrate)
+
+    export = sub.add_parser(
+        "export", help="print a result as a URDF joint, a static TF command or a launch file"
+    )
+    export.add_argument("result", help="result YAML written by calibrate")
+    export.add_argument(
+        "--format",
+        choices=["urdf", "static-tf", "launch"],
+        required=True,
+        help="urdf: a fixed <joint>; static-tf: the static_transform_publisher command line; "
+        "launch: a Python launch file publishing it",
+    )
+    export.set_defaults(func=_cmd_export)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
     demo.add_argument("bags", nargs="?", default="bags")

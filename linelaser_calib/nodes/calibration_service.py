@@ -34,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -77,9 +78,9 @@ from msg_adapters import (
 )
 
 try:  # a full ROS install has tf2_ros; the PyPI wheels do not
-    from tf2_ros import StaticTransformBroadcaster
+    from tf2_ros import Buffer, StaticTransformBroadcaster, TransformListener
 except ImportError:
-    StaticTransformBroadcaster = None
+    Buffer = StaticTransformBroadcaster = TransformListener = None
 
 NODE_NAME = "calibration_service"
 #: Diagnostic value: complete samples held.
@@ -213,6 +214,30 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     )
 
 
+def second_parent_warning(frames_yaml: str, child: str, parent: str) -> str | None:
+    """A warning when ``child`` already has a parent other than ``parent`` in /tf.
+
+    Parameters
+    ----------
+    frames_yaml : str
+        ``tf2_ros.Buffer.all_frames_as_yaml()``: ``frame: {parent: ..., ...}`` per frame.
+    child, parent : str
+        The hand-eye about to be broadcast: sensor frame and flange frame.
+    """
+    frames = yaml.safe_load(frames_yaml) or {}
+    entry = frames.get(child) if isinstance(frames, dict) else None
+    known = entry.get("parent") if isinstance(entry, dict) else None
+    if known is None or str(known) == parent:
+        return None
+    return (
+        f"the sensor frame {child} already has parent {known} in /tf (e.g. a joint of the "
+        f"URDF); broadcasting {parent} -> {child} gives it two parents, which breaks the TF "
+        f"tree. Remove the other transform (replace the URDF joint with `linelaser-calib "
+        f"export RESULT.yaml --format urdf`), or give the sensor another frame name "
+        f"(sensor_frame)"
+    )
+
+
 class CalibrationServiceNode(Node):
     """The ``calibration_service`` node; see the module docstring. ``kwargs`` go to ``Node``."""
 
@@ -246,6 +271,10 @@ class CalibrationServiceNode(Node):
         self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, latched_qos(1))
         self._tf_static = (
             None if StaticTransformBroadcaster is None else StaticTransformBroadcaster(self)
+        )
+        self._tf_buffer = None if Buffer is None else Buffer()
+        self._tf_listener = (
+            None if self._tf_buffer is None else TransformListener(self._tf_buffer, self)
         )
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(
@@ -392,6 +421,12 @@ class CalibrationServiceNode(Node):
         )
         self._hand_eye_pub.publish(transform)
         if self._tf_static is not None:
+            if self._tf_buffer is not None:
+                warning = second_parent_warning(
+                    self._tf_buffer.all_frames_as_yaml(), result.child_frame, result.parent_frame
+                )
+                if warning is not None:
+                    self.get_logger().warning(warning)
             self._tf_static.sendTransform(transform)
         # Clear what an earlier calibration drew (e.g. another target's shapes).
         markers = [Marker(action=Marker.DELETEALL)]
