@@ -17,6 +17,7 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_translation_quaternion,
 )
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.types import CalibrationResult, Cylinder
 from linelaser_calib.export import static_transform_arguments
 from linelaser_calib.io.results import write_result_yaml
@@ -37,7 +38,7 @@ def hand_eyes() -> list[np.ndarray]:
 def result_of(T: np.ndarray) -> CalibrationResult:
     return CalibrationResult(
         T_flange_sensor=T,
-        cylinder=Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02),
+        target=CylinderSection(Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02)),
         method="default",
         samples_used=[0, 1],
         samples_rejected=[],
