@@ -29,8 +29,8 @@ from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.results import (
     read_result_yaml,
-    read_truth_yaml,
     result_to_dict,
+    truth_beside,
     write_result_yaml,
     write_truth_yaml,
 )
@@ -338,8 +338,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         raise PairingError(
             f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
-    truth_path = Path(args.bag) / "truth.yaml"
-    truth = read_truth_yaml(truth_path) if truth_path.is_file() else None
+    truth, note = truth_beside(args.bag)
+    if note:
+        print(note, file=sys.stderr)
     written = []
     if args.output is not None:
         written.append(write_result_yaml(run.result, args.output))
@@ -390,7 +391,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
     rows = []
     for bag in bags:
-        truth = read_truth_yaml(bag / "truth.yaml")
+        truth, note = truth_beside(bag)
+        if truth is None:
+            print(note or f"{bag} has no truth.yaml; skipped", file=sys.stderr)
+            continue
         for method in (Method.PAPER, Method.DEFAULT):
             config = PipelineConfig(method=method, seed=args.seed)
             target = "cylinder"
