@@ -26,7 +26,7 @@ from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
 from linelaser_calib.core.refine import RefineConfig
 from linelaser_calib.core.types import CalibrationResult, KnownPoint
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
-from linelaser_calib.io.errors import ResultFileError
+from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
 from linelaser_calib.io.results import (
     read_result_yaml,
     result_to_dict,
@@ -224,12 +224,11 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     initial = None
     if args.initial is not None:
         try:
-            initial = read_result_yaml(args.initial).T_flange_sensor
-        except ResultFileError as exc:
-            raise ResultFileError(
-                f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
-                "written by linelaser-calib (its hand_eye section)"
-            ) from exc
+            initial, warnings = read_initial_hand_eye(args.initial)
+        except CalibrationError as exc:
+            raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
+        for warning in warnings:
+            print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
     if (
         args.target == Target.KNOWN_POINT.value
         and args.method == Method.PAPER.value
@@ -533,7 +532,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    cal.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     cal.add_argument(
         "--sync-tolerance",
