@@ -88,7 +88,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from .corner import CornerConfig, CornerFit, fit_corner
 from .errors import DegenerateError, InputError, ProfileRejected, SolverError
@@ -1422,7 +1422,7 @@ def _default_result(
         int(config.max_outlier_fraction * len(corners)),
         len(corners) - config.min_samples,
     )
-    limit = float(chi2.isf(config.outlier_probability, 3))
+    limit = float(chdtri(3, config.outlier_probability))  # P(chi2 with 3 dof > limit)
     dropped: list[Rejection] = []
     while True:
         refined = refine_known_point(
