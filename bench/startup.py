@@ -10,8 +10,9 @@ Runs, as fresh processes, each of:
 
 interleaved (one of each per round, so that a change of machine load hits all alike), with
 Python's bytecode cache on as a user has it (``PYTHONDONTWRITEBYTECODE`` is dropped for the
-runs; a warm-up run of each writes the cache), and prints the wall time of each (median, min, max over the rounds) and the ratio of the
-medians of ``calibrate`` to ``bare``. The goal is a ratio of at most 1.5.
+runs; a warm-up run of each writes the cache), and prints the wall time of each (median,
+min, max over the rounds) and the ratio of the medians of ``calibrate`` to ``bare``. The goal
+is a ratio of at most 1.5.
 
 Run from the repository root (not part of the test suite)::
 
@@ -63,7 +64,8 @@ def main() -> int:
     print(f"Wall time over {args.rounds} interleaved rounds, s")
     print(f"  {'run':<12}{'median':>8}{'min':>8}{'max':>8}")
     for name, values in times.items():
-        print(f"  {name:<12}{statistics.median(values):>8.3f}{min(values):>8.3f}{max(values):>8.3f}")
+        median = statistics.median(values)
+        print(f"  {name:<12}{median:>8.3f}{min(values):>8.3f}{max(values):>8.3f}")
     ratio = statistics.median(times["calibrate"]) / statistics.median(times["bare"])
     verdict = "within" if ratio <= GOAL else "above"
     print(f"calibrate / bare (medians): {ratio:.2f} ({verdict} the goal of {GOAL})")
