@@ -1,4 +1,4 @@
-"""The layering DESIGN.md promises: core is pure numpy/scipy/opencv, nodes are the only ROS."""
+"""The layering the package promises: core is pure numpy/scipy/opencv, nodes are the only ROS."""
 
 from __future__ import annotations
 

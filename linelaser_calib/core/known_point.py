@@ -12,7 +12,7 @@ paper). This is linear in (a1, a3, t_X) and, when p is not taught, in p.
 
 Methods
 -------
-``paper`` (:func:`paper_correction`, weld-seam paper eq. 11-16, ``papers.md`` §B)
+``paper`` (:func:`paper_correction`, weld-seam paper eq. 11-16)
     Start from an initial hand-eye and the taught point. Reconstruct p_i through every view.
     The scatter per axis is K_X = sign(X̄ − X_R) Σ|X_n − X̄| (eq. 14 as printed sums signed
     deviations, which is identically zero; the sum of absolute deviations is the evident

@@ -1,6 +1,6 @@
 """Result and truth YAML files: the one place calibration results are written and read.
 
-The result file layout is the DESIGN.md contract::
+The result file layout (the README's "Result file")::
 
     hand_eye:                       # T_flange_sensor
       parent_frame: tool0
