@@ -122,7 +122,7 @@ BAD = {
     "repeated_named": ("--x 0.1 --x 0.2", InputError, "at most once"),
     "named_without_number": ("--x 0.1 --y", InputError, "named arguments"),
     "named_not_a_number": ("--x 0.1 --y one", InputError, "need numbers"),
-    "missing_file": ("no/such/file.yaml", ResultFileError, "neither an existing file nor"),
+    "missing_file": ("no/such/file.yaml", ResultFileError, "does not exist"),
 }
 
 

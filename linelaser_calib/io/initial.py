@@ -219,5 +219,5 @@ def read_initial_hand_eye(spec: str) -> InitialHandEye:
         return numbers
     path = Path(spec).expanduser()
     if not path.exists():
-        raise ResultFileError(f"{path} is neither an existing file nor numbers; give {FORMS}")
+        raise ResultFileError(f"{path} does not exist (nor is it numbers); give {FORMS}")
     return _from_file(path)
