@@ -28,11 +28,11 @@ from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_name
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
-from linelaser_calib.io.errors import ResultFileError
+from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
 from linelaser_calib.io.results import (
     read_result_yaml,
-    read_truth_yaml,
     result_to_dict,
+    truth_beside,
     write_result_yaml,
     write_truth_yaml,
 )
@@ -264,12 +264,11 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     initial = None
     if args.initial is not None:
         try:
-            initial = read_result_yaml(args.initial).T_flange_sensor
-        except ResultFileError as exc:
-            raise ResultFileError(
-                f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
-                "written by linelaser-calib (its hand_eye section)"
-            ) from exc
+            initial, warnings = read_initial_hand_eye(args.initial)
+        except CalibrationError as exc:
+            raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
+        for warning in warnings:
+            print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
@@ -376,8 +375,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         raise PairingError(
             f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
-    truth_path = Path(args.bag) / "truth.yaml"
-    truth = read_truth_yaml(truth_path) if truth_path.is_file() else None
+    truth, note = truth_beside(args.bag)
+    if note:
+        print(note, file=sys.stderr)
     written = []
     if args.output is not None:
         written.append(write_result_yaml(run.result, args.output))
@@ -437,7 +437,10 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
     rows = []
     for bag in bags:
-        truth = read_truth_yaml(bag / "truth.yaml")
+        truth, note = truth_beside(bag)
+        if truth is None:
+            print(note or f"{bag} has no truth.yaml; skipped", file=sys.stderr)
+            continue
         target = get_target(truth.target.key)
         settings: dict[str, object] = {}
         initial = None
@@ -631,7 +634,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    cal.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     cal.add_argument(
         "--sync-tolerance",

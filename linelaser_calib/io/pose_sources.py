@@ -29,6 +29,7 @@ from linelaser_calib.io.bags import (
     _decode,
     _open_part,
     _raw_messages,
+    _reading_store,
 )
 from linelaser_calib.io.errors import BagError
 from msg_adapters import stamp_ns_from_msg, stamped_transforms_from_msgs
@@ -114,8 +115,9 @@ def read_tf(path: str | Path) -> TfRecording:
                 if c.msgtype == TF_TYPE and c.topic in (TF_TOPIC, TF_STATIC_TOPIC)
             ]
             topics |= {c.topic for c in reader.connections}
+            store = _reading_store(connections)
             for conn, log_ns, raw in _raw_messages(reader, connections, bag, part):
-                msg = _decode(conn.topic, TF_TYPE, log_ns, raw)
+                msg = _decode(store, conn.topic, TF_TYPE, log_ns, raw)
                 if isinstance(msg, SkippedMessage):
                     skipped.append(msg)
                     continue

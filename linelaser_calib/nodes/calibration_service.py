@@ -30,6 +30,7 @@ from __future__ import annotations
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +51,8 @@ from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samp
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.io import ResultFileError, read_result_yaml, write_result_yaml
+from linelaser_calib.io import write_result_yaml
+from linelaser_calib.io.initial import read_initial_hand_eye
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
     HAND_EYE_TOPIC,
@@ -123,8 +125,9 @@ PARAMETERS = (
     ParamSpec(
         "initial_hand_eye_path",
         "",
-        "Result YAML whose hand_eye is the initial (old) hand-eye, e.g. an earlier result; "
-        "'' for none. The default method starts from it; the paper method with target "
+        "Initial (old) hand-eye: a result YAML (e.g. an earlier result) or a YAML with a "
+        "hand_eye section, or the numbers 'x y z qx qy qz qw' or 'x y z roll pitch yaw' (m, "
+        "rad); '' for none. The default method starts from it; the paper method with target "
         "known_point corrects it and needs it.",
     ),
     ParamSpec(
@@ -173,11 +176,14 @@ PARAMETERS = (
 )
 
 
-def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
+def pipeline_config(
+    values: dict[str, Any], warn: Callable[[str], None] = lambda line: None
+) -> PipelineConfig:
     """The pipeline configuration from the parameter values in effect (by name).
 
     ``radius`` 0, ``known_point`` [], ``min_samples`` 0 and ``initial_hand_eye_path`` '' mean
-    "not given"; a given one that does not act on the target and method is refused.
+    "not given"; a given one that does not act on the target and method is refused. ``warn``
+    receives one line per value of the initial hand-eye that was normalised.
 
     Raises
     ------
@@ -188,14 +194,14 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     settings: dict[str, Any] = {}
     initial = None
     if values["initial_hand_eye_path"]:
-        path = Path(values["initial_hand_eye_path"]).expanduser()
         try:
-            initial = read_result_yaml(path).T_flange_sensor
-        except ResultFileError as err:
-            raise ResultFileError(
-                f"cannot use initial_hand_eye_path: {err} (it must name a result YAML with a "
-                "hand_eye section, e.g. an earlier calibration's output_path, or be '' for none)"
+            initial, warnings = read_initial_hand_eye(values["initial_hand_eye_path"])
+        except CalibrationError as err:
+            raise type(err)(
+                f"cannot use initial_hand_eye_path: {err} (or set it to '' for none)"
             ) from err
+        for line in warnings:
+            warn(f"initial_hand_eye_path: {line}")
         settings["initial"] = initial
     if values["radius"]:
         settings["radius_m"] = float(values["radius"])
@@ -390,7 +396,7 @@ class CalibrationServiceNode(Node):
         )
         start = time.monotonic()
         try:
-            result = calibrate_samples(samples, pipeline_config(p))
+            result = calibrate_samples(samples, pipeline_config(p, self._warn))
         except CalibrationError as err:
             return False, str(err)
         result.parent_frame = p["flange_frame"]
