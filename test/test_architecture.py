@@ -71,6 +71,7 @@ DEPENDENCIES = {
             "visualization_msgs",
             "diagnostic_msgs",
             "tf2_ros",
+            "tf2_msgs",
             "launch",
             "launch_ros",
             "ament_index_python",

@@ -175,11 +175,11 @@ def test_calibrate_takes_the_numbers_of_a_static_transform(
     """The weld-seam paper method corrects the old hand-eye given as seven numbers."""
     initial = read_result_yaml(WELD / "initial.yaml")
     truth = read_truth_yaml(WELD / "truth.yaml")
-    assert initial.known_point is not None
+    point = initial.target.to_mapping("base_link")["point"]
     t, q = translation_quaternion_from_transform(initial.T_flange_sensor)
     out = tmp_path / "result.yaml"
     argv = ["calibrate", str(WELD), "--target", "known_point", "--method", "paper"]
-    argv += ["--point", ",".join(map(str, initial.known_point.point))]
+    argv += ["--point", ",".join(map(str, point))]
     assert main([*argv, "--initial", numbers(np.r_[t, q]), "--output", str(out)]) == 0
     rot0, trans0 = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
     rot, trans = transform_error(read_result_yaml(out).T_flange_sensor, truth.T_flange_sensor)
