@@ -1,4 +1,4 @@
-"""Reproduce the cylinder paper's simulation tables (papers.md §A, §4.1) next to its numbers.
+"""Reproduce the cylinder paper's simulation tables (§4.1) next to its numbers.
 
 Run from the repository root, e.g.::
 

@@ -1,10 +1,11 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration), ``plan`` (the next flange poses to scan from) and
-``demo`` (calibrate the committed bags and show the error against their truth). Exit code 0
-means success; a user error prints one paragraph on stderr and exits with 1; a usage error
-exits with 2.
+``calibrate`` (the offline calibration), ``plan`` (the next flange poses to scan from),
+``export`` (a result as a URDF joint, a static TF command or a launch file) and ``demo``
+(calibrate the committed bags and show the error against their truth). Exit code 0 means
+success; a user error prints one paragraph on stderr and exits with 1; a usage error exits
+with 2.
 """
 
 from __future__ import annotations
@@ -31,15 +32,16 @@ from linelaser_calib.core.planning import (
     plannable,
     predicted_curve,
 )
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
-from linelaser_calib.io.errors import ResultFileError
+from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
 from linelaser_calib.io.results import (
     read_result_yaml,
-    read_truth_yaml,
     result_to_dict,
+    truth_beside,
     write_plan_yaml,
     write_result_yaml,
     write_truth_yaml,
@@ -109,12 +111,15 @@ def _xyz(text: str) -> tuple[float, float, float]:
 
 
 def simulate_to_bag(
-    out: Path, scenario_name: str, seed: int, overrides: dict[str, object]
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
 ) -> tuple[Path, Path]:
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
     truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    With ``tf`` the flange poses are also written as a robot_state_publisher-style
+    ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
+    (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
     Returns the bag directory and the truth file.
     """
     from linelaser_calib.core.targets.base import ResultSection
@@ -122,6 +127,7 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.known_point import KnownPoint
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
         bumped_hand_eye,
@@ -140,6 +146,9 @@ def simulate_to_bag(
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
         target = CylinderSection(data.truth.cylinder)
+    tf_dynamic, tf_static = (
+        ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
+    )
     write_bag(
         out,
         profiles,
@@ -150,6 +159,8 @@ def simulate_to_bag(
         base_frame=scenario.base_frame,
         organised=scenario.organised,
         intensities=intensities if scenario.intensity else None,
+        tf=tf_dynamic,
+        tf_static=tf_static,
     )
     simulation: dict[str, object] = {
         "scenario": scenario_name,
@@ -157,7 +168,7 @@ def simulate_to_bag(
         "overrides": overrides,
         "profiles": len(profiles),
         "poses": len(poses),
-        "command": simulate_command(out, scenario_name, seed, overrides),
+        "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
         taught = weld_data.truth.taught_point_m
@@ -205,7 +216,9 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
 )
 
 
-def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[str, object]) -> str:
+def simulate_command(
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
+) -> str:
     """The ``linelaser-calib simulate`` command line that regenerates a bag."""
     flags = {field: flag for flag, field, _ in SIMULATE_OPTIONS}
     words = [PROG, "simulate", str(out), "--scenario", scenario_name, "--seed", str(seed)]
@@ -214,6 +227,8 @@ def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[s
             words.append("--organised" if value else "--dense")
         else:
             words += [flags[field], str(value)]
+    if tf:
+        words.append("--tf")
     return " ".join(words)
 
 
@@ -225,7 +240,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     }
     if args.organised is not None:
         overrides["organised"] = args.organised
-    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides)
+    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides, tf=args.tf)
     print(f"wrote {bag} and {truth}")
     print(format_bag_info(bag_info(bag)))
     return 0
@@ -254,15 +269,15 @@ SETTING_FLAGS = {
 }
 
 
-def _initial_hand_eye(path: str) -> np.ndarray:
-    """The hand-eye (4, 4) of ``--initial FILE.yaml``."""
+def _initial_hand_eye(text: str) -> np.ndarray:
+    """The hand-eye (4, 4) of ``--initial``; its warnings go to stderr."""
     try:
-        return read_result_yaml(path).T_flange_sensor
-    except ResultFileError as exc:
-        raise ResultFileError(
-            f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
-            "written by linelaser-calib (its hand_eye section)"
-        ) from exc
+        initial, warnings = read_initial_hand_eye(text)
+    except CalibrationError as exc:
+        raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
+    for warning in warnings:
+        print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
+    return initial
 
 
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
@@ -366,13 +381,17 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             flange_frame=args.flange_frame,
             estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
+            pose_source=PoseSource(args.pose_source),
+            base_frame=args.base_frame,
+            invalid_values_m=tuple(args.invalid_value),
         )
     except PairingError as exc:
         raise PairingError(
             f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
-    truth_path = Path(args.bag) / "truth.yaml"
-    truth = read_truth_yaml(truth_path) if truth_path.is_file() else None
+    truth, note = truth_beside(args.bag)
+    if note:
+        print(note, file=sys.stderr)
     written = []
     if args.output is not None:
         written.append(write_result_yaml(run.result, args.output))
@@ -401,114 +420,15 @@ def _input_rows(run: OfflineRun) -> list[tuple[str, str]]:
     return [
         ("bag", str(bag.path)),
         ("profiles", f"{len(bag.profiles)} on {bag.profile_topic} (frame {bag.sensor_frame})"),
-        ("flange poses", f"{len(bag.poses)} on {bag.pose_topic} (frame {bag.base_frame})"),
+        ("flange poses", run.poses.description),
     ]
 
 
 def _input_line(run: OfflineRun) -> str:
     bag = run.bag
     return (
-        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, "
-        f"{len(bag.poses)} poses on {bag.pose_topic}"
+        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, {run.poses.description}"
     )
-
-
-# --- demo -----------------------------------------------------------------------------------
-
-
-def _cmd_demo(args: argparse.Namespace) -> int:
-    root = Path(args.bags)
-    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
-    if not bags:
-        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
-    rows = []
-    for bag in bags:
-        truth = read_truth_yaml(bag / "truth.yaml")
-        target = get_target(truth.target.key)
-        settings: dict[str, object] = {}
-        initial = None
-        label = target.title
-        if (bag / "initial.yaml").is_file():
-            initial = read_result_yaml(bag / "initial.yaml")
-            settings = {**initial.target.given_settings(), "initial": initial.T_flange_sensor}
-            label += ", from initial.yaml"
-            rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
-            rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
-        for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(
-                method=method,
-                target=target.name,
-                target_config=configure(target, method.value, settings, SETTING_FLAGS),
-                seed=args.seed,
-                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
-            )
-            started = time.perf_counter()
-            run = calibrate_bag(bag, config)
-            seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
-            print(format_summary(run.result, truth))
-            print()
-            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
-            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
-    print("Error against truth (hand-eye T_flange_sensor):")
-    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
-    for name, label, rot_deg, trans_mm, seconds in rows:
-        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
-    return 0
-
-
-# --- parser ---------------------------------------------------------------------------------
-
-#: Numeric options of ``calibrate`` for the pairing gate: (flag, parser, default, help).
-CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = (
-    (
-        "--max-speed",
-        _non_negative_float,
-        PairingConfig.max_linear_speed_m_s,
-        "reject profiles taken while the flange moved faster, m/s; 0 accepts any "
-        "(continuous scanning with a good clock)",
-    ),
-    (
-        "--max-angular-speed",
-        _non_negative_float,
-        PairingConfig.max_angular_speed_rad_s,
-        "reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
-    ),
-)
-
-#: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
-#: one the target or method does not use is refused): (flag, parser, help).
-TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
-    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
-    (
-        "--point",
-        _xyz,
-        "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
-    ),
-    (
-        "--sensor-sigma",
-        _positive_float,
-        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals; "
-        "cylinder default 5 um)",
-    ),
-    (
-        "--robot-sigma-t",
-        _positive_float,
-        "robot pose error per pose, 1 sigma per axis, m (default method; cylinder default "
-        "0.1 mm, known_point 0.05 mm)",
-    ),
-    (
-        "--robot-sigma-r",
-        _positive_float,
-        "robot orientation error per pose, 1 sigma per axis, rad (default method; cylinder "
-        "default 0.01 deg, known_point 0.005 deg)",
-    ),
-    (
-        "--min-samples",
-        _min_samples,
-        "fewest samples with a usable feature (ellipse, corner, ...); default the target's",
-    ),
-)
 
 
 # --- plan -----------------------------------------------------------------------------------
@@ -665,6 +585,156 @@ def format_plan(plan: Plan, elapsed_s: float) -> str:
     return "\n".join(lines)
 
 
+# --- export ---------------------------------------------------------------------------------
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from linelaser_calib.export import ExportFormat, export_text
+
+    print(export_text(read_result_yaml(args.result), ExportFormat(args.format)))
+    return 0
+
+
+# --- demo -----------------------------------------------------------------------------------
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    root = Path(args.bags)
+    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
+    if not bags:
+        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
+    rows = []
+    for bag in bags:
+        truth, note = truth_beside(bag)
+        if truth is None:
+            print(note or f"{bag} has no truth.yaml; skipped", file=sys.stderr)
+            continue
+        target = get_target(truth.target.key)
+        settings: dict[str, object] = {}
+        initial = None
+        label = target.title
+        if (bag / "initial.yaml").is_file():
+            initial = read_result_yaml(bag / "initial.yaml")
+            settings = {**initial.target.given_settings(), "initial": initial.T_flange_sensor}
+            label += ", from initial.yaml"
+            rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
+            rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+        for method in (Method.PAPER, Method.DEFAULT):
+            config = PipelineConfig(
+                method=method,
+                target=target.name,
+                target_config=configure(target, method.value, settings, SETTING_FLAGS),
+                seed=args.seed,
+                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+            )
+            started = time.perf_counter()
+            run = calibrate_bag(bag, config)
+            seconds = time.perf_counter() - started
+            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
+            print(format_summary(run.result, truth))
+            print()
+            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
+            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
+    print("Error against truth (hand-eye T_flange_sensor):")
+    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
+    for name, label, rot_deg, trans_mm, seconds in rows:
+        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+    return 0
+
+
+# --- parser ---------------------------------------------------------------------------------
+
+#: Numeric options of ``calibrate`` for the pairing gate: (flag, parser, default, help).
+CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = (
+    (
+        "--max-speed",
+        _non_negative_float,
+        PairingConfig.max_linear_speed_m_s,
+        "reject profiles taken while the flange moved faster, m/s; 0 accepts any "
+        "(continuous scanning with a good clock)",
+    ),
+    (
+        "--max-angular-speed",
+        _non_negative_float,
+        PairingConfig.max_angular_speed_rad_s,
+        "reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
+    ),
+)
+
+#: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
+#: one the target or method does not use is refused): (flag, parser, help).
+TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
+    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
+    (
+        "--point",
+        _xyz,
+        "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
+    (
+        "--sensor-sigma",
+        _positive_float,
+        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals; "
+        "cylinder default 5 um)",
+    ),
+    (
+        "--robot-sigma-t",
+        _positive_float,
+        "robot pose error per pose, 1 sigma per axis, m (default method; cylinder default "
+        "0.1 mm, known_point 0.05 mm)",
+    ),
+    (
+        "--robot-sigma-r",
+        _positive_float,
+        "robot orientation error per pose, 1 sigma per axis, rad (default method; cylinder "
+        "default 0.01 deg, known_point 0.005 deg)",
+    ),
+    (
+        "--min-samples",
+        _min_samples,
+        "fewest samples with a usable feature (ellipse, corner, ...); default the target's",
+    ),
+)
+
+
+def _sentinel(text: str) -> float:
+    """Parse a sentinel depth, m (finite)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a depth in metres, got {text!r}") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(
+            f"NaN and +-Inf are always no return; give a finite depth, got {text!r}"
+        )
+    return value
+
+
+def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
+    """Where the flange poses come from, the frames, and the profiler's no-return value."""
+    cal.add_argument(
+        "--pose-source",
+        choices=[s.value for s in PoseSource],
+        default=PoseSource.POSE.value,
+        help="flange poses from a PoseStamped topic (pose, default) or from the /tf + "
+        "/tf_static chain --base-frame -> --flange-frame (tf)",
+    )
+    cal.add_argument(
+        "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
+    )
+    cal.add_argument(
+        "--flange-frame", default="tool0", help="frame id of the flange (end of the TF chain)"
+    )
+    cal.add_argument(
+        "--invalid-value",
+        type=_sentinel,
+        action="append",
+        default=[],
+        metavar="M",
+        help="a depth z, m, that the profiler sends for no return besides NaN/Inf, e.g. "
+        "-0.999999 (Keyence's -999.999 mm) or 0; repeat for several",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
@@ -697,6 +767,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_false",
         help="dense profiles, invalid rays dropped",
     )
+    sim.add_argument(
+        "--tf",
+        action="store_true",
+        help="also write the flange poses as a /tf chain (UR-like links) with /tf_static",
+    )
     sim.set_defaults(func=_cmd_simulate)
 
     info = sub.add_parser("info", help="print what a bag holds")
@@ -727,7 +802,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    cal.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     cal.add_argument(
         "--sync-tolerance",
@@ -746,7 +825,7 @@ def build_parser() -> argparse.ArgumentParser:
         cal.add_argument(flag, type=parse, default=default, help=text)
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
-    cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
+    _add_pose_source_arguments(cal)
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(
         "--progress",
@@ -769,7 +848,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="RESULT.yaml",
         help="a result of this set-up: the hand-eye and the target's placement",
     )
-    plan.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    plan.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
     plan.add_argument(
         "--cylinder",
         type=_numbers,
@@ -826,6 +909,19 @@ def build_parser() -> argparse.ArgumentParser:
         "result achieved (needs matplotlib)",
     )
     plan.set_defaults(func=_cmd_plan)
+
+    export = sub.add_parser(
+        "export", help="print a result as a URDF joint, a static TF command or a launch file"
+    )
+    export.add_argument("result", help="result YAML written by calibrate")
+    export.add_argument(
+        "--format",
+        choices=["urdf", "static-tf", "launch"],
+        required=True,
+        help="urdf: a fixed <joint>; static-tf: the static_transform_publisher command line; "
+        "launch: a Python launch file publishing it",
+    )
+    export.set_defaults(func=_cmd_export)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
     demo.add_argument("bags", nargs="?", default="bags")

@@ -28,7 +28,11 @@ from msg_adapters.pose import (
     pose_array_from_transforms,
     pose_stamped_from_flange_pose,
 )
-from msg_adapters.transform import transform_stamped_from_matrix
+from msg_adapters.transform import (
+    stamped_transform_from_msg,
+    stamped_transforms_from_msgs,
+    transform_stamped_from_matrix,
+)
 
 __all__ = [
     "DecodedCloud",
@@ -48,6 +52,8 @@ __all__ = [
     "rosbags_types",
     "shape_markers",
     "stamp_ns_from_msg",
+    "stamped_transform_from_msg",
+    "stamped_transforms_from_msgs",
     "time_msg_from_ns",
     "transform_stamped_from_matrix",
 ]

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from _compare import assert_floats_close
 from geometry_msgs.msg import PoseStamped
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
@@ -480,7 +481,21 @@ def test_service_builds_the_known_point_configuration_from_its_parameters() -> N
     point = config.target_config.point_m
     assert point is not None and config.initial_T_flange_sensor is not None
     np.testing.assert_array_equal(point, initial.target.point)
-    np.testing.assert_array_equal(config.initial_T_flange_sensor, initial.T_flange_sensor)
+    assert_floats_close(config.initial_T_flange_sensor, initial.T_flange_sensor)
+
+
+def test_service_takes_the_initial_hand_eye_as_numbers_and_logs_normalisation() -> None:
+    warnings: list[str] = []
+    config = calibration_service.pipeline_config(
+        service_values(initial_hand_eye_path="0.1 0.2 0.3 0 0 0.7071 0.7071"), warnings.append
+    )
+    assert config.initial_T_flange_sensor is not None
+    assert_floats_close(config.initial_T_flange_sensor[:3, 3], [0.1, 0.2, 0.3])
+    assert len(warnings) == 1 and warnings[0].startswith("initial_hand_eye_path: the quaternion")
+    with pytest.raises(InputError, match=r"initial_hand_eye_path: .*millimetres"):
+        calibration_service.pipeline_config(
+            service_values(initial_hand_eye_path="100 200 300 0 0 0 1")
+        )
 
 
 def test_service_configuration_errors_name_the_parameters(tmp_path: Path) -> None:

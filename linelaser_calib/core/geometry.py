@@ -1,6 +1,6 @@
 """Rigid-body geometry on plain numpy arrays.
 
-Conventions (see DESIGN.md):
+Conventions (those of the whole package):
 
 - ``T_a_b`` is a (4, 4) homogeneous matrix, the pose of frame b in frame a; it maps
   b-coordinates into a-coordinates: ``p_a = T_a_b @ p_b``.

@@ -1,6 +1,6 @@
 """Result and truth YAML files: the one place calibration results are written and read.
 
-The result file layout is the DESIGN.md contract::
+The result file layout (the README's "Result file")::
 
     hand_eye:                       # T_flange_sensor
       parent_frame: tool0
@@ -19,7 +19,9 @@ the result's section object (:class:`~linelaser_calib.core.targets.base.ResultSe
 reading finds it through the target registry. ``quality`` also carries
 ``samples_used_indices`` and ``sample_residuals_m`` (profile index -> RMS m). Truth files
 (simulator output) use the same ``hand_eye`` and target keys (no uncertainty, no quality)
-plus free extra top-level keys.
+plus free extra top-level keys; the simulator's carry a ``simulation`` section (scenario,
+seed, the command that regenerates them), by which :func:`truth_beside` tells them from an
+unrelated ``truth.yaml``.
 
 Values are plain Python floats, ints and strings (no numpy tags). Files are written
 atomically: a temporary file in the same directory is flushed and renamed over the target,
@@ -54,6 +56,9 @@ from linelaser_calib.core.types import CalibrationResult, Rejection
 from linelaser_calib.io.errors import ResultFileError
 
 FloatArray = NDArray[np.float64]
+
+#: Top-level section of the simulator's truth files (scenario, seed, command): their marker.
+SIMULATION_KEY = "simulation"
 
 #: Largest accepted difference between ``matrix`` and ``translation``/``rotation_xyzw``.
 MATRIX_TOLERANCE = 1e-6
@@ -488,3 +493,39 @@ def read_truth_yaml(path: str | Path) -> Truth:
     T, parent_frame, child_frame = _read_hand_eye(fields)
     target, base_frame = _read_target(fields)
     return Truth(T, target, parent_frame, child_frame, base_frame, fields.data)
+
+
+def truth_beside(bag: str | Path) -> tuple[Truth | None, str]:
+    """The simulator's ``truth.yaml`` in a bag directory, if it holds one.
+
+    A ``truth.yaml`` without the simulator's ``simulation`` section (another tool's file, a
+    note), or one that cannot be read, is not an error: the truth only serves to compare.
+
+    Parameters
+    ----------
+    bag : str or Path
+        A bag directory (a file path has no truth beside it).
+
+    Returns
+    -------
+    truth : Truth or None
+    note : str
+        Empty, or one line saying why a ``truth.yaml`` that is there is not used.
+    """
+    path = Path(bag) / "truth.yaml"
+    if not path.is_file():
+        return None, ""
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        data = None
+    simulation = data.get(SIMULATION_KEY) if isinstance(data, dict) else None
+    if not (isinstance(simulation, dict) and {"scenario", "seed"} <= set(simulation)):
+        return None, (
+            f"{path} is not a truth file of linelaser-calib simulate (no {SIMULATION_KEY} "
+            "section with scenario and seed); not compared"
+        )
+    try:
+        return read_truth_yaml(path), ""
+    except ResultFileError as err:
+        return None, f"{err}; the truth file is not compared"

@@ -37,10 +37,12 @@ from __future__ import annotations
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -57,7 +59,8 @@ from linelaser_calib.core.planning import Plan, PlanConstraints, fan_shape, plan
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.io import ResultFileError, read_result_yaml, write_result_yaml
+from linelaser_calib.io import write_result_yaml
+from linelaser_calib.io.initial import read_initial_hand_eye
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
     HAND_EYE_TOPIC,
@@ -86,9 +89,9 @@ from msg_adapters import (
 )
 
 try:  # a full ROS install has tf2_ros; the PyPI wheels do not
-    from tf2_ros import StaticTransformBroadcaster
+    from tf2_ros import Buffer, StaticTransformBroadcaster, TransformListener
 except ImportError:
-    StaticTransformBroadcaster = None
+    Buffer = StaticTransformBroadcaster = TransformListener = None
 
 NODE_NAME = "calibration_service"
 #: Diagnostic value: complete samples held.
@@ -135,8 +138,9 @@ PARAMETERS = (
     ParamSpec(
         "initial_hand_eye_path",
         "",
-        "Result YAML whose hand_eye is the initial (old) hand-eye, e.g. an earlier result; "
-        "'' for none. The default method starts from it; the paper method with target "
+        "Initial (old) hand-eye: a result YAML (e.g. an earlier result) or a YAML with a "
+        "hand_eye section, or the numbers 'x y z qx qy qz qw' or 'x y z roll pitch yaw' (m, "
+        "rad); '' for none. The default method starts from it; the paper method with target "
         "known_point corrects it and needs it.",
     ),
     ParamSpec(
@@ -224,11 +228,14 @@ PARAMETERS = (
 )
 
 
-def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
+def pipeline_config(
+    values: dict[str, Any], warn: Callable[[str], None] = lambda line: None
+) -> PipelineConfig:
     """The pipeline configuration from the parameter values in effect (by name).
 
     ``radius`` 0, ``known_point`` [], ``min_samples`` 0 and ``initial_hand_eye_path`` '' mean
-    "not given"; a given one that does not act on the target and method is refused.
+    "not given"; a given one that does not act on the target and method is refused. ``warn``
+    receives one line per value of the initial hand-eye that was normalised.
 
     Raises
     ------
@@ -239,14 +246,14 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     settings: dict[str, Any] = {}
     initial = None
     if values["initial_hand_eye_path"]:
-        path = Path(values["initial_hand_eye_path"]).expanduser()
         try:
-            initial = read_result_yaml(path).T_flange_sensor
-        except ResultFileError as err:
-            raise ResultFileError(
-                f"cannot use initial_hand_eye_path: {err} (it must name a result YAML with a "
-                "hand_eye section, e.g. an earlier calibration's output_path, or be '' for none)"
+            initial, warnings = read_initial_hand_eye(values["initial_hand_eye_path"])
+        except CalibrationError as err:
+            raise type(err)(
+                f"cannot use initial_hand_eye_path: {err} (or set it to '' for none)"
             ) from err
+        for line in warnings:
+            warn(f"initial_hand_eye_path: {line}")
         settings["initial"] = initial
     if values["radius"]:
         settings["radius_m"] = float(values["radius"])
@@ -262,6 +269,30 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
         target_config=configure(target, method.value, settings, SETTING_LABELS),
         seed=values["seed"],
         initial_T_flange_sensor=initial,
+    )
+
+
+def second_parent_warning(frames_yaml: str, child: str, parent: str) -> str | None:
+    """A warning when ``child`` already has a parent other than ``parent`` in /tf.
+
+    Parameters
+    ----------
+    frames_yaml : str
+        ``tf2_ros.Buffer.all_frames_as_yaml()``: ``frame: {parent: ..., ...}`` per frame.
+    child, parent : str
+        The hand-eye about to be broadcast: sensor frame and flange frame.
+    """
+    frames = yaml.safe_load(frames_yaml) or {}
+    entry = frames.get(child) if isinstance(frames, dict) else None
+    known = entry.get("parent") if isinstance(entry, dict) else None
+    if known is None or str(known) == parent:
+        return None
+    return (
+        f"the sensor frame {child} already has parent {known} in /tf (e.g. a joint of the "
+        f"URDF); broadcasting {parent} -> {child} gives it two parents, which breaks the TF "
+        f"tree. Remove the other transform (replace the URDF joint with `linelaser-calib "
+        f"export RESULT.yaml --format urdf`), or give the sensor another frame name "
+        f"(sensor_frame)"
     )
 
 
@@ -298,6 +329,10 @@ class CalibrationServiceNode(Node):
         self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, latched_qos(1))
         self._tf_static = (
             None if StaticTransformBroadcaster is None else StaticTransformBroadcaster(self)
+        )
+        self._tf_buffer = None if Buffer is None else Buffer()
+        self._tf_listener = (
+            None if self._tf_buffer is None else TransformListener(self._tf_buffer, self)
         )
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(
@@ -448,7 +483,7 @@ class CalibrationServiceNode(Node):
         )
         start = time.monotonic()
         try:
-            result = calibrate_samples(samples, pipeline_config(p))
+            result = calibrate_samples(samples, pipeline_config(p, self._warn))
         except CalibrationError as err:
             return False, str(err)
         result.parent_frame = p["flange_frame"]
@@ -542,6 +577,12 @@ class CalibrationServiceNode(Node):
         )
         self._hand_eye_pub.publish(transform)
         if self._tf_static is not None:
+            if self._tf_buffer is not None:
+                warning = second_parent_warning(
+                    self._tf_buffer.all_frames_as_yaml(), result.child_frame, result.parent_frame
+                )
+                if warning is not None:
+                    self.get_logger().warning(warning)
             self._tf_static.sendTransform(transform)
         # Clear what an earlier calibration drew (e.g. another target's shapes).
         markers = [Marker(action=Marker.DELETEALL)]

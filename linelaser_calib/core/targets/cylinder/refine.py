@@ -74,7 +74,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, SolverError
 from ...geometry import (
@@ -780,7 +780,7 @@ def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[Flag]:
     rms, z_rms = result.sample_rms_m, result.sample_rms_zscore
     prior_chi2 = result.sample_prior_chi2
     z_prior = _robust_zscore(np.sqrt(prior_chi2))
-    chi2_limit = float(chi2.isf(config.outlier_prior_probability, N_LOCAL))
+    chi2_limit = float(chdtri(N_LOCAL, config.outlier_prior_probability))  # P(chi2 > limit)
     median_rms = float(np.median(rms))
     flagged = []
     for j in range(len(rms)):

@@ -94,7 +94,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.stats import chi2
+from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch
 from ...geometry import FloatArray, check_transform
@@ -354,7 +354,7 @@ def _default_result(
     estimate_point = taught is None or config.point_sigma_m > 0.0
     c, cov, T = _stack(corners)
     X, point = solve_linear(c, T, taught, prior, config.robot_sigma_t_m)
-    limit = float(chi2.isf(config.outlier_probability, 3))
+    limit = float(chdtri(3, config.outlier_probability))  # P(chi2 with 3 dof > limit)
 
     def solve_subset(
         keep: list[int], previous: KnownPointRefinement | None
