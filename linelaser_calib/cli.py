@@ -497,7 +497,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     else:
         raise InputError(
             "plan needs the current hand-eye: give --from RESULT.yaml (a calibration of this "
-            "set-up), or --initial FILE.yaml (e.g. from CAD, within ~5 mm and ~5 deg) with "
+            "set-up), or --initial (a file or 'x y z qx qy qz qw', e.g. from CAD, within ~5 mm "
+            "and ~5 deg) with "
             "--cylinder or a bag of 3 or more exploratory scans; the planner does not yet "
             "estimate the hand-eye from exploratory scans alone"
         )
@@ -735,6 +736,14 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_initial_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
@@ -802,11 +811,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument(
-        "--initial",
-        metavar="FILE|NUMBERS",
-        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
-    )
+    _add_initial_argument(cal)
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     cal.add_argument(
         "--sync-tolerance",
@@ -848,11 +853,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="RESULT.yaml",
         help="a result of this set-up: the hand-eye and the target's placement",
     )
-    plan.add_argument(
-        "--initial",
-        metavar="FILE|NUMBERS",
-        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
-    )
+    _add_initial_argument(plan)
     plan.add_argument(
         "--cylinder",
         type=_numbers,
