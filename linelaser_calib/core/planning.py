@@ -44,14 +44,14 @@ Planning stops early once every predicted 1σ of the hand-eye is within the user
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from .errors import DegenerateError, InputError
 from .geometry import FloatArray, invert_transform
-from .solver import N_HAND_EYE
+from .solver import N_HAND_EYE, Linearisation, Residuals, SolverConfig, normal_equations
 from .targets.base import Shape, Target
 from .types import BoolArray, Sample
 
@@ -61,6 +61,8 @@ from .types import BoolArray, Sample
 WEAK_PRIOR_INFORMATION = 1.0
 #: The base frame's upward direction (REP 103: z up); the table is a plane of constant z.
 UP = np.array([0.0, 0.0, 1.0])
+#: Solver settings of :func:`per_sample_information` (unit weights are given explicitly).
+UNIT_WEIGHTS = SolverConfig(loss="linear")
 #: Candidates drawn per pose to plan.
 CANDIDATES_PER_POSE = 60
 #: Fewest candidates drawn.
@@ -270,6 +272,26 @@ def predicted_curve(plan: Plan) -> list[SigmaPoint]:
         for k, pose in enumerate(plan.poses)
         if plan.taken + k + 1 >= 3
     ]
+
+
+def per_sample_information(linearisation: Linearisation) -> FloatArray:
+    """Information (M, G, G) each sample adds to the global parameters, its own pose
+    correction marginalised (the solver's Schur complement on one sample at a time, with
+    unit weights: the Gaussian information at the linearisation point)."""
+    n_samples, _, n_global = linearisation.J_global.shape
+    out = np.empty((n_samples, n_global, n_global))
+    residuals = linearisation.residuals
+    for j in range(n_samples):
+        one = slice(j, j + 1)
+        sample = replace(
+            linearisation,
+            residuals=Residuals(residuals.points[one], residuals.pose_prior[one]),
+            J_global=linearisation.J_global[one],
+            J_local=linearisation.J_local[one],
+        )
+        weights = np.ones_like(sample.residuals.points)
+        out[j] = normal_equations(sample, UNIT_WEIGHTS, weights).schur_information()
+    return out
 
 
 def marginal_hand_eye(information: FloatArray) -> FloatArray:

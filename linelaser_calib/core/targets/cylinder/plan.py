@@ -43,8 +43,7 @@ import numpy as np
 
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, orthonormal_basis
-from ...planning import UP, PlanConstraints
-from ...solver import Linearisation, Residuals, normal_equations
+from ...planning import UP, PlanConstraints, per_sample_information
 from ...types import Cylinder
 from .config import CylinderConfig
 from .features import FittedSample
@@ -260,19 +259,7 @@ class CylinderPlanner:
         state = initial_state(
             problem, T_flange_sensor, placement.cylinder, placement.cylinder.radius
         )
-        lin = problem.linearise(state)
-        out = np.empty((problem.n_samples, problem.n_global, problem.n_global))
-        for j in range(problem.n_samples):
-            one = slice(j, j + 1)
-            sample = Linearisation(
-                residuals=Residuals(lin.residuals.points[one], lin.residuals.pose_prior[one]),
-                J_global=lin.J_global[one],
-                J_local=lin.J_local[one],
-                pose_prior_sqrt_information=lin.pose_prior_sqrt_information,
-            )
-            weights = np.ones_like(sample.residuals.points)
-            out[j] = normal_equations(sample, refine.solver, weights).schur_information()
-        return out
+        return per_sample_information(problem.linearise(state))
 
 
 def rough_placement(
