@@ -6,8 +6,8 @@ The ``collector`` node decodes messages and hands them to a :class:`LiveCollecto
    deep, reset when the pose clock jumps back further than that) and follows the flange's
    standstills (:class:`StandstillDetector`);
 2. keeps each profile in a small waiting queue until the buffer holds every pose that can
-   still change its pairing (``PoseBuffer.ready_for``), or until it has waited
-   ``pose_window_s`` of wall time, then pairs it (``PoseBuffer.pair``);
+   still change its pairing (``PoseBuffer.ready_for``), or until the pose stream has been
+   silent for ``pose_window_s`` of wall time, then pairs it (``PoseBuffer.pair``);
 3. decides by the collection mode what becomes of each paired profile:
 
    - ``continuous``: it is a sample at once (store first; the node checks samples against
@@ -15,8 +15,9 @@ The ``collector`` node decodes messages and hands them to a :class:`LiveCollecto
      unless ``max_rate_hz`` decimates it on purpose;
    - ``stop_and_go``: the first profile of each standstill (the flange slower than the
      pairing's speed bounds for ``standstill_s``) that passes validation is the sample of
-     that standstill; profiles taken while the flange moves or settles, and the rest of a
-     standstill once it has its sample, are skipped;
+     that standstill (its profiles queue for validation in turn); profiles taken while the
+     flange moves or settles, and the rest of a standstill once it has its sample, are
+     skipped;
    - ``on_demand``: the first profile that passes validation after each capture request;
 
 4. hands the samples to the node to store and publish (:meth:`LiveCollector.take_to_store`).
@@ -32,6 +33,7 @@ a best-effort transport) are counted from the gaps in the publisher's sequence n
 
 from __future__ import annotations
 
+import math
 import re
 import threading
 from collections import deque
@@ -79,7 +81,7 @@ SKIP_BACKLOG = "validation queue full (the collector cannot validate profiles th
 SKIP_CLEARED = "received before the session was cleared"
 SKIP_MOVING = "robot moving or settling (stop_and_go: one sample per standstill)"
 SKIP_SAMPLED = "this standstill has its sample already (stop_and_go)"
-SKIP_CANDIDATE = "another profile of this standstill is being validated (stop_and_go)"
+SKIP_CANDIDATE = "validation queue full of this standstill's profiles (stop_and_go)"
 
 
 class Mode(str, Enum):
@@ -135,8 +137,9 @@ class CollectorConfig:
     pairing : PairingConfig
         Sync tolerance, clock offset and speed limits of the pairing.
     pose_window_s : float
-        Flange poses older than this behind the newest one are dropped, s; a profile waits at
-        most this long (wall time) for the poses around its stamp.
+        Flange poses older than this behind the newest one are dropped, s; a profile waits for
+        the poses around its stamp until the pose stream has been silent this long (wall
+        time; a busy receiver still working through queued poses is not silent).
     mode : Mode
         ``stop_and_go``: one valid sample per standstill; ``continuous``: every paired
         profile; ``on_demand``: the first valid one after each capture request.
@@ -158,7 +161,7 @@ class CollectorConfig:
     pose_window_s: float = 2.0
     mode: Mode = Mode.STOP_AND_GO
     max_rate_hz: float = 0.0
-    standstill_s: float = 0.3
+    standstill_s: float = 0.1
     validation_queue_size: int = 20
     max_waiting_profiles: int = 1000
 
@@ -360,6 +363,7 @@ class LiveCollector:
         #: Receive index of the profile that fulfilled the last capture request.
         self.captured: int | None = None
         self._base_frame = ""
+        self._last_pose_s = -math.inf  # wall time of the newest pose
         self._waiting: deque[_Waiting] = deque()
         self._to_validate: deque[PendingSample] = deque()
         self._to_store: deque[PendingSample] = deque()
@@ -368,7 +372,7 @@ class LiveCollector:
         self._last_sample_stamp: int | None = None
         self._capture_from: int | None = None
         self._sampled_standstill: int | None = None
-        self._candidate_standstill: int | None = None
+        self._candidates: int | None = None  # standstill of the newest candidate queued
 
     # -- input ---------------------------------------------------------------------------
 
@@ -392,6 +396,7 @@ class LiveCollector:
         self.poses.add(pose)
         self.standstills.add(pose)
         self._base_frame = pose.frame_id
+        self._last_pose_s = now_s
         self.release(now_s)
 
     def reject_pose(self, reason: str) -> None:
@@ -433,7 +438,7 @@ class LiveCollector:
             head = waiting[0]
             if not (
                 self.poses.ready_for(head.profile.stamp_ns, pairing)
-                or now_s - head.received_s > self.config.pose_window_s
+                or now_s - max(head.received_s, self._last_pose_s) > self.config.pose_window_s
                 or len(waiting) > self.config.max_waiting_profiles
             ):
                 break
@@ -475,13 +480,12 @@ class LiveCollector:
             self.skipped.add("skipped", SKIP_NOT_CAPTURED)
         elif mode is Mode.STOP_AND_GO and pending.standstill == self._sampled_standstill:
             self.skipped.add("skipped", SKIP_SAMPLED)
-        elif mode is Mode.STOP_AND_GO and pending.standstill == self._candidate_standstill:
-            self.skipped.add("skipped", SKIP_CANDIDATE)
         elif len(self._to_validate) >= self.config.validation_queue_size:
-            self.skipped.add("skipped", SKIP_BACKLOG)
+            full_of_it = mode is Mode.STOP_AND_GO and pending.standstill == self._candidates
+            self.skipped.add("skipped", SKIP_CANDIDATE if full_of_it else SKIP_BACKLOG)
         else:
             self._to_validate.append(pending)
-            self._candidate_standstill = pending.standstill
+            self._candidates = pending.standstill
 
     def _take(self, pending: PendingSample) -> None:
         """Count a sample as accepted, queue it for storing, fulfil a capture request."""
@@ -499,16 +503,26 @@ class LiveCollector:
     # -- validation (stop_and_go and on_demand) ------------------------------------------
 
     def next_to_validate(self) -> PendingSample | None:
-        """The oldest candidate awaiting validation (now counted as being validated)."""
-        if not self._to_validate:
-            return None
-        self._validating += 1
-        return self._to_validate.popleft()
+        """The oldest candidate awaiting validation (now counted as being validated).
+
+        ``stop_and_go``: candidates of a standstill that has its sample meanwhile are
+        skipped on the way.
+        """
+        while self._to_validate:
+            pending = self._to_validate.popleft()
+            if (
+                self.config.mode is Mode.STOP_AND_GO
+                and pending.standstill == self._sampled_standstill
+            ):
+                self.skipped.add("skipped", SKIP_SAMPLED)
+                continue
+            self._validating += 1
+            return pending
+        return None
 
     def reject_validated(self, rejection: Rejection) -> None:
-        """Count a candidate that failed validation; its standstill may offer another."""
+        """Count a candidate that failed validation (its standstill's next one is tried)."""
         self._validating -= 1
-        self._candidate_standstill = None
         self._reject(rejection.stage, rejection.reason)
 
     def admit(self, pending: PendingSample) -> bool:
@@ -520,7 +534,6 @@ class LiveCollector:
         is fulfilled.
         """
         self._validating -= 1
-        self._candidate_standstill = None
         if pending.generation != self.generation:
             self.skipped.add("skipped", SKIP_CLEARED)
             return False

@@ -19,7 +19,8 @@ Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and ``flange_pose``
   (``validate_sample``: cleaning, then the ellipse of a cylinder or, with ``target``
   ``known_point``, the V corner of a weld seam): in ``stop_and_go`` and ``on_demand`` modes
   the candidates before they become samples; in ``continuous`` mode the newest stored
-  sample whenever it is free (store first: a slow fit never holds a sample back), and
+  sample every ``LIVE_CHECK_PERIOD_S`` (store first: a slow fit never holds a sample back),
+  and
   every ``clock_offset_period_s`` the live estimate of the profile-to-pose clock offset;
 - ``~/capture`` (std_srvs/Trigger) waits, as a coroutine that lets the executor run on, for
   the next sample (``on_demand`` mode takes only these); ``~/clear`` starts a new session
@@ -87,6 +88,9 @@ from msg_adapters import (
 )
 
 NODE_NAME = "collector"
+#: ``continuous``: at most one live check of a stored sample per period, s (a check costs a
+#: few ms of CPU; the calibration checks every sample anyway).
+LIVE_CHECK_PERIOD_S = 0.2
 #: Diagnostic value: samples on disk in the session file.
 KEY_STORED = "samples stored"
 _PAIRING = PairingConfig()
@@ -165,8 +169,8 @@ PARAMETERS = (
     ParamSpec(
         "pose_window_s",
         _COLLECTOR.pose_window_s,
-        "Flange poses kept behind the newest one, s; a profile waits at most this long "
-        "(wall time) for the poses around its stamp.",
+        "Flange poses kept behind the newest one, s; a profile waits for the poses around its "
+        "stamp until the pose stream has been silent this long (wall time).",
         bounds=(0.05, 60.0),
         read_only=True,
     ),
@@ -376,6 +380,7 @@ class CollectorNode(Node):
         self._calibrate_client = self.create_client(Trigger, CALIBRATE_SERVICE)
         self.create_timer(p["diagnostics_period_s"], self._on_timer)
 
+        self._publish_offset(None)
         self._session_root = Path(p["session_dir"]).expanduser()
         reload_from = self._reload_source(str(p["reload_session"]))
         self._session = self._open_session(reload_from)
@@ -565,6 +570,7 @@ class CollectorNode(Node):
 
     def _validate_loop(self) -> None:
         """The validation thread: candidates, live checks and clock offset batches."""
+        next_check = 0.0
         while not self._stopping.is_set():
             self._work.wait(0.5)
             self._work.clear()
@@ -582,7 +588,8 @@ class CollectorNode(Node):
                             self._collector.reject_validated(rejection)
                 elif batch is not None:
                     self._estimate_offset(*batch)
-                elif check is not None:
+                elif check is not None and time.monotonic() >= next_check:
+                    next_check = time.monotonic() + LIVE_CHECK_PERIOD_S
                     rejection = validate_sample(check.sample, self._pipeline, self._rng)
                     with self._collector.lock:
                         self._collector.note_check(rejection)
@@ -603,11 +610,17 @@ class CollectorNode(Node):
             )
         if warning is not None:
             self.get_logger().warning(warning)
-        if estimate is not None:
+        self._publish_offset(estimate)
+
+    def _publish_offset(self, estimate: OffsetEstimate | None) -> None:
+        """Publish the pairing's clock offset and the live estimate (see CLOCK_OFFSET_TOPIC)."""
+        used = self._pipeline.pairing.clock_offset_s
+        if estimate is None:
+            data = [used, math.nan, math.nan, 0.0]
+        else:
             sigma = math.nan if estimate.sigma_s is None else estimate.sigma_s
-            self._offset_pub.publish(
-                Float64MultiArray(data=[estimate.offset_s, sigma, float(estimate.batches)])
-            )
+            data = [used, estimate.offset_s, sigma, float(estimate.batches)]
+        self._offset_pub.publish(Float64MultiArray(data=data))
 
     # -- capture -------------------------------------------------------------------------
 

@@ -43,8 +43,9 @@ SAMPLE_PROFILE_TOPIC = "linelaser_calib/samples/profile"
 SAMPLE_POSE_TOPIC = "linelaser_calib/samples/flange_pose"
 #: The collector's current session directory (std_msgs/String, latched).
 SESSION_TOPIC = "linelaser_calib/session"
-#: The collector's live clock offset estimate (std_msgs/Float64MultiArray, latched):
-#: [offset added to profile stamps (s), its 1 sigma (s, NaN before two batches), batches].
+#: The collector's clock offset (std_msgs/Float64MultiArray, latched): [offset it adds to
+#: profile stamps for pairing (s), live estimate (s), its 1 sigma (s), batches]; NaN where
+#: there is no estimate (yet) or fewer than two batches.
 CLOCK_OFFSET_TOPIC = "linelaser_calib/clock_offset"
 #: Results of the calibration service.
 HAND_EYE_TOPIC = "linelaser_calib/hand_eye"
