@@ -8,7 +8,8 @@ collector's subscriptions (no settling time), then calls ``/calibrate``. A profi
 accounted for when the collector counts it as accepted, rejected or skipped, or counts it as
 lost in transport (publisher sequence gaps, and profiles published before the first one
 received); the calibration must then use or reject every accepted sample. Prints one row
-per run and the total of unaccounted profiles (which must be 0).
+per run (with the poses lost in transport, which explain rejections for want of a pose) and
+the total of unaccounted profiles (which must be 0).
 
 Run from the repository root (not part of the test suite; ~15 s per run)::
 
@@ -43,6 +44,7 @@ from linelaser_calib.io import read_bag
 from linelaser_calib.nodes.collection import (
     KEY_ACCEPTED,
     KEY_PENDING,
+    KEY_POSES_LOST,
     KEY_PROFILES_BEFORE,
     KEY_PROFILES_LOST,
     KEY_RECEIVED,
@@ -154,6 +156,7 @@ def one_run(recording: Recording, args: argparse.Namespace, workdir: Path) -> di
         "lost (counted)": lost,
         "accepted": accepted,
         "rejected": counted(values, KEY_REJECTED),
+        "poses lost": counted(values, KEY_POSES_LOST),
         "skipped": counted(values, KEY_SKIPPED),
         "stored": stored,
         "used": used,

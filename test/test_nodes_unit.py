@@ -398,15 +398,13 @@ def test_live_clock_offset_on_a_continuous_scan() -> None:
     data = simulate(scenario, seed=1)
     truth = -scenario.latency_s  # profiles stamped late: the offset added to their stamps
     tracker = ClockOffsetTracker(PipelineConfig(), period_s=6.0)
-    events = sorted(
-        [(p.stamp_ns, 0, p) for p in data.poses] + [(q.stamp_ns, 1, q) for q in data.profiles],
-        key=lambda e: (e[0], e[1]),
-    )
-    for _, kind, item in events:
-        if kind == 1:
-            tracker.add_sample(item)
-            continue
-        tracker.add_pose(item)
+    waiting: list[Profile] = []  # a sample reaches the tracker once paired and stored
+    for pose in data.poses:
+        tracker.add_pose(pose)
+        while data.profiles and data.profiles[0].stamp_ns <= pose.stamp_ns:
+            waiting.append(data.profiles.pop(0))
+        while waiting and waiting[0].stamp_ns < pose.stamp_ns - 0.3 * NS_PER_S:
+            tracker.add_sample(waiting.pop(0))
         batch = tracker.take_batch()
         if batch is not None:
             assert tracker.add_estimate(tracker.estimate_batch(*batch)) is None  # no drift

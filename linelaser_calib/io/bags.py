@@ -14,9 +14,11 @@ chunk index, the summary and ``metadata.yaml`` only on close; its reader needs a
 So a rosbag2 bag is readable only once closed. :func:`write_bag` therefore writes into a
 hidden temporary directory and renames it into place when complete: a crash leaves no
 half-written bag under the requested name. :class:`SessionBagWriter`, for live collection,
-writes each sample (one profile and its flange pose) as its own small closed bag inside a
-session directory, so a crash loses at most the sample being written. :func:`read_bag`
-reads a session directory like a single bag.
+appends the samples (each a profile and its flange pose) to one MCAP file of unchunked
+records, flushed and fsynced on request, which this module reads record by record up to a
+torn tail; a crash loses only what was not flushed yet. :func:`read_bag` reads a session
+directory like a single bag (also a session of one bag per sample, written by earlier
+versions).
 
 Topics are auto-detected by type when exactly one topic of each type holds messages.
 Every user-caused failure (missing, empty, truncated or corrupt bag, missing or ambiguous

@@ -684,6 +684,9 @@ class ClockOffsetTracker:
     samples_per_batch : int
     half_range_s : float
         Half-width of the offset search, s (as :func:`estimate_clock_offset`).
+    delay_s : float
+        Longest delay from a sample's stamp to its :meth:`add_sample` (pairing, storing), s:
+        the poses that far back are kept before the first batch starts.
     """
 
     def __init__(
@@ -692,6 +695,7 @@ class ClockOffsetTracker:
         period_s: float,
         samples_per_batch: int = 30,
         half_range_s: float = 0.05,
+        delay_s: float = 2.0,
     ) -> None:
         self.config = config
         self.half_range_s = half_range_s
@@ -705,16 +709,23 @@ class ClockOffsetTracker:
             (half_range_s + config.pairing.sync_tolerance_s + abs(config.pairing.clock_offset_s))
             * NS_PER_S
         )
+        self._delay_ns = round(delay_s * NS_PER_S)
         self._start: int | None = None
         self._profiles: list[Profile] = []
-        self._poses: list[FlangePose] = []
+        self._poses: deque[FlangePose] = deque()
 
     def add_pose(self, pose: FlangePose) -> None:
-        """Keep a flange pose (only those near the current batch are kept)."""
-        if self._start is None or pose.stamp_ns < self._start - self._margin_ns:
+        """Keep a flange pose (those that the current or a coming batch may need)."""
+        poses = self._poses
+        if poses and pose.stamp_ns <= poses[-1].stamp_ns:
             return
-        if not self._poses or pose.stamp_ns > self._poses[-1].stamp_ns:
-            self._poses.append(pose)
+        poses.append(pose)
+        if self._start is None:
+            cut = pose.stamp_ns - self._delay_ns - self._margin_ns
+        else:
+            cut = self._start - self._margin_ns
+        while poses[0].stamp_ns < cut:
+            poses.popleft()
 
     def add_sample(self, profile: Profile) -> None:
         """Offer a stored sample's profile (stamped on the profile clock)."""
@@ -733,10 +744,11 @@ class ClockOffsetTracker:
         end = self._start + self._period_ns
         if self._poses[-1].stamp_ns < end + self._margin_ns:
             return None
-        batch = self._profiles, self._poses
+        batch = self._profiles, list(self._poses)
         self._start = end
         self._profiles = []
-        self._poses = [p for p in batch[1] if p.stamp_ns >= end - self._margin_ns]
+        while self._poses[0].stamp_ns < end - self._margin_ns:
+            self._poses.popleft()
         return batch
 
     def estimate_batch(self, profiles: list[Profile], poses: list[FlangePose]) -> float | str:

@@ -503,34 +503,36 @@ class CollectorNode(Node):
         """The storage thread: store, flush and publish the accepted samples every period."""
         while True:
             stopping = self._stopping.wait(self._flush_period_s)
-            with self._collector.lock:
-                batch = self._collector.take_to_store()
-                captured, self._collector.captured = self._collector.captured, None
-            if batch:
-                self._store(batch, captured)
+            # Under the session lock, so that a sample accepted before ~/clear is never
+            # stored in the new session (clear counts it as skipped instead).
+            with self._session_lock:
+                with self._collector.lock:
+                    batch = self._collector.take_to_store()
+                    captured, self._collector.captured = self._collector.captured, None
+                if batch:
+                    self._store(batch, captured)
             if stopping:
                 return
 
     def _store(self, batch: list[PendingSample], captured: int | None) -> None:
-        """Persist samples (flushed to disk), then publish them."""
+        """Persist samples (flushed to disk), then publish them; the session lock is held."""
         samples = []
         for pending in batch:
             sample = pending.sample
             profile = Profile(sample.stamp_ns, sample.points, pending.sensor_frame)
             pose = FlangePose(sample.stamp_ns, sample.T_base_flange, pending.base_frame)
             samples.append((profile, pose, pending))
-        with self._session_lock:
-            try:
-                numbers = [self._session.append(profile, pose) for profile, pose, _ in samples]
-                self._session.flush()
-            except BagError as err:
-                self.get_logger().error(str(err))
-                with self._collector.lock:
-                    for _ in samples:
-                        self._collector.revoke("session", str(err))
-                return
-            for profile, pose, _ in samples:
-                self._publish_sample(profile, pose)
+        try:
+            numbers = [self._session.append(profile, pose) for profile, pose, _ in samples]
+            self._session.flush()
+        except BagError as err:
+            self.get_logger().error(str(err))
+            with self._collector.lock:
+                for _ in samples:
+                    self._collector.revoke("session", str(err))
+            return
+        for profile, pose, _ in samples:
+            self._publish_sample(profile, pose)
         with self._collector.lock:
             if self._offsets is not None:
                 for profile, _, _ in samples:
