@@ -26,7 +26,7 @@ from linelaser_calib.io import (
     read_bag,
     write_bag,
 )
-from linelaser_calib.io.bags import SESSION_FILE
+from linelaser_calib.io.bags import SESSION_FILE, SESSION_MARKER
 from msg_adapters import (
     pointcloud2_from_points,
     points_from_pointcloud2,
@@ -447,6 +447,22 @@ def test_empty_session_says_so(tmp_path: Path) -> None:
     SessionBagWriter(tmp_path / "session").close()
     with pytest.raises(BagError, match="holds no samples yet"):
         read_bag(tmp_path / "session")
+
+
+def test_session_of_one_bag_per_sample_from_earlier_versions_still_reads(tmp_path: Path) -> None:
+    session = tmp_path / "session"
+    session.mkdir()
+    (session / SESSION_MARKER).write_text("linelaser_calib sample session\n", encoding="utf-8")
+    for i in range(3):
+        stamp = 10**9 + i
+        write_bag(
+            session / f"sample_{i:06d}",
+            [Profile(stamp, np.ones((10, 3)))],
+            [FlangePose(stamp, np.eye(4))],
+        )
+    contents = read_bag(session)
+    assert [p.stamp_ns for p in contents.profiles] == [10**9, 10**9 + 1, 10**9 + 2]
+    assert [p.stamp_ns for p in contents.poses] == [10**9, 10**9 + 1, 10**9 + 2]
 
 
 def test_fast_pose_decoding_equals_the_message_adapter() -> None:

@@ -574,6 +574,27 @@ def service_values(**overrides: Any) -> dict[str, Any]:
     return {**values, **overrides}
 
 
+def test_service_puts_the_live_clock_offset_in_the_result_and_warns_on_a_mismatch() -> None:
+    def result() -> CalibrationResult:
+        return CalibrationResult(np.eye(4), None, "default", [0], [], 1e-5)
+
+    agreeing = result()
+    calibration_service.add_live_clock_offset(agreeing, -0.004, -0.0041, 0.0002)
+    assert agreeing.clock_offset_s == -0.004
+    assert (agreeing.clock_offset_live_s, agreeing.clock_offset_live_sigma_s) == (-0.0041, 0.0002)
+    assert agreeing.warnings == []
+    mismatched = result()
+    calibration_service.add_live_clock_offset(mismatched, 0.0, -0.004, 0.0002)
+    (warning,) = mismatched.warnings
+    assert "-4.00 +- 0.20 ms" in warning and "clock_offset_s to -0.0040" in warning
+    no_sigma_yet = result()
+    calibration_service.add_live_clock_offset(no_sigma_yet, 0.0, -0.004, float("nan"))
+    assert no_sigma_yet.clock_offset_live_sigma_s is None and no_sigma_yet.warnings == []
+    none = result()
+    calibration_service.add_live_clock_offset(none, 0.002, float("nan"), float("nan"))
+    assert (none.clock_offset_s, none.clock_offset_live_s) == (0.002, None)
+
+
 def test_service_builds_the_known_point_configuration_from_its_parameters() -> None:
     initial = read_result_yaml(WELD_INITIAL)
     assert initial.known_point is not None
