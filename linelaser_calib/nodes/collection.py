@@ -394,7 +394,8 @@ class LiveCollector:
             self.poses = PoseBuffer(self.config.pose_window_s)
             self.standstills.reset()
         self.poses.add(pose)
-        self.standstills.add(pose)
+        if self.config.mode is Mode.STOP_AND_GO:
+            self.standstills.add(pose)
         self._base_frame = pose.frame_id
         self._last_pose_s = now_s
         self.release(now_s)
