@@ -20,8 +20,7 @@ Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and ``flange_pose``
   ``known_point``, the V corner of a weld seam): in ``stop_and_go`` and ``on_demand`` modes
   the candidates before they become samples; in ``continuous`` mode the newest stored
   sample every ``LIVE_CHECK_PERIOD_S`` (store first: a slow fit never holds a sample back),
-  and
-  every ``clock_offset_period_s`` the live estimate of the profile-to-pose clock offset;
+  and every ``clock_offset_period_s`` the live estimate of the profile-to-pose clock offset;
 - ``~/capture`` (std_srvs/Trigger) waits, as a coroutine that lets the executor run on, for
   the next sample (``on_demand`` mode takes only these); ``~/clear`` starts a new session
   directory and keeps the old one on disk;
