@@ -531,6 +531,8 @@ class CollectorNode(Node):
                     self._collector.revoke("session", str(err))
             return
         for profile, pose, _ in samples:
+            if not self.context.ok():
+                break  # shutting down: the samples are on disk, and reloadable from there
             self._publish_sample(profile, pose)
         with self._collector.lock:
             if self._offsets is not None:
