@@ -182,6 +182,14 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             **_plain(result.target.quality_entries()),
             "clock_offset_s": float(result.clock_offset_s),
             "clock_offset_estimated": bool(result.clock_offset_estimated),
+            **{
+                key: float(value)
+                for key, value in (
+                    ("clock_offset_live_s", result.clock_offset_live_s),
+                    ("clock_offset_live_sigma_s", result.clock_offset_live_sigma_s),
+                )
+                if value is not None
+            },
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
@@ -436,6 +444,14 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         uncertainty_rotation_rad=_read_uncertainty(hand_eye, "rotation_rad"),
         clock_offset_s=quality.number("clock_offset_s") if quality.has("clock_offset_s") else 0.0,
         clock_offset_estimated=quality.flag("clock_offset_estimated"),
+        clock_offset_live_s=(
+            quality.number("clock_offset_live_s") if quality.has("clock_offset_live_s") else None
+        ),
+        clock_offset_live_sigma_s=(
+            quality.number("clock_offset_live_sigma_s")
+            if quality.has("clock_offset_live_sigma_s")
+            else None
+        ),
         warnings=[str(w) for w in quality.items("warnings")],
         parent_frame=parent_frame,
         child_frame=child_frame,

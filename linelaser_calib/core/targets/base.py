@@ -35,7 +35,8 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
    the solution expects, ``TargetSolution.noise_m``), naming the likely cause
    (:func:`mismatch_message`). No result is written then.
 6. ``offset_cost(features, config, context)``: None, or the cost of the features re-paired
-   with other flange poses (for the clock-offset search of continuous scans).
+   with other flange poses (for the clock-offset search of continuous scans), and
+   ``estimates_clock_offset``, True when it gives one (the collector's live estimate asks).
 7. A result section class satisfying :class:`ResultSection` (its YAML key, its plain SI
    mapping, its text, its markers) and ``read_section(mapping, quality)`` that rebuilds it
    from a result file's section (raising ``ValueError`` naming the bad key).
@@ -269,6 +270,7 @@ class Target(Protocol[ConfigT]):
     methods: tuple[str, ...]
     config_type: type[ConfigT]
     options: Mapping[str, Option]
+    estimates_clock_offset: bool
 
     def validate(
         self, sample: Sample, config: ConfigT, rng: np.random.Generator
