@@ -39,6 +39,9 @@ from linelaser_calib.core.types import BoolArray, FloatArray
 MAX_REFIT_ROUNDS = 8
 #: Gauss-Newton iterations of the geometric refit.
 GEOMETRIC_ITERATIONS = 20
+#: How every rejection for the profile's shape begins (the target counts them to tell a
+#: wrong target from a few bad profiles).
+NOT_A_CIRCLE = "not a circular arc"
 #: Consecutive points per run in :func:`local_noise_m`.
 NOISE_RUN = 50
 
@@ -67,6 +70,10 @@ class CircleConfig:
     window_fraction : float
         Width of the window the three sample points are drawn from, as a share of the
         profile's points. Default 0.5.
+    max_noise_ratio : float
+        A circle whose RMS residual exceeds this many times the profile's own noise
+        (:func:`local_noise_m`) is the wrong model for the profile. Default 4 (real
+        profilers show some ripple: about 1.5 on a tooling ball).
     """
 
     iterations: int = 300
@@ -77,6 +84,7 @@ class CircleConfig:
     min_inlier_fraction: float = 0.3
     min_arc_rad: float = math.radians(10.0)
     window_fraction: float = 0.5
+    max_noise_ratio: float = 4.0
 
     def __post_init__(self) -> None:
         positive = {
@@ -85,6 +93,7 @@ class CircleConfig:
             "min_threshold_m": self.min_threshold_m,
             "min_arc_rad": self.min_arc_rad,
             "window_fraction": self.window_fraction,
+            "max_noise_ratio": self.max_noise_ratio,
         }
         for name, value in positive.items():
             if not (np.isfinite(value) and value > 0.0):
@@ -254,11 +263,14 @@ def fit_circle_ransac(
         keep = radii <= max_radius_m
         centres, radii = centres[keep], radii[keep]
     if len(radii) == 0:
-        raise ProfileRejected("no circular arc found: every three-point circle was degenerate")
+        raise ProfileRejected(f"{NOT_A_CIRCLE}: every three-point circle was degenerate")
     # Score in chunks to bound memory: (H, N) distances.
     best, best_count = 0, -1
     for lo in range(0, len(radii), 64):
-        d = np.abs(np.linalg.norm(p[None] - centres[lo : lo + 64, None], axis=2) - radii[lo : lo + 64, None])
+        d = np.abs(
+            np.linalg.norm(p[None] - centres[lo : lo + 64, None], axis=2)
+            - radii[lo : lo + 64, None]
+        )
         counts = np.sum(d < config.coarse_threshold_m, axis=1)
         k = int(np.argmax(counts))
         if counts[k] > best_count:
@@ -272,7 +284,7 @@ def fit_circle_ransac(
         try:
             centre, radius = fit_circle_algebraic(p[inliers])
         except ValueError as exc:
-            raise ProfileRejected(f"no circular arc found: {exc}") from None
+            raise ProfileRejected(f"{NOT_A_CIRCLE}: {exc}") from None
         centre, radius = fit_circle_geometric(p[inliers], centre, radius)
         residual = circle_residuals(p, centre, radius)
         sigma = MAD_TO_SIGMA * float(np.median(np.abs(residual[inliers])))
@@ -284,7 +296,7 @@ def fit_circle_ransac(
     count = int(inliers.sum())
     if count < max(config.min_points, config.min_inlier_fraction * len(p)):
         raise ProfileRejected(
-            f"no circular arc: the best circle holds {count} of {len(p)} points (needs "
+            f"{NOT_A_CIRCLE}: the best circle holds {count} of {len(p)} points (needs "
             f"{max(config.min_points, math.ceil(config.min_inlier_fraction * len(p)))})"
         )
     arc = _arc_span(p[inliers], centre)
@@ -294,11 +306,18 @@ def fit_circle_ransac(
             f"{radius * 1e3:.2f} mm), needs {math.degrees(config.min_arc_rad):.0f} deg"
         )
     residual = circle_residuals(p[inliers], centre, radius)
+    rms = float(np.sqrt(np.mean(residual**2)))
+    noise = local_noise_m(p[inliers])
+    if rms > config.max_noise_ratio * max(noise, config.min_threshold_m):
+        raise ProfileRejected(
+            f"{NOT_A_CIRCLE}: the circle leaves {rms * 1e6:.1f} um RMS, {rms / noise:.0f} times "
+            f"the profile's own noise ({noise * 1e6:.1f} um)"
+        )
     return CircleFit(
         centre_xz=np.asarray(centre),
         radius_m=float(radius),
         inliers=inliers,
-        rms_m=float(np.sqrt(np.mean(residual**2))),
-        noise_m=local_noise_m(p),
+        rms_m=rms,
+        noise_m=noise,
         arc_rad=arc,
     )

@@ -201,13 +201,20 @@ def solve_fixed_point(
     radii_m: ArrayLike,
     sphere_radius_m: float,
     side: int,
+    *,
+    polish: bool = True,
 ) -> FixedPointSolution:
-    """Linear solve, projection onto SO(3) and polish for one side and radius."""
+    """Linear solve, projection onto SO(3) and (unless ``polish`` is False) polish, for one
+    side and radius; the scatter is about c (polished) or about the centres' mean."""
     T = np.asarray(T_base_flange, dtype=np.float64)
     p = centres_in_sensor(centres_xz, radii_m, sphere_radius_m, side)
     X, c = solve_fixed_point_linear(T, p)
-    X, c = polish_fixed_point(T, p, X, c)
     mapped = fixed_point_residuals(T, p, X)
+    if polish:
+        X, c = polish_fixed_point(T, p, X, c)
+        mapped = fixed_point_residuals(T, p, X)
+    else:
+        c = mapped.mean(axis=0)
     scatter = float(np.sqrt(np.mean(np.sum((mapped - c) ** 2, axis=1))))
     return FixedPointSolution(X, c, side, float(sphere_radius_m), p, scatter)
 
@@ -217,10 +224,12 @@ def resolve_side(
     centres_xz: ArrayLike,
     radii_m: ArrayLike,
     sphere_radius_m: float,
+    *,
+    polish: bool = True,
 ) -> tuple[FixedPointSolution, FixedPointSolution]:
     """Solve with the centre on either side; returns (better, worse) by centre scatter."""
     a, b = (
-        solve_fixed_point(T_base_flange, centres_xz, radii_m, sphere_radius_m, side)
+        solve_fixed_point(T_base_flange, centres_xz, radii_m, sphere_radius_m, side, polish=polish)
         for side in (1, -1)
     )
     return (a, b) if a.scatter_m <= b.scatter_m else (b, a)
@@ -245,15 +254,16 @@ def estimate_radius(
 
     Searched between the largest circle radius and :data:`RADIUS_SEARCH_FACTOR` times it
     (log-spaced grid, then a bounded 1-D minimisation around the best grid point), over both
-    sides when ``side`` is None.
+    sides when ``side`` is None, with the linear solve alone (the polish moves the scatter
+    far less than the radius does).
     """
     r = np.asarray(radii_m, dtype=np.float64)
     lo, hi = float(np.max(r)), float(np.max(r)) * RADIUS_SEARCH_FACTOR
 
     def scatter(radius: float) -> float:
         if side is None:
-            return resolve_side(T_base_flange, centres_xz, r, radius)[0].scatter_m
-        return solve_fixed_point(T_base_flange, centres_xz, r, radius, side).scatter_m
+            return resolve_side(T_base_flange, centres_xz, r, radius, polish=False)[0].scatter_m
+        return solve_fixed_point(T_base_flange, centres_xz, r, radius, side, polish=False).scatter_m
 
     grid = lo * np.exp(np.linspace(0.0, math.log(hi / lo), 40))
     values = [scatter(float(g)) for g in grid]

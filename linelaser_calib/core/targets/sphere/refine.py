@@ -43,11 +43,10 @@ robot's noise levels re-estimated from the residuals
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
-from numpy.typing import ArrayLike
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from linelaser_calib.core.errors import InputError, SolverError
 from linelaser_calib.core.geometry import (
@@ -77,7 +76,7 @@ def right_jacobian(omega: ArrayLike) -> FloatArray:
     """
     w = np.asarray(omega, dtype=np.float64)
     angle = np.linalg.norm(w, axis=-1)[..., None, None]
-    W = skew_batch(w.reshape(-1, 3)).reshape(w.shape[:-1] + (3, 3))
+    W = skew_batch(w.reshape(-1, 3)).reshape((*w.shape[:-1], 3, 3))
     small = angle < 1e-8
     safe = np.where(small, 1.0, angle)
     a = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
@@ -180,13 +179,17 @@ class SphereRefineConfig:
     loss_scale : float
         Where the Huber loss turns linear, in σ. Default 3.
     estimate_radius : bool
-        Estimate the sphere radius (otherwise it is held at the given value).
+        Estimate the sphere radius (otherwise it is held at the start value).
     max_points_per_profile : int
         Profiles with more points are subsampled evenly (0 keeps all). Default 300.
     max_iterations : int
         Linearisations. Default 50.
     estimate_variance_factors : bool
         Re-estimate both noise levels from the residuals for the covariance. Default True.
+    variance_rounds : int
+        With ``estimate_variance_factors``, solve again this many times with the noise
+        levels re-estimated (so that stated levels far from the real ones weight the points
+        and the pose priors as the data say). Default 2.
     """
 
     sensor_sigma_m: float = 5e-6
@@ -197,6 +200,7 @@ class SphereRefineConfig:
     max_points_per_profile: int = 300
     max_iterations: int = 50
     estimate_variance_factors: bool = True
+    variance_rounds: int = 2
 
     def __post_init__(self) -> None:
         for name in ("sensor_sigma_m", "robot_sigma_t_m", "robot_sigma_r_rad", "loss_scale"):
@@ -217,7 +221,7 @@ def subsample(points: FloatArray, most: int) -> FloatArray:
 
 
 class SphereProblem:
-    """The refinement in the shared solver's block form (:class:`~linelaser_calib.core.solver.BlockProblem`).
+    """The refinement in the shared solver's block form (a ``BlockProblem``).
 
     Global parameters [θ (3), ρ (3), c (3)] and R when estimated; the points of sample j
     are row j of a (M, K) array, padded with zeros.
@@ -367,16 +371,26 @@ def refine_sphere(
     """
     T = np.asarray(T_base_flange, dtype=np.float64)
     lever = float(np.linalg.norm(start.T_flange_sensor[:3, 3])) + start.radius_m
-    problem = SphereProblem(T, [np.asarray(p, dtype=np.float64) for p in points], config, lever)
+    clouds = [np.asarray(p, dtype=np.float64) for p in points]
     solver_config = SolverConfig(
         loss="huber", loss_scale=config.loss_scale, max_iterations=config.max_iterations
     )
-    solution = solve(problem, start, solver_config)
-    state = solution.state
-    if not (np.all(np.isfinite(state.T_flange_sensor)) and np.isfinite(state.radius_m)):
-        raise SolverError("the sphere refinement diverged (non-finite estimate)")
-    sensor, robot = 1.0, 1.0
-    if config.estimate_variance_factors:
+    state, sensor, robot = start, 1.0, 1.0
+    for round_ in range(config.variance_rounds + 1):
+        if round_:
+            config = replace(
+                config,
+                sensor_sigma_m=config.sensor_sigma_m * math.sqrt(sensor),
+                robot_sigma_t_m=config.robot_sigma_t_m * math.sqrt(robot),
+                robot_sigma_r_rad=config.robot_sigma_r_rad * math.sqrt(robot),
+            )
+        problem = SphereProblem(T, clouds, config, lever)
+        solution = solve(problem, state, solver_config)
+        state = solution.state
+        if not (np.all(np.isfinite(state.T_flange_sensor)) and np.isfinite(state.radius_m)):
+            raise SolverError("the sphere refinement diverged (non-finite estimate)")
+        if not config.estimate_variance_factors:
+            break
         rho, _ = evaluate_loss(solution.residuals.points, solver_config)
         sensor, robot = variance_factors(
             solution.normal,
