@@ -1,6 +1,7 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
-Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
+Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
+recordings into a bag), ``info`` (what a bag holds),
 ``calibrate`` (the offline calibration) and ``demo`` (calibrate the committed bags and show
 the error against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
@@ -214,6 +215,19 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
 
 def _cmd_info(args: argparse.Namespace) -> int:
     print(format_bag_info(bag_info(args.bag)))
+    return 0
+
+
+# --- convert --------------------------------------------------------------------------------
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.robcalibrator import convert_robcalibrator
+
+    command = f"{PROG} convert {args.format} {args.folder} --output {args.output}"
+    bag = convert_robcalibrator(args.folder, args.output, command)
+    print(f"wrote {bag} (with reference.yaml, LICENSE and README.md)")
+    print(format_bag_info(bag_info(bag)))
     return 0
 
 
@@ -494,6 +508,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="dense profiles, invalid rays dropped",
     )
     sim.set_defaults(func=_cmd_simulate)
+
+    convert = sub.add_parser(
+        "convert", help="convert another tool's recordings into a rosbag2 bag (SI units)"
+    )
+    convert.add_argument(
+        "format",
+        choices=["robcalibrator"],
+        help="robcalibrator: a RobCalibrator scan folder (p1.yml..., RobPoses.rob, "
+        "calibration.sec, LICENSE)",
+    )
+    convert.add_argument("folder", help="the folder to convert")
+    convert.add_argument("--output", required=True, help="bag directory to create (must not exist)")
+    convert.set_defaults(func=_cmd_convert)
 
     info = sub.add_parser("info", help="print what a bag holds")
     info.add_argument("bag")
