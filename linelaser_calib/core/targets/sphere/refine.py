@@ -189,7 +189,7 @@ class SphereRefineConfig:
     variance_rounds : int
         With ``estimate_variance_factors``, solve again this many times with the noise
         levels re-estimated (so that stated levels far from the real ones weight the points
-        and the pose priors as the data say). Default 2.
+        and the pose priors as the data say); the robot's are only ever lowered. Default 2.
     """
 
     sensor_sigma_m: float = 5e-6
@@ -378,11 +378,13 @@ def refine_sphere(
     state, sensor, robot = start, 1.0, 1.0
     for round_ in range(config.variance_rounds + 1):
         if round_:
+            # Tighten, never loosen, the robot's prior: a weakly determined radius would
+            # otherwise trade against ever larger pose corrections.
             config = replace(
                 config,
                 sensor_sigma_m=config.sensor_sigma_m * math.sqrt(sensor),
-                robot_sigma_t_m=config.robot_sigma_t_m * math.sqrt(robot),
-                robot_sigma_r_rad=config.robot_sigma_r_rad * math.sqrt(robot),
+                robot_sigma_t_m=config.robot_sigma_t_m * math.sqrt(min(robot, 1.0)),
+                robot_sigma_r_rad=config.robot_sigma_r_rad * math.sqrt(min(robot, 1.0)),
             )
         problem = SphereProblem(T, clouds, config, lever)
         solution = solve(problem, state, solver_config)
