@@ -46,9 +46,9 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
-from linelaser_calib.sim.profiler import Trace, measure, ray_directions
+from linelaser_calib.sim.profiler import Trace, measure, ray_directions, returns_seen
 from linelaser_calib.sim.robot import StepMotion, draw_errors, reported_flange
-from linelaser_calib.sim.scenario import Scenario
+from linelaser_calib.sim.scenario import PRESETS, Scenario, rig_scene_from_preset
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
 from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
 
@@ -209,23 +209,16 @@ def trace_ball(ball: Ball, rig: Scenario, T_base_sensor: FloatArray) -> Trace:
     at sensor (0, baseline, 0).
     """
     dirs = ray_directions(rig)
-    R = T_base_sensor[:, :3, :3]
     origin = T_base_sensor[:, None, :3, 3]
-    rays = np.einsum("kij,nj->kni", R, dirs)
+    rays = np.einsum("kij,nj->kni", T_base_sensor[:, :3, :3], dirs)
     t, surface = ball.cast(origin, rays)
     hit = np.isfinite(t)
     t_hit = np.where(hit, t, 0.0)
     points = origin + t_hit[..., None] * rays
     normals = ball.normals(points, surface)
-    cos_inc = np.where(hit, -np.sum(rays * np.nan_to_num(normals), axis=-1), np.nan)
-    with np.errstate(invalid="ignore"):
-        seen = hit & (cos_inc > 0.0) & (cos_inc >= math.cos(rig.max_incidence_rad) - 1e-12)
-    if rig.camera_baseline_m > 0.0:
-        camera = origin + rig.camera_baseline_m * R[:, None, :, 1]
-        to_camera = camera - points
-        faces = np.sum(np.nan_to_num(normals) * to_camera, axis=-1) > 0.0
-        t_block, _ = ball.cast(points, to_camera, 1e-6)
-        seen &= faces & (t_block >= 1.0 - 1e-6)
+    cos_inc, seen = returns_seen(
+        rig, T_base_sensor, rays, points, normals, hit, lambda o, r: ball.cast(o, r, 1e-6)[0]
+    )
     return Trace(
         surface=surface,
         points_sensor=np.where(hit[..., None], t_hit[..., None] * dirs, np.nan),
@@ -405,30 +398,17 @@ def simulate_sphere(scenario: SphereScenario, seed: int) -> SphereSimulatedData:
 
 
 def _sphere_rig() -> Scenario:
+    """The ``ur_scancontrol`` profiler and arm with the sensor on another bracket."""
     R = Rotation.from_euler("xyz", [math.radians(10.0), math.radians(-6.0), math.radians(-80.0)])
     q = quaternion_xyzw_from_matrix(R.as_matrix())
-    return Scenario(
+    return replace(
+        PRESETS["ur_scancontrol"],
         name="sphere",
         hand_eye_translation_m=(-0.02, 0.07, 0.10),
         hand_eye_rotation_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-        z_min_m=0.07,
-        z_max_m=0.15,
-        fan_half_angle_rad=math.radians(25.0),
-        resolution=640,
-        sigma_depth_m=8e-6,
-        sigma_lateral_m=6e-6,
         spike_fraction=0.003,
         dropout_fraction=0.01,
-        max_incidence_rad=math.radians(80.0),
-        camera_baseline_m=0.03,
-        intensity=True,
-        organised=True,
-        n_poses=30,
         clearance_m=0.02,
-        robot_sigma_translation_m=3e-5,
-        robot_sigma_rotation_rad=math.radians(0.003),
-        robot_rate_hz=125.0,
-        dwell_s=0.3,
     )
 
 
@@ -446,18 +426,4 @@ def sphere_scenario_from_preset(name: str, **overrides: Any) -> SphereScenario:
     InputError
         For an unknown preset or field, or an invalid value.
     """
-    if name not in SPHERE_PRESETS:
-        raise InputError(f"unknown sphere preset {name!r}; choose one of {sorted(SPHERE_PRESETS)}")
-    own = {f.name for f in fields(SphereScenario)} - {"rig"}
-    rig_fields = {f.name for f in fields(Scenario)} - {"name"}
-    unknown = sorted(set(overrides) - own - rig_fields)
-    if unknown:
-        raise InputError(
-            f"unknown sphere scenario field(s) {unknown}; see "
-            "linelaser_calib.sim.sphere.SphereScenario and linelaser_calib.sim.Scenario"
-        )
-    preset = SPHERE_PRESETS[name]
-    rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
-    own_overrides = {k: v for k, v in overrides.items() if k in own}
-    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
-    return replace(preset, rig=rig, **own_overrides)
+    return rig_scene_from_preset(SPHERE_PRESETS, name, "sphere", overrides)

@@ -52,7 +52,7 @@ the safe side) and 0.002 deg per axis.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -69,7 +69,7 @@ from linelaser_calib.core.geometry import (
 from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.profiler import Trace, measure, ray_directions
 from linelaser_calib.sim.robot import StepMotion, draw_errors, reported_flange
-from linelaser_calib.sim.scenario import Scenario
+from linelaser_calib.sim.scenario import Scenario, rig_scene_from_preset
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
 from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
 
@@ -650,21 +650,7 @@ def weld_scenario_from_preset(name: str, **overrides: Any) -> WeldScenario:
     InputError
         For an unknown preset or field, or an invalid value.
     """
-    if name not in WELD_PRESETS:
-        raise InputError(f"unknown weld preset {name!r}; choose one of {sorted(WELD_PRESETS)}")
-    own = {f.name for f in fields(WeldScenario)} - {"rig"}
-    rig_fields = {f.name for f in fields(Scenario)} - {"name"}
-    unknown = sorted(set(overrides) - own - rig_fields)
-    if unknown:
-        raise InputError(
-            f"unknown weld scenario field(s) {unknown}; see linelaser_calib.sim.weld.WeldScenario "
-            "and linelaser_calib.sim.Scenario"
-        )
-    preset = WELD_PRESETS[name]
-    rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
-    own_overrides = {k: v for k, v in overrides.items() if k in own}
-    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
-    return replace(preset, rig=rig, **own_overrides)
+    return rig_scene_from_preset(WELD_PRESETS, name, "weld", overrides)
 
 
 def bumped_hand_eye(
