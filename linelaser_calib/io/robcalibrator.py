@@ -199,6 +199,7 @@ def convert_robcalibrator(folder: str | Path, output: str | Path, command: str) 
             "source": "RobCalibrator (GilbertPan97/RobCalibrator, data/ScanData), MIT licence: "
             "calibration.sec Solution.HTM, the authors' estimate, not ground truth",
             "sphere": {"radius": scans.sphere_radius_m, "centre_side": scans.centre_side},
+            "conversion": {"command": command},
         },
     )
     shutil.copyfile(licence, output / "LICENSE")

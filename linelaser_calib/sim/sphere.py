@@ -46,11 +46,10 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
-from linelaser_calib.sim.profiler import Trace, measure, ray_directions, returns_seen
-from linelaser_calib.sim.robot import StepMotion, draw_errors, reported_flange
+from linelaser_calib.sim.profiler import Trace, ray_directions, returns_seen
 from linelaser_calib.sim.scenario import PRESETS, Scenario, rig_scene_from_preset
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
-from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
+from linelaser_calib.sim.simulate import step_and_shoot
 
 Vec3 = tuple[float, float, float]
 
@@ -363,18 +362,8 @@ def simulate_sphere(scenario: SphereScenario, seed: int) -> SphereSimulatedData:
     rig = scenario.rig
     ball = Ball.from_scenario(scenario)
     views = sphere_views(scenario, ball, rng)
-    motion = StepMotion.plan(views, rig)
-    errors = draw_errors(rng, rig, len(views))
-    acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
-    t_shot = acq_ns / 1e9
-    T_sensor_shot = motion.T_base_sensor(t_shot)
-    traced = trace_ball(ball, rig, T_sensor_shot)
-    measured = measure(rng, rig, traced)
-    poses = recorded_pose_stream(rng, rig, motion, errors)
-    stamps, profiles, intensities = published_profiles(rig, acq_ns, measured)
-    centre_sensor = np.einsum(
-        "kji,kj->ki", T_sensor_shot[:, :3, :3], ball.centre - T_sensor_shot[:, :3, 3]
-    )
+    run = step_and_shoot(rng, rig, views, lambda T: trace_ball(ball, rig, T))
+    T = run.T_base_sensor
     truth = SphereTruth(
         scenario=scenario,
         seed=seed,
@@ -382,19 +371,19 @@ def simulate_sphere(scenario: SphereScenario, seed: int) -> SphereSimulatedData:
         centre_m=ball.centre.copy(),
         radius_m=scenario.radius_m,
         centre_side=scenario.centre_side,
-        T_base_flange_true=T_sensor_shot @ invert_transform(rig.T_flange_sensor),
-        T_base_flange_recorded=reported_flange(motion, rig, errors, t_shot),
-        stamps_ns=stamps,
-        acquisition_stamps_ns=rig.epoch_ns + acq_ns,
+        T_base_flange_true=run.T_base_flange_true,
+        T_base_flange_recorded=run.T_base_flange_recorded,
+        stamps_ns=run.stamps_ns,
+        acquisition_stamps_ns=rig.epoch_ns + run.acquisition_ns,
         T_base_sensor_waypoints=views,
-        centre_sensor=centre_sensor,
-        surface=traced.surface,
-        points_true_sensor=traced.points_sensor,
-        valid=measured.valid,
-        spike=measured.spike,
-        dropout=measured.dropout,
+        centre_sensor=np.einsum("kji,kj->ki", T[:, :3, :3], ball.centre - T[:, :3, 3]),
+        surface=run.traced.surface,
+        points_true_sensor=run.traced.points_sensor,
+        valid=run.measured.valid,
+        spike=run.measured.spike,
+        dropout=run.measured.dropout,
     )
-    return SphereSimulatedData(profiles, intensities, poses, truth)
+    return SphereSimulatedData(run.profiles, run.intensities, run.poses, truth)
 
 
 def _sphere_rig() -> Scenario:
