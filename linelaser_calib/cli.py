@@ -85,6 +85,13 @@ def _offset(text: str) -> float | str:
     return value
 
 
+def _centre_side(text: str) -> str:
+    """Parse ``+y`` or ``-y``."""
+    if text not in ("+y", "-y"):
+        raise argparse.ArgumentTypeError(f"expected +y or -y, got {text!r}")
+    return text
+
+
 def _xyz(text: str) -> tuple[float, float, float]:
     """Parse ``x,y,z`` (m)."""
     try:
@@ -111,8 +118,14 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.sphere import SphereSection
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.sphere import (
+        SPHERE_PRESETS,
+        simulate_sphere,
+        sphere_scenario_from_preset,
+    )
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
         bumped_hand_eye,
@@ -126,6 +139,17 @@ def simulate_to_bag(
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+    elif scenario_name in SPHERE_PRESETS:
+        ball = simulate_sphere(sphere_scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = ball.scenario, ball.profiles, ball.poses
+        intensities, T_true = ball.intensities, ball.truth.T_flange_sensor
+        target = SphereSection(
+            ball.truth.centre_m,
+            ball.truth.radius_m,
+            ball.truth.centre_side,
+            radius_estimated=False,
+            side_estimated=False,
+        )
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
@@ -250,6 +274,7 @@ def _cmd_convert(args: argparse.Namespace) -> int:
 SETTING_FLAGS = {
     "radius_m": "--radius",
     "point_m": "--point",
+    "centre_side": "--centre-side",
     "sensor_sigma_m": "--sensor-sigma",
     "robot_sigma_t_m": "--robot-sigma-t",
     "robot_sigma_r_rad": "--robot-sigma-r",
@@ -272,6 +297,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
+        "centre_side": args.centre_side,
         "sensor_sigma_m": args.sensor_sigma,
         "robot_sigma_t_m": args.robot_sigma_t,
         "robot_sigma_r_rad": args.robot_sigma_r,
@@ -480,11 +506,17 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
 #: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
 #: one the target or method does not use is refused): (flag, parser, help).
 TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
-    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
+    ("--radius", _positive_float, "cylinder or sphere radius, m (default: estimate)"),
     (
         "--point",
         _xyz,
         "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
+    (
+        "--centre-side",
+        _centre_side,
+        "sphere target: the side of the laser plane the sphere centre lies on, +y or -y "
+        "(sensor frame; default: resolved from the data)",
     ),
     (
         "--sensor-sigma",
@@ -525,7 +557,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general",
+        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general, sphere",
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:

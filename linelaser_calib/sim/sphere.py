@@ -15,8 +15,8 @@ frames. The rig's cylinder, background and pose-sampler fields are not used; its
 ``n_poses`` is the number of views and its motion must be ``step``.
 
 Views: the sensor's viewing axis (sensor z) is tilted from straight down by up to
-``tilt_rad`` in a random direction, the laser line turned about it by a uniform angle
-(any direction of the line across the ball), the plane's distance from the centre drawn as
+``tilt_rad`` in a random direction, the laser line turned about it by a uniform angle in
+±90 deg (every direction of the line across the ball), the plane's distance from the centre drawn as
 h = u·R with u uniform in ``offset_range``, the ball's centre placed at a depth drawn from
 ``depth_range_m`` and sideways along the line by up to ± ``lateral_fraction`` of the half
 fan width. A view is drawn again when the arc shows fewer than ``min_arc_points`` returns
@@ -256,7 +256,7 @@ def sphere_views(scenario: SphereScenario, ball: Ball, rng: np.random.Generator)
             )
         azimuth = rng.uniform(0.0, 2.0 * math.pi)
         tilt = rng.uniform(0.0, scenario.tilt_rad)
-        spin = rng.uniform(-math.pi, math.pi)
+        spin = rng.uniform(-0.5 * math.pi, 0.5 * math.pi)
         R = (
             matrix_from_rotvec(tilt * np.array([math.cos(azimuth), math.sin(azimuth), 0.0]))
             @ down

@@ -44,6 +44,8 @@ from linelaser_calib.core.targets.base import (
     TargetSolution,
     extract_each,
     mismatch_message,
+    plain_floats,
+    read_vector,
     rejection_digest,
 )
 from linelaser_calib.core.targets.sphere.circle import NOT_A_CIRCLE, CircleFit, fit_circle_ransac
@@ -152,12 +154,12 @@ class SphereSection:
         """``{frame, centre, radius, centre_side, uncertainty_m}`` in m."""
         return {
             "frame": base_frame,
-            "centre": [float(v) for v in self.centre_m],
+            "centre": plain_floats(self.centre_m),
             "radius": float(self.radius_m),
             "centre_side": SIDE_LABELS[self.centre_side],
             "uncertainty_m": None
             if self.centre_sigma_m is None
-            else [float(v) for v in self.centre_sigma_m],
+            else plain_floats(self.centre_sigma_m),
         }
 
     def quality_entries(self) -> dict[str, Any]:
@@ -190,17 +192,21 @@ class SphereSection:
         """The sphere."""
         return [Shape("sphere", self.centre_m[None], self.radius_m, "sphere")]
 
+    def given_settings(self) -> dict[str, Any]:
+        """None: a sphere result fixes nothing of a later calibration."""
+        return {}
+
 
 def read_sphere_section(mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> SphereSection:
     """The section from a result file's ``sphere`` mapping (ValueError naming a bad key)."""
+    centre = read_vector(mapping, "centre")
     try:
-        centre = np.asarray(mapping["centre"], dtype=np.float64)
         radius = float(mapping["radius"])
         side = side_from_label(str(mapping["centre_side"]))
     except (KeyError, TypeError, ValueError, InputError) as exc:
-        raise ValueError(f"sphere needs centre [x, y, z], radius and centre_side: {exc}") from None
-    if centre.shape != (3,) or not np.all(np.isfinite(centre)) or not radius > 0.0:
-        raise ValueError(f"sphere centre must be 3 numbers and radius > 0 m, got {mapping}")
+        raise ValueError(f"sphere needs a radius (m) and centre_side +y or -y: {exc}") from None
+    if not radius > 0.0:
+        raise ValueError(f"key radius must be > 0 m, got {radius}")
     sigma = mapping.get("uncertainty_m")
     return SphereSection(
         centre_m=centre,
@@ -250,6 +256,7 @@ class SphereTarget:
     config_type = SphereConfig
     options: Mapping[str, Option] = {
         "radius_m": Option("radius_m"),
+        "centre_side": Option("centre_side"),
         "sensor_sigma_m": Option("refine.sensor_sigma_m", methods=("default",)),
         "robot_sigma_t_m": Option("refine.robot_sigma_t_m"),
         "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad"),
@@ -268,7 +275,7 @@ class SphereTarget:
     ) -> tuple[list[Any], list[Rejection]]:
         """The circles of all samples and the rejections."""
         rng = np.random.default_rng(seed)
-        return extract_each(self, samples, config, rng, extract_feature, progress, "circle")
+        return extract_each(samples, config, rng, extract_feature, progress, "circle")
 
     def _require(
         self, features: list[SphereFeature], config: SphereConfig, context: SolveContext
@@ -476,6 +483,11 @@ class SphereTarget:
             f"{describe_direction(d.vector, d.status)}"
             for d in poor
         ]
+
+    def check_features(self, features: list[Any], config: SphereConfig) -> None:
+        """Nothing beyond extraction: each profile's shape is checked there (its circle's
+        residual against the profile's own noise), and the solve refuses data in which most
+        profiles are no circles (it knows the rejections)."""
 
     def check_fit(self, solution: TargetSolution, config: SphereConfig) -> None:
         """Refuse a sphere that does not explain the data (see the module docstring)."""
