@@ -29,6 +29,7 @@ from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.results import (
+    read_reference_yaml,
     read_result_yaml,
     read_truth_yaml,
     result_to_dict,
@@ -443,17 +444,20 @@ def _input_line(run: OfflineRun) -> str:
 # --- demo -----------------------------------------------------------------------------------
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    root = Path(args.bags)
-    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
-    if not bags:
-        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
-    rows = []
-    for bag in bags:
+def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
+    """Calibrate one committed bag with both methods, print the summaries, add table rows.
+
+    A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
+    corrects that hand-eye); a converted real recording with its ``reference.yaml`` (another
+    tool's hand-eye, calibrated with the settings recorded there).
+    """
+    truth = None
+    settings: dict[str, object] = {}
+    initial = None
+    if (bag / "truth.yaml").is_file():
         truth = read_truth_yaml(bag / "truth.yaml")
         target = get_target(truth.target.key)
-        settings: dict[str, object] = {}
-        initial = None
+        compare, against = truth.T_flange_sensor, "truth"
         label = target.title
         if (bag / "initial.yaml").is_file():
             initial = read_result_yaml(bag / "initial.yaml")
@@ -461,26 +465,50 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
-        for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(
-                method=method,
-                target=target.name,
-                target_config=configure(target, method.value, settings, SETTING_FLAGS),
-                seed=args.seed,
-                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+    else:
+        compare, reference = read_reference_yaml(bag / "reference.yaml")
+        target = get_target(str(reference["target"]))
+        settings = dict(reference.get("settings") or {})
+        against = "reference"
+        label = f"{target.title}, real scans, vs reference.yaml ({reference.get('source', '')})"
+    for method in (Method.PAPER, Method.DEFAULT):
+        config = PipelineConfig(
+            method=method,
+            target=target.name,
+            target_config=configure(target, method.value, settings, SETTING_FLAGS),
+            seed=seed,
+            initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+        )
+        started = time.perf_counter()
+        run = calibrate_bag(bag, config)
+        seconds = time.perf_counter() - started
+        print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
+        print(format_summary(run.result, truth))
+        rot, trans = transform_error(run.result.T_flange_sensor, compare)
+        if truth is None:
+            print(
+                f"Difference to the reference hand-eye: rotation {np.degrees(rot):.4f} deg, "
+                f"translation {trans * 1e3:.4f} mm (not ground truth)"
             )
-            started = time.perf_counter()
-            run = calibrate_bag(bag, config)
-            seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
-            print(format_summary(run.result, truth))
-            print()
-            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
-            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
-    print("Error against truth (hand-eye T_flange_sensor):")
-    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
+        print()
+        rows.append(
+            (bag.name, f"{method.value} vs {against}", np.degrees(rot), trans * 1e3, seconds)
+        )
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    root = Path(args.bags)
+    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
+    if not bags:
+        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
+    rows: list[tuple[str, str, float, float, float]] = []
+    for bag in bags:
+        _demo_runs(bag, args.seed, rows)
+    print("Difference of the hand-eye T_flange_sensor to the truth (simulated bags) or to the")
+    print("reference (real scans: another tool's published hand-eye, not ground truth):")
+    print(f"  {'bag':<24}{'method':<22}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
     for name, label, rot_deg, trans_mm, seconds in rows:
-        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+        print(f"  {name:<24}{label:<22}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
     return 0
 
 

@@ -175,9 +175,10 @@ beside this file). Converted to rosbag2 (SI units) by:
 def convert_robcalibrator(folder: str | Path, output: str | Path, command: str) -> Path:
     """Convert a RobCalibrator scan folder into a rosbag2 bag directory with attribution.
 
-    Writes the bag (profiles and flange poses), ``reference.yaml`` (their hand-eye),
-    ``LICENSE`` (copied from the folder) and ``README.md`` (the attribution and
-    ``command``, the command line that made it).
+    Writes the bag (profiles and flange poses), ``reference.yaml`` (their hand-eye, the
+    target, the settings they calibrated with as shared setting names, their sphere side
+    and ``command``, the command line that made it), ``LICENSE`` (copied from the folder)
+    and ``README.md`` (the attribution).
 
     Raises
     ------
@@ -198,7 +199,9 @@ def convert_robcalibrator(folder: str | Path, output: str | Path, command: str) 
         extra={
             "source": "RobCalibrator (GilbertPan97/RobCalibrator, data/ScanData), MIT licence: "
             "calibration.sec Solution.HTM, the authors' estimate, not ground truth",
-            "sphere": {"radius": scans.sphere_radius_m, "centre_side": scans.centre_side},
+            "target": "sphere",
+            "settings": {"radius_m": scans.sphere_radius_m},
+            "centre_side": scans.centre_side,
             "conversion": {"command": command},
         },
     )
