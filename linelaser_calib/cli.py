@@ -470,7 +470,7 @@ def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, fl
         target = get_target(str(reference["target"]))
         settings = dict(reference.get("settings") or {})
         against = "reference"
-        label = f"{target.title}, real scans, vs reference.yaml ({reference.get('source', '')})"
+        label = f"{target.title}, real scans; reference.yaml is not ground truth"
     for method in (Method.PAPER, Method.DEFAULT):
         config = PipelineConfig(
             method=method,

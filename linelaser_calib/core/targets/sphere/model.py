@@ -271,3 +271,34 @@ def estimate_radius(
     bracket = (float(grid[max(k - 1, 0)]), float(grid[min(k + 1, len(grid) - 1)]))
     found = minimize_scalar(scatter, bounds=bracket, method="bounded", options={"xatol": 1e-7})
     return float(found.x) if float(found.fun) <= values[k] else float(grid[k])
+
+
+def fit_sphere_centre(
+    T_base_flange: ArrayLike,
+    points: list[FloatArray],
+    T_flange_sensor: ArrayLike,
+    sphere_radius_m: float,
+    start_m: ArrayLike,
+) -> tuple[FloatArray, FloatArray]:
+    """The sphere centre (3,) that fits the points best under a hand-eye, and the distances.
+
+    Every sample's points (N_j, 3, sensor frame) are mapped into the base frame through its
+    recorded flange pose and ``T_flange_sensor`` (no pose corrections), and the centre of a
+    sphere of the given radius is fitted by least squares from ``start_m``. This judges a
+    hand-eye by the data alone: how well the scans, mapped with it, form one sphere.
+
+    Returns
+    -------
+    centre : ndarray, shape (3,)
+        m, base frame.
+    distances : ndarray, shape (ΣN_j,)
+        Signed point-to-sphere distances, m.
+    """
+    T = np.asarray(T_base_flange, dtype=np.float64) @ np.asarray(T_flange_sensor, dtype=np.float64)
+    mapped = np.concatenate([p @ Tk[:3, :3].T + Tk[:3, 3] for p, Tk in zip(points, T, strict=True)])
+
+    def residual(c: FloatArray) -> FloatArray:
+        return np.asarray(np.linalg.norm(mapped - c, axis=1) - sphere_radius_m)
+
+    solved = least_squares(residual, np.asarray(start_m, dtype=np.float64), method="lm")
+    return np.asarray(solved.x), residual(solved.x)

@@ -421,7 +421,10 @@ class SphereTarget:
         state = outcome.state
         sigma = np.sqrt(np.maximum(np.diag(outcome.covariance), 0.0))
         lever = float(np.median(np.linalg.norm(fixed.centres_sensor, axis=1)))
-        warnings += self._diagnose(outcome.covariance[:6, :6], lever, config)
+        noise = float(np.median([f.circle.noise_m for f in kept]))
+        if self._misfit(outcome.rms_m, noise, outcome.robot_sigma_t_m, config) is None:
+            # A model that does not fit is refused by check_fit, not called degenerate.
+            warnings += self._diagnose(outcome.covariance[:6, :6], lever, config)
         for index, reason in run.left_flagged:
             warnings.append(f"profile {features[index].index} looks like an outlier: {reason}")
         rms = outcome.sample_rms_m()
@@ -454,7 +457,7 @@ class SphereTarget:
             warnings=warnings,
             history={"refine_cost": list(outcome.cost_history)},
             sample_fits=[f.record() for f in kept],
-            noise_m=float(np.median([f.circle.noise_m for f in kept])),
+            noise_m=noise,
         )
 
     def _diagnose(self, covariance: FloatArray, lever_m: float, config: SphereConfig) -> list[str]:
@@ -489,6 +492,25 @@ class SphereTarget:
         residual against the profile's own noise), and the solve refuses data in which most
         profiles are no circles (it knows the rejections)."""
 
+    def _misfit(
+        self, rms_m: float, noise_m: float, robot_sigma_t_m: float | None, config: SphereConfig
+    ) -> str | None:
+        """Why the default method's sphere does not explain the data, or None."""
+        if rms_m > config.circle.max_noise_ratio * noise_m:
+            return mismatch_message("sphere", rms_m, noise_m)
+        stated = config.refine.robot_sigma_t_m
+        if robot_sigma_t_m is not None and robot_sigma_t_m > config.max_robot_ratio * stated:
+            return (
+                f"the sphere model fits the profiles only with flange-pose corrections of "
+                f"{robot_sigma_t_m * 1e3:.3f} mm (1 sigma), {robot_sigma_t_m / stated:.0f} times "
+                f"the robot's stated {stated * 1e3:.3f} mm. Likely causes: the sphere centre is "
+                "on the other side of the laser plane (--centre-side); the profile and pose "
+                "clocks are not synchronised (--clock-offset); the robot moved during the scans; "
+                "the scans show another target; or the robot is less accurate than stated "
+                "(--robot-sigma-t). No result was written."
+            )
+        return None
+
     def check_fit(self, solution: TargetSolution, config: SphereConfig) -> None:
         """Refuse a sphere that does not explain the data (see the module docstring)."""
         if solution.method == "paper":
@@ -503,25 +525,16 @@ class SphereTarget:
                     )
                 )
             return
-        ratio = config.circle.max_noise_ratio
-        if solution.rms_residual_m > ratio * solution.noise_m:
-            raise ModelMismatch(
-                mismatch_message("sphere", solution.rms_residual_m, solution.noise_m)
-            )
         section = solution.section
         levels = section.noise_levels if isinstance(section, SphereSection) else None
-        if levels:
-            stated = config.refine.robot_sigma_t_m
-            found = levels["robot_sigma_t_m"]
-            if found > config.max_robot_ratio * stated:
-                raise ModelMismatch(
-                    f"the sphere model fits the profiles only with flange-pose corrections of "
-                    f"{found * 1e3:.3f} mm (1 sigma), {found / stated:.0f} times the robot's "
-                    f"stated {stated * 1e3:.3f} mm. Likely causes: the profile and pose clocks "
-                    "are not synchronised (--clock-offset); the robot moved during the scans; "
-                    "the scans show another target; or the robot is less accurate than stated "
-                    "(--robot-sigma-t). No result was written."
-                )
+        problem = self._misfit(
+            solution.rms_residual_m,
+            solution.noise_m,
+            levels["robot_sigma_t_m"] if levels else None,
+            config,
+        )
+        if problem is not None:
+            raise ModelMismatch(problem)
 
     def offset_cost(
         self, features: list[Any], config: SphereConfig, context: SolveContext
