@@ -155,7 +155,8 @@ def simulator_table(seeds: int) -> None:
                 within.append(float(np.mean(np.abs(e) <= 2.0 * sigma)))
     print(f"Simulator, preset sphere (24 views), {seeds} seeds: error against truth")
     print(
-        f"{'method':<10}{'rot RMS deg':>13}{'rot max deg':>13}{'trans RMS mm':>14}{'trans max mm':>14}{'time s':>9}"
+        f"{'method':<10}{'rot RMS deg':>13}{'rot max deg':>13}{'trans RMS mm':>14}"
+        f"{'trans max mm':>14}{'time s':>9}"
     )
     for name, values in errors.items():
         a = np.array(values)
@@ -165,7 +166,8 @@ def simulator_table(seeds: int) -> None:
             f"{np.median(seconds[name]):>9.2f}"
         )
     print(
-        f"default: {100.0 * np.mean(within):.0f} % of per-axis errors within 2 predicted sigma (95 % expected)"
+        f"default: {100.0 * np.mean(within):.0f} % of per-axis errors within 2 predicted sigma "
+        "(95 % expected)"
     )
 
 
