@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import configure
@@ -42,7 +43,7 @@ from linelaser_calib.core.targets.sphere.model import (
     fit_sphere_centre,
     fixed_point_residuals,
 )
-from linelaser_calib.core.types import CalibrationResult, Sample
+from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import read_bag
 from linelaser_calib.io.results import read_reference_yaml
 from linelaser_calib.offline import calibrate_bag
@@ -73,10 +74,7 @@ def _judge(
 def real_table() -> None:
     published, _ = read_reference_yaml(REAL / "reference.yaml")
     bag = read_bag(REAL)
-    samples = [
-        Sample(k, p.stamp_ns, bag.poses[3 * k + 1].T_base_flange, p.points)
-        for k, p in enumerate(bag.profiles)
-    ]
+    samples = pair_profiles(bag.profiles, bag.poses, PairingConfig()).samples
     features, _ = get_target("sphere").extract(
         samples, SphereConfig(radius_m=0.04), 0, lambda *_: None
     )

@@ -23,6 +23,7 @@ from linelaser_calib.core.geometry import (
     transform_error,
     transform_from_rotation_translation,
 )
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import configure
@@ -48,7 +49,6 @@ from linelaser_calib.core.targets.sphere.refine import (
     point_residuals,
     right_jacobian,
 )
-from linelaser_calib.core.types import Sample
 from linelaser_calib.io.bags import read_bag
 from linelaser_calib.io.results import read_reference_yaml, read_truth_yaml
 from linelaser_calib.offline import calibrate_bag
@@ -287,10 +287,7 @@ def test_the_sphere_target_refuses_cylinder_scans(capsys: pytest.CaptureFixture[
 def _real() -> tuple[list[object], np.ndarray]:
     """The real scans' circles (radius 40 mm given) and the published hand-eye."""
     bag = read_bag(REAL_BAG)
-    samples = [
-        Sample(k, p.stamp_ns, bag.poses[3 * k + 1].T_base_flange, p.points)
-        for k, p in enumerate(bag.profiles)
-    ]
+    samples = pair_profiles(bag.profiles, bag.poses, PairingConfig()).samples
     features, rejected = get_target("sphere").extract(
         samples, SphereConfig(radius_m=0.04), 0, lambda *_: None
     )

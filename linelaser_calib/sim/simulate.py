@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -145,6 +146,45 @@ def published_profiles(
         )
         intensities.append(None if measured.intensity is None else measured.intensity[k][keep])
     return stamps, profiles, intensities
+
+
+class _RigScene(Protocol):
+    @property
+    def rig(self) -> Scenario: ...
+
+
+class _RigTruth(Protocol):
+    @property
+    def scenario(self) -> _RigScene: ...
+
+
+TruthT = TypeVar("TruthT", bound=_RigTruth)
+
+
+@dataclass(frozen=True, eq=False)
+class RigSimulatedData(Generic[TruthT]):
+    """Everything a run of a scene with a rig produces (weld seam, sphere); the same layout
+    as :class:`SimulatedData`.
+
+    Attributes
+    ----------
+    profiles : list of Profile
+    intensities : list of (ndarray or None)
+    poses : list of FlangePose
+        The full reported flange-pose stream, sorted by stamp.
+    truth : the scene's truth record
+        Its ``scenario.rig`` is the :class:`Scenario` of profiler, robot, topics and frames.
+    """
+
+    profiles: list[Profile]
+    intensities: list[FloatArray | None]
+    poses: list[FlangePose]
+    truth: TruthT
+
+    @property
+    def scenario(self) -> Scenario:
+        """The rig (topics, frame names, output format), as ``SimulatedData.scenario``."""
+        return self.truth.scenario.rig
 
 
 @dataclass(frozen=True, eq=False)

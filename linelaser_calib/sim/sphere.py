@@ -45,11 +45,11 @@ from linelaser_calib.core.geometry import (
     quaternion_xyzw_from_matrix,
     transform_from_rotation_translation,
 )
-from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
+from linelaser_calib.core.types import BoolArray, FloatArray
 from linelaser_calib.sim.profiler import Trace, ray_directions, returns_seen
 from linelaser_calib.sim.scenario import PRESETS, Scenario, rig_scene_from_preset
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
-from linelaser_calib.sim.simulate import step_and_shoot
+from linelaser_calib.sim.simulate import RigSimulatedData, step_and_shoot
 
 Vec3 = tuple[float, float, float]
 
@@ -327,27 +327,8 @@ class SphereTruth:
     dropout: BoolArray
 
 
-@dataclass(frozen=True, eq=False)
-class SphereSimulatedData:
-    """Everything a sphere run produces; the same layout as ``SimulatedData``.
-
-    Attributes
-    ----------
-    profiles : list of Profile
-    intensities : list of (ndarray or None)
-    poses : list of FlangePose
-    truth : SphereTruth
-    """
-
-    profiles: list[Profile]
-    intensities: list[FloatArray | None]
-    poses: list[FlangePose]
-    truth: SphereTruth
-
-    @property
-    def scenario(self) -> Scenario:
-        """The rig (topics, frame names, output format), as ``SimulatedData.scenario``."""
-        return self.truth.scenario.rig
+#: Everything a sphere run produces.
+SphereSimulatedData = RigSimulatedData[SphereTruth]
 
 
 def simulate_sphere(scenario: SphereScenario, seed: int) -> SphereSimulatedData:

@@ -66,11 +66,11 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_rotvec_translation,
 )
-from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
+from linelaser_calib.core.types import BoolArray, FloatArray
 from linelaser_calib.sim.profiler import Trace, ray_directions
 from linelaser_calib.sim.scenario import Scenario, rig_scene_from_preset
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
-from linelaser_calib.sim.simulate import step_and_shoot
+from linelaser_calib.sim.simulate import RigSimulatedData, step_and_shoot
 
 Vec3 = tuple[float, float, float]
 
@@ -519,28 +519,8 @@ class WeldTruth:
     dropout: BoolArray
 
 
-@dataclass(frozen=True, eq=False)
-class WeldSimulatedData:
-    """Everything a weld-seam run produces; the same layout as ``SimulatedData``.
-
-    Attributes
-    ----------
-    profiles : list of Profile
-    intensities : list of (ndarray or None)
-    poses : list of FlangePose
-        The full reported flange-pose stream, sorted by stamp.
-    truth : WeldTruth
-    """
-
-    profiles: list[Profile]
-    intensities: list[FloatArray | None]
-    poses: list[FlangePose]
-    truth: WeldTruth
-
-    @property
-    def scenario(self) -> Scenario:
-        """The rig (topics, frame names, output format), as ``SimulatedData.scenario``."""
-        return self.truth.scenario.rig
+#: Everything a weld-seam run produces.
+WeldSimulatedData = RigSimulatedData[WeldTruth]
 
 
 def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
