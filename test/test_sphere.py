@@ -354,3 +354,19 @@ def test_the_cylinder_target_refuses_sphere_scans(
     out = tmp_path / "result.yaml"
     assert main(["calibrate", str(bag), "--target", "cylinder", "--output", str(out)]) == 1
     assert not out.exists() and "No result was written" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("side", [1, -1])
+def test_the_simulated_ball_is_where_its_truth_says(side: int) -> None:
+    data = _simulated(side)
+    truth = data.truth
+    T = truth.T_base_flange_true @ truth.T_flange_sensor
+    on_ball = truth.surface == 1
+    points = np.einsum("kij,knj->kni", T[:, :3, :3], truth.points_true_sensor) + T[:, None, :3, 3]
+    distance = np.linalg.norm(points[on_ball] - truth.centre_m, axis=1)
+    np.testing.assert_allclose(distance, truth.radius_m, atol=1e-9)
+    assert np.all(np.sign(truth.centre_sensor[:, 1]) == side)
+    assert np.all(np.abs(truth.points_true_sensor[on_ball][:, 1]) < 1e-12)
+    # The recorded poses differ from the true ones by the robot's error only.
+    recorded = truth.T_base_flange_recorded[:, :3, 3] - truth.T_base_flange_true[:, :3, 3]
+    assert 0.0 < float(np.max(np.abs(recorded))) < 5e-4
