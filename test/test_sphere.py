@@ -16,15 +16,16 @@ import numpy as np
 import pytest
 
 from linelaser_calib.cli import main
-from linelaser_calib.core.errors import ProfileRejected
+from linelaser_calib.core.errors import DegenerateError, ProfileRejected
 from linelaser_calib.core.geometry import (
     matrix_from_rotvec,
+    right_jacobian_so3,
     rotvec_from_matrix,
     transform_error,
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
@@ -47,7 +48,6 @@ from linelaser_calib.core.targets.sphere.model import (
 from linelaser_calib.core.targets.sphere.refine import (
     SphereState,
     point_residuals,
-    right_jacobian,
 )
 from linelaser_calib.io.bags import read_bag
 from linelaser_calib.io.results import read_reference_yaml, read_truth_yaml
@@ -185,7 +185,7 @@ def test_right_jacobian_and_point_jacobians_match_finite_differences() -> None:
     rng = np.random.default_rng(6)
     w, d = rng.normal(size=3) * 0.5, rng.normal(size=3) * 1e-7
     lhs = matrix_from_rotvec(w + d)
-    rhs = matrix_from_rotvec(w) @ matrix_from_rotvec(right_jacobian(w) @ d)
+    rhs = matrix_from_rotvec(w) @ matrix_from_rotvec(right_jacobian_so3(w[None])[0] @ d)
     np.testing.assert_allclose(lhs, rhs, atol=1e-13)
 
     data = _simulated(-1)
@@ -370,3 +370,14 @@ def test_the_simulated_ball_is_where_its_truth_says(side: int) -> None:
     # The recorded poses differ from the true ones by the robot's error only.
     recorded = truth.T_base_flange_recorded[:, :3, 3] - truth.T_base_flange_true[:, :3, 3]
     assert 0.0 < float(np.max(np.abs(recorded))) < 5e-4
+
+
+@pytest.mark.parametrize("method", [Method.PAPER, Method.DEFAULT])
+def test_poses_that_only_turn_about_the_vertical_are_named(method: Method) -> None:
+    # Every view straight down, the line turned about the vertical only: the hand-eye's
+    # translation along the flange's turning axis cannot be told from a shift of the ball.
+    scenario = sphere_scenario_from_preset("sphere", tilt_rad=0.0, n_poses=12, resolution=320)
+    data = simulate_sphere(scenario, 2)
+    with pytest.raises(DegenerateError, match="cannot be told from a shift of the sphere") as err:
+        run_pipeline(data.profiles, data.poses, _config(method))
+    assert "rotate the flange" in str(err.value)

@@ -36,6 +36,7 @@ from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import (
     matrix_from_rotvec,
     project_to_so3,
+    skews,
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.types import FloatArray
@@ -167,6 +168,29 @@ def polish_fixed_point(
     start = np.concatenate([np.zeros(3), X0[:3, 3], np.asarray(centre_base, dtype=np.float64)])
     solved = least_squares(residual, start, method="lm", xtol=1e-15, ftol=1e-15)
     return transform(solved.x), np.asarray(solved.x[6:])
+
+
+def fixed_point_information(
+    T_base_flange: ArrayLike, centres_sensor: ArrayLike, T_flange_sensor: ArrayLike
+) -> FloatArray:
+    """Information (6, 6) of the hand-eye [θ (sensor axes), ρ (flange axes)] in the
+    fixed-point equations, per unit variance of the mapped centres, with c marginalised.
+
+    The residual R_j (R_X p_j + t_X) + t_j − c has the Jacobians −R_j R_X [p_j]ₓ (θ, with
+    R_X ← R_X·Exp(θ)), R_j (ρ) and −I (c).
+    """
+    T = np.asarray(T_base_flange, dtype=np.float64)
+    p = np.asarray(centres_sensor, dtype=np.float64)
+    R = np.asarray(T_flange_sensor, dtype=np.float64)[:3, :3]
+    K = len(T)
+    J = np.zeros((K, 3, 9))
+    J[:, :, :3] = -np.einsum("kij,jl,klm->kim", T[:, :3, :3], R, skews(p))
+    J[:, :, 3:6] = T[:, :3, :3]
+    J[:, :, 6:] = -np.eye(3)
+    J2 = J.reshape(3 * K, 9)
+    H = J2.T @ J2
+    S = H[:6, :6] - H[:6, 6:] @ np.linalg.solve(H[6:, 6:], H[6:, :6])
+    return np.asarray(0.5 * (S + S.T))
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,8 @@ from numpy.typing import ArrayLike, NDArray
 from linelaser_calib.core.errors import InputError, SolverError
 from linelaser_calib.core.geometry import (
     matrix_from_rotvec,
+    right_jacobian_so3,
+    skews,
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.solver import (
@@ -67,21 +69,6 @@ IntArray = NDArray[np.int64]
 
 #: Numbers per sample: the pose correction ω (3), τ (3).
 N_LOCAL = 6
-
-
-def right_jacobian(omega: ArrayLike) -> FloatArray:
-    """Right Jacobians J_r(ω) of Exp, shape (..., 3, 3), for rotation vectors (..., 3), rad.
-
-    Exp(ω + δ) ≈ Exp(ω) Exp(J_r(ω) δ).
-    """
-    w = np.asarray(omega, dtype=np.float64)
-    angle = np.linalg.norm(w, axis=-1)[..., None, None]
-    W = skew_batch(w.reshape(-1, 3)).reshape((*w.shape[:-1], 3, 3))
-    small = angle < 1e-8
-    safe = np.where(small, 1.0, angle)
-    a = np.where(small, 0.5, (1.0 - np.cos(safe)) / safe**2)
-    b = np.where(small, 1.0 / 6.0, (safe - np.sin(safe)) / safe**3)
-    return np.asarray(np.eye(3) - a * W + b * (W @ W))
 
 
 @dataclass(frozen=True)
@@ -148,23 +135,15 @@ def point_residuals(
     nRE = np.einsum("nj,njk->nk", nR, E[j])
     J_global = np.empty((len(points), 10))
     # θ at 0: J_r = I; -R_X [q]x.
-    J_global[:, :3] = -np.einsum("nk,kl,nlm->nm", nRE, X[:3, :3], skew_batch(points))
+    J_global[:, :3] = -np.einsum("nk,kl,nlm->nm", nRE, X[:3, :3], skews(points))
     J_global[:, 3:6] = nRE
     J_global[:, 6:9] = -n
     J_global[:, 9] = -1.0
-    Jr = right_jacobian(omega)
+    Jr = right_jacobian_so3(omega)
     J_local = np.empty((len(points), N_LOCAL))
-    J_local[:, :3] = -np.einsum("nk,nkl,nlm->nm", nRE, skew_batch(s), Jr[j])
+    J_local[:, :3] = -np.einsum("nk,nkl,nlm->nm", nRE, skews(s), Jr[j])
     J_local[:, 3:] = nR
     return residuals, J_global / sensor_sigma_m, J_local / sensor_sigma_m
-
-
-def skew_batch(v: FloatArray) -> FloatArray:
-    """Cross-product matrices (N, 3, 3) of vectors (N, 3)."""
-    S = np.zeros((len(v), 3, 3))
-    S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return S
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,9 @@ arc and is rejected. The sphere centre lies √(R² − r²) off the plane on on
 
 - ``paper``: the fixed-point linear solve of the tools that calibrate profilers on a
   sphere, projected onto SO(3) and polished (:mod:`.model`); the side resolved from the
-  data unless given; an unknown radius by the least centre scatter.
+  data unless given; an unknown radius by the least centre scatter. Directions the poses
+  leave undetermined are named from the fixed-point equations' information (with the
+  robot's stated σ as the centres' noise).
 - ``default``: that solve as the start, then maximum likelihood on every inlier point with
   each sample's robot pose error as nuisance (:mod:`.refine`, the shared solver), samples
   with outlying residuals dropped, the covariance (1σ) and the directions the poses leave
@@ -54,6 +56,7 @@ from linelaser_calib.core.targets.sphere.model import (
     SIDE_LABELS,
     FixedPointSolution,
     estimate_radius,
+    fixed_point_information,
     fixed_point_residuals,
     resolve_side,
     side_from_label,
@@ -341,6 +344,13 @@ class SphereTarget:
             axis=1,
         )
         lever = float(np.median(np.linalg.norm(fixed.centres_sensor, axis=1)))
+        expected = self._expected_scatter_m(config, lever)
+        if fixed.scatter_m <= config.max_scatter_ratio * expected:
+            # The centres' per-axis noise the robot's stated sigma explains.
+            information = fixed_point_information(
+                T, fixed.centres_sensor, fixed.T_flange_sensor
+            ) / (expected**2 / 3.0)
+            warnings += self._diagnose(np.linalg.pinv(information), lever, config)
         section = SphereSection(
             fixed.centre_base,
             fixed.radius_m,
@@ -363,7 +373,7 @@ class SphereTarget:
             warnings=warnings,
             history={},
             sample_fits=[f.record() for f in features],
-            noise_m=self._expected_scatter_m(config, lever),
+            noise_m=expected,
         )
 
     def solve_default(
