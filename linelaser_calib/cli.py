@@ -141,7 +141,9 @@ def simulate_to_bag(
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
     elif scenario_name in SPHERE_PRESETS:
-        ball = simulate_sphere(sphere_scenario_from_preset(scenario_name, **overrides), seed)
+        # --radius is the target's radius: the sphere's here.
+        own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
+        ball = simulate_sphere(sphere_scenario_from_preset(scenario_name, **own), seed)
         scenario, profiles, poses = ball.scenario, ball.profiles, ball.poses
         intensities, T_true = ball.intensities, ball.truth.T_flange_sensor
         target = SphereSection(
@@ -207,7 +209,7 @@ def simulate_to_bag(
 #: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
 SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--poses", "n_poses", int),
-    ("--radius", "cylinder_radius_m", float),
+    ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
     ("--points", "resolution", int),
     ("--sensor-sigma", "sigma_depth_m", float),
     ("--robot-sigma-t", "robot_sigma_translation_m", float),
