@@ -1,9 +1,10 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
-Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration), ``export`` (a result as a URDF joint, a static TF
-command or a launch file) and ``demo`` (calibrate the committed bags and show the error
-against their truth). Exit code 0 means success; a user error prints one
+Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
+recordings into a bag), ``info`` (what a bag holds), ``calibrate`` (the offline
+calibration), ``export`` (a result as a URDF joint, a static TF command or a launch file)
+and ``demo`` (calibrate the committed bags and show the error against their truth). Exit
+code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -30,6 +31,7 @@ from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
 from linelaser_calib.io.results import (
+    read_reference_yaml,
     read_result_yaml,
     result_to_dict,
     truth_beside,
@@ -86,6 +88,13 @@ def _offset(text: str) -> float | str:
     return value
 
 
+def _centre_side(text: str) -> str:
+    """Parse ``+y`` or ``-y``."""
+    if text not in ("+y", "-y"):
+        raise argparse.ArgumentTypeError(f"expected +y or -y, got {text!r}")
+    return text
+
+
 def _xyz(text: str) -> tuple[float, float, float]:
     """Parse ``x,y,z`` (m)."""
     try:
@@ -115,8 +124,14 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.sphere import SphereSection
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.sphere import (
+        SPHERE_PRESETS,
+        simulate_sphere,
+        sphere_scenario_from_preset,
+    )
     from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
@@ -131,6 +146,19 @@ def simulate_to_bag(
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+    elif scenario_name in SPHERE_PRESETS:
+        # --radius is the target's radius: the sphere's here.
+        own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
+        ball = simulate_sphere(sphere_scenario_from_preset(scenario_name, **own), seed)
+        scenario, profiles, poses = ball.scenario, ball.profiles, ball.poses
+        intensities, T_true = ball.intensities, ball.truth.T_flange_sensor
+        target = SphereSection(
+            ball.truth.centre_m,
+            ball.truth.radius_m,
+            ball.truth.centre_side,
+            radius_estimated=False,
+            side_estimated=False,
+        )
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
@@ -192,7 +220,7 @@ def simulate_to_bag(
 #: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
 SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--poses", "n_poses", int),
-    ("--radius", "cylinder_radius_m", float),
+    ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
     ("--points", "resolution", int),
     ("--sensor-sigma", "sigma_depth_m", float),
     ("--robot-sigma-t", "robot_sigma_translation_m", float),
@@ -244,6 +272,19 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- convert --------------------------------------------------------------------------------
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.robcalibrator import convert_robcalibrator
+
+    command = f"{PROG} convert {args.format} {args.folder} --output {args.output}"
+    bag = convert_robcalibrator(args.folder, args.output, command)
+    print(f"wrote {bag} (with reference.yaml, LICENSE and README.md)")
+    print(format_bag_info(bag_info(bag)))
+    return 0
+
+
 # --- calibrate ------------------------------------------------------------------------------
 
 
@@ -251,6 +292,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 SETTING_FLAGS = {
     "radius_m": "--radius",
     "point_m": "--point x,y,z",
+    "centre_side": "--centre-side",
     "sensor_sigma_m": "--sensor-sigma",
     "robot_sigma_t_m": "--robot-sigma-t",
     "robot_sigma_r_rad": "--robot-sigma-r",
@@ -272,6 +314,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
+        "centre_side": args.centre_side,
         "sensor_sigma_m": args.sensor_sigma,
         "robot_sigma_t_m": args.robot_sigma_t,
         "robot_sigma_r_rad": args.robot_sigma_r,
@@ -430,20 +473,23 @@ def _cmd_export(args: argparse.Namespace) -> int:
 # --- demo -----------------------------------------------------------------------------------
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    root = Path(args.bags)
-    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
-    if not bags:
-        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
-    rows = []
-    for bag in bags:
-        truth, note = truth_beside(bag)
-        if truth is None:
-            print(note or f"{bag} has no truth.yaml; skipped", file=sys.stderr)
-            continue
+def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
+    """Calibrate one committed bag with both methods, print the summaries, add table rows.
+
+    A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
+    corrects that hand-eye); a converted real recording with its ``reference.yaml`` (another
+    tool's hand-eye, calibrated with the settings recorded there). A bag with neither is
+    skipped with a note.
+    """
+    settings: dict[str, object] = {}
+    initial = None
+    truth, note = truth_beside(bag)
+    if truth is None and not (bag / "reference.yaml").is_file():
+        print(note or f"{bag} has no truth.yaml or reference.yaml; skipped", file=sys.stderr)
+        return
+    if truth is not None:
         target = get_target(truth.target.key)
-        settings: dict[str, object] = {}
-        initial = None
+        compare, against = truth.T_flange_sensor, "truth"
         label = target.title
         if (bag / "initial.yaml").is_file():
             initial = read_result_yaml(bag / "initial.yaml")
@@ -451,26 +497,50 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
-        for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(
-                method=method,
-                target=target.name,
-                target_config=configure(target, method.value, settings, SETTING_FLAGS),
-                seed=args.seed,
-                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+    else:
+        compare, reference = read_reference_yaml(bag / "reference.yaml")
+        target = get_target(str(reference["target"]))
+        settings = dict(reference.get("settings") or {})
+        against = "reference"
+        label = f"{target.title}, real scans; reference.yaml is not ground truth"
+    for method in (Method.PAPER, Method.DEFAULT):
+        config = PipelineConfig(
+            method=method,
+            target=target.name,
+            target_config=configure(target, method.value, settings, SETTING_FLAGS),
+            seed=seed,
+            initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+        )
+        started = time.perf_counter()
+        run = calibrate_bag(bag, config)
+        seconds = time.perf_counter() - started
+        print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
+        print(format_summary(run.result, truth))
+        rot, trans = transform_error(run.result.T_flange_sensor, compare)
+        if truth is None:
+            print(
+                f"Difference to the reference hand-eye: rotation {np.degrees(rot):.4f} deg, "
+                f"translation {trans * 1e3:.4f} mm (not ground truth)"
             )
-            started = time.perf_counter()
-            run = calibrate_bag(bag, config)
-            seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
-            print(format_summary(run.result, truth))
-            print()
-            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
-            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
-    print("Error against truth (hand-eye T_flange_sensor):")
-    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
+        print()
+        rows.append(
+            (bag.name, f"{method.value} vs {against}", np.degrees(rot), trans * 1e3, seconds)
+        )
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    root = Path(args.bags)
+    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
+    if not bags:
+        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
+    rows: list[tuple[str, str, float, float, float]] = []
+    for bag in bags:
+        _demo_runs(bag, args.seed, rows)
+    print("Difference of the hand-eye T_flange_sensor to the truth (simulated bags) or to the")
+    print("reference (real scans: another tool's published hand-eye, not ground truth):")
+    print(f"  {'bag':<24}{'method':<22}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
     for name, label, rot_deg, trans_mm, seconds in rows:
-        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+        print(f"  {name:<24}{label:<22}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
     return 0
 
 
@@ -496,11 +566,17 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
 #: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
 #: one the target or method does not use is refused): (flag, parser, help).
 TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
-    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
+    ("--radius", _positive_float, "cylinder or sphere radius, m (default: estimate)"),
     (
         "--point",
         _xyz,
         "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
+    (
+        "--centre-side",
+        _centre_side,
+        "sphere target: the side of the laser plane the sphere centre lies on, +y or -y "
+        "(sensor frame; default: resolved from the data)",
     ),
     (
         "--sensor-sigma",
@@ -580,7 +656,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general",
+        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general, sphere",
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
@@ -605,6 +681,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write the flange poses as a /tf chain (UR-like links) with /tf_static",
     )
     sim.set_defaults(func=_cmd_simulate)
+
+    convert = sub.add_parser(
+        "convert", help="convert another tool's recordings into a rosbag2 bag (SI units)"
+    )
+    convert.add_argument(
+        "format",
+        choices=["robcalibrator"],
+        help="robcalibrator: a RobCalibrator scan folder (p1.yml..., RobPoses.rob, "
+        "calibration.sec, LICENSE)",
+    )
+    convert.add_argument("folder", help="the folder to convert")
+    convert.add_argument("--output", required=True, help="bag directory to create (must not exist)")
+    convert.set_defaults(func=_cmd_convert)
 
     info = sub.add_parser("info", help="print what a bag holds")
     info.add_argument("bag")
