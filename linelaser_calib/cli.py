@@ -1,11 +1,11 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
-Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration), ``plan`` (the next flange poses to scan from),
-``export`` (a result as a URDF joint, a static TF command or a launch file) and ``demo``
-(calibrate the committed bags and show the error against their truth). Exit code 0 means
-success; a user error prints one paragraph on stderr and exits with 1; a usage error exits
-with 2.
+Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
+recordings into a bag), ``info`` (what a bag holds), ``calibrate`` (the offline
+calibration), ``plan`` (the next flange poses to scan from), ``export`` (a result as a URDF
+joint, a static TF command or a launch file) and ``demo`` (calibrate the committed bags and
+show the error against their truth). Exit code 0 means success; a user error prints one
+paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
 from linelaser_calib.io.results import (
+    read_reference_yaml,
     read_result_yaml,
     result_to_dict,
     truth_beside,
@@ -96,6 +97,13 @@ def _offset(text: str) -> float | str:
     return value
 
 
+def _centre_side(text: str) -> str:
+    """Parse ``+y`` or ``-y``."""
+    if text not in ("+y", "-y"):
+        raise argparse.ArgumentTypeError(f"expected +y or -y, got {text!r}")
+    return text
+
+
 def _xyz(text: str) -> tuple[float, float, float]:
     """Parse ``x,y,z`` (m)."""
     try:
@@ -125,8 +133,14 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.sphere import SphereSection
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.sphere import (
+        SPHERE_PRESETS,
+        simulate_sphere,
+        sphere_scenario_from_preset,
+    )
     from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
@@ -141,6 +155,19 @@ def simulate_to_bag(
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+    elif scenario_name in SPHERE_PRESETS:
+        # --radius is the target's radius: the sphere's here.
+        own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
+        ball = simulate_sphere(sphere_scenario_from_preset(scenario_name, **own), seed)
+        scenario, profiles, poses = ball.scenario, ball.profiles, ball.poses
+        intensities, T_true = ball.intensities, ball.truth.T_flange_sensor
+        target = SphereSection(
+            ball.truth.centre_m,
+            ball.truth.radius_m,
+            ball.truth.centre_side,
+            radius_estimated=False,
+            side_estimated=False,
+        )
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
@@ -202,7 +229,7 @@ def simulate_to_bag(
 #: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
 SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--poses", "n_poses", int),
-    ("--radius", "cylinder_radius_m", float),
+    ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
     ("--points", "resolution", int),
     ("--sensor-sigma", "sigma_depth_m", float),
     ("--robot-sigma-t", "robot_sigma_translation_m", float),
@@ -254,6 +281,19 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- convert --------------------------------------------------------------------------------
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.robcalibrator import convert_robcalibrator
+
+    command = f"{PROG} convert {args.format} {args.folder} --output {args.output}"
+    bag = convert_robcalibrator(args.folder, args.output, command)
+    print(f"wrote {bag} (with reference.yaml, LICENSE and README.md)")
+    print(format_bag_info(bag_info(bag)))
+    return 0
+
+
 # --- calibrate ------------------------------------------------------------------------------
 
 
@@ -261,6 +301,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 SETTING_FLAGS = {
     "radius_m": "--radius",
     "point_m": "--point x,y,z",
+    "centre_side": "--centre-side",
     "sensor_sigma_m": "--sensor-sigma",
     "robot_sigma_t_m": "--robot-sigma-t",
     "robot_sigma_r_rad": "--robot-sigma-r",
@@ -286,6 +327,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
+        "centre_side": args.centre_side,
         "sensor_sigma_m": args.sensor_sigma,
         "robot_sigma_t_m": args.robot_sigma_t,
         "robot_sigma_r_rad": args.robot_sigma_r,
@@ -453,6 +495,16 @@ def _span(text: str) -> tuple[float, float]:
     return values[0], values[1]
 
 
+#: The target settings ``plan`` takes (those that shape the information of a pose).
+PLAN_TARGET_OPTIONS = (
+    "--radius",
+    "--centre-side",
+    "--sensor-sigma",
+    "--robot-sigma-t",
+    "--robot-sigma-r",
+)
+
+
 def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
     return PlanConstraints(
         z_min_m=args.range[0],
@@ -473,14 +525,23 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         _check_output(args.figure, "figure (--figure)")
         require_matplotlib()
     target = get_target(args.target)
-    plannable(target)
     section = None
     achieved: list[SigmaPoint] = []
+    planner = plannable(target)
+    placed = {"--cylinder": args.cylinder, "--sphere": args.sphere}
+    given_numbers = {flag: value for flag, value in placed.items() if value is not None}
+    for flag in given_numbers:
+        if flag != planner.numbers_flag:
+            raise InputError(
+                f"{flag} does not apply to the {target.title} target and would be ignored; "
+                f"give its placement with {planner.numbers_flag} ({planner.numbers_help})"
+            )
+    numbers = given_numbers.get(planner.numbers_flag)
     if args.from_result is not None:
-        if args.initial is not None or args.cylinder is not None:
+        if args.initial is not None or numbers is not None:
             raise InputError(
                 "--from gives the hand-eye and the target's placement; omit --initial and "
-                "--cylinder"
+                f"{planner.numbers_flag}"
             )
         result = read_result_yaml(args.from_result)
         if result.target.key != target.name:
@@ -502,13 +563,15 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             "--cylinder or a bag of 3 or more exploratory scans; the planner does not yet "
             "estimate the hand-eye from exploratory scans alone"
         )
-    if section is None and args.cylinder is None and args.bag is None:
+    if section is None and numbers is None and args.bag is None:
         raise InputError(
-            "plan needs the target's placement: give --from RESULT.yaml, --cylinder "
-            "px,py,pz,dx,dy,dz (m, base frame), or a bag of 3 or more exploratory scans"
+            f"plan needs the target's placement: give --from RESULT.yaml, "
+            f"{planner.numbers_flag} {planner.numbers_help}, or a bag of 3 or more exploratory "
+            "scans"
         )
     given = {
         "radius_m": args.radius,
+        "centre_side": args.centre_side,
         "sensor_sigma_m": args.sensor_sigma,
         "robot_sigma_t_m": args.robot_sigma_t,
         "robot_sigma_r_rad": args.robot_sigma_r,
@@ -539,7 +602,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         args.n,
         samples=samples,
         section=section,
-        numbers=args.cylinder,
+        numbers=numbers,
         extent=args.axial_range,
         constraints=_plan_constraints(args),
         goal=goal,
@@ -599,20 +662,23 @@ def _cmd_export(args: argparse.Namespace) -> int:
 # --- demo -----------------------------------------------------------------------------------
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    root = Path(args.bags)
-    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
-    if not bags:
-        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
-    rows = []
-    for bag in bags:
-        truth, note = truth_beside(bag)
-        if truth is None:
-            print(note or f"{bag} has no truth.yaml; skipped", file=sys.stderr)
-            continue
+def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
+    """Calibrate one committed bag with both methods, print the summaries, add table rows.
+
+    A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
+    corrects that hand-eye); a converted real recording with its ``reference.yaml`` (another
+    tool's hand-eye, calibrated with the settings recorded there). A bag with neither is
+    skipped with a note.
+    """
+    settings: dict[str, object] = {}
+    initial = None
+    truth, note = truth_beside(bag)
+    if truth is None and not (bag / "reference.yaml").is_file():
+        print(note or f"{bag} has no truth.yaml or reference.yaml; skipped", file=sys.stderr)
+        return
+    if truth is not None:
         target = get_target(truth.target.key)
-        settings: dict[str, object] = {}
-        initial = None
+        compare, against = truth.T_flange_sensor, "truth"
         label = target.title
         if (bag / "initial.yaml").is_file():
             initial = read_result_yaml(bag / "initial.yaml")
@@ -620,26 +686,50 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
-        for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(
-                method=method,
-                target=target.name,
-                target_config=configure(target, method.value, settings, SETTING_FLAGS),
-                seed=args.seed,
-                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+    else:
+        compare, reference = read_reference_yaml(bag / "reference.yaml")
+        target = get_target(str(reference["target"]))
+        settings = dict(reference.get("settings") or {})
+        against = "reference"
+        label = f"{target.title}, real scans; reference.yaml is not ground truth"
+    for method in (Method.PAPER, Method.DEFAULT):
+        config = PipelineConfig(
+            method=method,
+            target=target.name,
+            target_config=configure(target, method.value, settings, SETTING_FLAGS),
+            seed=seed,
+            initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+        )
+        started = time.perf_counter()
+        run = calibrate_bag(bag, config)
+        seconds = time.perf_counter() - started
+        print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
+        print(format_summary(run.result, truth))
+        rot, trans = transform_error(run.result.T_flange_sensor, compare)
+        if truth is None:
+            print(
+                f"Difference to the reference hand-eye: rotation {np.degrees(rot):.4f} deg, "
+                f"translation {trans * 1e3:.4f} mm (not ground truth)"
             )
-            started = time.perf_counter()
-            run = calibrate_bag(bag, config)
-            seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
-            print(format_summary(run.result, truth))
-            print()
-            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
-            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
-    print("Error against truth (hand-eye T_flange_sensor):")
-    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
+        print()
+        rows.append(
+            (bag.name, f"{method.value} vs {against}", np.degrees(rot), trans * 1e3, seconds)
+        )
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    root = Path(args.bags)
+    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
+    if not bags:
+        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
+    rows: list[tuple[str, str, float, float, float]] = []
+    for bag in bags:
+        _demo_runs(bag, args.seed, rows)
+    print("Difference of the hand-eye T_flange_sensor to the truth (simulated bags) or to the")
+    print("reference (real scans: another tool's published hand-eye, not ground truth):")
+    print(f"  {'bag':<24}{'method':<22}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
     for name, label, rot_deg, trans_mm, seconds in rows:
-        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+        print(f"  {name:<24}{label:<22}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
     return 0
 
 
@@ -665,11 +755,17 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
 #: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
 #: one the target or method does not use is refused): (flag, parser, help).
 TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
-    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
+    ("--radius", _positive_float, "cylinder or sphere radius, m (default: estimate)"),
     (
         "--point",
         _xyz,
         "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
+    (
+        "--centre-side",
+        _centre_side,
+        "sphere target: the side of the laser plane the sphere centre lies on, +y or -y "
+        "(sensor frame; default: resolved from the data)",
     ),
     (
         "--sensor-sigma",
@@ -757,7 +853,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general",
+        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general, sphere",
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
@@ -783,6 +879,19 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sim.set_defaults(func=_cmd_simulate)
 
+    convert = sub.add_parser(
+        "convert", help="convert another tool's recordings into a rosbag2 bag (SI units)"
+    )
+    convert.add_argument(
+        "format",
+        choices=["robcalibrator"],
+        help="robcalibrator: a RobCalibrator scan folder (p1.yml..., RobPoses.rob, "
+        "calibration.sec, LICENSE)",
+    )
+    convert.add_argument("folder", help="the folder to convert")
+    convert.add_argument("--output", required=True, help="bag directory to create (must not exist)")
+    convert.set_defaults(func=_cmd_convert)
+
     info = sub.add_parser("info", help="print what a bag holds")
     info.add_argument("bag")
     info.set_defaults(func=_cmd_info)
@@ -796,9 +905,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--target",
         choices=target_names(),
         default=DEFAULT_TARGET,
-        help="what was scanned: "
-        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
-        + f" (default {DEFAULT_TARGET})",
+        help=f"what was scanned (default {DEFAULT_TARGET}): cylinder, a cylinder of known or "
+        "estimated radius; known_point, one fixed point such as a weld-seam corner; each "
+        "registered target is a choice",
     )
     cal.add_argument("--output", help="result YAML to write (its directory must exist)")
     cal.add_argument(
@@ -860,6 +969,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="px,py,pz,dx,dy,dz: a point on the cylinder axis and its direction (base frame, m)",
     )
     plan.add_argument(
+        "--sphere", type=_numbers, help="cx,cy,cz: the centre of the sphere (base frame, m)"
+    )
+    plan.add_argument(
         "--axial-range",
         type=_span,
         help="LO,HI: the span of the shaft to scan, m along the axis (upwards) from its point "
@@ -899,7 +1011,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     plan.add_argument("--no-table", action="store_true", help="no table below the target")
     for flag, parse_setting, text in TARGET_OPTIONS:
-        if flag != "--point":
+        if flag in PLAN_TARGET_OPTIONS:
             plan.add_argument(flag, type=parse_setting, default=None, help=text)
     plan.add_argument("--seed", type=int, default=0, help="seed of the candidate poses")
     plan.add_argument("--output", help="plan YAML to write (its directory must exist)")

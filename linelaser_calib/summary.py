@@ -225,6 +225,13 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
         lines.append(
             f"Clock offset added to profile stamps: {result.clock_offset_s * 1e3:+.2f} ms ({how})"
         )
+    if result.clock_offset_live_s is not None:
+        sigma = result.clock_offset_live_sigma_s
+        spread = "" if sigma is None else f" +- {sigma * 1e3:.2f} ms (1 sigma)"
+        lines.append(
+            f"Clock offset estimated live by the collector: {result.clock_offset_live_s * 1e3:+.2f}"
+            f" ms{spread}"
+        )
     lines += [f"WARNING: {warning}" for warning in result.warnings]
     if truth is not None:
         lines.append("Error against truth:")

@@ -4,6 +4,7 @@ rough placement from exploratory scans, the plan command and its refusals."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from linelaser_calib.core.planning import (
     predicted_profiles,
     robot_angle,
 )
+from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.cylinder import TARGET, CylinderConfig
 from linelaser_calib.core.targets.cylinder.plan import (
     LONG_AXIS_CUT_RAD,
@@ -28,11 +30,21 @@ from linelaser_calib.core.targets.cylinder.plan import (
     placement,
     rough_placement,
 )
+from linelaser_calib.core.targets.sphere import SphereConfig
+from linelaser_calib.core.targets.sphere.plan import SpherePlacement, SpherePlanner
 from linelaser_calib.sim import scenario_from_preset, simulate
 from linelaser_calib.sim.poses import sample_sensor_poses
 from linelaser_calib.sim.profiler import trace
 from linelaser_calib.sim.scene import Scene, Surface
+from linelaser_calib.sim.sphere import (
+    Ball,
+    simulate_sphere,
+    sphere_scenario_from_preset,
+    sphere_views,
+    trace_ball,
+)
 
+RNG = np.random.default_rng
 SCENARIO = scenario_from_preset("ur_scancontrol")
 REACH_CENTRE = (0.35, 0.15, 0.25)
 CONSTRAINTS = PlanConstraints(reach_centre_m=REACH_CENTRE)
@@ -215,3 +227,108 @@ def test_plan_refuses_bad_input_with_one_clear_message(
     err = capsys.readouterr().err
     assert message in err
     assert "Traceback" not in err and err.count("\n") == 1
+
+
+# --- the sphere -----------------------------------------------------------------------------
+
+SPHERE = sphere_scenario_from_preset("sphere")
+SPHERE_PLACEMENT = SpherePlacement(SPHERE.centre, SPHERE.radius_m, SPHERE.centre_side)
+SPHERE_CONFIG = SphereConfig(radius_m=SPHERE.radius_m)
+SPHERE_TABLE = SPHERE.centre_m[2] - SPHERE.radius_m - SPHERE.table_gap_m
+SPHERE_CONSTRAINTS = PlanConstraints(table_height_m=SPHERE_TABLE, clearance_m=0.02)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_planned_sphere_views_show_the_whole_cap_on_the_configured_side(seed: int) -> None:
+    plan = plan_poses(
+        SpherePlanner(),
+        SPHERE_PLACEMENT,
+        SPHERE.rig.T_flange_sensor,
+        SPHERE_CONFIG,
+        8,
+        np.random.default_rng(seed),
+        SPHERE_CONSTRAINTS,
+    )
+    T_sensor = np.stack([p.T_base_sensor for p in plan.poses])
+    T_flange = np.stack([p.T_base_flange for p in plan.poses])
+    traced = trace_ball(Ball.from_scenario(SPHERE), SPHERE.rig, T_sensor)
+    on_ball = traced.surface == Surface.SIDE
+    assert not np.any(on_ball[:, 0]) and not np.any(on_ball[:, -1])
+    z = np.where(on_ball, traced.points_sensor[..., 2], SPHERE.rig.z_min_m)
+    assert np.all((z >= SPHERE.rig.z_min_m - 1e-9) & (z <= SPHERE.rig.z_max_m + 1e-9))
+    assert np.all(on_ball.sum(axis=1) >= 0.15 * SPHERE.rig.resolution)
+    # The centre on the sensor's configured side of every laser plane, the cap off the equator.
+    centre_sensor = np.einsum("kji,kj->ki", T_sensor[:, :3, :3], SPHERE.centre - T_sensor[:, :3, 3])
+    assert np.all(SPHERE.centre_side * centre_sensor[:, 1] > 0.1 * SPHERE.radius_m)
+    assert np.all(np.minimum(T_sensor[:, 2, 3], T_flange[:, 2, 3]) >= SPHERE_TABLE + 0.02)
+    assert np.all(T_sensor[:, 2, 2] <= 0.0)
+
+
+def test_planned_sphere_views_beat_the_simulators_views() -> None:
+    ball = Ball.from_scenario(SPHERE)
+    views = sphere_views(replace(SPHERE, rig=replace(SPHERE.rig, n_poses=20)), ball, RNG(1))
+    planner = SpherePlanner()
+    profiles = predicted_profiles(planner, SPHERE_PLACEMENT, views, SPHERE_CONSTRAINTS)
+    T_flange = views @ invert_transform(SPHERE.rig.T_flange_sensor)
+    info = planner.information(
+        SPHERE_PLACEMENT, SPHERE.rig.T_flange_sensor, profiles, T_flange, SPHERE_CONFIG
+    )
+    random_sigma = np.sqrt(np.diag(np.linalg.inv(marginal_hand_eye(info.sum(axis=0)))))
+    plan = plan_poses(
+        planner,
+        SPHERE_PLACEMENT,
+        SPHERE.rig.T_flange_sensor,
+        SPHERE_CONFIG,
+        20,
+        RNG(1),
+        SPHERE_CONSTRAINTS,
+    )
+    last = plan.poses[-1]
+    planned_sigma = np.concatenate([last.sigma_rotation_rad, last.sigma_translation_m])
+    assert np.prod(planned_sigma / random_sigma) < 0.1
+
+
+def test_rough_sphere_placement_from_three_scans_finds_the_centre() -> None:
+    data = simulate_sphere(replace(SPHERE, rig=replace(SPHERE.rig, n_poses=3)), seed=4)
+    paired = pair_profiles(data.profiles, data.poses, PairingConfig())
+    target = get_target("sphere")
+    features, _ = target.extract(paired.samples, SPHERE_CONFIG, 0, lambda *_: None)
+    assert len(features) == 3
+    placed = SpherePlanner().placement_from_features(
+        features, SPHERE.rig.T_flange_sensor, SPHERE_CONFIG, None
+    )
+    assert placed.centre_side == SPHERE.centre_side
+    assert np.linalg.norm(placed.centre - SPHERE.centre) < 1e-3
+
+
+def test_plan_command_for_the_sphere(tmp_path: Path) -> None:
+    out = tmp_path / "poses.yaml"
+    centre = ",".join(str(v) for v in SPHERE.centre_m)
+    x, y, z = SPHERE.rig.hand_eye_translation_m
+    qx, qy, qz, qw = SPHERE.rig.hand_eye_rotation_xyzw
+    argv = ["plan", "--target", "sphere", "--sphere", centre, "--radius", str(SPHERE.radius_m)]
+    argv += ["--initial", f"{x} {y} {z} {qx} {qy} {qz} {qw}", "--centre-side=-y"]
+    argv += ["--table-height", str(SPHERE_TABLE), "--reach-centre", centre, "--n", "5"]
+    assert main([*argv, "--output", str(out)]) == 0
+    assert len(yaml.safe_load(out.read_text())["poses"]) == 5
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (
+            ["--target", "sphere", "--sphere", "0.5,0.1,0.1", "--axial-range", "0,0.1"],
+            "--axial-range",
+        ),
+        (["--target", "sphere", "--cylinder", "0.5,0.1,0.1,0,0,1"], "--cylinder does not apply"),
+        (["--sphere", "0.5,0.1,0.1"], "--sphere does not apply"),
+        (["--target", "sphere", "--sphere", "0.5,0.1"], "takes 3 numbers"),
+    ],
+)
+def test_plan_refuses_placements_of_another_target(
+    capsys: pytest.CaptureFixture[str], argv: list[str], message: str
+) -> None:
+    initial = ["--initial", "0 0 0.1 0 0 0 1", "--radius", "0.02"]
+    assert main(["plan", *argv, *initial]) == 1
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err

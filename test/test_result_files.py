@@ -50,6 +50,8 @@ def random_result(rng: np.random.Generator, *, with_uncertainty: bool = True) ->
         uncertainty_rotation_rad=rng.random(3) * 1e-3 if with_uncertainty else None,
         warnings=["rotation about the sensor x axis is weakly observed"],
         history={"refine_cost": [3.0, 2.0, 1.0]},
+        clock_offset_live_s=-0.004 + 1e-4 * float(rng.normal()) if with_uncertainty else None,
+        clock_offset_live_sigma_s=1e-4 if with_uncertainty else None,
     )
 
 
@@ -100,6 +102,8 @@ def test_result_round_trips_exactly(tmp_path: Path) -> None:
         assert back.sample_residuals_m == result.sample_residuals_m
         assert back.warnings == result.warnings
         assert back.target.radius_estimated is True
+        assert back.clock_offset_live_s == result.clock_offset_live_s
+        assert back.clock_offset_live_sigma_s == result.clock_offset_live_sigma_s
         assert (back.method, back.parent_frame, back.child_frame, back.base_frame) == (
             "default",
             "tool0",

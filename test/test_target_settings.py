@@ -128,9 +128,9 @@ def test_every_target_option_names_a_shared_setting_and_a_config_field() -> None
         assert target.name in target_names()
         for name, option in target.options.items():
             if option.field and name != "initial":
-                value = 7 if name == "min_samples" else 0.5
-                if name == "point_m":
-                    value = np.zeros(3)  # type: ignore[assignment]
+                value: object = {"min_samples": 7, "point_m": np.zeros(3), "centre_side": "-y"}.get(
+                    name, 0.5
+                )
                 for method in option.methods:
                     others = {
                         n: INITIAL if n == "initial" else np.zeros(3)

@@ -204,6 +204,9 @@ class CalibrationResult:
         Offset added to the profile stamps to pair them with the poses, s.
     clock_offset_estimated : bool
         True when that offset was estimated from the data (continuous scanning).
+    clock_offset_live_s, clock_offset_live_sigma_s : float or None
+        The collector's live estimate of the clock offset and its 1σ, s (continuous
+        scanning through the nodes); None when there is none.
     parent_frame, child_frame, base_frame : str
         Frame ids: flange, sensor and robot base.
     """
@@ -222,6 +225,8 @@ class CalibrationResult:
     sample_fits: list[SampleFit] = field(default_factory=list)
     clock_offset_s: float = 0.0
     clock_offset_estimated: bool = False
+    clock_offset_live_s: float | None = None
+    clock_offset_live_sigma_s: float | None = None
     parent_frame: str = "tool0"
     child_frame: str = "laser"
     base_frame: str = "base_link"

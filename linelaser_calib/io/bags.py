@@ -14,9 +14,11 @@ chunk index, the summary and ``metadata.yaml`` only on close; its reader needs a
 So a rosbag2 bag is readable only once closed. :func:`write_bag` therefore writes into a
 hidden temporary directory and renames it into place when complete: a crash leaves no
 half-written bag under the requested name. :class:`SessionBagWriter`, for live collection,
-writes each sample (one profile and its flange pose) as its own small closed bag inside a
-session directory, so a crash loses at most the sample being written. :func:`read_bag`
-reads a session directory like a single bag.
+appends the samples (each a profile and its flange pose) to one MCAP file of unchunked
+records, flushed and fsynced on request, which this module reads record by record up to a
+torn tail; a crash loses only what was not flushed yet. :func:`read_bag` reads a session
+directory like a single bag (also a session of one bag per sample, written by earlier
+versions).
 
 Topics are auto-detected by type when exactly one topic of each type holds messages.
 Every user-caused failure (missing, empty, truncated or corrupt bag, missing or ambiguous
@@ -30,15 +32,24 @@ import datetime
 import functools
 import os
 import shutil
+import struct
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from io import BufferedWriter, BytesIO
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NamedTuple
 
 import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel as McapChannel
+from mcap.records import Message as McapMessage
+from mcap.records import Schema as McapSchema
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import Writer as McapWriter
 from numpy.typing import NDArray
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
@@ -70,7 +81,12 @@ TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
 #: File in a session directory that marks it as one (see :class:`SessionBagWriter`).
 SESSION_MARKER = "linelaser_calib_session.txt"
+#: The MCAP file of a session's samples (see :class:`SessionBagWriter`).
+SESSION_FILE = "session.mcap"
 _SAMPLE_PREFIX = "sample_"
+
+#: The first bytes of every MCAP file.
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 #: Called as ``progress(done, total)`` while messages are decoded.
 Progress = Callable[[int, int], None]
@@ -178,7 +194,7 @@ def _store_from_definitions(definitions: tuple[tuple[str, str], ...]) -> Typesto
     return store
 
 
-def _reading_store(connections: Sequence[Connection]) -> Typestore:
+def _reading_store(connections: Sequence[Connection | _SessionConnection]) -> Typestore:
     """The typestore that decodes the messages of ``connections``.
 
     Built from the message definitions the recording carries (rosbag2 >= 8, MCAP) when each
@@ -187,7 +203,7 @@ def _reading_store(connections: Sequence[Connection]) -> Typestore:
     """
     definitions = set()
     for connection in connections:
-        msgdef = connection.msgdef
+        msgdef = getattr(connection, "msgdef", None)  # session files carry no definitions
         if msgdef is None or msgdef.format != MessageDefinitionFormat.MSG or not msgdef.data:
             return _typestore()
         definitions.add((connection.msgtype, msgdef.data))
@@ -386,15 +402,18 @@ def write_bag(
 
 
 class SessionBagWriter:
-    """Persist samples one by one during live collection; a crash loses at most one sample.
+    """Persist samples as they arrive during live collection, in one MCAP file per session.
 
-    The session is a directory holding a marker file and one complete rosbag2 MCAP bag per
-    sample, ``sample_000000/``, ``sample_000001/``, ... Each bag holds the flange pose and
-    the profile, both stamped with the profile stamp. :meth:`append` returns only after the
-    sample's bag is closed, flushed to disk (fsync) and renamed into place, so every
-    appended sample survives a crash; a sample interrupted mid-write stays in a hidden
-    ``.sample_*.partial`` directory that readers ignore. :func:`read_bag` and
-    :func:`bag_info` read the session directory as one bag.
+    The session is a directory holding a marker file and ``session.mcap``: a ``ros2`` profile
+    MCAP file (``ros2msg`` schemas, CDR messages, as rosbag2 writes them) with a flange pose
+    and a profile per sample, both stamped with the profile stamp. Records are written
+    unchunked, so every :meth:`flush` ends on a record boundary: :meth:`append` only buffers,
+    and :meth:`flush` writes, flushes and fsyncs what was appended, after which those samples
+    survive a crash (the collector flushes at a bounded interval). A crash leaves the file
+    without its summary and footer, and perhaps a torn last record; :func:`read_bag` reads
+    every complete sample of such a file. :meth:`close` writes the summary and footer, after
+    which any MCAP reader opens the file. :func:`read_bag` and :func:`bag_info` read the
+    session directory (or its ``session.mcap``) as one bag.
 
     Parameters
     ----------
@@ -414,11 +433,9 @@ class SessionBagWriter:
         organised: bool = True,
     ) -> None:
         self.path = Path(path)
-        self.profile_topic = profile_topic
-        self.pose_topic = pose_topic
         self.organised = organised
         self.count = 0
-        self._closed = False
+        self.durable = 0
         if self.path.exists():
             raise BagError(
                 f"{self.path} exists already and sessions are never overwritten; "
@@ -427,15 +444,29 @@ class SessionBagWriter:
         try:
             self.path.mkdir(parents=True)
             (self.path / SESSION_MARKER).write_text(
-                "linelaser_calib sample session: one rosbag2 bag per sample in sample_*/\n",
+                f"linelaser_calib sample session: the samples are in {SESSION_FILE}\n",
                 encoding="utf-8",
             )
-            _fsync_tree(self.path)
+            self._stream: BufferedWriter | None = (self.path / SESSION_FILE).open("wb")
+            self._writer = McapWriter(self._stream, use_chunking=False)
+            self._writer.start(profile="ros2", library="linelaser_calib")
+            store = _typestore()
+            channels = {}
+            for topic, msgtype in ((pose_topic, POSE_TYPE), (profile_topic, PROFILE_TYPE)):
+                text, _ = store.generate_msgdef(msgtype, ros_version=2)
+                schema = self._writer.register_schema(msgtype, SchemaEncoding.ROS2, text.encode())
+                channels[msgtype] = self._writer.register_channel(
+                    topic, MessageEncoding.CDR, schema
+                )
+            self._pose_channel, self._profile_channel = channels[POSE_TYPE], channels[PROFILE_TYPE]
+            self._types = rosbags_types(store)
+            self.flush()
+            _fsync_directory(self.path)
         except OSError as err:
-            raise BagError(f"cannot create session directory {self.path}: {err}") from err
+            raise BagError(f"cannot create session {self.path}: {err}") from err
 
-    def append(self, profile: Profile, pose_at_profile: FlangePose) -> Path:
-        """Write one sample durably.
+    def append(self, profile: Profile, pose_at_profile: FlangePose) -> int:
+        """Buffer one sample; it is on disk after the next :meth:`flush`.
 
         Parameters
         ----------
@@ -447,29 +478,54 @@ class SessionBagWriter:
 
         Returns
         -------
-        Path
-            The sample's bag directory.
+        int
+            The sample's number in the session (0-based).
         """
-        if self._closed:
+        if self._stream is None:
             raise BagError(f"session {self.path} is closed; start a new session to record more")
-        sample_path = self.path / f"{_SAMPLE_PREFIX}{self.count:06d}"
-        pose = FlangePose(profile.stamp_ns, pose_at_profile.T_base_flange, pose_at_profile.frame_id)
-        with _new_bag(sample_path, self.profile_topic, self.pose_topic) as bag:
-            bag.write_pose(pose)
-            bag.write_profile(
-                profile.stamp_ns,
-                profile.points,
-                profile.frame_id,
-                intensity=None,
-                organised=self.organised,
-                padding_bytes=0,
-            )
+        stamp = profile.stamp_ns
+        pose = pose_stamped_from_flange_pose(
+            FlangePose(stamp, pose_at_profile.T_base_flange, pose_at_profile.frame_id),
+            types=self._types,
+        )
+        cloud = pointcloud2_from_points(
+            profile.points, stamp, profile.frame_id, types=self._types, organised=self.organised
+        )
+        store = _typestore()
+        try:
+            for channel, data in (
+                (self._pose_channel, store.serialize_cdr(pose, POSE_TYPE)),
+                (self._profile_channel, store.serialize_cdr(cloud, PROFILE_TYPE)),
+            ):
+                self._writer.add_message(channel, stamp, data.tobytes(), stamp, self.count)
+        except OSError as err:
+            raise BagError(f"cannot write to session {self.path}: {err}") from err
         self.count += 1
-        return sample_path
+        return self.count - 1
+
+    def flush(self) -> None:
+        """Write every appended sample to disk (flush and fsync); they then survive a crash."""
+        if self._stream is None:
+            return
+        try:
+            self._stream.flush()
+            os.fsync(self._stream.fileno())
+        except OSError as err:
+            raise BagError(f"cannot write to session {self.path}: {err}") from err
+        self.durable = self.count
 
     def close(self) -> None:
-        """Stop appending. Every appended sample is already on disk."""
-        self._closed = True
+        """Write the MCAP summary and footer and close the file; appending then fails."""
+        if self._stream is None:
+            return
+        try:
+            self._writer.finish()  # type: ignore[no-untyped-call]  # mcap has no annotation here
+            self.flush()
+            self._stream.close()
+        except OSError as err:
+            raise BagError(f"cannot close session {self.path}: {err}") from err
+        finally:
+            self._stream = None
 
     def __enter__(self) -> SessionBagWriter:
         return self
@@ -481,6 +537,75 @@ class SessionBagWriter:
         traceback: TracebackType | None,
     ) -> None:
         self.close()
+
+
+class _SessionConnection(NamedTuple):
+    """One channel of a session file, shaped like the rosbags connections read_bag uses."""
+
+    topic: str
+    msgtype: str
+    msgcount: int
+
+
+class _SessionReader:
+    """Reads a session file, complete or not (see :class:`SessionBagWriter`).
+
+    It walks the records from the start and stops at the first incomplete one (the torn
+    tail of a session whose writer crashed), so it needs neither the summary nor the footer.
+    It offers the parts of rosbags' ``Reader`` that :func:`read_bag` uses.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.connections: list[_SessionConnection] = []
+        self.start_time = 0
+        self.end_time = 0
+        self._messages: list[tuple[int, int, bytes]] = []  # (channel, log ns, data)
+        self._by_key: dict[int, _SessionConnection] = {}
+
+    def open(self) -> None:
+        data = self.path.read_bytes()
+        if data[: len(MCAP_MAGIC)] != MCAP_MAGIC:
+            raise BagError(f"{self.path} is not an MCAP file (wrong magic bytes)")
+        schemas: dict[int, str] = {}
+        channels: dict[int, tuple[str, str]] = {}
+        position = len(MCAP_MAGIC)
+        while position + 9 <= len(data):
+            opcode = data[position]
+            (length,) = struct.unpack_from("<Q", data, position + 1)
+            body = position + 9
+            if body + length > len(data):
+                break  # the torn tail of a crashed writer
+            stream = ReadDataStream(BytesIO(data[body : body + length]))
+            if opcode == Opcode.SCHEMA:
+                schema = McapSchema.read(stream)
+                schemas[schema.id] = schema.name
+            elif opcode == Opcode.CHANNEL:
+                channel = McapChannel.read(stream)
+                channels[channel.id] = (channel.topic, schemas.get(channel.schema_id, ""))
+            elif opcode == Opcode.MESSAGE:
+                message = McapMessage.read(stream, length)
+                self._messages.append((message.channel_id, message.log_time, message.data))
+            position = body + length
+        self._by_key = {
+            key: _SessionConnection(topic, msgtype, sum(m[0] == key for m in self._messages))
+            for key, (topic, msgtype) in channels.items()
+        }
+        self.connections = list(self._by_key.values())
+        stamps = [log_ns for _, log_ns, _ in self._messages]
+        self.start_time, self.end_time = min(stamps, default=0), max(stamps, default=-1) + 1
+
+    def messages(
+        self, connections: Sequence[_SessionConnection]
+    ) -> Iterator[tuple[_SessionConnection, int, bytes]]:
+        wanted = set(connections)
+        for key, log_ns, data in self._messages:
+            conn = self._by_key.get(key)
+            if conn in wanted:
+                yield conn, log_ns, data
+
+    def close(self) -> None:
+        self._messages = []
 
 
 def _bag_parts(path: Path) -> list[Path]:
@@ -496,7 +621,9 @@ def _bag_parts(path: Path) -> list[Path]:
         return [path]
     if (path / "metadata.yaml").is_file():
         return [path]
-    if (path / SESSION_MARKER).is_file():
+    if (path / SESSION_FILE).is_file():
+        return [path / SESSION_FILE]
+    if (path / SESSION_MARKER).is_file():  # a session written one bag per sample
         samples = sorted(
             p for p in path.glob(f"{_SAMPLE_PREFIX}*") if (p / "metadata.yaml").is_file()
         )
@@ -517,11 +644,17 @@ def _bag_parts(path: Path) -> list[Path]:
     raise BagError(f"{path} is not a rosbag2 bag (it has no metadata.yaml){hint}")
 
 
+def _is_session_file(path: Path) -> bool:
+    """True for the MCAP file of a :class:`SessionBagWriter` session."""
+    return path.name == SESSION_FILE and (path.parent / SESSION_MARKER).is_file()
+
+
 @contextmanager
-def _open_part(part: Path, bag: Path) -> Iterator[Reader]:
-    """Open one bag with rosbags; any failure to parse it becomes a :class:`BagError`."""
+def _open_part(part: Path, bag: Path) -> Iterator[Reader | _SessionReader]:
+    """Open one bag (rosbags) or session file; any failure to parse it becomes a
+    :class:`BagError`."""
     try:
-        reader = Reader(part)
+        reader = _SessionReader(part) if _is_session_file(part) else Reader(part)
         reader.open()
     # A damaged file makes the parsers raise almost anything (seen: UnicodeDecodeError,
     # KeyError, MemoryError, rosbags' own errors); all mean the same to the user.
@@ -602,7 +735,7 @@ def _choose_topic(
 
 
 def _raw_messages(
-    reader: Reader, connections: Sequence[Any], bag: Path, part: Path
+    reader: Reader | _SessionReader, connections: Sequence[Any], bag: Path, part: Path
 ) -> Iterator[tuple[Any, int, Any]]:
     """``reader.messages(connections)``, with a damaged chunk turned into :class:`BagError`."""
     iterator = iter(reader.messages(connections))
@@ -779,6 +912,8 @@ def read_bag(
     parts = _bag_parts(bag)
     summary = _summarise(bag, parts)
     if summary.start_ns is None or summary.end_ns is None:
+        if any(_is_session_file(part) for part in parts):
+            raise BagError(f"session {bag} holds no samples yet; record some first")
         raise BagError(
             f"bag {bag} is empty (topics: {_listing(summary.topics)}); record the profile "
             "and flange pose topics"

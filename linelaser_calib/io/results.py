@@ -183,6 +183,14 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             **_plain(result.target.quality_entries()),
             "clock_offset_s": float(result.clock_offset_s),
             "clock_offset_estimated": bool(result.clock_offset_estimated),
+            **{
+                key: float(value)
+                for key, value in (
+                    ("clock_offset_live_s", result.clock_offset_live_s),
+                    ("clock_offset_live_sigma_s", result.clock_offset_live_sigma_s),
+                )
+                if value is not None
+            },
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
@@ -474,6 +482,14 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         uncertainty_rotation_rad=_read_uncertainty(hand_eye, "rotation_rad"),
         clock_offset_s=quality.number("clock_offset_s") if quality.has("clock_offset_s") else 0.0,
         clock_offset_estimated=quality.flag("clock_offset_estimated"),
+        clock_offset_live_s=(
+            quality.number("clock_offset_live_s") if quality.has("clock_offset_live_s") else None
+        ),
+        clock_offset_live_sigma_s=(
+            quality.number("clock_offset_live_sigma_s")
+            if quality.has("clock_offset_live_sigma_s")
+            else None
+        ),
         warnings=[str(w) for w in quality.items("warnings")],
         parent_frame=parent_frame,
         child_frame=child_frame,
@@ -529,3 +545,55 @@ def truth_beside(bag: str | Path) -> tuple[Truth | None, str]:
         return read_truth_yaml(path), ""
     except ResultFileError as err:
         return None, f"{err}; the truth file is not compared"
+
+
+_REFERENCE_HEADER = (
+    "# A hand-eye from elsewhere (not ground truth), for comparison. hand_eye is\n"
+    "# T_flange_sensor; lengths in m, quaternions xyzw.\n"
+)
+
+
+def write_reference_yaml(
+    path: str | Path,
+    T_flange_sensor: ArrayLike,
+    *,
+    parent_frame: str = "tool0",
+    child_frame: str = "laser",
+    extra: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write another tool's hand-eye in the result's ``hand_eye`` keys (SI), atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    T_flange_sensor : array-like, shape (4, 4)
+        Translation in m.
+    parent_frame, child_frame : str
+    extra : mapping, optional
+        Further top-level keys (where the hand-eye comes from); not ``hand_eye``.
+
+    Raises
+    ------
+    InputError
+        If ``extra`` holds ``hand_eye`` or values YAML cannot store.
+    ResultFileError
+        If the file cannot be written.
+    """
+    extra = dict(extra or {})
+    if "hand_eye" in extra:
+        raise InputError("extra must not hold hand_eye, the reference itself")
+    data = {"hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame)}
+    return _write_yaml_atomically(Path(path), _REFERENCE_HEADER, {**data, **_plain(extra)})
+
+
+def read_reference_yaml(path: str | Path) -> tuple[FloatArray, dict[str, Any]]:
+    """The hand-eye (4, 4) of a file with a ``hand_eye`` section, and the whole file as read.
+
+    Raises
+    ------
+    ResultFileError
+        Missing file, invalid YAML, or a missing or malformed ``hand_eye`` key.
+    """
+    _, fields = _load(path)
+    T, _, _ = _read_hand_eye(fields)
+    return T, fields.data

@@ -20,9 +20,10 @@
 - On success it answers a one-line summary, publishes ``linelaser_calib/hand_eye``
   (TransformStamped ``flange_frame`` -> ``sensor_frame``, transient_local) and
   ``linelaser_calib/markers`` (in ``base_frame``: the profiles mapped through the result and
-  the target's shapes, e.g. the fitted cylinder or the known point), broadcasts ``/tf_static``
-  where ``tf2_ros`` is importable, and writes the result YAML to ``output_path``
-  atomically. A failed calibration leaves the last good file.
+  the target's shapes, e.g. the fitted cylinder or the known point), puts the collector's
+  clock offset and live estimate (``linelaser_calib/clock_offset``) in the result, broadcasts
+  ``/tf_static`` where ``tf2_ros`` is importable, and writes the result YAML to
+  ``output_path`` atomically. A failed calibration leaves the last good file.
 - ``~/plan`` (std_srvs/Trigger) plans the next ``plan_poses`` flange poses that most reduce
   the hand-eye's predicted uncertainty (:func:`~linelaser_calib.core.planning.plan_for_target`),
   from the last calibration (or, before one, from ``initial_hand_eye_path`` with the samples
@@ -34,6 +35,7 @@
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 import traceback
@@ -49,7 +51,7 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallb
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import String
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -61,8 +63,10 @@ from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io import write_result_yaml
 from linelaser_calib.io.initial import read_initial_hand_eye
+from linelaser_calib.nodes.collection import DRIFT_FLOOR_S
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
+    CLOCK_OFFSET_TOPIC,
     HAND_EYE_TOPIC,
     MARKERS_TOPIC,
     SAMPLE_POSE_TOPIC,
@@ -296,6 +300,30 @@ def second_parent_warning(frames_yaml: str, child: str, parent: str) -> str | No
     )
 
 
+def add_live_clock_offset(
+    result: CalibrationResult, used_s: float, estimate_s: float, sigma_s: float
+) -> None:
+    """Put the collector's clock offsets in the result (NaN: no estimate, or no 1σ yet).
+
+    ``used_s`` is what the collector added to the profile stamps when pairing. A warning
+    says so when the live estimate disagrees with it by more than three sigma and
+    ``DRIFT_FLOOR_S``: the samples were then paired with poses from the wrong moment.
+    """
+    result.clock_offset_s = used_s
+    if math.isnan(estimate_s):
+        return
+    result.clock_offset_live_s = estimate_s
+    result.clock_offset_live_sigma_s = None if math.isnan(sigma_s) else sigma_s
+    if math.isnan(sigma_s) or abs(estimate_s - used_s) <= max(3.0 * sigma_s, DRIFT_FLOOR_S):
+        return
+    result.warnings.append(
+        f"the collector estimates the profile-to-pose clock offset live at "
+        f"{estimate_s * 1e3:+.2f} +- {sigma_s * 1e3:.2f} ms (1 sigma) but paired the samples "
+        f"with {used_s * 1e3:+.2f} ms: set the collector's clock_offset_s to "
+        f"{estimate_s:.4f} and collect again"
+    )
+
+
 class CalibrationServiceNode(Node):
     """The ``calibration_service`` node; see the module docstring. ``kwargs`` go to ``Node``."""
 
@@ -324,6 +352,14 @@ class CalibrationServiceNode(Node):
         )
         self.create_subscription(
             String, SESSION_TOPIC, self._on_session, latched_qos(1), callback_group=receive
+        )
+        self._clock_offset: list[float] = []
+        self.create_subscription(
+            Float64MultiArray,
+            CLOCK_OFFSET_TOPIC,
+            self._on_clock_offset,
+            latched_qos(1),
+            callback_group=receive,
         )
         self._hand_eye_pub = self.create_publisher(TransformStamped, HAND_EYE_TOPIC, latched_qos(1))
         self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, latched_qos(1))
@@ -390,6 +426,9 @@ class CalibrationServiceNode(Node):
                 f"the collector started session {msg.data}: dropped the {dropped} samples of "
                 "the previous session"
             )
+
+    def _on_clock_offset(self, msg: Float64MultiArray) -> None:
+        self._clock_offset = list(msg.data)
 
     def _publish_diagnostics(self) -> None:
         store = self._store
@@ -489,6 +528,8 @@ class CalibrationServiceNode(Node):
         result.parent_frame = p["flange_frame"]
         result.child_frame = p["sensor_frame"]
         result.base_frame = p["base_frame"]
+        if len(self._clock_offset) == 4:
+            add_live_clock_offset(result, *self._clock_offset[:3])
         summary = one_line_summary(result, len(samples))
         self._last_result = result
         self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")

@@ -35,7 +35,8 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
    the solution expects, ``TargetSolution.noise_m``), naming the likely cause
    (:func:`mismatch_message`). No result is written then.
 6. ``offset_cost(features, config, context)``: None, or the cost of the features re-paired
-   with other flange poses (for the clock-offset search of continuous scans).
+   with other flange poses (for the clock-offset search of continuous scans), and
+   ``estimates_clock_offset``, True when it gives one (the collector's live estimate asks).
 7. A result section class satisfying :class:`ResultSection` (its YAML key, its plain SI
    mapping, its text, its markers) and ``read_section(mapping, quality)`` that rebuilds it
    from a result file's section (raising ``ValueError`` naming the bad key).
@@ -62,10 +63,12 @@ Progress = Callable[[str, int, int], None]
 #: ``radius_m`` (--radius, m), ``point_m`` (--point, (3,) m, base frame), ``sensor_sigma_m``
 #: (--sensor-sigma, m), ``robot_sigma_t_m`` (--robot-sigma-t, m), ``robot_sigma_r_rad``
 #: (--robot-sigma-r, rad), ``min_samples`` (int), ``initial`` (--initial: the initial
-#: hand-eye, held by the pipeline configuration, not the target's).
+#: hand-eye, held by the pipeline configuration, not the target's), ``centre_side``
+#: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on).
 SETTINGS = (
     "radius_m",
     "point_m",
+    "centre_side",
     "sensor_sigma_m",
     "robot_sigma_t_m",
     "robot_sigma_r_rad",
@@ -269,6 +272,7 @@ class Target(Protocol[ConfigT]):
     methods: tuple[str, ...]
     config_type: type[ConfigT]
     options: Mapping[str, Option]
+    estimates_clock_offset: bool
 
     def validate(
         self, sample: Sample, config: ConfigT, rng: np.random.Generator

@@ -63,6 +63,7 @@ class CylinderTarget:
     title = "cylinder"
     summary = "a cylinder of known or estimated radius (the cylinder paper)"
     methods = ("paper", "default")
+    estimates_clock_offset = True
     config_type = CylinderConfig
     options: Mapping[str, Option] = {
         "radius_m": Option("radius_m"),

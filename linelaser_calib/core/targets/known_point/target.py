@@ -477,6 +477,7 @@ class KnownPointTarget:
     title = "known point"
     summary = "one fixed point such as a weld-seam corner, seen from many poses"
     methods = METHODS
+    estimates_clock_offset = False
     config_type = KnownPointConfig
     options: Mapping[str, Option] = {
         "point_m": Option(
