@@ -12,6 +12,9 @@ known):
     poses (5, then 4 at a time), each round planned from the calibration of all scans so far.
     RMS over seeds of the true hand-eye error and of the predicted 1 sigma against the
     number of poses.
+``sphere``
+    The same on the ``sphere`` preset (a 2 in tooling ball on a table) at the paper's noise;
+    random: the simulator's sphere views (tilted up to 35 deg, any line direction).
 ``cold``
     Random upright scenes (``random_scenario`` with a vertical shaft on a table, the
     paper's cut-angle rules, random hand-eye, profiler, noise): 3 exploratory scans and an
@@ -33,7 +36,9 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -48,12 +53,20 @@ from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
 from linelaser_calib.core.planning import PlanConstraints, plan_for_target
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.cylinder import CylinderConfig
+from linelaser_calib.core.targets.sphere import SphereConfig
 from linelaser_calib.core.types import CalibrationResult, Sample
 from linelaser_calib.sim import Scenario, random_scenario, scenario_from_preset
 from linelaser_calib.sim.poses import sample_sensor_poses
-from linelaser_calib.sim.profiler import measure, trace
+from linelaser_calib.sim.profiler import Trace, measure, trace
 from linelaser_calib.sim.robot import draw_errors
 from linelaser_calib.sim.scene import Scene
+from linelaser_calib.sim.sphere import (
+    Ball,
+    SphereScenario,
+    sphere_scenario_from_preset,
+    sphere_views,
+    trace_ball,
+)
 
 PAPER_NOISE = {
     "sigma_depth_m": 5e-6,
@@ -68,7 +81,6 @@ EXPLORATORY = 3
 INITIAL_ERROR = (2e-3, math.radians(1.0))
 SUCCESS = (0.5e-3, math.radians(0.1))
 FINE = (0.1e-3, math.radians(0.02))
-TARGET = get_target("cylinder")
 
 
 @dataclass
@@ -85,34 +97,73 @@ class Point:
     planner_mm: float = math.nan
 
 
-def constraints_of(scenario: Scenario, reach_centre: FloatArray) -> PlanConstraints:
-    """The planner's constraints for the simulated profiler."""
-    return PlanConstraints(
-        z_min_m=scenario.z_min_m,
-        z_max_m=scenario.z_max_m,
-        fan_half_angle_rad=scenario.fan_half_angle_rad,
-        resolution=scenario.resolution,
-        reach_centre_m=(float(reach_centre[0]), float(reach_centre[1]), float(reach_centre[2])),
-        table_height_m=float(scenario.cylinder_base_m[2]),
-        clearance_m=scenario.clearance_m,
+@dataclass(frozen=True)
+class Setup:
+    """A simulated set-up: its rig (profiler, robot, true hand-eye), its target and how the
+    simulator casts rays at it and draws its random rule-abiding views."""
+
+    rig: Scenario
+    target: str
+    config: Any
+    radius_m: float
+    table_height_m: float
+    extent: Any
+    trace: Callable[[FloatArray], Trace]
+    views: Callable[[np.random.Generator, int], FloatArray]
+
+    def constraints(self, reach_centre: FloatArray) -> PlanConstraints:
+        """The planner's constraints for the simulated profiler."""
+        rig = self.rig
+        return PlanConstraints(
+            z_min_m=rig.z_min_m,
+            z_max_m=rig.z_max_m,
+            fan_half_angle_rad=rig.fan_half_angle_rad,
+            resolution=rig.resolution,
+            reach_centre_m=(float(reach_centre[0]), float(reach_centre[1]), float(reach_centre[2])),
+            table_height_m=self.table_height_m,
+            clearance_m=rig.clearance_m,
+        )
+
+
+def cylinder_setup(scenario: Scenario) -> Setup:
+    scene = Scene.from_scenario(scenario)
+    return Setup(
+        scenario,
+        "cylinder",
+        CylinderConfig(radius_m=scenario.cylinder_radius_m),
+        scenario.cylinder_radius_m,
+        float(scenario.cylinder_base_m[2]),
+        (0.0, scenario.cylinder_length_m),
+        lambda T: trace(scene, scenario, T),
+        lambda rng, n: sample_sensor_poses(rng, replace(scenario, n_poses=n), scene).T_base_sensor,
+    )
+
+
+def sphere_setup(scenario: SphereScenario) -> Setup:
+    ball = Ball.from_scenario(scenario)
+    rig = scenario.rig
+    return Setup(
+        rig,
+        "sphere",
+        SphereConfig(radius_m=scenario.radius_m),
+        scenario.radius_m,
+        scenario.centre_m[2] - scenario.radius_m - scenario.table_gap_m,
+        None,
+        lambda T: trace_ball(ball, rig, T),
+        lambda rng, n: sphere_views(replace(scenario, rig=replace(rig, n_poses=n)), ball, rng),
     )
 
 
 def scan(
-    rng: np.random.Generator,
-    scenario: Scenario,
-    scene: Scene,
-    T_base_flange: FloatArray,
-    first_index: int,
+    rng: np.random.Generator, setup: Setup, T_base_flange: FloatArray, first_index: int
 ) -> list[Sample]:
     """Profiles at commanded flange poses (K, 4, 4): the robot misses each by its random
     error, the recorded pose is the commanded one."""
-    errors = draw_errors(rng, scenario, len(T_base_flange))
+    rig = setup.rig
+    errors = draw_errors(rng, rig, len(T_base_flange))
     E = np.stack([transform_from_rotvec_translation(e[3:], e[:3]) for e in errors])
     true_flange = T_base_flange @ np.stack([invert_transform(e) for e in E])
-    measured = measure(
-        rng, scenario, trace(scene, scenario, true_flange @ scenario.T_flange_sensor)
-    )
+    measured = measure(rng, rig, setup.trace(true_flange @ rig.T_flange_sensor))
     return [
         Sample(
             first_index + k,
@@ -124,8 +175,8 @@ def scan(
     ]
 
 
-def calibrate(samples: list[Sample], radius: float, seed: int) -> CalibrationResult | None:
-    config = PipelineConfig(target_config=CylinderConfig(radius_m=radius), seed=seed)
+def calibrate(samples: list[Sample], setup: Setup, seed: int) -> CalibrationResult | None:
+    config = PipelineConfig(target=setup.target, target_config=setup.config, seed=seed)
     try:
         return calibrate_samples(samples, config)
     except CalibrationError:
@@ -158,34 +209,31 @@ def initial_guess(rng: np.random.Generator, T_true: FloatArray) -> FloatArray:
 
 
 def planned_run(
-    scenario: Scenario, seed: int, rounds: tuple[int, ...]
+    setup: Setup, seed: int, rounds: tuple[int, ...]
 ) -> tuple[list[Point], CalibrationResult | None]:
     """3 exploratory scans, then rounds of planned poses; a point after each round."""
     rng = np.random.default_rng(seed)
-    scene = Scene.from_scenario(scenario)
-    T_true = scenario.T_flange_sensor
-    explore = sample_sensor_poses(rng, replace(scenario, n_poses=EXPLORATORY), scene)
-    samples = scan(rng, scenario, scene, explore.T_base_sensor @ invert_transform(T_true), 0)
-    constraints = constraints_of(scenario, samples[0].T_base_flange[:3, 3])
-    config = CylinderConfig(radius_m=scenario.cylinder_radius_m)
-    span = (0.0, scenario.cylinder_length_m)
+    T_true = setup.rig.T_flange_sensor
+    explore = setup.views(rng, EXPLORATORY)
+    samples = scan(rng, setup, explore @ invert_transform(T_true), 0)
+    constraints = setup.constraints(samples[0].T_base_flange[:3, 3])
     T_estimate, section = initial_guess(rng, T_true), None
     points, result = [], None
     for n in rounds:
         plan = plan_for_target(
-            TARGET,
-            config,
+            get_target(setup.target),
+            setup.config,
             T_estimate,
             n,
             samples=samples,
             section=section,
-            extent=span,
+            extent=setup.extent,
             constraints=constraints,
             seed=seed + len(samples),
         )
         T_flange = np.stack([p.T_base_flange for p in plan.poses])
-        samples += scan(rng, scenario, scene, T_flange, len(samples))
-        result = calibrate(samples, scenario.cylinder_radius_m, seed)
+        samples += scan(rng, setup, T_flange, len(samples))
+        result = calibrate(samples, setup, seed)
         last = point(result, T_true, len(samples))
         last.planner_deg = math.degrees(float(np.linalg.norm(plan.poses[-1].sigma_rotation_rad)))
         last.planner_mm = float(np.linalg.norm(plan.poses[-1].sigma_translation_m)) * 1e3
@@ -195,16 +243,12 @@ def planned_run(
     return points, result
 
 
-def random_run(scenario: Scenario, seed: int) -> list[Point]:
+def random_run(setup: Setup, seed: int) -> list[Point]:
     rng = np.random.default_rng(seed)
-    scene = Scene.from_scenario(scenario)
-    T_true = scenario.T_flange_sensor
-    poses = sample_sensor_poses(rng, replace(scenario, n_poses=max(RANDOM_COUNTS)), scene)
-    samples = scan(rng, scenario, scene, poses.T_base_sensor @ invert_transform(T_true), 0)
-    return [
-        point(calibrate(samples[:k], scenario.cylinder_radius_m, seed), T_true, k)
-        for k in RANDOM_COUNTS
-    ]
+    T_true = setup.rig.T_flange_sensor
+    views = setup.views(rng, max(RANDOM_COUNTS))
+    samples = scan(rng, setup, views @ invert_transform(T_true), 0)
+    return [point(calibrate(samples[:k], setup, seed), T_true, k) for k in RANDOM_COUNTS]
 
 
 def _rms(values: list[float]) -> float:
@@ -212,11 +256,10 @@ def _rms(values: list[float]) -> float:
     return float(np.sqrt(np.mean(np.square(finite)))) if finite else math.nan
 
 
-def curve(seeds: int) -> None:
-    scenario = scenario_from_preset("ur_scancontrol", **PAPER_NOISE)
-    planned = [planned_run(scenario, seed, ROUNDS)[0] for seed in range(seeds)]
-    randoms = [random_run(scenario, seed) for seed in range(seeds)]
-    print(f"\n### Hand-eye accuracy against poses ({seeds} seeds, ur_scancontrol, paper noise)\n")
+def curve(setup: Setup, label: str, seeds: int) -> None:
+    planned = [planned_run(setup, seed, ROUNDS)[0] for seed in range(seeds)]
+    randoms = [random_run(setup, seed) for seed in range(seeds)]
+    print(f"\n### Hand-eye accuracy against poses ({seeds} seeds, {label}, paper noise)\n")
     print(
         "RMS over seeds; 1 sigma is the norm of the per-axis 1 sigma of the calibration; "
         "planner: the planner's prediction of it before the scans (configured noise).\n"
@@ -262,7 +305,7 @@ def cold(scenes: int) -> None:
             f"{scenario.sigma_depth_m * 1e6:.0f} um"
         )
         try:
-            points, result = planned_run(scenario, k, ROUNDS)
+            points, result = planned_run(cylinder_setup(scenario), k, ROUNDS)
         except CalibrationError as exc:
             notes.append(f"FAILED scene {k}: {exc}"[:200])
             continue
@@ -295,16 +338,15 @@ def cold(scenes: int) -> None:
 
 def speed() -> None:
     scenario = scenario_from_preset("ur_scancontrol", **PAPER_NOISE)
+    setup = cylinder_setup(scenario)
     rng = np.random.default_rng(0)
-    scene = Scene.from_scenario(scenario)
     T_true = scenario.T_flange_sensor
-    poses = sample_sensor_poses(rng, replace(scenario, n_poses=20), scene)
-    samples = scan(rng, scenario, scene, poses.T_base_sensor @ invert_transform(T_true), 0)
-    result = calibrate(samples, scenario.cylinder_radius_m, 0)
+    samples = scan(rng, setup, setup.views(rng, 20) @ invert_transform(T_true), 0)
+    result = calibrate(samples, setup, 0)
     assert result is not None
-    config = CylinderConfig(radius_m=scenario.cylinder_radius_m)
-    constraints = constraints_of(scenario, samples[0].T_base_flange[:3, 3])
-    span = (0.0, scenario.cylinder_length_m)
+    config = setup.config
+    constraints = setup.constraints(samples[0].T_base_flange[:3, 3])
+    span = setup.extent
     cases = {
         "from a result and 20 scans": {"samples": samples, "section": result.target},
         "from a given axis, no scan": {"numbers": [0.45, 0.15, 0.0, 0.0, 0.0, 1.0]},
@@ -315,7 +357,7 @@ def speed() -> None:
         for _ in range(5):
             started = time.perf_counter()
             plan_for_target(
-                TARGET,
+                get_target("cylinder"),
                 config,
                 result.T_flange_sensor,
                 10,
@@ -330,13 +372,19 @@ def speed() -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
-    parser.add_argument("--only", choices=("curve", "cold", "speed"))
+    parser.add_argument("--only", choices=("curve", "sphere", "cold", "speed"))
     args = parser.parse_args()
     seeds, scenes = (4, 8) if args.quick else (20, 50)
     if args.only in (None, "speed"):
         speed()
     if args.only in (None, "curve"):
-        curve(seeds)
+        curve(
+            cylinder_setup(scenario_from_preset("ur_scancontrol", **PAPER_NOISE)),
+            "ur_scancontrol",
+            seeds,
+        )
+    if args.only in (None, "sphere"):
+        curve(sphere_setup(sphere_scenario_from_preset("sphere", **PAPER_NOISE)), "sphere", seeds)
     if args.only in (None, "cold"):
         cold(scenes)
 
