@@ -275,6 +275,21 @@ def predicted_curve(plan: Plan) -> list[SigmaPoint]:
     ]
 
 
+def required_radius(radius_m: float | None, title: str) -> float:
+    """The target's radius, m, which a placement from numbers or scans needs.
+
+    Raises
+    ------
+    InputError
+        None given.
+    """
+    if radius_m is None:
+        raise InputError(
+            f"the planner needs the {title}'s radius: give --radius (m) or a result YAML (--from)"
+        )
+    return radius_m
+
+
 def per_sample_information(linearisation: Linearisation) -> FloatArray:
     """Information (M, G, G) each sample adds to the global parameters, its own pose
     correction marginalised (the solver's Schur complement on one sample at a time, with

@@ -43,7 +43,7 @@ import numpy as np
 
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, orthonormal_basis
-from ...planning import UP, PlanConstraints, per_sample_information
+from ...planning import UP, PlanConstraints, per_sample_information, required_radius
 from ...types import Cylinder
 from .config import CylinderConfig
 from .features import FittedSample
@@ -127,14 +127,6 @@ def placement(
     return CylinderPlacement(Cylinder(c, d, float(cylinder.radius)), axial_range_m)
 
 
-def _radius(config: CylinderConfig) -> float:
-    if config.radius_m is None:
-        raise InputError(
-            "the planner needs the cylinder's radius: give --radius (m) or a result YAML (--from)"
-        )
-    return config.radius_m
-
-
 class CylinderPlanner:
     """:class:`~linelaser_calib.core.planning.Plannable` for the cylinder (module docstring)."""
 
@@ -156,13 +148,19 @@ class CylinderPlanner:
                 f"{self.numbers_flag} takes 6 numbers, {self.numbers_help}; got {len(numbers)}"
             )
         values = np.asarray(numbers, dtype=np.float64)
-        return placement(Cylinder(values[:3], values[3:], _radius(config)), extent, points_base)
+        return placement(
+            Cylinder(values[:3], values[3:], required_radius(config.radius_m, "cylinder")),
+            extent,
+            points_base,
+        )
 
     def placement_from_features(
         self, features: list[Any], T_flange_sensor: FloatArray, config: Any, extent: Any
     ) -> CylinderPlacement:
         """From exploratory scans (:func:`rough_placement`)."""
-        return rough_placement(features, T_flange_sensor, _radius(config), extent)
+        return rough_placement(
+            features, T_flange_sensor, required_radius(config.radius_m, "cylinder"), extent
+        )
 
     def sample_points(self, features: list[Any]) -> list[FloatArray]:
         """Each ellipse's inlier points."""

@@ -38,7 +38,7 @@ import numpy as np
 
 from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import FloatArray, matrix_from_rotvec
-from linelaser_calib.core.planning import PlanConstraints, per_sample_information
+from linelaser_calib.core.planning import PlanConstraints, per_sample_information, required_radius
 from linelaser_calib.core.targets.sphere.config import SphereConfig
 from linelaser_calib.core.targets.sphere.model import side_from_label
 from linelaser_calib.core.targets.sphere.refine import SphereProblem, SphereState
@@ -75,14 +75,6 @@ class SpherePlacement:
             raise InputError(f"the sphere centre must be 3 finite numbers, got {self.centre}")
         if not (np.isfinite(self.radius) and self.radius > 0.0):
             raise InputError(f"the sphere radius must be positive, got {self.radius}")
-
-
-def _radius(config: SphereConfig) -> float:
-    if config.radius_m is None:
-        raise InputError(
-            "the planner needs the sphere's radius: give --radius (m) or a result YAML (--from)"
-        )
-    return config.radius_m
 
 
 def _side(config: SphereConfig) -> int | None:
@@ -124,7 +116,9 @@ class SpherePlanner:
             )
         side = _side(config)
         return SpherePlacement(
-            np.asarray(numbers, dtype=np.float64), _radius(config), -1 if side is None else side
+            np.asarray(numbers, dtype=np.float64),
+            required_radius(config.radius_m, "sphere"),
+            -1 if side is None else side,
         )
 
     def placement_from_features(
@@ -136,7 +130,7 @@ class SpherePlanner:
             raise DegenerateError(
                 "no exploratory scan shows the sphere's cap: scan it from 3 or more poses first"
             )
-        radius = _radius(config)
+        radius = required_radius(config.radius_m, "sphere")
         given = _side(config)
         best: tuple[float, FloatArray, int] | None = None
         for side in (given,) if given is not None else (1, -1):
