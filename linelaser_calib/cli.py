@@ -34,6 +34,7 @@ from linelaser_calib.io.results import (
     write_result_yaml,
     write_truth_yaml,
 )
+from linelaser_calib.io.kinematics import SECTION, kinematics_section
 from linelaser_calib.offline import OfflineRun, calibrate_bag
 from linelaser_calib.summary import format_summary
 
@@ -116,6 +117,7 @@ def simulate_to_bag(
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
         cylinder, known_point = data.truth.cylinder, None
+    arm = None if weld else data.truth.arm
     write_bag(
         out,
         profiles,
@@ -126,6 +128,8 @@ def simulate_to_bag(
         base_frame=scenario.base_frame,
         organised=scenario.organised,
         intensities=intensities if scenario.intensity else None,
+        joint_states=None if weld else data.joint_states,
+        joint_state_topic=scenario.joint_state_topic,
     )
     simulation: dict[str, object] = {
         "scenario": scenario_name,
@@ -161,7 +165,7 @@ def simulate_to_bag(
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
-        extra={"simulation": simulation},
+        extra={"simulation": simulation, **({} if arm is None else {SECTION: kinematics_section(arm.errors, arm.nominal)})},
     )
     return out, truth
 

@@ -47,11 +47,14 @@ from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
+from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io.errors import BagError
 from msg_adapters import (
     MessageError,
     flange_pose_from_pose_stamped,
+    joint_state_from_msg,
+    joint_state_msg,
     pointcloud2_from_points,
     pose_stamped_from_flange_pose,
     profile_from_pointcloud2,
@@ -62,6 +65,7 @@ from msg_adapters.message_types import NS_PER_S
 
 PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 #: File in a session directory that marks it as one (see :class:`SessionBagWriter`).
 SESSION_MARKER = "linelaser_calib_session.txt"
 _SAMPLE_PREFIX = "sample_"
@@ -189,6 +193,7 @@ class _ProfilePoseWriter:
         self._types = rosbags_types(store)
         self._profiles = writer.add_connection(profile_topic, PROFILE_TYPE, typestore=store)
         self._poses = writer.add_connection(pose_topic, POSE_TYPE, typestore=store)
+        self._joint_states: dict[str, Any] = {}
 
     def write_profile(
         self,
@@ -214,6 +219,19 @@ class _ProfilePoseWriter:
     def write_pose(self, pose: FlangePose) -> None:
         msg = pose_stamped_from_flange_pose(pose, types=self._types)
         self._writer.write(self._poses, pose.stamp_ns, _typestore().serialize_cdr(msg, POSE_TYPE))
+
+    def write_joint_state(
+        self, topic: str, stamp_ns: int, names: Sequence[str], positions: NDArray[np.float64]
+    ) -> None:
+        store = _typestore()
+        if topic not in self._joint_states:
+            self._joint_states[topic] = self._writer.add_connection(
+                topic, JOINT_STATE_TYPE, typestore=store
+            )
+        msg = joint_state_msg(stamp_ns, names, positions, types=self._types)
+        self._writer.write(
+            self._joint_states[topic], stamp_ns, store.serialize_cdr(msg, JOINT_STATE_TYPE)
+        )
 
 
 @contextmanager
@@ -260,6 +278,8 @@ def write_bag(
     organised: bool = True,
     intensities: Sequence[NDArray[np.float64] | None] | None = None,
     padding_bytes: int = 0,
+    joint_states: JointStates | None = None,
+    joint_state_topic: str = "/joint_states",
 ) -> Path:
     """Write profiles and flange poses to a new rosbag2 MCAP bag, in stamp order.
 
@@ -280,6 +300,9 @@ def write_bag(
         Per-profile intensity field (float32 in the message).
     padding_bytes : int
         Unused bytes per point, as some drivers send.
+    joint_states : JointStates, optional
+        Joint states to write as ``sensor_msgs/msg/JointState`` on ``joint_state_topic``.
+    joint_state_topic : str
 
     Returns
     -------
@@ -298,13 +321,19 @@ def write_bag(
         intensities = [None] * len(profiles)
     if len(intensities) != len(profiles):
         raise InputError(f"{len(intensities)} intensity arrays given for {len(profiles)} profiles")
+    joints = [] if joint_states is None else list(enumerate(joint_states.stamps_ns))
     events = sorted(
         [(pose.stamp_ns, 0, i) for i, pose in enumerate(poses)]
         + [(profile.stamp_ns, 1, i) for i, profile in enumerate(profiles)]
+        + [(int(stamp), 2, i) for i, stamp in joints]
     )
     with _new_bag(path, profile_topic, pose_topic) as bag:
-        for _, kind, i in events:
-            if kind == 0:
+        for stamp_ns, kind, i in events:
+            if kind == 2 and joint_states is not None:
+                bag.write_joint_state(
+                    joint_state_topic, stamp_ns, joint_states.names, joint_states.positions[i]
+                )
+            elif kind == 0:
                 pose = poses[i]
                 bag.write_pose(FlangePose(pose.stamp_ns, pose.T_base_flange, base_frame))
             else:
@@ -677,6 +706,7 @@ def read_bag(
     profile_topic: str | None = None,
     pose_topic: str | None = None,
     progress: Progress | None = None,
+    with_poses: bool = True,
 ) -> BagContents:
     """Read the profiles and flange poses of a bag (or a :class:`SessionBagWriter` session).
 
@@ -689,6 +719,9 @@ def read_bag(
         holding messages.
     progress : callable(done, total), optional
         Called after each message of the two topics.
+    with_poses : bool
+        False: read the profiles only (the flange poses come from elsewhere, e.g. joint
+        states); ``poses`` is then empty and ``pose_topic`` and ``base_frame`` are "".
 
     Returns
     -------
@@ -711,7 +744,9 @@ def read_bag(
             "and flange pose topics"
         )
     chosen_profile = _choose_topic(bag, summary.topics, PROFILE_TYPE, profile_topic, "profile")
-    chosen_pose = _choose_topic(bag, summary.topics, POSE_TYPE, pose_topic, "pose")
+    chosen_pose = (
+        _choose_topic(bag, summary.topics, POSE_TYPE, pose_topic, "pose") if with_poses else ""
+    )
     wanted = {(chosen_profile, PROFILE_TYPE), (chosen_pose, POSE_TYPE)}
     total = sum(t.msgcount for t in summary.topics if (t.topic, t.msgtype) in wanted)
 
@@ -749,7 +784,7 @@ def read_bag(
             skipped.append(entry)
 
     for items, topic, what in ((profiles, chosen_profile, "profile"), (poses, chosen_pose, "pose")):
-        if not items:
+        if not items and topic:
             first = next((s.reason for s in skipped if s.topic == topic), "none")
             raise BagError(
                 f"bag {bag}: no readable {what} on {topic} "
@@ -764,11 +799,84 @@ def read_bag(
         profile_topic=chosen_profile,
         pose_topic=chosen_pose,
         sensor_frame=profiles[0].frame_id,
-        base_frame=poses[0].frame_id,
+        base_frame=poses[0].frame_id if poses else "",
         topics=summary.topics,
         start_ns=summary.start_ns,
         end_ns=summary.end_ns,
         skipped=skipped,
+    )
+
+
+def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointStates:
+    """Read the ``sensor_msgs/msg/JointState`` stream of a bag, sorted by stamp.
+
+    Parameters
+    ----------
+    path : str or Path
+        rosbag2 directory, its ``.mcap`` file, or a session directory.
+    topic : str, optional
+        Default: ``/joint_states`` if it holds JointState messages, else the only
+        JointState topic.
+
+    Returns
+    -------
+    JointStates
+        Positions (K, n) in the joint order of the first message; messages that name other
+        joints or are malformed are left out.
+
+    Raises
+    ------
+    BagError
+        No JointState topic (the bag's topics are listed), several without a choice, or
+        none readable.
+    """
+    bag = Path(path)
+    parts = _bag_parts(bag)
+    topics = _summarise(bag, parts).topics
+    found = [t for t in topics if t.msgtype == JOINT_STATE_TYPE and t.msgcount > 0]
+    if topic is None:
+        default = [t for t in found if t.topic == "/joint_states"]
+        chosen = default or found
+        if not chosen:
+            raise BagError(
+                f"bag {bag} holds no {JOINT_STATE_TYPE} messages, which the joint_states "
+                f"pose source needs; its topics are: {_listing(topics)}. Record /joint_states "
+                "with the profiles, or use another pose source"
+            )
+        if len(chosen) > 1:
+            raise BagError(
+                f"bag {bag} has several {JOINT_STATE_TYPE} topics: {_listing(chosen)}; "
+                "choose one with --joint-state-topic"
+            )
+        topic = chosen[0].topic
+    elif not any(t.topic == topic for t in found):
+        raise BagError(
+            f"bag {bag} has no {JOINT_STATE_TYPE} messages on {topic!r}; its topics are: "
+            f"{_listing(topics)}"
+        )
+    records = []
+    for part in parts:
+        with _open_part(part, bag) as reader:
+            connections = [
+                c for c in reader.connections if (c.topic, c.msgtype) == (topic, JOINT_STATE_TYPE)
+            ]
+            for _, log_ns, raw in _raw_messages(reader, connections, bag, part):
+                msg = _decode(topic, JOINT_STATE_TYPE, log_ns, raw)
+                if isinstance(msg, SkippedMessage):
+                    continue
+                try:
+                    records.append(joint_state_from_msg(msg))
+                except MessageError:
+                    continue
+    if not records:
+        raise BagError(f"bag {bag}: no readable {JOINT_STATE_TYPE} message on {topic}")
+    records.sort(key=lambda r: r.stamp_ns)
+    names = records[0].names
+    kept = [r for r in records if r.names == names]
+    return JointStates(
+        names,
+        np.array([r.stamp_ns for r in kept], dtype=np.int64),
+        np.array([r.positions for r in kept]),
     )
 
 
