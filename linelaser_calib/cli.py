@@ -1,8 +1,9 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration) and ``demo`` (calibrate the committed bags and show
-the error against their truth). Exit code 0 means success; a user error prints one
+``calibrate`` (the offline calibration), ``reconstruct`` (apply a calibration: a recording's
+profiles in the base frame) and ``demo`` (calibrate the committed bags and show the error
+against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
+from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
@@ -34,8 +36,14 @@ from linelaser_calib.io.results import (
     write_result_yaml,
     write_truth_yaml,
 )
-from linelaser_calib.io.kinematics import SECTION, kinematics_section
+from linelaser_calib.io.kinematics import (
+    SECTION,
+    kinematics_section,
+    load_model,
+    read_kinematics,
+)
 from linelaser_calib.offline import OfflineRun, calibrate_bag
+from linelaser_calib.pose_sources import PoseSource
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
@@ -252,7 +260,9 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
-            clock_offset_s=0.0 if args.clock_offset == "auto" else float(args.clock_offset),
+            clock_offset_s=0.0
+            if args.clock_offset in (None, "auto")
+            else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
@@ -328,6 +338,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     _check_outputs(args)
     config = _pipeline_config(args)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
+    source, model = _pose_source(args)
     try:
         run = calibrate_bag(
             args.bag,
@@ -337,6 +348,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             flange_frame=args.flange_frame,
             estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
+            pose_source=source,
+            joint_state_topic=args.joint_state_topic,
+            model=model,
         )
     except PairingError as exc:
         raise PairingError(
@@ -363,6 +377,132 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print(format_summary(run.result, truth))
         for path in written:
             print(f"Wrote {path}")
+    return 0
+
+
+def _pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel | None]:
+    """The pose source and robot model of ``--pose-source`` and ``--kinematics``."""
+    source = PoseSource(args.pose_source)
+    if source is PoseSource.JOINT_STATES and args.kinematics is None:
+        raise InputError(
+            "--pose-source joint_states computes the flange poses from the joint states "
+            "through the robot's kinematic model: pass --kinematics ur5e, ur10e or a URDF file"
+        )
+    if source is not PoseSource.JOINT_STATES and args.kinematics is not None:
+        raise InputError(
+            f"--kinematics {args.kinematics} selects the robot model of the joint_states pose "
+            f"source and does not apply to --pose-source {source.value}; add --pose-source "
+            "joint_states or leave --kinematics out"
+        )
+    if args.kinematics is None:
+        return source, None
+    return source, load_model(args.kinematics, flange_frame=args.flange_frame or "tool0")
+
+
+def _add_pose_source_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--pose-source",
+        choices=[s.value for s in PoseSource],
+        default=PoseSource.POSE.value,
+        help="flange poses from the PoseStamped topic (pose, default) or from "
+        "sensor_msgs/JointState through the robot model (joint_states, needs --kinematics)",
+    )
+    parser.add_argument(
+        "--kinematics",
+        metavar="MODEL",
+        help="robot model of the joint_states pose source: ur5e, ur10e or a URDF file "
+        "(chain base_link to --flange-frame)",
+    )
+    parser.add_argument(
+        "--joint-state-topic",
+        help="JointState topic (default /joint_states, else the only JointState topic)",
+    )
+
+
+def _add_pairing_arguments(parser: argparse.ArgumentParser, clock_offset_help: str) -> None:
+    parser.add_argument(
+        "--sync-tolerance",
+        type=_positive_float,
+        default=PairingConfig.sync_tolerance_s,
+        help="largest profile-to-pose stamp gap, s",
+    )
+    parser.add_argument("--clock-offset", type=_offset, default=None, help=clock_offset_help)
+    for flag, parse, default, text in CALIBRATE_NUMBERS:
+        if flag in PAIRING_FLAGS:
+            parser.add_argument(flag, type=parse, default=default, help=text)
+
+
+# --- reconstruct ----------------------------------------------------------------------------
+
+
+def _cmd_reconstruct(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.ply import write_ply
+    from linelaser_calib.reconstruct import reconstruct_bag
+    from linelaser_calib.report import write_cloud_mcap
+
+    suffix = Path(args.output).suffix
+    if suffix not in (".ply", ".mcap"):
+        raise InputError(
+            f"--output {args.output}: give a .ply file (point-cloud tools) or an .mcap file "
+            "(PointCloud2 for Foxglove and RViz)"
+        )
+    _check_output(args.output, "point cloud (--output)")
+    try:
+        calibration = read_result_yaml(args.calibration)
+        corrections = read_kinematics(args.calibration)
+    except ResultFileError as exc:
+        raise ResultFileError(
+            f"cannot use the calibration (--calibration): {exc}; give a result YAML written "
+            "by linelaser-calib calibrate"
+        ) from exc
+    source, model = _pose_source(args)
+    if args.clock_offset == "auto":
+        raise InputError(
+            "reconstruct takes the clock offset from the calibration (quality.clock_offset_s) "
+            "or as --clock-offset SECONDS; 'auto' applies to calibrate only"
+        )
+    offset = calibration.clock_offset_s if args.clock_offset is None else args.clock_offset
+    pairing = PairingConfig(
+        sync_tolerance_s=args.sync_tolerance,
+        clock_offset_s=float(offset),
+        max_linear_speed_m_s=args.max_speed,
+        max_angular_speed_rad_s=args.max_angular_speed,
+    )
+    try:
+        done = reconstruct_bag(
+            args.bag,
+            calibration,
+            pairing,
+            kinematics=corrections,
+            pose_source=source,
+            model=model,
+            profile_topic=args.profile_topic,
+            pose_topic=args.pose_topic,
+            joint_state_topic=args.joint_state_topic,
+            flange_frame=args.flange_frame,
+        )
+    except PairingError as exc:
+        raise PairingError(
+            f"{exc} (Options of reconstruct: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
+        ) from exc
+    if suffix == ".ply":
+        written = write_ply(args.output, done.points, frame_id=done.base_frame)
+    else:
+        written = write_cloud_mcap(args.output, done.clouds, done.base_frame)
+    via = (
+        f"joint states on {done.bag.pose_topic} through the "
+        f"{'corrected ' if corrections else ''}model"
+        if done.pose_source is PoseSource.JOINT_STATES
+        else f"flange poses on {done.bag.pose_topic}"
+    )
+    print(
+        f"{done.bag.path}: {len(done.clouds)} of {len(done.bag.profiles)} profiles mapped into "
+        f"{done.base_frame} with {via}; {len(done.points)} points"
+    )
+    if done.rejected:
+        reasons = sorted({r.reason.split(" (")[0] for r in done.rejected})
+        print(f"  {len(done.rejected)} profiles not paired: {'; '.join(reasons[:3])}")
+    print(f"Wrote {written}")
     return 0
 
 
@@ -465,6 +605,10 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
 )
 
 
+#: Flags of :data:`CALIBRATE_NUMBERS` that set the pairing gate (shared with reconstruct).
+PAIRING_FLAGS = ("--max-speed", "--max-angular-speed")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
@@ -535,22 +679,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
-    cal.add_argument(
-        "--sync-tolerance",
-        type=_positive_float,
-        default=PairingConfig.sync_tolerance_s,
-        help="largest profile-to-pose stamp gap, s",
-    )
-    cal.add_argument(
-        "--clock-offset",
-        type=_offset,
-        default=0.0,
-        help="added to profile stamps to reach the pose clock, s; 'auto' estimates it "
-        "(continuous scanning with latency)",
+    _add_pairing_arguments(
+        cal,
+        "added to profile stamps to reach the pose clock, s (default 0); 'auto' estimates "
+        "it (continuous scanning with latency)",
     )
     for flag, parse, default, text in CALIBRATE_NUMBERS:
-        cal.add_argument(flag, type=parse, default=default, help=text)
+        if flag not in PAIRING_FLAGS:
+            cal.add_argument(flag, type=parse, default=default, help=text)
     cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
+    _add_pose_source_arguments(cal)
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(
         "--progress",
@@ -559,6 +697,34 @@ def build_parser() -> argparse.ArgumentParser:
         help="print progress on stderr (default: when stderr is a terminal)",
     )
     cal.set_defaults(func=_cmd_calibrate)
+
+    rec = sub.add_parser(
+        "reconstruct", help="map every profile of a bag into the base frame with a calibration"
+    )
+    rec.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
+    rec.add_argument(
+        "--calibration", required=True, metavar="RESULT.yaml", help="result of calibrate"
+    )
+    rec.add_argument(
+        "--output",
+        required=True,
+        metavar="OUT.ply|OUT.mcap",
+        help="PLY (x y z float, m, base frame) or MCAP (PointCloud2 in the base frame)",
+    )
+    rec.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
+    rec.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
+    _add_pairing_arguments(
+        rec,
+        "added to profile stamps to reach the pose clock, s (default: the calibration's)",
+    )
+    rec.add_argument(
+        "--flange-frame",
+        default=None,
+        help="frame id of the flange (checked against the calibration's; default tool0 for "
+        "a URDF model)",
+    )
+    _add_pose_source_arguments(rec)
+    rec.set_defaults(func=_cmd_reconstruct)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
     demo.add_argument("bags", nargs="?", default="bags")

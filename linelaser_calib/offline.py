@@ -12,8 +12,10 @@ from linelaser_calib.core.pipeline import (
     estimate_clock_offset,
     run_pipeline,
 )
+from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.io.bags import BagContents, read_bag
+from linelaser_calib.io.bags import BagContents
+from linelaser_calib.pose_sources import PoseSource, read_recording
 
 
 @dataclass
@@ -37,8 +39,11 @@ def calibrate_bag(
     flange_frame: str = "tool0",
     estimate_offset: bool = False,
     progress: Progress = _silent,
+    pose_source: PoseSource = PoseSource.POSE,
+    joint_state_topic: str | None = None,
+    model: KinematicModel | None = None,
 ) -> OfflineRun:
-    """Calibrate from a bag holding profiles (PointCloud2) and flange poses (PoseStamped).
+    """Calibrate from a bag holding profiles (PointCloud2) and flange poses.
 
     Parameters
     ----------
@@ -55,6 +60,12 @@ def calibrate_bag(
         configured one.
     progress : callable, optional
         Called as ``progress(stage, done, total)``.
+    pose_source : PoseSource
+        Flange poses from the PoseStamped topic, or from joint states through ``model``
+        (:func:`~linelaser_calib.pose_sources.read_recording`).
+    joint_state_topic : str, optional
+    model : KinematicModel, optional
+        The robot model of the ``joint_states`` source.
 
     Raises
     ------
@@ -62,10 +73,13 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
-    bag = read_bag(
+    bag = read_recording(
         path,
+        pose_source,
         profile_topic=profile_topic,
         pose_topic=pose_topic,
+        joint_state_topic=joint_state_topic,
+        model=model,
         progress=lambda done, total: progress("reading", done, total),
     )
     if all(len(p.points) == 0 for p in bag.profiles):

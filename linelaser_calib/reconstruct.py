@@ -1,0 +1,133 @@
+"""Apply a calibration: every profile of a recording mapped into the base frame.
+
+Each profile is paired with the flange pose at its stamp by the same pairing as
+calibration (:func:`~linelaser_calib.core.pairing.pair_profiles`, same options), and its
+valid points go to ``T_base_flange · T_flange_sensor · p``. When the calibration holds
+kinematic corrections, the flange poses come from the recording's joint states through
+the corrected robot model instead of the recorded flange poses.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from linelaser_calib.core.errors import InputError, PairingError
+from linelaser_calib.core.geometry import apply_transform
+from linelaser_calib.core.kinematics import KinematicCorrections, KinematicModel
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.types import CalibrationResult, FloatArray, Rejection
+from linelaser_calib.io.bags import BagContents
+from linelaser_calib.io.kinematics import load_model
+from linelaser_calib.pose_sources import PoseSource, read_recording
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """Profiles of a recording in the base frame.
+
+    Attributes
+    ----------
+    clouds : list of (int, ndarray (N, 3))
+        Per paired profile, in stamp order: its stamp (ns) and its points in the base frame
+        (m).
+    base_frame : str
+    rejected : list of Rejection
+        Profiles that could not be paired, with reasons.
+    bag : BagContents
+        What was read.
+    pose_source : PoseSource
+    """
+
+    clouds: list[tuple[int, FloatArray]]
+    base_frame: str
+    rejected: list[Rejection]
+    bag: BagContents
+    pose_source: PoseSource
+
+    @property
+    def points(self) -> FloatArray:
+        """Every point, shape (N, 3), m."""
+        if not self.clouds:
+            return np.zeros((0, 3))
+        return np.concatenate([c for _, c in self.clouds])
+
+
+def _check_frames(calibration: CalibrationResult, bag: BagContents, flange_frame: str) -> None:
+    pairs = [
+        ("sensor", calibration.child_frame, bag.sensor_frame, "the profiles' header frame"),
+        ("base", calibration.base_frame, bag.base_frame, "the flange poses' frame"),
+        ("flange", calibration.parent_frame, flange_frame, "the flange frame"),
+    ]
+    for what, expected, found, where in pairs:
+        if expected and found and expected != found:
+            raise InputError(
+                f"the calibration's {what} frame is {expected!r} but {where} in {bag.path} is "
+                f"{found!r}: the calibration belongs to another setup. Use the calibration of "
+                "this sensor and robot, or the matching frame option"
+            )
+
+
+def reconstruct_bag(
+    path: str | Path,
+    calibration: CalibrationResult,
+    pairing: PairingConfig,
+    *,
+    kinematics: KinematicCorrections | None = None,
+    pose_source: PoseSource = PoseSource.POSE,
+    model: KinematicModel | None = None,
+    profile_topic: str | None = None,
+    pose_topic: str | None = None,
+    joint_state_topic: str | None = None,
+    flange_frame: str | None = None,
+) -> Reconstruction:
+    """Map every profile of a recording into the base frame with a calibration.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory, its .mcap file, or a collector session directory.
+    calibration : CalibrationResult
+        Its ``T_flange_sensor`` and frames are used.
+    pairing : PairingConfig
+    kinematics : KinematicCorrections, optional
+        The calibration's kinematic corrections; the flange poses then come from the joint
+        states through the corrected model (which ``model`` must not contradict).
+    pose_source : PoseSource
+        Without corrections: where the flange poses come from.
+    model : KinematicModel, optional
+        The robot model of the ``joint_states`` source.
+    profile_topic, pose_topic, joint_state_topic : str, optional
+    flange_frame : str, optional
+        The recording's flange frame, checked against the calibration's (default: the
+        model's flange frame with joint states, else not checked).
+
+    Raises
+    ------
+    CalibrationError
+        Bag problems, frames that differ from the calibration's, or no profile paired.
+    """
+    if kinematics is not None:
+        base = model if model is not None else load_model(kinematics.model)
+        model, pose_source = kinematics.apply(base), PoseSource.JOINT_STATES
+    bag = read_recording(
+        path,
+        pose_source,
+        profile_topic=profile_topic,
+        pose_topic=pose_topic,
+        joint_state_topic=joint_state_topic,
+        model=model,
+    )
+    if flange_frame is None and model is not None and pose_source is PoseSource.JOINT_STATES:
+        flange_frame = model.flange_frame
+    _check_frames(calibration, bag, flange_frame or "")
+    paired = pair_profiles(bag.profiles, bag.poses, pairing)
+    if not paired.samples:
+        raise PairingError(paired.explain_nothing_paired(pairing))
+    clouds = []
+    for sample in paired.samples:
+        T_base_sensor = sample.T_base_flange @ calibration.T_flange_sensor
+        clouds.append((sample.stamp_ns, apply_transform(T_base_sensor, sample.points)))
+    return Reconstruction(clouds, bag.base_frame, paired.rejected, bag, pose_source)
