@@ -306,7 +306,9 @@ def inverse_kinematics(
         solution nearest to the first seed.
     iterations : int
     damping : float
-        Levenberg damping of the normal equations (dimensionless, on J^T J).
+        Levenberg damping of the normal equations, relative to the mean diagonal of J^T J
+        and shrinking with the remaining error (below 1 m or rad), so that the last steps are
+        Gauss-Newton steps.
     tolerance_m, tolerance_rad : float
         Convergence thresholds on the remaining position (m) and rotation (rad) error.
 
@@ -325,7 +327,10 @@ def inverse_kinematics(
         err = pose_twist(goal, forward_kinematics(model, q))
         J = parameter_jacobian(model, q)[:, :, cols]
         JtJ = np.einsum("mik,mil->mkl", J, J)
-        JtJ += damping * np.eye(n) * (1.0 + np.trace(JtJ, axis1=1, axis2=2)[:, None, None] / n)
+        scale = (1.0 + np.trace(JtJ, axis1=1, axis2=2) / n) * np.minimum(
+            1.0, np.linalg.norm(err, axis=1)
+        )
+        JtJ += damping * scale[:, None, None] * np.eye(n)
         q = q + np.linalg.solve(JtJ, np.einsum("mik,mi->mk", J, err)[..., None])[..., 0]
     q[:, revolute] = np.mod(q[:, revolute] + math.pi, 2.0 * math.pi) - math.pi
     err = pose_twist(goal, forward_kinematics(model, q))

@@ -41,7 +41,7 @@ from linelaser_calib.sim.scene import Scene
 
 #: Home joint vector of UR arms (rad): elbow up, tool pointing down; the IK starts here.
 UR_HOME_RAD = (0.0, -math.pi / 2, math.pi / 2, -math.pi / 2, -math.pi / 2, 0.0)
-_EXTRA_SEEDS = 24
+_EXTRA_SEEDS = 12
 _SAMPLE_FACTOR = 3
 
 
