@@ -21,26 +21,26 @@ from pathlib import Path
 import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
-from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
 from linelaser_calib.core.refine import RefineConfig
 from linelaser_calib.core.types import CalibrationResult, KnownPoint
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
+from linelaser_calib.io.kinematics import (
+    SECTION,
+    kinematics_section,
+    load_model,
+    read_kinematics,
+)
 from linelaser_calib.io.results import (
     read_result_yaml,
     read_truth_yaml,
     result_to_dict,
     write_result_yaml,
     write_truth_yaml,
-)
-from linelaser_calib.io.kinematics import (
-    SECTION,
-    kinematics_section,
-    load_model,
-    read_kinematics,
 )
 from linelaser_calib.offline import OfflineRun, calibrate_bag
 from linelaser_calib.pose_sources import PoseSource
@@ -173,7 +173,10 @@ def simulate_to_bag(
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
-        extra={"simulation": simulation, **({} if arm is None else {SECTION: kinematics_section(arm.errors, arm.nominal)})},
+        extra={
+            "simulation": simulation,
+            **({} if arm is None else {SECTION: kinematics_section(arm.errors, arm.nominal)}),
+        },
     )
     return out, truth
 
@@ -260,9 +263,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
-            clock_offset_s=0.0
-            if args.clock_offset in (None, "auto")
-            else float(args.clock_offset),
+            clock_offset_s=0.0 if args.clock_offset in (None, "auto") else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
@@ -486,9 +487,11 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
             f"{exc} (Options of reconstruct: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
     if suffix == ".ply":
-        written = write_ply(args.output, done.points, frame_id=done.base_frame)
+        written = write_ply(
+            args.output, done.points, frame_id=done.base_frame, intensity=done.intensity
+        )
     else:
-        written = write_cloud_mcap(args.output, done.clouds, done.base_frame)
+        written = write_cloud_mcap(args.output, done.clouds, done.base_frame, done.intensities)
     via = (
         f"joint states on {done.bag.pose_topic} through the "
         f"{'corrected ' if corrections else ''}model"

@@ -6,13 +6,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pipeline import (
     PipelineConfig,
     Progress,
     estimate_clock_offset,
     run_pipeline,
 )
-from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import BagContents
 from linelaser_calib.pose_sources import PoseSource, read_recording

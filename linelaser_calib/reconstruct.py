@@ -2,7 +2,8 @@
 
 Each profile is paired with the flange pose at its stamp by the same pairing as
 calibration (:func:`~linelaser_calib.core.pairing.pair_profiles`, same options), and its
-valid points go to ``T_base_flange · T_flange_sensor · p``. When the calibration holds
+valid points go to ``T_base_flange · T_flange_sensor · p``, with their intensity where the
+profiles carry one. When the calibration holds
 kinematic corrections, the flange poses come from the recording's joint states through
 the corrected robot model instead of the recorded flange poses.
 """
@@ -19,7 +20,7 @@ from linelaser_calib.core.geometry import apply_transform
 from linelaser_calib.core.kinematics import KinematicCorrections, KinematicModel
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.types import CalibrationResult, FloatArray, Rejection
-from linelaser_calib.io.bags import BagContents
+from linelaser_calib.io.bags import BagContents, read_profile_intensities
 from linelaser_calib.io.kinematics import load_model
 from linelaser_calib.pose_sources import PoseSource, read_recording
 
@@ -34,6 +35,8 @@ class Reconstruction:
         Per paired profile, in stamp order: its stamp (ns) and its points in the base frame
         (m).
     base_frame : str
+    intensities : list of ndarray (N,), or None
+        Per cloud, the intensity of each point; None when the profiles carry none.
     rejected : list of Rejection
         Profiles that could not be paired, with reasons.
     bag : BagContents
@@ -42,6 +45,7 @@ class Reconstruction:
     """
 
     clouds: list[tuple[int, FloatArray]]
+    intensities: list[FloatArray] | None
     base_frame: str
     rejected: list[Rejection]
     bag: BagContents
@@ -53,6 +57,13 @@ class Reconstruction:
         if not self.clouds:
             return np.zeros((0, 3))
         return np.concatenate([c for _, c in self.clouds])
+
+    @property
+    def intensity(self) -> FloatArray | None:
+        """Every point's intensity, shape (N,), or None."""
+        if self.intensities is None:
+            return None
+        return np.concatenate(self.intensities) if self.intensities else np.zeros(0)
 
 
 def _check_frames(calibration: CalibrationResult, bag: BagContents, flange_frame: str) -> None:
@@ -130,4 +141,11 @@ def reconstruct_bag(
     for sample in paired.samples:
         T_base_sensor = sample.T_base_flange @ calibration.T_flange_sensor
         clouds.append((sample.stamp_ns, apply_transform(T_base_sensor, sample.points)))
-    return Reconstruction(clouds, bag.base_frame, paired.rejected, bag, pose_source)
+    by_stamp = read_profile_intensities(path, bag.profile_topic)
+    intensities = None
+    if by_stamp and all(
+        s.stamp_ns in by_stamp and len(by_stamp[s.stamp_ns]) == len(s.points)
+        for s in paired.samples
+    ):
+        intensities = [by_stamp[s.stamp_ns] for s in paired.samples]
+    return Reconstruction(clouds, intensities, bag.base_frame, paired.rejected, bag, pose_source)

@@ -66,9 +66,7 @@ def test_kinematic_errors_give_sub_millimetre_absolute_error() -> None:
 def test_joint_states_survive_the_bag(tmp_path: Path) -> None:
     data = run()
     assert data.joint_states is not None
-    bag = write_bag(
-        tmp_path / "bag", data.profiles, data.poses, joint_states=data.joint_states
-    )
+    bag = write_bag(tmp_path / "bag", data.profiles, data.poses, joint_states=data.joint_states)
     states = read_joint_states(bag)
     assert states.names == data.joint_states.names
     np.testing.assert_array_equal(states.stamps_ns, data.joint_states.stamps_ns)

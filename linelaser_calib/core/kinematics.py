@@ -242,7 +242,9 @@ def parameter_jacobian(model: KinematicModel, q: ArrayLike) -> FloatArray:
     joints = check_joint_positions(model, q)
     J = np.zeros((len(joints), 6, len(model.elements)))
     T = np.tile(model.T_base_root, (len(joints), 1, 1))
-    for k, (element, amount) in enumerate(zip(model.elements, _amounts(model, joints), strict=True)):
+    for k, (element, amount) in enumerate(
+        zip(model.elements, _amounts(model, joints), strict=True)
+    ):
         T = T @ _elementary(element, amount)
         axis = T[:, :3, :3] @ np.asarray(element.axis)
         if element.motion is Motion.TRANSLATION:
@@ -255,7 +257,10 @@ def parameter_jacobian(model: KinematicModel, q: ArrayLike) -> FloatArray:
 
 def joint_columns(model: KinematicModel) -> list[int]:
     """For each joint, the index of the parameter (element) that it moves."""
-    return [next(k for k, e in enumerate(model.elements) if e.joint == j) for j in range(len(model.joint_names))]
+    return [
+        next(k for k, e in enumerate(model.elements) if e.joint == j)
+        for j in range(len(model.joint_names))
+    ]
 
 
 def pose_twist(T_target: FloatArray, T: FloatArray) -> FloatArray:
@@ -281,7 +286,7 @@ class IKSolution:
     """
 
     q: FloatArray
-    converged: FloatArray
+    converged: NDArray[np.bool_]
 
 
 def inverse_kinematics(
@@ -334,13 +339,13 @@ def inverse_kinematics(
         q = q + np.linalg.solve(JtJ, np.einsum("mik,mi->mk", J, err)[..., None])[..., 0]
     q[:, revolute] = np.mod(q[:, revolute] + math.pi, 2.0 * math.pi) - math.pi
     err = pose_twist(goal, forward_kinematics(model, q))
-    ok = (np.linalg.norm(err[:, :3], axis=1) < tolerance_m + 1e-12) & (
-        np.linalg.norm(err[:, 3:], axis=1) < tolerance_rad + 1e-12
+    ok = (np.linalg.norm(err[:, :3], axis=1) <= tolerance_m) & (
+        np.linalg.norm(err[:, 3:], axis=1) <= tolerance_rad
     )
-    q, ok = q.reshape(M, S, n), ok.reshape(M, S)
-    distance = np.linalg.norm(q - starts[0], axis=2) + np.where(ok, 0.0, np.inf)
+    solutions, converged = q.reshape(M, S, n), ok.reshape(M, S)
+    distance = np.linalg.norm(solutions - starts[0], axis=2) + np.where(converged, 0.0, np.inf)
     best = np.argmin(distance, axis=1)
-    return IKSolution(q[np.arange(M), best], ok[np.arange(M), best])
+    return IKSolution(solutions[np.arange(M), best], converged[np.arange(M), best])
 
 
 def _rz(angle: float) -> FloatArray:
@@ -508,8 +513,7 @@ def model_from_preset(name: str) -> KinematicModel:
     """
     if name not in UR_DH:
         raise InputError(
-            f"unknown kinematic preset {name!r}; choose one of {sorted(UR_DH)} or give a "
-            "URDF file"
+            f"unknown kinematic preset {name!r}; choose one of {sorted(UR_DH)} or give a URDF file"
         )
     d, a, alpha = UR_DH[name]
     return dh_model(name, UR_JOINT_NAMES, d, a, alpha, T_base_root=_rz(math.pi))

@@ -52,6 +52,7 @@ from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io.errors import BagError
 from msg_adapters import (
     MessageError,
+    cloud_from_pointcloud2,
     flange_pose_from_pose_stamped,
     joint_state_from_msg,
     joint_state_msg,
@@ -805,6 +806,36 @@ def read_bag(
         end_ns=summary.end_ns,
         skipped=skipped,
     )
+
+
+def read_profile_intensities(path: str | Path, topic: str) -> dict[int, NDArray[np.float64]]:
+    """Per profile stamp (ns), the ``intensity`` of its valid points, in the order of
+    :func:`read_bag`'s points; empty when the profiles have no intensity field.
+
+    Raises
+    ------
+    BagError
+        If the bag cannot be read.
+    """
+    bag = Path(path)
+    found: dict[int, NDArray[np.float64]] = {}
+    for part in _bag_parts(bag):
+        with _open_part(part, bag) as reader:
+            connections = [
+                c for c in reader.connections if (c.topic, c.msgtype) == (topic, PROFILE_TYPE)
+            ]
+            for _, log_ns, raw in _raw_messages(reader, connections, bag, part):
+                msg = _decode(topic, PROFILE_TYPE, log_ns, raw)
+                if isinstance(msg, SkippedMessage):
+                    continue
+                if not any(field.name == "intensity" for field in msg.fields):
+                    return {}
+                try:
+                    cloud = cloud_from_pointcloud2(msg, extra_fields=("intensity",))
+                except MessageError:
+                    continue
+                found[stamp_ns_from_msg(msg.header.stamp)] = cloud.extras["intensity"]
+    return found
 
 
 def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointStates:

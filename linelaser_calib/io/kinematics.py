@@ -86,29 +86,30 @@ def model_from_urdf(
                 "flange frames of the robot"
             )
     chain: list[JointSpec] = []
-    link = flange_frame
+    link, seen = flange_frame, set()
     while link != base_frame:
-        joint = by_child.get(link)
-        if joint is None:
+        found = by_child.get(link)
+        if found is None or link in seen:
             raise InputError(
                 f"the URDF has no chain from {base_frame!r} to {flange_frame!r}: it stops at "
                 f"link {link!r}, which no joint has as child"
             )
-        joint_name = str(joint.get("name"))
-        origin = joint.find("origin")
+        joint_name = str(found.get("name"))
+        origin = found.find("origin")
         xyz = _triple(origin, "xyz", "0 0 0", joint_name)
         rpy = _triple(origin, "rpy", "0 0 0", joint_name)
-        axis = _triple(joint.find("axis"), "xyz", "1 0 0", joint_name)
+        axis = _triple(found.find("axis"), "xyz", "1 0 0", joint_name)
         chain.append(
             JointSpec(
                 joint_name,
-                str(joint.get("type")),
+                str(found.get("type")),
                 (xyz[0], xyz[1], xyz[2]),
                 (rpy[0], rpy[1], rpy[2]),
                 (axis[0], axis[1], axis[2]),
             )
         )
-        parent = joint.find("parent")
+        seen.add(link)
+        parent = found.find("parent")
         link = "" if parent is None else str(parent.get("link"))
     chain.reverse()
     robot = name or str(root.get("name") or "urdf")
@@ -146,9 +147,7 @@ def load_model(
         raise InputError(f"URDF {path}: {err}") from None
 
 
-def kinematics_section(
-    corrections: KinematicCorrections, model: KinematicModel
-) -> dict[str, Any]:
+def kinematics_section(corrections: KinematicCorrections, model: KinematicModel) -> dict[str, Any]:
     """The ``kinematics`` section of a result or truth file (plain YAML data)."""
     return {
         "model": corrections.model,

@@ -165,7 +165,7 @@ def write_cloud_mcap(
     path: str | Path,
     clouds: Sequence[tuple[int, FloatArray]],
     frame_id: str,
-    intensities: Sequence[FloatArray | None] | None = None,
+    intensities: Sequence[FloatArray] | None = None,
 ) -> Path:
     """Write point clouds as PointCloud2 messages in one MCAP file (Foxglove, RViz).
 
@@ -179,36 +179,31 @@ def write_cloud_mcap(
     clouds : sequence of (int, ndarray (N, 3))
         Stamp (ns) and points (m) in ``frame_id``, in stamp order.
     frame_id : str
-    intensities : sequence of (ndarray (N,) or None), optional
-        Per cloud, an ``intensity`` field.
+    intensities : sequence of ndarray (N,), optional
+        Per cloud, the points' intensities (an ``intensity`` field).
 
     Raises
     ------
     ReportError
         If the file cannot be written.
     """
-    extra = list(intensities) if intensities is not None else [None] * len(clouds)
-    with_intensity = bool(clouds) and all(i is not None for i in extra)
 
     def body(writer: Writer) -> None:
         types = rosbags_types(_typestore())
         channels = _Channels(writer, ("profiles", "cloud"))
         first = clouds[0][0] if clouds else 0
         every = np.concatenate([c for _, c in clouds]) if clouds else np.zeros((0, 3))
-        values = np.concatenate(extra) if with_intensity else None  # type: ignore[arg-type]
+        values = None
+        if intensities is not None and len(intensities):
+            values = np.concatenate(list(intensities))
         channels.write(
             "cloud",
             first,
             pointcloud2_from_points(every, first, frame_id, types=types, intensity=values),
         )
-        for (stamp_ns, points), value in zip(clouds, extra, strict=True):
-            msg = pointcloud2_from_points(
-                points,
-                stamp_ns,
-                frame_id,
-                types=types,
-                intensity=value if with_intensity else None,
-            )
+        for k, (stamp_ns, points) in enumerate(clouds):
+            value = None if intensities is None else intensities[k]
+            msg = pointcloud2_from_points(points, stamp_ns, frame_id, types=types, intensity=value)
             channels.write("profiles", stamp_ns, msg)
 
     return _write_atomically(path, body)
