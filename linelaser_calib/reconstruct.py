@@ -121,6 +121,12 @@ def reconstruct_bag(
         Bag problems, frames that differ from the calibration's, or no profile paired.
     """
     if kinematics is not None:
+        if model is not None and model.name != kinematics.model:
+            raise InputError(
+                f"the calibration's kinematic corrections are for the model "
+                f"{kinematics.model!r}, not {model.name!r} (--kinematics); leave --kinematics "
+                "out or give the calibration's model"
+            )
         base = model if model is not None else load_model(kinematics.model)
         model, pose_source = kinematics.apply(base), PoseSource.JOINT_STATES
     bag = read_recording(

@@ -67,13 +67,15 @@ def ply_points(path: Path) -> np.ndarray:
     return np.stack([vertex["x"], vertex["y"], vertex["z"]], axis=1)
 
 
+def reconstruct(bag: Path, calibration: Path, out: Path) -> Path:
+    args = ["reconstruct", str(bag), "--calibration", str(calibration), "--output", str(out)]
+    assert main(args) == 0
+    return out
+
+
 def test_true_kinematics_put_the_points_on_the_true_cylinder(bag: Path, tmp_path: Path) -> None:
     calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=True)
-    out = tmp_path / "cloud.ply"
-    assert (
-        main(["reconstruct", str(bag), "--calibration", str(calibration), "--output", str(out)])
-        == 0
-    )
+    out = reconstruct(bag, calibration, tmp_path / "cloud.ply")
     vertex = read_ply(out)
     assert set(vertex) == {"x", "y", "z", "intensity"}
     assert np.all((vertex["intensity"] >= 0.0) & (vertex["intensity"] <= 1.5))
@@ -87,21 +89,15 @@ def test_true_kinematics_put_the_points_on_the_true_cylinder(bag: Path, tmp_path
 
 def test_nominal_kinematics_leave_the_robot_error_in_the_points(bag: Path, tmp_path: Path) -> None:
     calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=False)
-    out = tmp_path / "cloud.ply"
-    assert (
-        main(["reconstruct", str(bag), "--calibration", str(calibration), "--output", str(out)])
-        == 0
-    )
+    out = reconstruct(bag, calibration, tmp_path / "cloud.ply")
     distance = surface_distances_m(bag, ply_points(out))
     assert np.median(distance) > 8e-5
 
 
 def test_mcap_output_holds_pointclouds_in_the_base_frame(bag: Path, tmp_path: Path) -> None:
     calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=True)
-    ply, mcap = tmp_path / "cloud.ply", tmp_path / "cloud.mcap"
-    for out in (ply, mcap):
-        args = ["reconstruct", str(bag), "--calibration", str(calibration), "--output", str(out)]
-        assert main(args) == 0
+    ply = reconstruct(bag, calibration, tmp_path / "cloud.ply")
+    mcap = reconstruct(bag, calibration, tmp_path / "cloud.mcap")
     store = get_typestore(Stores.ROS2_JAZZY)
     per_topic: dict[str, list[np.ndarray]] = {}
     with mcap.open("rb") as stream:
@@ -203,3 +199,12 @@ def test_ascii_ply_reads_like_binary(tmp_path: Path) -> None:
     np.testing.assert_allclose(ply_points(binary), points, rtol=1e-7)
     np.testing.assert_allclose(ply_points(ascii_path), points, rtol=1e-12)
     assert "frame base_link, unit m" in binary.read_bytes()[:200].decode("ascii", "replace")
+
+
+def test_corrections_for_another_model_are_refused(
+    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=True)
+    args = ["reconstruct", str(bag), "--calibration", str(calibration), "--output"]
+    args += [str(tmp_path / "c.ply"), "--pose-source", "joint_states", "--kinematics", "ur10e"]
+    _fails(args, capsys, "'ur5e'", "'ur10e'")

@@ -819,23 +819,28 @@ def read_profile_intensities(path: str | Path, topic: str) -> dict[int, NDArray[
     """
     bag = Path(path)
     found: dict[int, NDArray[np.float64]] = {}
-    for part in _bag_parts(bag):
+    for msg in _decoded_messages(bag, _bag_parts(bag), topic, PROFILE_TYPE):
+        if not any(field.name == "intensity" for field in msg.fields):
+            return {}
+        try:
+            cloud = cloud_from_pointcloud2(msg, extra_fields=("intensity",))
+        except MessageError:
+            continue
+        found[stamp_ns_from_msg(msg.header.stamp)] = cloud.extras["intensity"]
+    return found
+
+
+def _decoded_messages(bag: Path, parts: Sequence[Path], topic: str, msgtype: str) -> Iterator[Any]:
+    """The decoded messages of one topic and type, part by part; undecodable ones left out."""
+    for part in parts:
         with _open_part(part, bag) as reader:
             connections = [
-                c for c in reader.connections if (c.topic, c.msgtype) == (topic, PROFILE_TYPE)
+                c for c in reader.connections if (c.topic, c.msgtype) == (topic, msgtype)
             ]
             for _, log_ns, raw in _raw_messages(reader, connections, bag, part):
-                msg = _decode(topic, PROFILE_TYPE, log_ns, raw)
-                if isinstance(msg, SkippedMessage):
-                    continue
-                if not any(field.name == "intensity" for field in msg.fields):
-                    return {}
-                try:
-                    cloud = cloud_from_pointcloud2(msg, extra_fields=("intensity",))
-                except MessageError:
-                    continue
-                found[stamp_ns_from_msg(msg.header.stamp)] = cloud.extras["intensity"]
-    return found
+                msg = _decode(topic, msgtype, log_ns, raw)
+                if not isinstance(msg, SkippedMessage):
+                    yield msg
 
 
 def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointStates:
@@ -886,19 +891,11 @@ def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointSta
             f"{_listing(topics)}"
         )
     records = []
-    for part in parts:
-        with _open_part(part, bag) as reader:
-            connections = [
-                c for c in reader.connections if (c.topic, c.msgtype) == (topic, JOINT_STATE_TYPE)
-            ]
-            for _, log_ns, raw in _raw_messages(reader, connections, bag, part):
-                msg = _decode(topic, JOINT_STATE_TYPE, log_ns, raw)
-                if isinstance(msg, SkippedMessage):
-                    continue
-                try:
-                    records.append(joint_state_from_msg(msg))
-                except MessageError:
-                    continue
+    for msg in _decoded_messages(bag, parts, topic, JOINT_STATE_TYPE):
+        try:
+            records.append(joint_state_from_msg(msg))
+        except MessageError:
+            continue
     if not records:
         raise BagError(f"bag {bag}: no readable {JOINT_STATE_TYPE} message on {topic}")
     records.sort(key=lambda r: r.stamp_ns)
