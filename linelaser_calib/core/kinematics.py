@@ -44,7 +44,7 @@ from .types import FlangePose, FloatArray
 _UNIT = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
 
-class Motion(Enum):
+class ElementKind(Enum):
     """What an element does along its axis."""
 
     ROTATION = "rotation"
@@ -59,7 +59,7 @@ class Element:
     ----------
     name : str
         Parameter name, ``<joint>.<what>`` (e.g. ``elbow_joint.a``).
-    motion : Motion
+    kind : ElementKind
     axis : (3,) floats
         Unit axis in the frame before the element.
     value : float
@@ -69,7 +69,7 @@ class Element:
     """
 
     name: str
-    motion: Motion
+    kind: ElementKind
     axis: tuple[float, float, float]
     value: float
     joint: int = -1
@@ -123,9 +123,9 @@ class KinematicModel:
         return np.array([e.value for e in self.elements], dtype=np.float64)
 
     @property
-    def parameter_is_length(self) -> FloatArray:
+    def parameter_is_length(self) -> NDArray[np.bool_]:
         """Per parameter, True for a length (m), False for an angle (rad), shape (P,)."""
-        return np.array([e.motion is Motion.TRANSLATION for e in self.elements])
+        return np.array([e.kind is ElementKind.TRANSLATION for e in self.elements])
 
     def with_parameters(self, values: ArrayLike) -> KinematicModel:
         """The same chain with other parameter values (m, rad), shape (P,)."""
@@ -197,7 +197,7 @@ def _elementary(element: Element, amount: FloatArray) -> FloatArray:
     """Transforms (M, 4, 4) of one element moved by ``amount`` (M,) (m or rad)."""
     T = np.tile(np.eye(4), (len(amount), 1, 1))
     u = np.asarray(element.axis)
-    if element.motion is Motion.TRANSLATION:
+    if element.kind is ElementKind.TRANSLATION:
         T[:, :3, 3] = amount[:, None] * u
         return T
     c, s = np.cos(amount), np.sin(amount)
@@ -247,7 +247,7 @@ def parameter_jacobian(model: KinematicModel, q: ArrayLike) -> FloatArray:
     ):
         T = T @ _elementary(element, amount)
         axis = T[:, :3, :3] @ np.asarray(element.axis)
-        if element.motion is Motion.TRANSLATION:
+        if element.kind is ElementKind.TRANSLATION:
             J[:, :3, k] = axis
         else:
             J[:, :3, k] = np.cross(T[:, :3, 3], axis)
@@ -327,7 +327,7 @@ def inverse_kinematics(
     q = np.repeat(starts[None], M, axis=0).reshape(M * S, n)
     goal = np.repeat(targets, S, axis=0)
     cols = joint_columns(model)
-    revolute = np.array([model.elements[c].motion is Motion.ROTATION for c in cols])
+    revolute = np.array([model.elements[c].kind is ElementKind.ROTATION for c in cols])
     for _ in range(iterations):
         err = pose_twist(goal, forward_kinematics(model, q))
         J = parameter_jacobian(model, q)[:, :, cols]
@@ -383,10 +383,10 @@ def dh_model(
     elements: list[Element] = []
     for j, joint in enumerate(joint_names):
         elements += [
-            Element(f"{joint}.offset", Motion.ROTATION, _UNIT["z"], 0.0, j),
-            Element(f"{joint}.d", Motion.TRANSLATION, _UNIT["z"], float(d_[j])),
-            Element(f"{joint}.a", Motion.TRANSLATION, _UNIT["x"], float(a_[j])),
-            Element(f"{joint}.alpha", Motion.ROTATION, _UNIT["x"], float(alpha_[j])),
+            Element(f"{joint}.offset", ElementKind.ROTATION, _UNIT["z"], 0.0, j),
+            Element(f"{joint}.d", ElementKind.TRANSLATION, _UNIT["z"], float(d_[j])),
+            Element(f"{joint}.a", ElementKind.TRANSLATION, _UNIT["x"], float(a_[j])),
+            Element(f"{joint}.alpha", ElementKind.ROTATION, _UNIT["x"], float(alpha_[j])),
         ]
     return KinematicModel(
         name,
@@ -444,12 +444,12 @@ def urdf_model(
         x, y, z = spec.xyz
         roll, pitch, yaw = spec.rpy
         elements += [
-            Element(f"{spec.name}.x", Motion.TRANSLATION, _UNIT["x"], x),
-            Element(f"{spec.name}.y", Motion.TRANSLATION, _UNIT["y"], y),
-            Element(f"{spec.name}.z", Motion.TRANSLATION, _UNIT["z"], z),
-            Element(f"{spec.name}.yaw", Motion.ROTATION, _UNIT["z"], yaw),
-            Element(f"{spec.name}.pitch", Motion.ROTATION, _UNIT["y"], pitch),
-            Element(f"{spec.name}.roll", Motion.ROTATION, _UNIT["x"], roll),
+            Element(f"{spec.name}.x", ElementKind.TRANSLATION, _UNIT["x"], x),
+            Element(f"{spec.name}.y", ElementKind.TRANSLATION, _UNIT["y"], y),
+            Element(f"{spec.name}.z", ElementKind.TRANSLATION, _UNIT["z"], z),
+            Element(f"{spec.name}.yaw", ElementKind.ROTATION, _UNIT["z"], yaw),
+            Element(f"{spec.name}.pitch", ElementKind.ROTATION, _UNIT["y"], pitch),
+            Element(f"{spec.name}.roll", ElementKind.ROTATION, _UNIT["x"], roll),
         ]
         if spec.kind == "fixed":
             continue
@@ -458,11 +458,11 @@ def urdf_model(
         if not norm > 1e-9:
             raise InputError(f"joint {spec.name!r} has a zero axis")
         unit = axis / norm
-        motion = Motion.TRANSLATION if spec.kind == "prismatic" else Motion.ROTATION
+        kind = ElementKind.TRANSLATION if spec.kind == "prismatic" else ElementKind.ROTATION
         elements.append(
             Element(
                 f"{spec.name}.offset",
-                motion,
+                kind,
                 (float(unit[0]), float(unit[1]), float(unit[2])),
                 0.0,
                 len(moving),
