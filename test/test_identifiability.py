@@ -10,6 +10,7 @@ from linelaser_calib.core.geometry import orthonormal_basis, transform_from_rotv
 from linelaser_calib.core.identifiability import (
     CYLINDER_NAMES,
     HAND_EYE_NAMES,
+    CylinderScan,
     cylinder_identifiability,
     cylinder_scan_jacobian,
 )
@@ -55,7 +56,7 @@ def test_jacobian_matches_finite_differences() -> None:
     model, q = truth.arm.nominal, truth.joint_positions[:4]
     points = cylinder_points(data, 40)[:4]
     T_fs, cyl = truth.T_flange_sensor, truth.cylinder
-    J = cylinder_scan_jacobian(model, q, points, T_fs, cyl)
+    J = cylinder_scan_jacobian(model, CylinderScan(q, points, cyl), T_fs)
     eps = 1e-6
     e1, e2 = orthonormal_basis(cyl.direction)
     p0 = model.parameters
@@ -91,13 +92,8 @@ def test_one_cylinder_leaves_the_gauge_and_the_parallel_axes_free() -> None:
     data = scan(20)
     truth = data.truth
     assert truth.arm is not None and truth.joint_positions is not None
-    found = cylinder_identifiability(
-        truth.arm.nominal,
-        truth.joint_positions,
-        cylinder_points(data, 5),
-        truth.T_flange_sensor,
-        truth.cylinder,
-    )
+    placed = CylinderScan(truth.joint_positions, cylinder_points(data, 5), truth.cylinder)
+    found = cylinder_identifiability(truth.arm.nominal, [placed], truth.T_flange_sensor)
     assert len(found.names) == 24 + 6 + 5
     free = set(found.unidentifiable)
     # Lengths along the three parallel joint axes (shoulder lift, elbow, wrist 1): only

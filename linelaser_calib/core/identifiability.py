@@ -12,6 +12,9 @@ Each scan point gives one residual, its distance to the cylinder surface. Its de
 - axis point moved by ε e (e ⊥ axis): ``-n · e``; direction tilted to a + ε e:
   ``-((X - c) · a)(n · e)``; radius: -1.
 
+Several scans (cylinder placements) share the kinematic parameters and the hand-eye; each
+adds its own five cylinder unknowns.
+
 Columns are scaled by the prior 1σ of each unknown (so that a column's size says how much
 the data knows against what is known before), then the column-pivoted QR of the stacked
 Jacobian orders the unknowns from best to worst determined; an unknown whose pivot falls
@@ -39,15 +42,34 @@ HAND_EYE_NAMES = tuple(f"hand_eye.{k}" for k in ("tx", "ty", "tz", "rx", "ry", "
 CYLINDER_NAMES = ("cylinder.p1", "cylinder.p2", "cylinder.a1", "cylinder.a2", "cylinder.radius")
 
 
+@dataclass(frozen=True, eq=False)
+class CylinderScan:
+    """One cylinder placement scanned by the arm.
+
+    Attributes
+    ----------
+    q : ndarray, shape (M, n)
+        Joint vector of each profile (rad or m).
+    points_sensor : list of M arrays (N_i, 3)
+        Each profile's points in the sensor frame, m.
+    cylinder : Cylinder
+        In the base frame, m.
+    """
+
+    q: FloatArray
+    points_sensor: list[FloatArray]
+    cylinder: Cylinder
+
+
 @dataclass(frozen=True)
 class Identifiability:
-    """What one recording determines.
+    """What a set of scans determines.
 
     Attributes
     ----------
     names : tuple of str
-        Every unknown: the kinematic parameters, then :data:`HAND_EYE_NAMES` and
-        :data:`CYLINDER_NAMES`.
+        Every unknown: the kinematic parameters, :data:`HAND_EYE_NAMES`, then
+        :data:`CYLINDER_NAMES` per scan (suffixed ``[i]`` when there are several).
     identifiable : tuple of str
         The unknowns the data determines, best first (pivot order).
     unidentifiable : tuple of str
@@ -72,37 +94,30 @@ class Identifiability:
 
 
 def cylinder_scan_jacobian(
-    model: KinematicModel,
-    q: ArrayLike,
-    points_sensor: Sequence[FloatArray],
-    T_flange_sensor: ArrayLike,
-    cylinder: Cylinder,
+    model: KinematicModel, scan: CylinderScan, T_flange_sensor: ArrayLike
 ) -> FloatArray:
     """Derivatives of every point's distance to the cylinder surface (module docstring).
 
     Parameters
     ----------
     model : KinematicModel
-    q : array_like, shape (M, n)
-        Joint vector of each profile (rad or m).
-    points_sensor : sequence of M arrays (N_i, 3)
-        Each profile's points in the sensor frame, m.
+    scan : CylinderScan
     T_flange_sensor : array_like, shape (4, 4)
-    cylinder : Cylinder
-        In the base frame, m.
 
     Returns
     -------
     ndarray, shape (sum N_i, P + 6 + 5)
-        Columns in the order of :attr:`Identifiability.names` (unscaled: m per m or per rad).
+        Columns: the kinematic parameters, the hand-eye, the cylinder (unscaled: m per m
+        or per rad).
     """
     T_fs = np.asarray(T_flange_sensor, dtype=np.float64)
-    T_bf = forward_kinematics(model, q)
-    J_kin = parameter_jacobian(model, q)
+    T_bf = forward_kinematics(model, scan.q)
+    J_kin = parameter_jacobian(model, scan.q)
+    cylinder = scan.cylinder
     a = cylinder.direction / np.linalg.norm(cylinder.direction)
     e1, e2 = orthonormal_basis(a)
     rows = []
-    for k, x in enumerate(points_sensor):
+    for k, x in enumerate(scan.points_sensor):
         T_bs = T_bf[k] @ T_fs
         X = x @ T_bs[:3, :3].T + T_bs[:3, 3]
         v = X - cylinder.point
@@ -123,32 +138,49 @@ def cylinder_scan_jacobian(
 
 def cylinder_identifiability(
     model: KinematicModel,
-    q: ArrayLike,
-    points_sensor: Sequence[FloatArray],
+    scans: Sequence[CylinderScan],
     T_flange_sensor: ArrayLike,
-    cylinder: Cylinder,
     *,
     sigma_length_m: float = 1e-3,
     sigma_angle_rad: float = 1e-3,
     rtol: float = 1e-6,
 ) -> Identifiability:
-    """The identifiable kinematic, hand-eye and cylinder unknowns of one cylinder scan.
+    """The identifiable kinematic, hand-eye and cylinder unknowns of cylinder scans.
+
+    The scans share the robot and the hand-eye; each has its own cylinder.
 
     Parameters
     ----------
-    model, q, points_sensor, T_flange_sensor, cylinder
-        As in :func:`cylinder_scan_jacobian`.
+    model : KinematicModel
+    scans : sequence of CylinderScan
+    T_flange_sensor : array_like, shape (4, 4)
     sigma_length_m, sigma_angle_rad : float
         Column scales: prior 1σ of every length (m) and angle (rad) unknown.
     rtol : float
         An unknown whose QR pivot is below ``rtol`` times the largest is not identifiable.
     """
-    J = cylinder_scan_jacobian(model, q, points_sensor, T_flange_sensor, cylinder)
+    shared = len(model.parameter_names) + len(HAND_EYE_NAMES)
+    blocks = [cylinder_scan_jacobian(model, scan, T_flange_sensor) for scan in scans]
+    per_scan = len(CYLINDER_NAMES)
+    J = np.zeros((sum(len(b) for b in blocks), shared + per_scan * len(scans)))
+    row = 0
+    for i, block in enumerate(blocks):
+        J[row : row + len(block), :shared] = block[:, :shared]
+        J[row : row + len(block), shared + per_scan * i : shared + per_scan * (i + 1)] = block[
+            :, shared:
+        ]
+        row += len(block)
+    cylinder_is_length = [True, True, False, False, True] * len(scans)
     is_length = np.concatenate(
-        [model.parameter_is_length, [True] * 3, [False] * 3, [True, True, False, False, True]]
+        [model.parameter_is_length, [True] * 3, [False] * 3, cylinder_is_length]
     )
     J = J * np.where(is_length, sigma_length_m, sigma_angle_rad)
-    names = (*model.parameter_names, *HAND_EYE_NAMES, *CYLINDER_NAMES)
+    suffix = [f"[{i}]" if len(scans) > 1 else "" for i in range(len(scans))]
+    names = (
+        *model.parameter_names,
+        *HAND_EYE_NAMES,
+        *(name + tag for tag in suffix for name in CYLINDER_NAMES),
+    )
     _, R, pivots = scipy.linalg.qr(J, mode="economic", pivoting=True)
     diagonal = np.abs(np.diag(R))
     rank = int(np.sum(diagonal > rtol * diagonal[0]))
