@@ -25,6 +25,7 @@ from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.refine import RefineConfig
 from linelaser_calib.core.types import CalibrationResult, KnownPoint
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
@@ -43,7 +44,6 @@ from linelaser_calib.io.results import (
     write_truth_yaml,
 )
 from linelaser_calib.offline import OfflineRun, calibrate_bag
-from linelaser_calib.pose_sources import PoseSource
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
@@ -492,15 +492,10 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
         )
     else:
         written = write_cloud_mcap(args.output, done.clouds, done.base_frame, done.intensities)
-    via = (
-        f"joint states on {done.bag.pose_topic} through the "
-        f"{'corrected ' if corrections else ''}model"
-        if done.pose_source is PoseSource.JOINT_STATES
-        else f"flange poses on {done.bag.pose_topic}"
-    )
+    corrected = " (kinematic corrections applied)" if corrections else ""
     print(
         f"{done.bag.path}: {len(done.clouds)} of {len(done.bag.profiles)} profiles mapped into "
-        f"{done.base_frame} with {via}; {len(done.points)} points"
+        f"{done.base_frame} with {done.poses.description}{corrected}; {len(done.points)} points"
     )
     if done.rejected:
         reasons = sorted({r.reason.split(" (")[0] for r in done.rejected})
@@ -515,15 +510,14 @@ def _input_rows(run: OfflineRun) -> list[tuple[str, str]]:
     return [
         ("bag", str(bag.path)),
         ("profiles", f"{len(bag.profiles)} on {bag.profile_topic} (frame {bag.sensor_frame})"),
-        ("flange poses", f"{len(bag.poses)} on {bag.pose_topic} (frame {bag.base_frame})"),
+        ("flange poses", run.poses.description),
     ]
 
 
 def _input_line(run: OfflineRun) -> str:
     bag = run.bag
     return (
-        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, "
-        f"{len(bag.poses)} poses on {bag.pose_topic}"
+        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, {run.poses.description}"
     )
 
 

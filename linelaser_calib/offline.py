@@ -13,17 +13,19 @@ from linelaser_calib.core.pipeline import (
     estimate_clock_offset,
     run_pipeline,
 )
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.io.bags import BagContents
-from linelaser_calib.pose_sources import PoseSource, read_recording
+from linelaser_calib.io.bags import BagContents, read_bag
+from linelaser_calib.io.pose_sources import POSE_SOURCES, FlangePoses, PoseRequest
 
 
 @dataclass
 class OfflineRun:
-    """A calibration of one bag: the result and what was read."""
+    """A calibration of one bag: the result, what was read and where the poses came from."""
 
     result: CalibrationResult
     bag: BagContents
+    poses: FlangePoses
 
 
 def _silent(stage: str, done: int, total: int) -> None:
@@ -61,8 +63,7 @@ def calibrate_bag(
     progress : callable, optional
         Called as ``progress(stage, done, total)``.
     pose_source : PoseSource
-        Flange poses from the PoseStamped topic, or from joint states through ``model``
-        (:func:`~linelaser_calib.pose_sources.read_recording`).
+        Where the flange poses come from (:data:`~linelaser_calib.io.pose_sources.POSE_SOURCES`).
     joint_state_topic : str, optional
     model : KinematicModel, optional
         The robot model of the ``joint_states`` source.
@@ -73,15 +74,19 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
-    bag = read_recording(
+    if pose_source is not PoseSource.POSE and pose_topic is not None:
+        raise InputError(
+            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
+            f"--pose-source {pose_source.value}: drop --pose-topic, or use --pose-source pose"
+        )
+    bag = read_bag(
         path,
-        pose_source,
         profile_topic=profile_topic,
         pose_topic=pose_topic,
-        joint_state_topic=joint_state_topic,
-        model=model,
         progress=lambda done, total: progress("reading", done, total),
+        read_poses=pose_source is PoseSource.POSE,
     )
+    flange_poses = POSE_SOURCES[pose_source](bag, PoseRequest(model, joint_state_topic))
     if all(len(p.points) == 0 for p in bag.profiles):
         raise InputError(
             f"all {len(bag.profiles)} profiles on {bag.profile_topic} in {bag.path} are empty "
@@ -91,17 +96,17 @@ def calibrate_bag(
         )
     if estimate_offset:
         progress("clock offset", 0, 1)
-        offset = estimate_clock_offset(bag.profiles, bag.poses, config)
+        offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config)
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
         progress("clock offset", 1, 1)
-    result = run_pipeline(bag.profiles, bag.poses, config, progress)
+    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress)
     result.clock_offset_estimated = estimate_offset
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame
-    result.base_frame = bag.base_frame
+    result.base_frame = flange_poses.base_frame
     if bag.skipped:
         reasons = sorted({s.reason for s in bag.skipped})
         result.warnings.append(
             f"{len(bag.skipped)} malformed messages were skipped: {'; '.join(reasons[:3])}"
         )
-    return OfflineRun(result, bag)
+    return OfflineRun(result, bag, flange_poses)

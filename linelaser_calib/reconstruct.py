@@ -19,10 +19,11 @@ from linelaser_calib.core.errors import InputError, PairingError
 from linelaser_calib.core.geometry import apply_transform
 from linelaser_calib.core.kinematics import KinematicCorrections, KinematicModel
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.types import CalibrationResult, FloatArray, Rejection
-from linelaser_calib.io.bags import BagContents, read_profile_intensities
+from linelaser_calib.io.bags import BagContents, read_bag, read_profile_intensities
 from linelaser_calib.io.kinematics import load_model
-from linelaser_calib.pose_sources import PoseSource, read_recording
+from linelaser_calib.io.pose_sources import POSE_SOURCES, FlangePoses, PoseRequest
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,8 @@ class Reconstruction:
     bag : BagContents
         What was read.
     pose_source : PoseSource
+    poses : FlangePoses
+        The flange poses used and where they came from.
     """
 
     clouds: list[tuple[int, FloatArray]]
@@ -50,6 +53,7 @@ class Reconstruction:
     rejected: list[Rejection]
     bag: BagContents
     pose_source: PoseSource
+    poses: FlangePoses
 
     @property
     def points(self) -> FloatArray:
@@ -66,16 +70,18 @@ class Reconstruction:
         return np.concatenate(self.intensities) if self.intensities else np.zeros(0)
 
 
-def _check_frames(calibration: CalibrationResult, bag: BagContents, flange_frame: str) -> None:
+def _check_frames(
+    calibration: CalibrationResult, sensor: str, base: str, flange: str, path: Path
+) -> None:
     pairs = [
-        ("sensor", calibration.child_frame, bag.sensor_frame, "the profiles' header frame"),
-        ("base", calibration.base_frame, bag.base_frame, "the flange poses' frame"),
-        ("flange", calibration.parent_frame, flange_frame, "the flange frame"),
+        ("sensor", calibration.child_frame, sensor, "the profiles' header frame"),
+        ("base", calibration.base_frame, base, "the flange poses' frame"),
+        ("flange", calibration.parent_frame, flange, "the flange frame"),
     ]
     for what, expected, found, where in pairs:
         if expected and found and expected != found:
             raise InputError(
-                f"the calibration's {what} frame is {expected!r} but {where} in {bag.path} is "
+                f"the calibration's {what} frame is {expected!r} but {where} in {path} is "
                 f"{found!r}: the calibration belongs to another setup. Use the calibration of "
                 "this sensor and robot, or the matching frame option"
             )
@@ -129,18 +135,22 @@ def reconstruct_bag(
             )
         base = model if model is not None else load_model(kinematics.model)
         model, pose_source = kinematics.apply(base), PoseSource.JOINT_STATES
-    bag = read_recording(
+    if pose_source is not PoseSource.POSE and pose_topic is not None:
+        raise InputError(
+            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
+            f"--pose-source {pose_source.value}: drop --pose-topic, or use --pose-source pose"
+        )
+    bag = read_bag(
         path,
-        pose_source,
         profile_topic=profile_topic,
         pose_topic=pose_topic,
-        joint_state_topic=joint_state_topic,
-        model=model,
+        read_poses=pose_source is PoseSource.POSE,
     )
+    poses = POSE_SOURCES[pose_source](bag, PoseRequest(model, joint_state_topic))
     if flange_frame is None and model is not None and pose_source is PoseSource.JOINT_STATES:
         flange_frame = model.flange_frame
-    _check_frames(calibration, bag, flange_frame or "")
-    paired = pair_profiles(bag.profiles, bag.poses, pairing)
+    _check_frames(calibration, bag.sensor_frame, poses.base_frame, flange_frame or "", bag.path)
+    paired = pair_profiles(bag.profiles, poses.poses, pairing)
     if not paired.samples:
         raise PairingError(paired.explain_nothing_paired(pairing))
     clouds = []
@@ -154,4 +164,6 @@ def reconstruct_bag(
         for s in paired.samples
     ):
         intensities = [by_stamp[s.stamp_ns] for s in paired.samples]
-    return Reconstruction(clouds, intensities, bag.base_frame, paired.rejected, bag, pose_source)
+    return Reconstruction(
+        clouds, intensities, poses.base_frame, paired.rejected, bag, pose_source, poses
+    )

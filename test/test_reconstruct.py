@@ -166,6 +166,8 @@ def test_joint_states_need_a_model_and_a_model_needs_joint_states(
 ) -> None:
     _fails(["calibrate", str(bag), "--pose-source", "joint_states"], capsys, "--kinematics")
     _fails(["calibrate", str(bag), "--kinematics", "ur5e"], capsys, "--pose-source joint_states")
+    args = ["calibrate", str(bag), "--pose-source", "joint_states", "--kinematics", "ur5e"]
+    _fails([*args, "--pose-topic", "/flange_pose"], capsys, "drop --pose-topic")
 
 
 def test_no_joint_states_in_the_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

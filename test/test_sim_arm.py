@@ -71,7 +71,7 @@ def test_joint_states_survive_the_bag(tmp_path: Path) -> None:
     assert states.names == data.joint_states.names
     np.testing.assert_array_equal(states.stamps_ns, data.joint_states.stamps_ns)
     np.testing.assert_array_equal(states.positions, data.joint_states.positions)
-    assert len(read_bag(bag, with_poses=False).poses) == 0
+    assert len(read_bag(bag, read_poses=False).poses) == 0
 
 
 def test_a_bag_without_joint_states_lists_its_topics(tmp_path: Path) -> None:

@@ -707,7 +707,7 @@ def read_bag(
     profile_topic: str | None = None,
     pose_topic: str | None = None,
     progress: Progress | None = None,
-    with_poses: bool = True,
+    read_poses: bool = True,
 ) -> BagContents:
     """Read the profiles and flange poses of a bag (or a :class:`SessionBagWriter` session).
 
@@ -720,9 +720,9 @@ def read_bag(
         holding messages.
     progress : callable(done, total), optional
         Called after each message of the two topics.
-    with_poses : bool
-        False: read the profiles only (the flange poses come from elsewhere, e.g. joint
-        states); ``poses`` is then empty and ``pose_topic`` and ``base_frame`` are "".
+    read_poses : bool
+        False: read the profiles only (the flange poses come from another source, e.g.
+        joint states); ``poses`` is then empty and ``pose_topic`` and ``base_frame`` are ''.
 
     Returns
     -------
@@ -746,7 +746,7 @@ def read_bag(
         )
     chosen_profile = _choose_topic(bag, summary.topics, PROFILE_TYPE, profile_topic, "profile")
     chosen_pose = (
-        _choose_topic(bag, summary.topics, POSE_TYPE, pose_topic, "pose") if with_poses else ""
+        _choose_topic(bag, summary.topics, POSE_TYPE, pose_topic, "pose") if read_poses else ""
     )
     wanted = {(chosen_profile, PROFILE_TYPE), (chosen_pose, POSE_TYPE)}
     total = sum(t.msgcount for t in summary.topics if (t.topic, t.msgtype) in wanted)
