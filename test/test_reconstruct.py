@@ -13,9 +13,8 @@ from rosbags.typesys import Stores, get_typestore
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_error
-from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.ply import read_ply, write_ply
-from linelaser_calib.io.results import read_result_yaml, read_truth_yaml, write_result_yaml
+from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
 from msg_adapters import points_from_pointcloud2
 
 #: Points above this height are on the cylinder (the table is z = 0), m.
@@ -31,25 +30,26 @@ def bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def true_calibration(bag: Path, path: Path, *, kinematics: bool, child: str = "laser") -> Path:
+@pytest.fixture(scope="module")
+def calibrated(bag: Path) -> Path:
+    """The default method's result on ``bag`` (its hand-eye is off by the robot's error)."""
+    out = bag.parent / "calibrated.yaml"
+    assert main(["calibrate", str(bag), "--output", str(out)]) == 0
+    return out
+
+
+def true_calibration(
+    bag: Path, calibrated: Path, path: Path, *, kinematics: bool, child: str = "laser"
+) -> Path:
     """A result file holding the true hand-eye and, if asked, the true kinematic corrections."""
-    truth = read_truth_yaml(bag / "truth.yaml")
-    write_result_yaml(
-        CalibrationResult(
-            T_flange_sensor=truth.T_flange_sensor,
-            cylinder=truth.cylinder,
-            method="truth",
-            samples_used=[],
-            samples_rejected=[],
-            rms_residual_m=0.0,
-            child_frame=child,
-        ),
-        path,
-    )
+    truth = read_truth_yaml(bag / "truth.yaml").raw
+    data = yaml.safe_load(calibrated.read_text(encoding="utf-8"))
+    for key in ("translation", "rotation_xyzw", "matrix"):
+        data["hand_eye"][key] = truth["hand_eye"][key]
+    data["hand_eye"]["child_frame"] = child
     if kinematics:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-        data["kinematics"] = truth.raw["kinematics"]
-        path.write_text(yaml.safe_dump(data), encoding="utf-8")
+        data["kinematics"] = truth["kinematics"]
+    path.write_text(yaml.safe_dump(data), encoding="utf-8")
     return path
 
 
@@ -73,8 +73,10 @@ def reconstruct(bag: Path, calibration: Path, out: Path) -> Path:
     return out
 
 
-def test_true_kinematics_put_the_points_on_the_true_cylinder(bag: Path, tmp_path: Path) -> None:
-    calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=True)
+def test_true_kinematics_put_the_points_on_the_true_cylinder(
+    bag: Path, calibrated: Path, tmp_path: Path
+) -> None:
+    calibration = true_calibration(bag, calibrated, tmp_path / "true.yaml", kinematics=True)
     out = reconstruct(bag, calibration, tmp_path / "cloud.ply")
     vertex = read_ply(out)
     assert set(vertex) == {"x", "y", "z", "intensity"}
@@ -87,15 +89,19 @@ def test_true_kinematics_put_the_points_on_the_true_cylinder(bag: Path, tmp_path
     assert np.percentile(distance, 90) < 8e-5
 
 
-def test_nominal_kinematics_leave_the_robot_error_in_the_points(bag: Path, tmp_path: Path) -> None:
-    calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=False)
+def test_nominal_kinematics_leave_the_robot_error_in_the_points(
+    bag: Path, calibrated: Path, tmp_path: Path
+) -> None:
+    calibration = true_calibration(bag, calibrated, tmp_path / "true.yaml", kinematics=False)
     out = reconstruct(bag, calibration, tmp_path / "cloud.ply")
     distance = surface_distances_m(bag, ply_points(out))
     assert np.median(distance) > 8e-5
 
 
-def test_mcap_output_holds_pointclouds_in_the_base_frame(bag: Path, tmp_path: Path) -> None:
-    calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=True)
+def test_mcap_output_holds_pointclouds_in_the_base_frame(
+    bag: Path, calibrated: Path, tmp_path: Path
+) -> None:
+    calibration = true_calibration(bag, calibrated, tmp_path / "true.yaml", kinematics=True)
     ply = reconstruct(bag, calibration, tmp_path / "cloud.ply")
     mcap = reconstruct(bag, calibration, tmp_path / "cloud.mcap")
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -111,21 +117,21 @@ def test_mcap_output_holds_pointclouds_in_the_base_frame(bag: Path, tmp_path: Pa
     np.testing.assert_allclose(cloud, ply_points(ply), atol=1e-6)
 
 
-def test_joint_states_pose_source_calibrates_like_the_pose_topic(bag: Path, tmp_path: Path) -> None:
+def test_joint_states_pose_source_calibrates_like_the_pose_topic(
+    bag: Path, calibrated: Path, tmp_path: Path
+) -> None:
     urdf = tmp_path / "arm.urdf"
     urdf.write_text(ur_urdf("ur5e"), encoding="utf-8")
-    results = {}
-    for source, extra in (("pose", []), ("joint_states", ["--kinematics", str(urdf)])):
-        out = tmp_path / f"{source}.yaml"
-        args = ["calibrate", str(bag), "--pose-source", source, *extra, "--output", str(out)]
-        assert main(args) == 0
-        results[source] = read_result_yaml(out)
+    out = tmp_path / "joint_states.yaml"
+    args = ["calibrate", str(bag), "--pose-source", "joint_states", "--kinematics", str(urdf)]
+    assert main([*args, "--output", str(out)]) == 0
+    from_joints = read_result_yaml(out)
     rot, trans = transform_error(
-        results["pose"].T_flange_sensor, results["joint_states"].T_flange_sensor
+        read_result_yaml(calibrated).T_flange_sensor, from_joints.T_flange_sensor
     )
     assert rot < 1e-6 and trans < 1e-7
     truth = read_truth_yaml(bag / "truth.yaml")
-    rot, trans = transform_error(results["joint_states"].T_flange_sensor, truth.T_flange_sensor)
+    rot, trans = transform_error(from_joints.T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot) < 0.3 and trans < 2e-3
 
 
@@ -146,17 +152,19 @@ def test_missing_calibration_file(
 
 
 def test_frame_mismatch_names_both_frames(
-    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    bag: Path, calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    calibration = true_calibration(bag, tmp_path / "other.yaml", kinematics=False, child="cam")
+    calibration = true_calibration(
+        bag, calibrated, tmp_path / "other.yaml", kinematics=False, child="cam"
+    )
     args = ["reconstruct", str(bag), "--calibration", str(calibration)]
     _fails([*args, "--output", str(tmp_path / "c.ply")], capsys, "'cam'", "'laser'")
 
 
 def test_unknown_output_format(
-    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    bag: Path, calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=False)
+    calibration = true_calibration(bag, calibrated, tmp_path / "true.yaml", kinematics=False)
     args = ["reconstruct", str(bag), "--calibration", str(calibration)]
     _fails([*args, "--output", str(tmp_path / "c.xyz")], capsys, ".ply", ".mcap")
 
@@ -204,9 +212,9 @@ def test_ascii_ply_reads_like_binary(tmp_path: Path) -> None:
 
 
 def test_corrections_for_another_model_are_refused(
-    bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    bag: Path, calibrated: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    calibration = true_calibration(bag, tmp_path / "true.yaml", kinematics=True)
+    calibration = true_calibration(bag, calibrated, tmp_path / "true.yaml", kinematics=True)
     args = ["reconstruct", str(bag), "--calibration", str(calibration), "--output"]
     args += [str(tmp_path / "c.ply"), "--pose-source", "joint_states", "--kinematics", "ur10e"]
     _fails(args, capsys, "'ur5e'", "'ur10e'")
