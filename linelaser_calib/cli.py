@@ -2,7 +2,8 @@
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
 ``calibrate`` (the offline calibration), ``reconstruct`` (apply a calibration: a recording's
-profiles in the base frame) and ``demo`` (calibrate the committed bags and show the error
+profiles in the base frame), ``export`` (a result as a URDF joint, a static TF command or a
+launch file) and ``demo`` (calibrate the committed bags and show the error
 against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
@@ -15,7 +16,6 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -24,12 +24,14 @@ from linelaser_calib.core.errors import CalibrationError, InputError, PairingErr
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
+from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.pose_source import PoseSource
-from linelaser_calib.core.refine import RefineConfig
-from linelaser_calib.core.types import CalibrationResult, KnownPoint
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
+from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
+from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
 from linelaser_calib.io.kinematics import (
     SECTION,
     kinematics_section,
@@ -38,8 +40,8 @@ from linelaser_calib.io.kinematics import (
 )
 from linelaser_calib.io.results import (
     read_result_yaml,
-    read_truth_yaml,
     result_to_dict,
+    truth_beside,
     write_result_yaml,
     write_truth_yaml,
 )
@@ -66,6 +68,17 @@ def _non_negative_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
     if not (np.isfinite(value) and value >= 0.0):
         raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
+    return value
+
+
+def _min_samples(text: str) -> int:
+    """Parse a sample count >= 3."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {text!r}") from None
+    if value < 3:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {value}")
     return value
 
 
@@ -97,16 +110,23 @@ def _xyz(text: str) -> tuple[float, float, float]:
 
 
 def simulate_to_bag(
-    out: Path, scenario_name: str, seed: int, overrides: dict[str, object]
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
 ) -> tuple[Path, Path]:
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
     truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    With ``tf`` the flange poses are also written as a robot_state_publisher-style
+    ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
+    (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
     Returns the bag directory and the truth file.
     """
+    from linelaser_calib.core.targets.base import ResultSection
+    from linelaser_calib.core.targets.cylinder import CylinderSection
+    from linelaser_calib.core.targets.known_point import KnownPoint
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
         bumped_hand_eye,
@@ -119,12 +139,15 @@ def simulate_to_bag(
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
-        cylinder, known_point = None, weld_data.truth.weld_point_m
+        target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
-        cylinder, known_point = data.truth.cylinder, None
+        target = CylinderSection(data.truth.cylinder)
+    tf_dynamic, tf_static = (
+        ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
+    )
     arm = None if weld else data.truth.arm
     write_bag(
         out,
@@ -136,6 +159,8 @@ def simulate_to_bag(
         base_frame=scenario.base_frame,
         organised=scenario.organised,
         intensities=intensities if scenario.intensity else None,
+        tf=tf_dynamic,
+        tf_static=tf_static,
         joint_states=None if weld else data.joint_states,
         joint_state_topic=scenario.joint_state_topic,
     )
@@ -145,7 +170,7 @@ def simulate_to_bag(
         "overrides": overrides,
         "profiles": len(profiles),
         "poses": len(poses),
-        "command": simulate_command(out, scenario_name, seed, overrides),
+        "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
         taught = weld_data.truth.taught_point_m
@@ -153,12 +178,11 @@ def simulate_to_bag(
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                cylinder=None,
+                target=KnownPoint(np.asarray(taught), estimated=False),
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
                 rms_residual_m=0.0,
-                known_point=KnownPoint(np.asarray(taught), estimated=False),
                 parent_frame=scenario.flange_frame,
                 child_frame=scenario.sensor_frame,
                 base_frame=scenario.base_frame,
@@ -168,8 +192,7 @@ def simulate_to_bag(
     truth = write_truth_yaml(
         out / "truth.yaml",
         T_true,
-        cylinder,
-        known_point=known_point,
+        target,
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
@@ -198,7 +221,9 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
 )
 
 
-def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[str, object]) -> str:
+def simulate_command(
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
+) -> str:
     """The ``linelaser-calib simulate`` command line that regenerates a bag."""
     flags = {field: flag for flag, field, _ in SIMULATE_OPTIONS}
     words = [PROG, "simulate", str(out), "--scenario", scenario_name, "--seed", str(seed)]
@@ -207,6 +232,8 @@ def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[s
             words.append("--organised" if value else "--dense")
         else:
             words += [flags[field], str(value)]
+    if tf:
+        words.append("--tf")
     return " ".join(words)
 
 
@@ -218,7 +245,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     }
     if args.organised is not None:
         overrides["organised"] = args.organised
-    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides)
+    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides, tf=args.tf)
     print(f"wrote {bag} and {truth}")
     print(format_bag_info(bag_info(bag)))
     return 0
@@ -235,42 +262,49 @@ def _cmd_info(args: argparse.Namespace) -> int:
 # --- calibrate ------------------------------------------------------------------------------
 
 
+#: The calibrate flag behind each shared target setting (for refusals).
+SETTING_FLAGS = {
+    "radius_m": "--radius",
+    "point_m": "--point x,y,z",
+    "sensor_sigma_m": "--sensor-sigma",
+    "robot_sigma_t_m": "--robot-sigma-t",
+    "robot_sigma_r_rad": "--robot-sigma-r",
+    "min_samples": "--min-samples",
+    "initial": "--initial FILE.yaml",
+}
+
+
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+    """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
     initial = None
     if args.initial is not None:
         try:
-            initial = read_result_yaml(args.initial).T_flange_sensor
-        except ResultFileError as exc:
-            raise ResultFileError(
-                f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
-                "written by linelaser-calib (its hand_eye section)"
-            ) from exc
-    if (
-        args.target == Target.KNOWN_POINT.value
-        and args.method == Method.PAPER.value
-        and (args.point is None or initial is None)
-    ):
-        raise InputError(
-            "--method paper with --target known_point corrects an old hand-eye against the "
-            "taught point: it needs --point x,y,z (the taught point, m, base frame) and "
-            "--initial FILE.yaml (the old hand-eye)"
-        )
+            initial, warnings = read_initial_hand_eye(args.initial)
+        except CalibrationError as exc:
+            raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
+        for warning in warnings:
+            print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
+    given = {
+        "radius_m": args.radius,
+        "point_m": None if args.point is None else np.array(args.point),
+        "sensor_sigma_m": args.sensor_sigma,
+        "robot_sigma_t_m": args.robot_sigma_t,
+        "robot_sigma_r_rad": args.robot_sigma_r,
+        "min_samples": args.min_samples,
+        "initial": initial,
+    }
+    target = get_target(args.target)
+    settings = {name: value for name, value in given.items() if value is not None}
     return PipelineConfig(
         method=Method(args.method),
-        target=Target(args.target),
-        known_point=None if args.point is None else np.array(args.point),
-        radius_m=args.radius,
+        target=target.name,
+        target_config=configure(target, args.method, settings, SETTING_FLAGS),
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
             clock_offset_s=0.0 if args.clock_offset in (None, "auto") else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
-        ),
-        refine=RefineConfig(
-            sensor_sigma_m=args.sensor_sigma,
-            robot_sigma_t_m=args.robot_sigma_t,
-            robot_sigma_r_rad=args.robot_sigma_r,
         ),
         initial_T_flange_sensor=initial,
     )
@@ -350,6 +384,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
             pose_source=source,
+            base_frame=args.base_frame,
+            invalid_values_m=tuple(args.invalid_value),
             joint_state_topic=args.joint_state_topic,
             model=model,
         )
@@ -357,8 +393,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         raise PairingError(
             f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
-    truth_path = Path(args.bag) / "truth.yaml"
-    truth = read_truth_yaml(truth_path) if truth_path.is_file() else None
+    truth, note = truth_beside(args.bag)
+    if note:
+        print(note, file=sys.stderr)
     written = []
     if args.output is not None:
         written.append(write_result_yaml(run.result, args.output))
@@ -397,26 +434,8 @@ def _pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel |
         )
     if args.kinematics is None:
         return source, None
-    return source, load_model(args.kinematics, flange_frame=args.flange_frame or "tool0")
-
-
-def _add_pose_source_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--pose-source",
-        choices=[s.value for s in PoseSource],
-        default=PoseSource.POSE.value,
-        help="flange poses from the PoseStamped topic (pose, default) or from "
-        "sensor_msgs/JointState through the robot model (joint_states, needs --kinematics)",
-    )
-    parser.add_argument(
-        "--kinematics",
-        metavar="MODEL",
-        help="robot model of the joint_states pose source: ur5e, ur10e or a URDF file "
-        "(chain base_link to --flange-frame)",
-    )
-    parser.add_argument(
-        "--joint-state-topic",
-        help="JointState topic (default /joint_states, else the only JointState topic)",
+    return source, load_model(
+        args.kinematics, base_frame=args.base_frame, flange_frame=args.flange_frame
     )
 
 
@@ -480,7 +499,9 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
             profile_topic=args.profile_topic,
             pose_topic=args.pose_topic,
             joint_state_topic=args.joint_state_topic,
+            base_frame=args.base_frame,
             flange_frame=args.flange_frame,
+            invalid_values_m=tuple(args.invalid_value),
         )
     except PairingError as exc:
         raise PairingError(
@@ -521,6 +542,16 @@ def _input_line(run: OfflineRun) -> str:
     )
 
 
+# --- export ---------------------------------------------------------------------------------
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from linelaser_calib.export import ExportFormat, export_text
+
+    print(export_text(read_result_yaml(args.result), ExportFormat(args.format)))
+    return 0
+
+
 # --- demo -----------------------------------------------------------------------------------
 
 
@@ -531,27 +562,32 @@ def _cmd_demo(args: argparse.Namespace) -> int:
         raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
     rows = []
     for bag in bags:
-        truth = read_truth_yaml(bag / "truth.yaml")
+        truth, note = truth_beside(bag)
+        if truth is None:
+            print(note or f"{bag} has no truth.yaml; skipped", file=sys.stderr)
+            continue
+        target = get_target(truth.target.key)
+        settings: dict[str, object] = {}
+        initial = None
+        label = target.title
+        if (bag / "initial.yaml").is_file():
+            initial = read_result_yaml(bag / "initial.yaml")
+            settings = {**initial.target.given_settings(), "initial": initial.T_flange_sensor}
+            label += ", from initial.yaml"
+            rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
+            rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
         for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(method=method, seed=args.seed)
-            target = "cylinder"
-            if truth.known_point is not None:
-                initial = read_result_yaml(bag / "initial.yaml")
-                taught = None if initial.known_point is None else initial.known_point.point
-                config = replace(
-                    config,
-                    target=Target.KNOWN_POINT,
-                    known_point=taught,
-                    initial_T_flange_sensor=initial.T_flange_sensor,
-                )
-                target = "known point, from initial.yaml"
-                if method is Method.PAPER:
-                    rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
-                    rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+            config = PipelineConfig(
+                method=method,
+                target=target.name,
+                target_config=configure(target, method.value, settings, SETTING_FLAGS),
+                seed=args.seed,
+                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+            )
             started = time.perf_counter()
             run = calibrate_bag(bag, config)
             seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({target}), method {method.value} ({seconds:.2f} s) ===")
+            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
             print(format_summary(run.result, truth))
             print()
             rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
@@ -565,8 +601,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 # --- parser ---------------------------------------------------------------------------------
 
-#: Numeric options of ``calibrate`` for the pairing gate and the default method's priors:
-#: (flag, parser, default, help).
+#: Numeric options of ``calibrate`` for the pairing gate: (flag, parser, default, help).
 CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = (
     (
         "--max-speed",
@@ -581,23 +616,39 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
         PairingConfig.max_angular_speed_rad_s,
         "reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
     ),
+)
+
+#: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
+#: one the target or method does not use is refused): (flag, parser, help).
+TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
+    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
+    (
+        "--point",
+        _xyz,
+        "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
     (
         "--sensor-sigma",
         _positive_float,
-        RefineConfig.sensor_sigma_m,
-        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals)",
+        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals; "
+        "cylinder default 5 um)",
     ),
     (
         "--robot-sigma-t",
         _positive_float,
-        RefineConfig.robot_sigma_t_m,
-        "robot pose error per pose, 1 sigma per axis, m (default: UR-class 0.1 mm)",
+        "robot pose error per pose, 1 sigma per axis, m (default method; cylinder default "
+        "0.1 mm, known_point 0.05 mm)",
     ),
     (
         "--robot-sigma-r",
         _positive_float,
-        RefineConfig.robot_sigma_r_rad,
-        "robot orientation error per pose, 1 sigma per axis, rad (default 0.01 deg)",
+        "robot orientation error per pose, 1 sigma per axis, rad (default method; cylinder "
+        "default 0.01 deg, known_point 0.005 deg)",
+    ),
+    (
+        "--min-samples",
+        _min_samples,
+        "fewest samples with a usable feature (ellipse, corner, ...); default the target's",
     ),
 )
 
@@ -606,11 +657,61 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
 PAIRING_FLAGS = ("--max-speed", "--max-angular-speed")
 
 
+def _sentinel(text: str) -> float:
+    """Parse a sentinel depth, m (finite)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a depth in metres, got {text!r}") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(
+            f"NaN and +-Inf are always no return; give a finite depth, got {text!r}"
+        )
+    return value
+
+
+def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
+    """Where the flange poses come from, the frames, and the profiler's no-return value."""
+    cal.add_argument(
+        "--pose-source",
+        choices=[s.value for s in PoseSource],
+        default=PoseSource.POSE.value,
+        help="flange poses from a PoseStamped topic (pose, default), from the /tf + "
+        "/tf_static chain --base-frame -> --flange-frame (tf), or from sensor_msgs/JointState "
+        "through the robot model (joint_states, needs --kinematics)",
+    )
+    cal.add_argument(
+        "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
+    )
+    cal.add_argument(
+        "--flange-frame", default="tool0", help="frame id of the flange (end of the TF chain)"
+    )
+    cal.add_argument(
+        "--kinematics",
+        metavar="MODEL",
+        help="robot model of the joint_states pose source: ur5e, ur10e or a URDF file "
+        "(chain --base-frame to --flange-frame)",
+    )
+    cal.add_argument(
+        "--joint-state-topic",
+        help="JointState topic (default /joint_states, else the only JointState topic)",
+    )
+    cal.add_argument(
+        "--invalid-value",
+        type=_sentinel,
+        action="append",
+        default=[],
+        metavar="M",
+        help="a depth z, m, that the profiler sends for no return besides NaN/Inf, e.g. "
+        "-0.999999 (Keyence's -999.999 mm) or 0; repeat for several",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="Hand-eye calibration of a line-laser profile sensor from cylinder scans.",
+        description="Hand-eye calibration of a line-laser profile sensor from scans of a target.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -638,6 +739,11 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_false",
         help="dense profiles, invalid rays dropped",
     )
+    sim.add_argument(
+        "--tf",
+        action="store_true",
+        help="also write the flange poses as a /tf chain (UR-like links) with /tf_static",
+    )
     sim.set_defaults(func=_cmd_simulate)
 
     info = sub.add_parser("info", help="print what a bag holds")
@@ -648,20 +754,14 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
     cal.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
     cal.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
-    cal.add_argument(
-        "--radius", type=_positive_float, help="cylinder radius, m (default: estimate)"
-    )
     cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
     cal.add_argument(
         "--target",
-        choices=[t.value for t in Target],
-        default=Target.CYLINDER.value,
-        help="cylinder (default), or known_point: one fixed point such as a weld-seam corner",
-    )
-    cal.add_argument(
-        "--point",
-        type=_xyz,
-        help="known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+        choices=target_names(),
+        default=DEFAULT_TARGET,
+        help="what was scanned: "
+        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
+        + f" (default {DEFAULT_TARGET})",
     )
     cal.add_argument("--output", help="result YAML to write (its directory must exist)")
     cal.add_argument(
@@ -674,7 +774,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    cal.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     _add_pairing_arguments(
         cal,
@@ -684,7 +788,8 @@ def build_parser() -> argparse.ArgumentParser:
     for flag, parse, default, text in CALIBRATE_NUMBERS:
         if flag not in PAIRING_FLAGS:
             cal.add_argument(flag, type=parse, default=default, help=text)
-    cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
+    for flag, parse_setting, text in TARGET_OPTIONS:
+        cal.add_argument(flag, type=parse_setting, default=None, help=text)
     _add_pose_source_arguments(cal)
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(
@@ -714,14 +819,21 @@ def build_parser() -> argparse.ArgumentParser:
         rec,
         "added to profile stamps to reach the pose clock, s (default: the calibration's)",
     )
-    rec.add_argument(
-        "--flange-frame",
-        default=None,
-        help="frame id of the flange (checked against the calibration's; default tool0 for "
-        "a URDF model)",
-    )
     _add_pose_source_arguments(rec)
     rec.set_defaults(func=_cmd_reconstruct)
+
+    export = sub.add_parser(
+        "export", help="print a result as a URDF joint, a static TF command or a launch file"
+    )
+    export.add_argument("result", help="result YAML written by calibrate")
+    export.add_argument(
+        "--format",
+        choices=["urdf", "static-tf", "launch"],
+        required=True,
+        help="urdf: a fixed <joint>; static-tf: the static_transform_publisher command line; "
+        "launch: a Python launch file publishing it",
+    )
+    export.set_defaults(func=_cmd_export)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
     demo.add_argument("bags", nargs="?", default="bags")

@@ -7,16 +7,17 @@ from pathlib import Path
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.kinematics import KinematicModel
-from linelaser_calib.core.pipeline import (
-    PipelineConfig,
-    Progress,
-    estimate_clock_offset,
-    run_pipeline,
-)
+from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
 from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.targets.base import Progress
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import BagContents, read_bag
-from linelaser_calib.io.pose_sources import POSE_SOURCES, FlangePoses, PoseRequest
+from linelaser_calib.io.pose_sources import (
+    POSE_SOURCES,
+    FlangePoses,
+    PoseRequest,
+    refuse_pose_topic,
+)
 
 
 @dataclass
@@ -42,10 +43,12 @@ def calibrate_bag(
     estimate_offset: bool = False,
     progress: Progress = _silent,
     pose_source: PoseSource = PoseSource.POSE,
+    base_frame: str = "base_link",
+    invalid_values_m: tuple[float, ...] = (),
     joint_state_topic: str | None = None,
     model: KinematicModel | None = None,
 ) -> OfflineRun:
-    """Calibrate from a bag holding profiles (PointCloud2) and flange poses.
+    """Calibrate from a bag holding profiles (PointCloud2) and flange poses (any source).
 
     Parameters
     ----------
@@ -55,7 +58,7 @@ def calibrate_bag(
     profile_topic, pose_topic : str, optional
         Auto-detected by message type when there is exactly one topic of each type.
     flange_frame : str
-        Frame id of the flange (PoseStamped does not carry it).
+        Frame id of the flange (PoseStamped does not carry it; the end of the TF chain).
     estimate_offset : bool
         Estimate the clock offset between profile and pose stamps (continuous scanning,
         :func:`~linelaser_calib.core.pipeline.estimate_clock_offset`), starting from the
@@ -64,6 +67,11 @@ def calibrate_bag(
         Called as ``progress(stage, done, total)``.
     pose_source : PoseSource
         Where the flange poses come from (:data:`~linelaser_calib.io.pose_sources.POSE_SOURCES`).
+    base_frame : str
+        The robot base frame: the start of the TF chain; with PoseStamped poses in another
+        frame (UR's ``base``) a warning says what that means.
+    invalid_values_m : tuple of float
+        Depths z, m, that the profiler sends for no return, besides NaN and +-Inf.
     joint_state_topic : str, optional
     model : KinematicModel, optional
         The robot model of the ``joint_states`` source.
@@ -74,19 +82,21 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
-    if pose_source is not PoseSource.POSE and pose_topic is not None:
-        raise InputError(
-            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
-            f"--pose-source {pose_source.value}: drop --pose-topic, or use --pose-source pose"
-        )
+    refuse_pose_topic(pose_source, pose_topic)
     bag = read_bag(
         path,
         profile_topic=profile_topic,
         pose_topic=pose_topic,
         progress=lambda done, total: progress("reading", done, total),
         read_poses=pose_source is PoseSource.POSE,
+        invalid_values_m=invalid_values_m,
     )
-    flange_poses = POSE_SOURCES[pose_source](bag, PoseRequest(model, joint_state_topic))
+    flange_poses = POSE_SOURCES[pose_source](
+        bag,
+        PoseRequest(
+            base_frame, flange_frame, config.pairing.sync_tolerance_s, model, joint_state_topic
+        ),
+    )
     if all(len(p.points) == 0 for p in bag.profiles):
         raise InputError(
             f"all {len(bag.profiles)} profiles on {bag.profile_topic} in {bag.path} are empty "
@@ -104,6 +114,7 @@ def calibrate_bag(
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame
     result.base_frame = flange_poses.base_frame
+    result.warnings.extend(flange_poses.warnings)
     if bag.skipped:
         reasons = sorted({s.reason for s in bag.skipped})
         result.warnings.append(

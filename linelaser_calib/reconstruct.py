@@ -23,7 +23,12 @@ from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.types import CalibrationResult, FloatArray, Rejection
 from linelaser_calib.io.bags import BagContents, read_bag, read_profile_intensities
 from linelaser_calib.io.kinematics import load_model
-from linelaser_calib.io.pose_sources import POSE_SOURCES, FlangePoses, PoseRequest
+from linelaser_calib.io.pose_sources import (
+    POSE_SOURCES,
+    FlangePoses,
+    PoseRequest,
+    refuse_pose_topic,
+)
 
 
 @dataclass(frozen=True)
@@ -98,7 +103,9 @@ def reconstruct_bag(
     profile_topic: str | None = None,
     pose_topic: str | None = None,
     joint_state_topic: str | None = None,
-    flange_frame: str | None = None,
+    base_frame: str = "base_link",
+    flange_frame: str = "tool0",
+    invalid_values_m: tuple[float, ...] = (),
 ) -> Reconstruction:
     """Map every profile of a recording into the base frame with a calibration.
 
@@ -117,9 +124,11 @@ def reconstruct_bag(
     model : KinematicModel, optional
         The robot model of the ``joint_states`` source.
     profile_topic, pose_topic, joint_state_topic : str, optional
-    flange_frame : str, optional
-        The recording's flange frame, checked against the calibration's (default: the
-        model's flange frame with joint states, else not checked).
+    base_frame, flange_frame : str
+        The ends of the ``tf`` chain; with ``tf`` or joint states the flange frame is
+        checked against the calibration's.
+    invalid_values_m : tuple of float
+        Depths z, m, that the profiler sends for no return, besides NaN and +-Inf.
 
     Raises
     ------
@@ -135,21 +144,24 @@ def reconstruct_bag(
             )
         base = model if model is not None else load_model(kinematics.model)
         model, pose_source = kinematics.apply(base), PoseSource.JOINT_STATES
-    if pose_source is not PoseSource.POSE and pose_topic is not None:
-        raise InputError(
-            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
-            f"--pose-source {pose_source.value}: drop --pose-topic, or use --pose-source pose"
-        )
+    refuse_pose_topic(pose_source, pose_topic)
     bag = read_bag(
         path,
         profile_topic=profile_topic,
         pose_topic=pose_topic,
         read_poses=pose_source is PoseSource.POSE,
+        invalid_values_m=invalid_values_m,
     )
-    poses = POSE_SOURCES[pose_source](bag, PoseRequest(model, joint_state_topic))
-    if flange_frame is None and model is not None and pose_source is PoseSource.JOINT_STATES:
-        flange_frame = model.flange_frame
-    _check_frames(calibration, bag.sensor_frame, poses.base_frame, flange_frame or "", bag.path)
+    request = PoseRequest(
+        base_frame, flange_frame, pairing.sync_tolerance_s, model, joint_state_topic
+    )
+    poses = POSE_SOURCES[pose_source](bag, request)
+    flange = ""  # a PoseStamped does not name the flange
+    if pose_source is PoseSource.TF:
+        flange = flange_frame
+    elif pose_source is PoseSource.JOINT_STATES and model is not None:
+        flange = model.flange_frame
+    _check_frames(calibration, bag.sensor_frame, poses.base_frame, flange, bag.path)
     paired = pair_profiles(bag.profiles, poses.poses, pairing)
     if not paired.samples:
         raise PairingError(paired.explain_nothing_paired(pairing))

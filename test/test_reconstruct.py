@@ -13,6 +13,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.io.ply import read_ply, write_ply
 from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
 from msg_adapters import points_from_pointcloud2
@@ -54,8 +55,9 @@ def true_calibration(
 
 
 def surface_distances_m(bag: Path, points: np.ndarray) -> np.ndarray:
-    cylinder = read_truth_yaml(bag / "truth.yaml").cylinder
-    assert cylinder is not None
+    section = read_truth_yaml(bag / "truth.yaml").target
+    assert isinstance(section, CylinderSection)
+    cylinder = section.cylinder
     above = points[points[:, 2] > ABOVE_TABLE_M]
     v = above - cylinder.point
     radial = v - np.outer(v @ cylinder.direction, cylinder.direction)

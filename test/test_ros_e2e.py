@@ -33,6 +33,8 @@ from ros_helpers import (
 from visualization_msgs.msg import MarkerArray
 
 from linelaser_calib.core.geometry import transform_error, transform_from_rotvec_translation
+from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.targets.known_point import KnownPoint
 from linelaser_calib.core.types import Cylinder, FlangePose
 from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
 from linelaser_calib.nodes.collection import SKIP_NOT_CAPTURED
@@ -97,7 +99,7 @@ def committed_replay() -> Replay:
     bags = [
         bag
         for bag, truth in truths.items()
-        if truth.cylinder is not None and "kinematics" not in truth.raw
+        if isinstance(truth.target, CylinderSection) and "kinematics" not in truth.raw
     ]
     assert bags, "no committed cylinder bag with truth.yaml under bags/"
 
@@ -111,8 +113,8 @@ def committed_replay() -> Replay:
         contents.profiles, contents.poses, contents.sensor_frame, contents.base_frame
     )
     truth = truths[bag]
-    assert truth.cylinder is not None
-    return Replay(recording, truth.T_flange_sensor, truth.cylinder)
+    assert isinstance(truth.target, CylinderSection)
+    return Replay(recording, truth.T_flange_sensor, truth.target.cylinder)
 
 
 @dataclass
@@ -303,8 +305,8 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     contents = read_bag(WELD_BAG)
     initial = read_result_yaml(WELD_BAG / "initial.yaml")
     truth = read_truth_yaml(WELD_BAG / "truth.yaml")
-    assert initial.known_point is not None
-    taught = initial.known_point.point
+    assert isinstance(initial.target, KnownPoint)
+    taught = initial.target.point
     graph.collector(*params(reliable_inputs=True, target="known_point"))
     graph.service(
         *params(
@@ -337,9 +339,9 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     )
     written = read_result_yaml(graph.tmp / "hand_eye.yaml")
     assert max(transform_error(written.T_flange_sensor, T)) < 1e-6
-    assert written.cylinder is None and written.known_point is not None
-    assert not written.known_point.estimated
-    np.testing.assert_allclose(written.known_point.point, taught, atol=1e-12)
+    assert isinstance(written.target, KnownPoint)
+    assert not written.target.estimated
+    np.testing.assert_allclose(written.target.point, taught, atol=1e-12)
     markers = probe.latched(MarkerArray, "linelaser_calib/markers")
     (sphere,) = [m for m in markers.markers if m.ns == "known_point"]
     assert sphere.type == sphere.SPHERE_LIST and sphere.header.frame_id == contents.base_frame

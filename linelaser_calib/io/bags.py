@@ -40,14 +40,16 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
+from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
 from linelaser_calib.core.kinematics import JointStates
+from linelaser_calib.core.tf import StampedTransform
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io.errors import BagError
 from msg_adapters import (
@@ -61,12 +63,16 @@ from msg_adapters import (
     profile_from_pointcloud2,
     rosbags_types,
     stamp_ns_from_msg,
+    transform_stamped_from_matrix,
 )
 from msg_adapters.message_types import NS_PER_S
 
 PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+TF_TOPIC = "/tf"
+TF_STATIC_TOPIC = "/tf_static"
 #: File in a session directory that marks it as one (see :class:`SessionBagWriter`).
 SESSION_MARKER = "linelaser_calib_session.txt"
 _SAMPLE_PREFIX = "sample_"
@@ -164,8 +170,36 @@ class BagInfo:
 
 @functools.cache
 def _typestore() -> Typestore:
-    """The ROS 2 Jazzy typestore that serialises and deserialises every message."""
+    """The ROS 2 Jazzy typestore that serialises every message written."""
     return get_typestore(Stores.ROS2_JAZZY)
+
+
+@functools.cache
+def _store_from_definitions(definitions: tuple[tuple[str, str], ...]) -> Typestore:
+    """A typestore of just the given (type, ``.msg`` definition) pairs and their fields."""
+    store = get_typestore(Stores.EMPTY)
+    for msgtype, text in definitions:
+        store.register(get_types_from_msg(text, msgtype))
+    return store
+
+
+def _reading_store(connections: Sequence[Connection]) -> Typestore:
+    """The typestore that decodes the messages of ``connections``.
+
+    Built from the message definitions the recording carries (rosbag2 >= 8, MCAP) when each
+    connection has one in ``.msg`` form: ~30 ms, against ~0.25 s for every type of Jazzy
+    (:func:`_typestore`, the fallback), which would be most of a calibration's start-up.
+    """
+    definitions = set()
+    for connection in connections:
+        msgdef = connection.msgdef
+        if msgdef is None or msgdef.format != MessageDefinitionFormat.MSG or not msgdef.data:
+            return _typestore()
+        definitions.add((connection.msgtype, msgdef.data))
+    try:
+        return _store_from_definitions(tuple(sorted(definitions)))
+    except TypesysError:  # a definition rosbags cannot parse, or two that disagree
+        return _typestore()
 
 
 def _fsync_tree(directory: Path) -> None:
@@ -195,6 +229,24 @@ class _ProfilePoseWriter:
         self._profiles = writer.add_connection(profile_topic, PROFILE_TYPE, typestore=store)
         self._poses = writer.add_connection(pose_topic, POSE_TYPE, typestore=store)
         self._joint_states: dict[str, Any] = {}
+        self._tf: dict[str, Any] = {}
+
+    def write_transforms(
+        self, topic: str, stamp_ns: int, transforms: Sequence[StampedTransform]
+    ) -> None:
+        """One ``tf2_msgs/msg/TFMessage`` holding ``transforms`` on ``topic``."""
+        store = _typestore()
+        if topic not in self._tf:
+            self._tf[topic] = self._writer.add_connection(topic, TF_TYPE, typestore=store)
+        msg = self._types(TF_TYPE)(
+            transforms=[
+                transform_stamped_from_matrix(
+                    t.T_parent_child, t.stamp_ns, t.parent, t.child, types=self._types
+                )
+                for t in transforms
+            ]
+        )
+        self._writer.write(self._tf[topic], stamp_ns, store.serialize_cdr(msg, TF_TYPE))
 
     def write_profile(
         self,
@@ -281,6 +333,8 @@ def write_bag(
     padding_bytes: int = 0,
     joint_states: JointStates | None = None,
     joint_state_topic: str = "/joint_states",
+    tf: Sequence[StampedTransform] = (),
+    tf_static: Sequence[StampedTransform] = (),
 ) -> Path:
     """Write profiles and flange poses to a new rosbag2 MCAP bag, in stamp order.
 
@@ -301,6 +355,9 @@ def write_bag(
         Per-profile intensity field (float32 in the message).
     padding_bytes : int
         Unused bytes per point, as some drivers send.
+    tf, tf_static : sequence of StampedTransform
+        Transforms for ``/tf`` (one ``TFMessage`` per stamp, as robot_state_publisher
+        sends) and ``/tf_static`` (one message, logged with the first message of the bag).
     joint_states : JointStates, optional
         Joint states to write as ``sensor_msgs/msg/JointState`` on ``joint_state_topic``.
     joint_state_topic : str
@@ -322,17 +379,25 @@ def write_bag(
         intensities = [None] * len(profiles)
     if len(intensities) != len(profiles):
         raise InputError(f"{len(intensities)} intensity arrays given for {len(profiles)} profiles")
+    tf_by_stamp: dict[int, list[StampedTransform]] = {}
+    for transform in tf:
+        tf_by_stamp.setdefault(transform.stamp_ns, []).append(transform)
     joints = [] if joint_states is None else list(enumerate(joint_states.stamps_ns))
     events = sorted(
         [(pose.stamp_ns, 0, i) for i, pose in enumerate(poses)]
         + [(profile.stamp_ns, 1, i) for i, profile in enumerate(profiles)]
-        + [(int(stamp), 2, i) for i, stamp in joints]
+        + [(stamp, 2, 0) for stamp in tf_by_stamp]
+        + [(int(stamp), 3, i) for i, stamp in joints]
     )
     with _new_bag(path, profile_topic, pose_topic) as bag:
-        for stamp_ns, kind, i in events:
-            if kind == 2 and joint_states is not None:
+        if tf_static and events:
+            bag.write_transforms(TF_STATIC_TOPIC, events[0][0], tf_static)
+        for stamp, kind, i in events:
+            if kind == 2:
+                bag.write_transforms(TF_TOPIC, stamp, tf_by_stamp[stamp])
+            elif kind == 3 and joint_states is not None:
                 bag.write_joint_state(
-                    joint_state_topic, stamp_ns, joint_states.names, joint_states.positions[i]
+                    joint_state_topic, stamp, joint_states.names, joint_states.positions[i]
                 )
             elif kind == 0:
                 pose = poses[i]
@@ -581,19 +646,19 @@ def _raw_messages(
         yield item
 
 
-def _decode(topic: str, msgtype: str, log_ns: int, raw: Any) -> Any:
+def _decode(store: Typestore, topic: str, msgtype: str, log_ns: int, raw: Any) -> Any:
     """Deserialise one message; undecodable bytes become a :class:`SkippedMessage`."""
     try:
-        return _typestore().deserialize_cdr(raw, msgtype)
+        return store.deserialize_cdr(raw, msgtype)
     # Corrupt message bytes make the deserialiser raise various errors; skip the message.
     except Exception as err:
         return SkippedMessage(topic, log_ns, f"cannot decode the message: {err}")
 
 
-def _profile(topic: str, msg: Any) -> Profile | SkippedMessage:
+def _profile(topic: str, msg: Any, invalid_values_m: Sequence[float]) -> Profile | SkippedMessage:
     """Profile of a decoded PointCloud2; a malformed one becomes a :class:`SkippedMessage`."""
     try:
-        return profile_from_pointcloud2(msg)
+        return profile_from_pointcloud2(msg, invalid_values_m=invalid_values_m)
     except MessageError as err:
         return SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err))
 
@@ -690,7 +755,7 @@ def _flange_poses(
         if good[k]:
             out.append(FlangePose(int(records.stamps_ns[k]), T[k], records.frame_ids[k]))
             continue
-        msg = _decode(topic, POSE_TYPE, log_ns[k], raws[k])
+        msg = _decode(_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
         if isinstance(msg, SkippedMessage):
             out.append(msg)
             continue
@@ -708,6 +773,7 @@ def read_bag(
     pose_topic: str | None = None,
     progress: Progress | None = None,
     read_poses: bool = True,
+    invalid_values_m: Sequence[float] = (),
 ) -> BagContents:
     """Read the profiles and flange poses of a bag (or a :class:`SessionBagWriter` session).
 
@@ -722,7 +788,11 @@ def read_bag(
         Called after each message of the two topics.
     read_poses : bool
         False: read the profiles only (the flange poses come from another source, e.g.
-        joint states); ``poses`` is then empty and ``pose_topic`` and ``base_frame`` are ''.
+        ``/tf`` or joint states); ``poses`` is then empty and ``pose_topic`` and
+        ``base_frame`` are ''.
+    invalid_values_m : sequence of float
+        Depths z, m, that mark a point as no return besides NaN and +-Inf (driver
+        sentinels such as -0.999999 for Keyence's -999.999 mm, or 0).
 
     Returns
     -------
@@ -758,11 +828,14 @@ def read_bag(
     for part in parts:
         with _open_part(part, bag) as reader:
             connections = [c for c in reader.connections if (c.topic, c.msgtype) in wanted]
+            store = _reading_store(connections)
             for conn, log_ns, raw in _raw_messages(reader, connections, bag, part):
                 if conn.msgtype == PROFILE_TYPE:
-                    msg = _decode(conn.topic, conn.msgtype, log_ns, raw)
+                    msg = _decode(store, conn.topic, conn.msgtype, log_ns, raw)
                     decoded.append(
-                        msg if isinstance(msg, SkippedMessage) else _profile(conn.topic, msg)
+                        msg
+                        if isinstance(msg, SkippedMessage)
+                        else _profile(conn.topic, msg, invalid_values_m)
                     )
                 else:
                     decoded.append(None)
@@ -837,8 +910,9 @@ def _decoded_messages(bag: Path, parts: Sequence[Path], topic: str, msgtype: str
             connections = [
                 c for c in reader.connections if (c.topic, c.msgtype) == (topic, msgtype)
             ]
+            store = _reading_store(connections)
             for _, log_ns, raw in _raw_messages(reader, connections, bag, part):
-                msg = _decode(topic, msgtype, log_ns, raw)
+                msg = _decode(store, topic, msgtype, log_ns, raw)
                 if not isinstance(msg, SkippedMessage):
                     yield msg
 

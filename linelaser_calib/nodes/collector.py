@@ -47,7 +47,11 @@ from std_srvs.srv import Trigger
 
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import PipelineConfig, Target, validate_sample
+from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
+from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
+from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.tf import base_frame_warning
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter, read_bag
 from linelaser_calib.io.bags import SESSION_MARKER
@@ -68,6 +72,7 @@ from linelaser_calib.nodes.common import (
     latched_qos,
     run_node,
 )
+from linelaser_calib.nodes.tf_input import TfPoseInput
 from msg_adapters import (
     MessageError,
     flange_pose_from_pose_stamped,
@@ -85,10 +90,10 @@ _COLLECTOR = CollectorConfig()
 PARAMETERS = (
     ParamSpec(
         "target",
-        Target.CYLINDER.value,
-        "What the profiles scan, which decides how each is validated: cylinder (an elliptical "
-        "arc) or known_point (a V-shaped weld seam whose corner is the fixed point).",
-        choices=tuple(t.value for t in Target),
+        DEFAULT_TARGET,
+        "What the profiles scan, which decides how each is validated (the target's feature "
+        "fit): a registered target's name (cylinder, known_point, ...; `linelaser-calib "
+        "calibrate --help` lists them).",
         read_only=True,
     ),
     ParamSpec(
@@ -104,6 +109,35 @@ PARAMETERS = (
         False,
         "Subscribe profile and flange_pose with reliable QoS (nothing lost, needs reliable "
         "publishers) instead of best effort (sensor-data QoS, matches any publisher).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "pose_source",
+        PoseSource.POSE.value,
+        "Where flange poses come from: pose (geometry_msgs/PoseStamped on flange_pose) or tf "
+        "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs).",
+        choices=tuple(s.value for s in PoseSource),
+        read_only=True,
+    ),
+    ParamSpec(
+        "base_frame",
+        "base_link",
+        "Robot base frame: start of the TF chain (pose_source tf); with PoseStamped poses in "
+        "UR's 'base' instead, a warning says what that means.",
+        read_only=True,
+    ),
+    ParamSpec(
+        "flange_frame",
+        "tool0",
+        "Flange frame: end of the TF chain (pose_source tf).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "invalid_values_m",
+        (),
+        "Depths z, m, that the profiler sends for no return besides NaN and +-Inf, e.g. "
+        "[-0.999999] (Keyence's -999.999 mm) or [0.0].",
+        sizes=tuple(range(9)),
         read_only=True,
     ),
     ParamSpec(
@@ -168,7 +202,7 @@ PARAMETERS = (
         "radius",
         0.0,
         "Cylinder radius, m, checked against each profile's ellipse; 0 accepts any radius "
-        "(cylinder target only).",
+        "(cylinder target; refused by the others).",
         bounds=(0.0, 1.0),
         read_only=True,
     ),
@@ -279,9 +313,11 @@ class CollectorNode(Node):
             )
         except ValueError as err:
             raise InputError(f"invalid collector parameters: {err}") from err
+        target = get_target(p["target"])
+        settings = {"radius_m": float(p["radius"])} if p["radius"] else {}
         self._pipeline = PipelineConfig(
-            target=Target(p["target"]),
-            radius_m=p["radius"] or None,
+            target=target.name,
+            target_config=configure(target, Method.DEFAULT.value, settings, {"radius_m": "radius"}),
             seed=p["seed"],
             pairing=pairing,
         )
@@ -305,7 +341,22 @@ class CollectorNode(Node):
         )
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         qos = input_qos(bool(p["reliable_inputs"]))
+        self._invalid_values_m = tuple(p["invalid_values_m"] or ())
+        self._base_frame = str(p["base_frame"])
+        self._base_frame_warned = False
         self._profile_sub = self.create_subscription(PointCloud2, "profile", self._on_profile, qos)
+        self._tf_input = None
+        if PoseSource(p["pose_source"]) is PoseSource.TF:
+            self._tf_input = TfPoseInput(
+                self,
+                self._base_frame,
+                str(p["flange_frame"]),
+                pairing.sync_tolerance_s,
+                config.pose_window_s,
+                qos,
+                self._add_pose,
+                self._reject_pose,
+            )
         self._pose_sub = self.create_subscription(PoseStamped, "flange_pose", self._on_pose, qos)
         # Its own group: while a capture waits, the default group (inputs, timers) runs on.
         self.create_service(
@@ -323,7 +374,7 @@ class CollectorNode(Node):
         self._validator = threading.Thread(target=self._validate_loop, name="validation")
         self._validator.start()
         self.get_logger().info(
-            f"collecting in {config.mode.value} mode (target {self._pipeline.target.value}) "
+            f"collecting in {config.mode.value} mode (target {self._pipeline.target}) "
             f"from {self._profile_sub.topic_name} and {self._pose_sub.topic_name} into "
             f"{self._session.path}"
         )
@@ -390,7 +441,7 @@ class CollectorNode(Node):
     def _on_profile(self, msg: PointCloud2) -> None:
         now = time.monotonic()
         try:
-            profile = profile_from_pointcloud2(msg)
+            profile = profile_from_pointcloud2(msg, invalid_values_m=self._invalid_values_m)
         except MessageError as err:
             with self._collector.lock:
                 self._collector.reject_profile(str(err))
@@ -402,13 +453,25 @@ class CollectorNode(Node):
             self._work.set()
 
     def _on_pose(self, msg: PoseStamped) -> None:
-        now = time.monotonic()
+        if self._tf_input is not None:  # pose_source tf: the poses come from /tf only
+            return
         try:
             pose = flange_pose_from_pose_stamped(msg)
         except MessageError as err:
-            with self._collector.lock:
-                self._collector.reject_pose(str(err))
+            self._reject_pose(str(err))
             return
+        warning = base_frame_warning(pose.frame_id, self._base_frame)
+        if warning is not None and not self._base_frame_warned:
+            self._base_frame_warned = True
+            self.get_logger().warning(warning)
+        self._add_pose(pose)
+
+    def _reject_pose(self, reason: str) -> None:
+        with self._collector.lock:
+            self._collector.reject_pose(reason)
+
+    def _add_pose(self, pose: FlangePose) -> None:
+        now = time.monotonic()
         with self._collector.lock:
             self._collector.add_pose(pose, now)
             work = self._collector.has_work

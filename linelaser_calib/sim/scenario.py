@@ -10,7 +10,7 @@ in each field name or its description. Degrees appear only in descriptions, labe
 Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
 
 ``paper``
-    The simulation of the cylinder paper, §4.1.1 (``papers.md`` §A): axis through
+    The simulation of the cylinder paper, §4.1.1: axis through
     (1, 1, 1) mm with direction (3, 1, 1)/√11 (a 200 mm long cylinder centred there), Ø40 mm;
     true hand-eye eq. 17 (its printed rotation is orthonormal to ~4 digits only and is
     projected to SO(3) by SVD; translation (150, 200, 250) mm); 50 step-and-shoot poses,

@@ -4,7 +4,7 @@ The target (``v_groove``) is two half-planes (the flanks) meeting along a straig
 laser plane crosses the seam, so every profile is a V whose corner is the seam point in the
 plane. The user has taught the weld point (a point on the seam) with the tool tip and scans
 it from several flange poses, each aimed so that the laser line passes through it (weld-seam
-paper §2.3, ``papers.md`` §B).
+paper §2.3).
 
 :class:`WeldScenario` holds the weld geometry and the view pattern and, in its ``rig`` field,
 an ordinary :class:`~linelaser_calib.sim.scenario.Scenario` for everything else: profiler
