@@ -150,6 +150,7 @@ def simulate_to_bag(
     )
 
     weld = scenario_name in WELD_PRESETS
+    arm, joint_states = None, None  # only the cylinder scenes simulate an arm's joints
     if weld:
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
@@ -173,10 +174,10 @@ def simulate_to_bag(
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
         target = CylinderSection(data.truth.cylinder)
+        arm, joint_states = data.truth.arm, data.joint_states
     tf_dynamic, tf_static = (
         ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
     )
-    arm = None if weld else data.truth.arm
     write_bag(
         out,
         profiles,
@@ -189,7 +190,7 @@ def simulate_to_bag(
         intensities=intensities if scenario.intensity else None,
         tf=tf_dynamic,
         tf_static=tf_static,
-        joint_states=None if weld else data.joint_states,
+        joint_states=joint_states,
         joint_state_topic=scenario.joint_state_topic,
     )
     simulation: dict[str, object] = {
