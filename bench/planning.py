@@ -29,6 +29,7 @@ Run from the repository root (not part of the test suite)::
 
     .venv/bin/python bench/planning.py                # 20 seeds, 50 scenes
     .venv/bin/python bench/planning.py --quick        # 4 seeds, 8 scenes
+    .venv/bin/python bench/planning.py --only sphere --figures /tmp   # and the 1 sigma plot
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -50,7 +52,12 @@ from linelaser_calib.core.geometry import (
     transform_from_rotvec_translation,
 )
 from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
-from linelaser_calib.core.planning import PlanConstraints, plan_for_target
+from linelaser_calib.core.planning import (
+    PlanConstraints,
+    SigmaPoint,
+    plan_for_target,
+    predicted_curve,
+)
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.cylinder import CylinderConfig
 from linelaser_calib.core.targets.sphere import SphereConfig
@@ -208,9 +215,18 @@ def initial_guess(rng: np.random.Generator, T_true: FloatArray) -> FloatArray:
     return np.asarray(T_true @ bump)
 
 
-def planned_run(
-    setup: Setup, seed: int, rounds: tuple[int, ...]
-) -> tuple[list[Point], CalibrationResult | None]:
+@dataclass
+class PlannedRun:
+    """A planned run: a point after each round, the last result, and the 1 sigma curves
+    predicted by each round's plan and achieved by each round's calibration."""
+
+    points: list[Point]
+    result: CalibrationResult | None
+    predicted: list[SigmaPoint]
+    achieved: list[SigmaPoint]
+
+
+def planned_run(setup: Setup, seed: int, rounds: tuple[int, ...]) -> PlannedRun:
     """3 exploratory scans, then rounds of planned poses; a point after each round."""
     rng = np.random.default_rng(seed)
     T_true = setup.rig.T_flange_sensor
@@ -218,7 +234,7 @@ def planned_run(
     samples = scan(rng, setup, explore @ invert_transform(T_true), 0)
     constraints = setup.constraints(samples[0].T_base_flange[:3, 3])
     T_estimate, section = initial_guess(rng, T_true), None
-    points, result = [], None
+    run = PlannedRun([], None, [], [])
     for n in rounds:
         plan = plan_for_target(
             get_target(setup.target),
@@ -231,16 +247,20 @@ def planned_run(
             constraints=constraints,
             seed=seed + len(samples),
         )
+        run.predicted += predicted_curve(plan)
         T_flange = np.stack([p.T_base_flange for p in plan.poses])
         samples += scan(rng, setup, T_flange, len(samples))
-        result = calibrate(samples, setup, seed)
+        result = run.result = calibrate(samples, setup, seed)
         last = point(result, T_true, len(samples))
         last.planner_deg = math.degrees(float(np.linalg.norm(plan.poses[-1].sigma_rotation_rad)))
         last.planner_mm = float(np.linalg.norm(plan.poses[-1].sigma_translation_m)) * 1e3
-        points.append(last)
+        run.points.append(last)
         if result is not None:
             T_estimate, section = result.T_flange_sensor, result.target
-    return points, result
+            sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+            if sigma_t is not None and sigma_r is not None:
+                run.achieved.append((len(samples), sigma_t, sigma_r))
+    return run
 
 
 def random_run(setup: Setup, seed: int) -> list[Point]:
@@ -256,8 +276,15 @@ def _rms(values: list[float]) -> float:
     return float(np.sqrt(np.mean(np.square(finite)))) if finite else math.nan
 
 
-def curve(setup: Setup, label: str, seeds: int) -> None:
-    planned = [planned_run(setup, seed, ROUNDS)[0] for seed in range(seeds)]
+def curve(setup: Setup, label: str, seeds: int, figure_dir: Path | None) -> None:
+    runs = [planned_run(setup, seed, ROUNDS) for seed in range(seeds)]
+    planned = [run.points for run in runs]
+    if figure_dir is not None:
+        from linelaser_calib.report.figures import DPI, sigma_curve_figure
+
+        path = figure_dir / f"planning_{label}.png"
+        sigma_curve_figure(runs[0].predicted, runs[0].achieved).savefig(path, dpi=DPI)
+        print(f"\nWrote {path} (seed 0: predicted and achieved 1 sigma against poses)")
     randoms = [random_run(setup, seed) for seed in range(seeds)]
     print(f"\n### Hand-eye accuracy against poses ({seeds} seeds, {label}, paper noise)\n")
     print(
@@ -305,7 +332,8 @@ def cold(scenes: int) -> None:
             f"{scenario.sigma_depth_m * 1e6:.0f} um"
         )
         try:
-            points, result = planned_run(cylinder_setup(scenario), k, ROUNDS)
+            run = planned_run(cylinder_setup(scenario), k, ROUNDS)
+            points, result = run.points, run.result
         except CalibrationError as exc:
             notes.append(f"FAILED scene {k}: {exc}"[:200])
             continue
@@ -373,6 +401,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--only", choices=("curve", "sphere", "cold", "speed"))
+    parser.add_argument(
+        "--figures",
+        type=Path,
+        metavar="DIR",
+        help="write the predicted and achieved 1 sigma curves of seed 0 as PNG files into DIR",
+    )
     args = parser.parse_args()
     seeds, scenes = (4, 8) if args.quick else (20, 50)
     if args.only in (None, "speed"):
@@ -382,9 +416,11 @@ def main() -> None:
             cylinder_setup(scenario_from_preset("ur_scancontrol", **PAPER_NOISE)),
             "ur_scancontrol",
             seeds,
+            args.figures,
         )
     if args.only in (None, "sphere"):
-        curve(sphere_setup(sphere_scenario_from_preset("sphere", **PAPER_NOISE)), "sphere", seeds)
+        sphere = sphere_setup(sphere_scenario_from_preset("sphere", **PAPER_NOISE))
+        curve(sphere, "sphere", seeds, args.figures)
     if args.only in (None, "cold"):
         cold(scenes)
 
