@@ -108,18 +108,27 @@ class SimulatedData:
 
 
 def recorded_pose_stream(
-    rng: np.random.Generator, scenario: Scenario, motion: Motion, errors: FloatArray
+    rng: np.random.Generator,
+    scenario: Scenario,
+    motion: Motion,
+    errors: FloatArray,
+    stamp_jitter_s: float = 0.0,
 ) -> list[FlangePose]:
     """The robot's flange-pose stream at ``robot_rate_hz`` over the whole motion.
 
     Each message is the reported pose (true pose with the shot's error ``errors``) times a
-    per-message jitter, stamped on the pose clock from ``epoch_ns``.
+    per-message jitter, stamped on the pose clock from ``epoch_ns``. With ``stamp_jitter_s``
+    (s, 1σ) each stamp misses the instant the pose was taken by a Gaussian error, as when a
+    driver stamps messages on arrival (the stamps are kept in order).
     """
     period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
     n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
     stream_ns = np.arange(n_stream, dtype=np.int64) * period_ns
     stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
     stream = stream @ jitter_transforms(rng, scenario, n_stream)
+    if stamp_jitter_s > 0.0:
+        late = np.round(rng.normal(size=n_stream) * stamp_jitter_s * 1e9).astype(np.int64)
+        stream_ns = np.sort(stream_ns + late)
     return [
         FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
         for s, T in zip(stream_ns, stream, strict=True)

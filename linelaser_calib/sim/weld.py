@@ -52,8 +52,9 @@ the safe side) and 0.002 deg per axis.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -236,23 +237,44 @@ class Groove:
     half_length_m: float
 
     @classmethod
-    def from_scenario(cls, scenario: WeldScenario) -> Groove:
-        """The groove of a weld scenario."""
-        s = _unit(scenario.seam_direction)
-        b = _unit(np.asarray(scenario.groove_bisector) - (s @ scenario.groove_bisector) * s)
+    def build(
+        cls,
+        point: Any,
+        seam_direction: Any,
+        groove_bisector: Any,
+        opening_angle_rad: float,
+        flank_width_m: float,
+        seam_half_length_m: float,
+    ) -> Groove:
+        """A groove through ``point`` (m) along ``seam_direction``, opening towards
+        ``groove_bisector`` (made perpendicular to the seam) by ``opening_angle_rad``."""
+        s = _unit(seam_direction)
+        b = _unit(np.asarray(groove_bisector) - (s @ np.asarray(groove_bisector)) * s)
         m = np.cross(s, b)
-        half = 0.5 * scenario.opening_angle_rad
+        half = 0.5 * opening_angle_rad
         flanks = np.array([math.cos(half) * b + sign * math.sin(half) * m for sign in (1.0, -1.0)])
         normals = np.cross(s, flanks)
         # Face the free side: the bisector's part perpendicular to each flank.
         inward = b - np.einsum("ki,i->k", flanks, b)[:, None] * flanks
         normals *= np.sign(np.einsum("ki,ki->k", normals, inward))[:, None]
         return cls(
-            scenario.weld_point.copy(),
+            np.asarray(point, dtype=np.float64).copy(),
             s,
             b,
             flanks,
             normals / np.linalg.norm(normals, axis=1, keepdims=True),
+            flank_width_m,
+            seam_half_length_m,
+        )
+
+    @classmethod
+    def from_scenario(cls, scenario: WeldScenario) -> Groove:
+        """The groove of a weld scenario."""
+        return cls.build(
+            scenario.weld_point,
+            scenario.seam_direction,
+            scenario.groove_bisector,
+            scenario.opening_angle_rad,
             scenario.flank_width_m,
             scenario.seam_half_length_m,
         )
@@ -345,7 +367,7 @@ def trace_groove(
     return traced, flank
 
 
-def _flank_counts(groove: Groove, rig: Scenario, T_base_sensor: FloatArray) -> Int64Array:
+def flank_counts(groove: Groove, rig: Scenario, T_base_sensor: FloatArray) -> Int64Array:
     """Seen returns within the range on each flank per pose, shape (K, 2), noise-free."""
     traced, flank = trace_groove(groove, rig, T_base_sensor)
     z = traced.points_sensor[..., 2]
@@ -354,14 +376,18 @@ def _flank_counts(groove: Groove, rig: Scenario, T_base_sensor: FloatArray) -> I
     return np.stack([np.sum(usable & (flank == k), axis=1) for k in (1, 2)], axis=1)
 
 
-def nominal_orientation(scenario: WeldScenario, groove: Groove) -> FloatArray:
-    """Sensor orientation (3, 3) of the nominal view turned by ``view_rotvec_rad``.
+def nominal_view(groove: Groove) -> FloatArray:
+    """Sensor orientation (3, 3) looking into the groove across the seam.
 
-    Nominal: sensor z = −b (looking into the groove), y = s (laser plane across the seam).
+    Sensor z = −b (looking into the groove), y = s (laser plane across the seam).
     """
     z, y = -groove.bisector, groove.seam
-    R = np.column_stack([np.cross(y, z), y, z])
-    return np.asarray(R @ matrix_from_rotvec(scenario.view_rotvec_rad))
+    return np.column_stack([np.cross(y, z), y, z])
+
+
+def nominal_orientation(scenario: WeldScenario, groove: Groove) -> FloatArray:
+    """Sensor orientation (3, 3) of the :func:`nominal_view` turned by ``view_rotvec_rad``."""
+    return np.asarray(nominal_view(groove) @ matrix_from_rotvec(scenario.view_rotvec_rad))
 
 
 def _pose(R: FloatArray, point_in_sensor: FloatArray, point: FloatArray) -> FloatArray:
@@ -374,7 +400,7 @@ def _views_ok(
 ) -> tuple[BoolArray, list[str]]:
     """Which views show both flanks and keep sensor and flange clear of the plates."""
     rig = scenario.rig
-    counts = _flank_counts(groove, rig, T_base_sensor)
+    counts = flank_counts(groove, rig, T_base_sensor)
     T_base_flange = T_base_sensor @ invert_transform(rig.T_flange_sensor)
     clear_sensor = groove.free_clearance(T_base_sensor[:, :3, 3]) >= rig.clearance_m
     clear_flange = groove.free_clearance(T_base_flange[:, :3, 3]) >= rig.clearance_m
@@ -635,6 +661,56 @@ WELD_PRESETS: dict[str, WeldScenario] = {
 }
 
 
+class RiggedScene(Protocol):
+    """A scene dataclass that carries its :class:`Scenario` as ``rig`` (weld, line)."""
+
+    __dataclass_fields__: ClassVar[dict[str, Any]]
+
+    @property
+    def rig(self) -> Scenario: ...
+
+
+SceneT = TypeVar("SceneT", bound=RiggedScene)
+
+
+def rigged_preset(
+    presets: Mapping[str, SceneT], name: str, kind: str, overrides: Mapping[str, Any]
+) -> SceneT:
+    """A scene preset with fields replaced; rig (:class:`Scenario`) fields go to its rig.
+
+    Parameters
+    ----------
+    presets : mapping of str to scene
+        Named scenes of one kind.
+    name : str
+    kind : str
+        What the presets are (``weld``, ``line``), for the messages.
+    overrides : mapping
+        Scene fields, or :class:`Scenario` fields (applied to the rig), SI.
+
+    Raises
+    ------
+    InputError
+        For an unknown preset or field, or an invalid value.
+    """
+    if name not in presets:
+        raise InputError(f"unknown {kind} preset {name!r}; choose one of {sorted(presets)}")
+    preset = presets[name]
+    own = {f.name for f in fields(preset)} - {"rig"}
+    rig_fields = {f.name for f in fields(Scenario)} - {"name"}
+    unknown = sorted(set(overrides) - own - rig_fields)
+    if unknown:
+        scene_type = type(preset)
+        raise InputError(
+            f"unknown {kind} scenario field(s) {unknown}; see {scene_type.__module__}."
+            f"{scene_type.__qualname__} and linelaser_calib.sim.Scenario"
+        )
+    rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
+    own_overrides = {k: v for k, v in overrides.items() if k in own}
+    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
+    return replace(preset, rig=rig, **own_overrides)
+
+
 def weld_scenario_from_preset(name: str, **overrides: Any) -> WeldScenario:
     """A weld preset with fields replaced; rig (:class:`Scenario`) fields are accepted too.
 
@@ -650,21 +726,7 @@ def weld_scenario_from_preset(name: str, **overrides: Any) -> WeldScenario:
     InputError
         For an unknown preset or field, or an invalid value.
     """
-    if name not in WELD_PRESETS:
-        raise InputError(f"unknown weld preset {name!r}; choose one of {sorted(WELD_PRESETS)}")
-    own = {f.name for f in fields(WeldScenario)} - {"rig"}
-    rig_fields = {f.name for f in fields(Scenario)} - {"name"}
-    unknown = sorted(set(overrides) - own - rig_fields)
-    if unknown:
-        raise InputError(
-            f"unknown weld scenario field(s) {unknown}; see linelaser_calib.sim.weld.WeldScenario "
-            "and linelaser_calib.sim.Scenario"
-        )
-    preset = WELD_PRESETS[name]
-    rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
-    own_overrides = {k: v for k, v in overrides.items() if k in own}
-    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
-    return replace(preset, rig=rig, **own_overrides)
+    return rigged_preset(WELD_PRESETS, name, "weld", overrides)
 
 
 def bumped_hand_eye(
