@@ -17,7 +17,8 @@ Sweep (waypoint k of M, u = k / (M − 1) from 0 to 1): the laser plane meets th
 ``depth_range_m`` (mid ± half, one period over the sweep) and at x = ``weave_fraction`` of
 the half fan width times sin(2π · ``weaves`` · u + φ) (the S). The orientation is the nominal
 view of the weld scene (sensor z into the groove, laser plane across the seam) tilted about
-the sensor x and y axes by up to ``tilt_rad`` and turned about the viewing axis by up to
+the sensor x axis (tipping the laser plane along the seam) by up to ``tilt_along_rad``, about
+its y axis by up to ``tilt_across_rad`` and turned about the viewing axis by up to
 ``yaw_rad``, each a sinusoid of its own frequency over the sweep; the phases φ are drawn from
 the seed. The robot runs the rig's continuous motion through the waypoints (a spline, quintic
 ease-in/out); sweeps in which a profile fails to show both flanks with ``min_flank_points``
@@ -33,9 +34,11 @@ plus the rig's profiler noise), in x order.
 
 Presets (:data:`LINE_PRESETS`): ``line`` (dense V profiles) and ``line_features`` (feature
 points only), both a 90-deg fillet seam, a scanCONTROL-class profiler (70-150 mm, ±25 deg,
-320 points), 16 waypoints swept at 0.1 m/s on average, profiles at 25 Hz stamped 12 ms late,
-a 250 Hz (4 ms) pose stream with 0.25 ms stamp jitter and the weld scene's PR1400-class robot
-errors (0.05 mm and 0.002 deg per axis).
+320 points), 40 waypoints over ±80 mm of seam swept at 0.1 m/s on average (two S periods,
+tilts of ±30 deg along and ±15 deg across the seam, turns of ±35 deg), profiles at 25 Hz
+stamped 12 ms late, a 250 Hz (4 ms) pose stream with 0.25 ms stamp jitter, and a UR-class
+robot error of 0.02 mm and 0.002 deg per axis (1σ) drawn at each waypoint and blended
+between them.
 """
 
 from __future__ import annotations
@@ -99,8 +102,10 @@ class LineScenario:
         Largest |x| of the seam point as a share of the half fan width, in [0, 1).
     depth_range_m : (2,) floats
         Depth of the seam point in the sensor, m.
-    tilt_rad, yaw_rad : float
-        Largest tilt about the sensor x and y axes, and turn about its z axis, rad.
+    tilt_along_rad, tilt_across_rad, yaw_rad : float
+        Largest tilt about the sensor x axis (the laser plane tips along the seam), about its
+        y axis (the view turns across the seam inside the laser plane), and turn about its
+        z axis, rad.
     stamp_jitter_s : float
         1σ error of the flange-pose stamps, s.
     feature_points : bool
@@ -119,10 +124,11 @@ class LineScenario:
     seam_half_length_m: float = 0.2
     sweep_half_length_m: float = 0.08
     weaves: float = 2.0
-    weave_fraction: float = 0.45
-    depth_range_m: tuple[float, float] = (0.09, 0.125)
-    tilt_rad: float = math.radians(20.0)
-    yaw_rad: float = math.radians(25.0)
+    weave_fraction: float = 0.65
+    depth_range_m: tuple[float, float] = (0.08, 0.135)
+    tilt_along_rad: float = math.radians(30.0)
+    tilt_across_rad: float = math.radians(15.0)
+    yaw_rad: float = math.radians(35.0)
     stamp_jitter_s: float = 0.0
     feature_points: bool = False
     min_flank_points: int = 30
@@ -160,10 +166,9 @@ class LineScenario:
         require(0.0 <= self.weave_fraction < 1.0, "weave_fraction must be in [0, 1)")
         lo, hi = self.depth_range_m
         require(0.0 < lo <= hi, "depth_range_m must satisfy 0 < low <= high")
-        require(
-            0.0 <= self.tilt_rad < math.pi / 2 and 0.0 <= self.yaw_rad < math.pi / 2,
-            "tilt_rad and yaw_rad must be in [0, pi/2) rad",
-        )
+        for name in ("tilt_along_rad", "tilt_across_rad", "yaw_rad"):
+            value = getattr(self, name)
+            require(0.0 <= value < math.pi / 2, f"{name} must be in [0, pi/2) rad, got {value}")
         require(self.stamp_jitter_s >= 0.0, "stamp_jitter_s must be >= 0")
         require(self.min_flank_points >= 2, "min_flank_points must be >= 2")
         require(self.rig.n_poses >= 4, "the rig's n_poses (waypoints) must be >= 4")
@@ -199,8 +204,8 @@ def sweep_waypoints(scenario: LineScenario, groove: Groove, phases: FloatArray) 
         * math.tan(rig.fan_half_angle_rad)
         * np.sin(2.0 * math.pi * scenario.weaves * u + phases[1])
     )
-    tilt_x = scenario.tilt_rad * np.sin(2.0 * math.pi * _TILT_X_CYCLES * u + phases[2])
-    tilt_y = scenario.tilt_rad * np.sin(2.0 * math.pi * _TILT_Y_CYCLES * u + phases[3])
+    tilt_x = scenario.tilt_along_rad * np.sin(2.0 * math.pi * _TILT_X_CYCLES * u + phases[2])
+    tilt_y = scenario.tilt_across_rad * np.sin(2.0 * math.pi * _TILT_Y_CYCLES * u + phases[3])
     yaw = scenario.yaw_rad * np.sin(2.0 * math.pi * _YAW_CYCLES * u + phases[4])
     on_seam = groove.point + np.outer((2.0 * u - 1.0) * scenario.sweep_half_length_m, groove.seam)
     T = np.tile(np.eye(4), (len(u), 1, 1))
@@ -336,7 +341,7 @@ def simulate_line(scenario: LineScenario, seed: int) -> LineSimulatedData:
     else:
         raise InputError(
             f"line scenario {scenario.name!r}: none of {MAX_SWEEP_DRAWS} sweeps keeps both "
-            "flanks in view of every profile; reduce tilt_rad, yaw_rad or weave_fraction, or "
+            "flanks in view of every profile; reduce the tilts, yaw_rad or weave_fraction, or "
             "widen the profiler's range or fan"
         )
     errors = draw_errors(rng, rig, len(waypoints))
@@ -375,8 +380,10 @@ def _line_rig() -> Scenario:
         WELD_PRESETS["weld_seam"].rig,
         name="line",
         motion="continuous",
-        n_poses=16,
+        n_poses=40,
         resolution=320,
+        robot_sigma_translation_m=2e-5,
+        robot_sigma_rotation_rad=math.radians(0.002),
         robot_rate_hz=250.0,
         profile_rate_hz=25.0,
         move_speed_m_s=0.1,
