@@ -41,8 +41,8 @@ class LineConfig:
     features : LineFeatureConfig
         How each profile's corner is found.
     robot_sigma_t_m, robot_sigma_r_rad : float
-        1σ per axis of the flange position (m) and orientation (rad) error. Defaults 0.05 mm
-        and 0.005 deg.
+        1σ per axis of the flange position (m) and orientation (rad) error. Defaults 0.03 mm
+        and 0.003 deg (a UR-class arm).
     corner_sigma_floor_m : float
         Smallest 1σ of a fitted corner in x and z, m (flank roughness, bead shape). Default
         5 µm.
@@ -65,8 +65,8 @@ class LineConfig:
     """
 
     features: LineFeatureConfig = field(default_factory=LineFeatureConfig)
-    robot_sigma_t_m: float = 5e-5
-    robot_sigma_r_rad: float = math.radians(0.005)
+    robot_sigma_t_m: float = 3e-5
+    robot_sigma_r_rad: float = math.radians(0.003)
     corner_sigma_floor_m: float = 5e-6
     initial_sigma_rotation_rad: float = math.radians(5.0)
     initial_sigma_translation_m: float = 0.01
