@@ -14,7 +14,6 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +21,10 @@ import numpy as np
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
-from linelaser_calib.core.refine import RefineConfig
-from linelaser_calib.core.types import CalibrationResult, KnownPoint
+from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
+from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.results import (
@@ -57,6 +57,17 @@ def _non_negative_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}") from None
     if not (np.isfinite(value) and value >= 0.0):
         raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text}")
+    return value
+
+
+def _min_samples(text: str) -> int:
+    """Parse a sample count >= 3."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {text!r}") from None
+    if value < 3:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {value}")
     return value
 
 
@@ -96,6 +107,9 @@ def simulate_to_bag(
     truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
     Returns the bag directory and the truth file.
     """
+    from linelaser_calib.core.targets.base import ResultSection
+    from linelaser_calib.core.targets.cylinder import CylinderSection
+    from linelaser_calib.core.targets.known_point import KnownPoint
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
     from linelaser_calib.sim.weld import (
@@ -110,12 +124,12 @@ def simulate_to_bag(
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
-        cylinder, known_point = None, weld_data.truth.weld_point_m
+        target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
-        cylinder, known_point = data.truth.cylinder, None
+        target = CylinderSection(data.truth.cylinder)
     write_bag(
         out,
         profiles,
@@ -141,12 +155,11 @@ def simulate_to_bag(
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                cylinder=None,
+                target=KnownPoint(np.asarray(taught), estimated=False),
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
                 rms_residual_m=0.0,
-                known_point=KnownPoint(np.asarray(taught), estimated=False),
                 parent_frame=scenario.flange_frame,
                 child_frame=scenario.sensor_frame,
                 base_frame=scenario.base_frame,
@@ -156,8 +169,7 @@ def simulate_to_bag(
     truth = write_truth_yaml(
         out / "truth.yaml",
         T_true,
-        cylinder,
-        known_point=known_point,
+        target,
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
@@ -220,7 +232,20 @@ def _cmd_info(args: argparse.Namespace) -> int:
 # --- calibrate ------------------------------------------------------------------------------
 
 
+#: The calibrate flag behind each shared target setting (for refusals).
+SETTING_FLAGS = {
+    "radius_m": "--radius",
+    "point_m": "--point",
+    "sensor_sigma_m": "--sensor-sigma",
+    "robot_sigma_t_m": "--robot-sigma-t",
+    "robot_sigma_r_rad": "--robot-sigma-r",
+    "min_samples": "--min-samples",
+    "initial": "--initial",
+}
+
+
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+    """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
     initial = None
     if args.initial is not None:
         try:
@@ -230,32 +255,27 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                 f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
                 "written by linelaser-calib (its hand_eye section)"
             ) from exc
-    if (
-        args.target == Target.KNOWN_POINT.value
-        and args.method == Method.PAPER.value
-        and (args.point is None or initial is None)
-    ):
-        raise InputError(
-            "--method paper with --target known_point corrects an old hand-eye against the "
-            "taught point: it needs --point x,y,z (the taught point, m, base frame) and "
-            "--initial FILE.yaml (the old hand-eye)"
-        )
+    given = {
+        "radius_m": args.radius,
+        "point_m": None if args.point is None else np.array(args.point),
+        "sensor_sigma_m": args.sensor_sigma,
+        "robot_sigma_t_m": args.robot_sigma_t,
+        "robot_sigma_r_rad": args.robot_sigma_r,
+        "min_samples": args.min_samples,
+        "initial": initial,
+    }
+    target = get_target(args.target)
+    settings = {name: value for name, value in given.items() if value is not None}
     return PipelineConfig(
         method=Method(args.method),
-        target=Target(args.target),
-        known_point=None if args.point is None else np.array(args.point),
-        radius_m=args.radius,
+        target=target.name,
+        target_config=configure(target, args.method, settings, SETTING_FLAGS),
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
             clock_offset_s=0.0 if args.clock_offset == "auto" else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
-        ),
-        refine=RefineConfig(
-            sensor_sigma_m=args.sensor_sigma,
-            robot_sigma_t_m=args.robot_sigma_t,
-            robot_sigma_r_rad=args.robot_sigma_r,
         ),
         initial_T_flange_sensor=initial,
     )
@@ -391,26 +411,28 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     rows = []
     for bag in bags:
         truth = read_truth_yaml(bag / "truth.yaml")
+        target = get_target(truth.target.key)
+        settings: dict[str, object] = {}
+        initial = None
+        label = target.title
+        if (bag / "initial.yaml").is_file():
+            initial = read_result_yaml(bag / "initial.yaml")
+            settings = {**initial.target.given_settings(), "initial": initial.T_flange_sensor}
+            label += ", from initial.yaml"
+            rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
+            rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
         for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(method=method, seed=args.seed)
-            target = "cylinder"
-            if truth.known_point is not None:
-                initial = read_result_yaml(bag / "initial.yaml")
-                taught = None if initial.known_point is None else initial.known_point.point
-                config = replace(
-                    config,
-                    target=Target.KNOWN_POINT,
-                    known_point=taught,
-                    initial_T_flange_sensor=initial.T_flange_sensor,
-                )
-                target = "known point, from initial.yaml"
-                if method is Method.PAPER:
-                    rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
-                    rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+            config = PipelineConfig(
+                method=method,
+                target=target.name,
+                target_config=configure(target, method.value, settings, SETTING_FLAGS),
+                seed=args.seed,
+                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+            )
             started = time.perf_counter()
             run = calibrate_bag(bag, config)
             seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({target}), method {method.value} ({seconds:.2f} s) ===")
+            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
             print(format_summary(run.result, truth))
             print()
             rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
@@ -424,8 +446,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 # --- parser ---------------------------------------------------------------------------------
 
-#: Numeric options of ``calibrate`` for the pairing gate and the default method's priors:
-#: (flag, parser, default, help).
+#: Numeric options of ``calibrate`` for the pairing gate: (flag, parser, default, help).
 CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = (
     (
         "--max-speed",
@@ -440,23 +461,39 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
         PairingConfig.max_angular_speed_rad_s,
         "reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
     ),
+)
+
+#: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
+#: one the target or method does not use is refused): (flag, parser, help).
+TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
+    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
+    (
+        "--point",
+        _xyz,
+        "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
     (
         "--sensor-sigma",
         _positive_float,
-        RefineConfig.sensor_sigma_m,
-        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals)",
+        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals; "
+        "cylinder default 5 um)",
     ),
     (
         "--robot-sigma-t",
         _positive_float,
-        RefineConfig.robot_sigma_t_m,
-        "robot pose error per pose, 1 sigma per axis, m (default: UR-class 0.1 mm)",
+        "robot pose error per pose, 1 sigma per axis, m (default method; cylinder default "
+        "0.1 mm, known_point 0.05 mm)",
     ),
     (
         "--robot-sigma-r",
         _positive_float,
-        RefineConfig.robot_sigma_r_rad,
-        "robot orientation error per pose, 1 sigma per axis, rad (default 0.01 deg)",
+        "robot orientation error per pose, 1 sigma per axis, rad (default method; cylinder "
+        "default 0.01 deg, known_point 0.005 deg)",
+    ),
+    (
+        "--min-samples",
+        _min_samples,
+        "fewest samples with a usable feature (ellipse, corner, ...); default the target's",
     ),
 )
 
@@ -465,7 +502,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="Hand-eye calibration of a line-laser profile sensor from cylinder scans.",
+        description="Hand-eye calibration of a line-laser profile sensor from scans of a target.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -503,20 +540,14 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
     cal.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
     cal.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
-    cal.add_argument(
-        "--radius", type=_positive_float, help="cylinder radius, m (default: estimate)"
-    )
     cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
     cal.add_argument(
         "--target",
-        choices=[t.value for t in Target],
-        default=Target.CYLINDER.value,
-        help="cylinder (default), or known_point: one fixed point such as a weld-seam corner",
-    )
-    cal.add_argument(
-        "--point",
-        type=_xyz,
-        help="known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+        choices=target_names(),
+        default=DEFAULT_TARGET,
+        help="what was scanned: "
+        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
+        + f" (default {DEFAULT_TARGET})",
     )
     cal.add_argument("--output", help="result YAML to write (its directory must exist)")
     cal.add_argument(
@@ -546,6 +577,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     for flag, parse, default, text in CALIBRATE_NUMBERS:
         cal.add_argument(flag, type=parse, default=default, help=text)
+    for flag, parse_setting, text in TARGET_OPTIONS:
+        cal.add_argument(flag, type=parse_setting, default=None, help=text)
     cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(

@@ -6,12 +6,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.pipeline import (
-    PipelineConfig,
-    Progress,
-    estimate_clock_offset,
-    run_pipeline,
-)
+from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
+from linelaser_calib.core.targets.base import Progress
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import BagContents, read_bag
 

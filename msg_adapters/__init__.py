@@ -8,7 +8,7 @@ classes: pass ``types=rclpy_types()`` (live nodes) or ``types=rosbags_types(type
 from __future__ import annotations
 
 from msg_adapters.errors import MessageError
-from msg_adapters.markers import cylinder_marker, marker_array, points_marker
+from msg_adapters.markers import cylinder_marker, marker_array, points_marker, shape_markers
 from msg_adapters.message_types import (
     TypeResolver,
     rclpy_types,
@@ -41,6 +41,7 @@ __all__ = [
     "profile_from_pointcloud2",
     "rclpy_types",
     "rosbags_types",
+    "shape_markers",
     "stamp_ns_from_msg",
     "time_msg_from_ns",
     "transform_stamped_from_matrix",

@@ -11,15 +11,16 @@
   :func:`~linelaser_calib.core.pipeline.calibrate_samples` in its own callback group on a
   MultiThreadedExecutor, so samples keep arriving during a solve. The pipeline
   configuration is built from the parameters at each call (:func:`pipeline_config`):
-  ``target`` cylinder or known_point (a weld-seam corner, with the taught ``known_point``
-  or estimating it), ``method``, and an optional initial hand-eye read from
+  ``target`` (a registered target: cylinder, known_point, ...), ``method``, the target's
+  settings (``radius``, ``known_point``, ``min_samples``; one that does not act on the target
+  and method is refused), and an optional initial hand-eye read from
   ``initial_hand_eye_path``. A second call during a solve, no samples, too few or
-  degenerate samples, or an unusable initial hand-eye file answer ``success: false`` with
-  the reason; the node keeps running.
+  degenerate samples, data the target's model does not fit, or an unusable initial hand-eye
+  file answer ``success: false`` with the reason; the node keeps running.
 - On success it answers a one-line summary, publishes ``linelaser_calib/hand_eye``
   (TransformStamped ``flange_frame`` -> ``sensor_frame``, transient_local) and
-  ``linelaser_calib/markers`` (in ``base_frame``: the fitted cylinder and the profiles
-  mapped through the result, or a sphere at the known point), broadcasts ``/tf_static``
+  ``linelaser_calib/markers`` (in ``base_frame``: the profiles mapped through the result and
+  the target's shapes, e.g. the fitted cylinder or the known point), broadcasts ``/tf_static``
   where ``tf2_ros`` is importable, and writes the result YAML to ``output_path``
   atomically. A failed calibration leaves the last good file.
 """
@@ -43,9 +44,10 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from linelaser_calib.core.errors import CalibrationError, InputError
-from linelaser_calib.core.pipeline import Method, PipelineConfig, Target, calibrate_samples
-from linelaser_calib.core.residuals import axis_extent
+from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
+from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io import ResultFileError, read_result_yaml, write_result_yaml
 from linelaser_calib.nodes.common import (
@@ -65,12 +67,12 @@ from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
 from linelaser_calib.summary import one_line_summary
 from msg_adapters import (
     MessageError,
-    cylinder_marker,
     flange_pose_from_pose_stamped,
     marker_array,
     points_marker,
     profile_from_pointcloud2,
     rclpy_types,
+    shape_markers,
     transform_stamped_from_matrix,
 )
 
@@ -84,24 +86,31 @@ NODE_NAME = "calibration_service"
 KEY_SAMPLES = "samples"
 #: Most profile points drawn in the markers (evenly subsampled over the used samples).
 MAX_MARKER_POINTS = 5000
-#: Diameter of the sphere marker at the known point, m.
-KNOWN_POINT_MARKER_M = 0.004
 _PIPELINE = PipelineConfig()
+#: How the shared target settings are named as parameters (for refusals).
+SETTING_LABELS = {
+    "radius_m": "radius",
+    "point_m": "known_point",
+    "min_samples": "min_samples",
+    "initial": "initial_hand_eye_path",
+}
 
 #: Every parameter; all but the read-only ones are read at each calibration, so
 #: ``ros2 param set`` applies to the next one. config/calibration_service.yaml repeats the defaults.
 PARAMETERS = (
     ParamSpec(
         "target",
-        _PIPELINE.target.value,
-        "What was scanned: cylinder (the cylinder paper) or known_point (one fixed point such "
-        "as a weld-seam corner seen from many poses, the weld-seam paper).",
-        choices=tuple(t.value for t in Target),
+        DEFAULT_TARGET,
+        "What was scanned: "
+        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
+        + ".",
+        choices=target_names(),
     ),
     ParamSpec(
         "radius",
         0.0,
-        "Cylinder radius, m (half the diameter); 0 estimates it from the profiles.",
+        "Cylinder radius, m (half the diameter); 0 estimates it from the profiles (cylinder "
+        "target; refused by the others).",
         bounds=(0.0, 1.0),
     ),
     ParamSpec(
@@ -132,10 +141,14 @@ PARAMETERS = (
     ),
     ParamSpec(
         "min_samples",
-        _PIPELINE.min_samples,
-        "Fewest samples with a usable ellipse that a calibration accepts (cylinder target; "
-        f"known_point needs {_PIPELINE.known_point_config.min_samples} corners).",
-        bounds=(3, 100000),
+        0,
+        "Fewest samples with a usable feature (ellipse, corner, ...) that a calibration "
+        "accepts; 0 takes the target's default ("
+        + ", ".join(
+            f"{name} {get_target(name).config_type().min_samples}" for name in target_names()
+        )
+        + ").",
+        bounds=(0, 100000),
     ),
     ParamSpec(
         "max_samples",
@@ -167,12 +180,16 @@ PARAMETERS = (
 def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     """The pipeline configuration from the parameter values in effect (by name).
 
+    ``radius`` 0, ``known_point`` [], ``min_samples`` 0 and ``initial_hand_eye_path`` '' mean
+    "not given"; a given one that does not act on the target and method is refused.
+
     Raises
     ------
     CalibrationError
-        ``initial_hand_eye_path`` cannot be read as a result file, or ``method`` paper with
-        ``target`` known_point lacks the taught point or the initial hand-eye.
+        ``initial_hand_eye_path`` cannot be read as a result file, a setting does not apply,
+        or the method needs a setting that is not given (e.g. paper with known_point).
     """
+    settings: dict[str, Any] = {}
     initial = None
     if values["initial_hand_eye_path"]:
         path = Path(values["initial_hand_eye_path"]).expanduser()
@@ -183,25 +200,20 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
                 f"cannot use initial_hand_eye_path: {err} (it must name a result YAML with a "
                 "hand_eye section, e.g. an earlier calibration's output_path, or be '' for none)"
             ) from err
-    target, method = Target(values["target"]), Method(values["method"])
-    point = np.array(values["known_point"]) if values["known_point"] else None
-    if (
-        target is Target.KNOWN_POINT
-        and method is Method.PAPER
-        and (point is None or initial is None)
-    ):
-        raise InputError(
-            "method paper with target known_point corrects an old hand-eye against the taught "
-            "point: set known_point to [x, y, z] (m, base frame) and initial_hand_eye_path to "
-            "the old hand-eye's result YAML, or use method default"
-        )
+        settings["initial"] = initial
+    if values["radius"]:
+        settings["radius_m"] = float(values["radius"])
+    if values["known_point"]:
+        settings["point_m"] = np.array(values["known_point"], dtype=np.float64)
+    if values["min_samples"]:
+        settings["min_samples"] = int(values["min_samples"])
+    method = Method(values["method"])
+    target = get_target(values["target"])
     return PipelineConfig(
         method=method,
-        target=target,
-        known_point=point,
-        radius_m=values["radius"] or None,
+        target=target.name,
+        target_config=configure(target, method.value, settings, SETTING_LABELS),
         seed=values["seed"],
-        min_samples=values["min_samples"],
         initial_T_flange_sensor=initial,
     )
 
@@ -386,7 +398,7 @@ class CalibrationServiceNode(Node):
         self._hand_eye_pub.publish(transform)
         if self._tf_static is not None:
             self._tf_static.sendTransform(transform)
-        # Clear what an earlier calibration drew (e.g. a cylinder before a known point).
+        # Clear what an earlier calibration drew (e.g. another target's shapes).
         markers = [Marker(action=Marker.DELETEALL)]
         points = points_in_base(result, MAX_MARKER_POINTS)
         if len(points):
@@ -400,31 +412,9 @@ class CalibrationServiceNode(Node):
                     ns="profiles",
                 )
             )
-        if result.cylinder is not None:
-            centre, length = axis_extent(points, result.cylinder)
-            markers.append(
-                cylinder_marker(
-                    result.cylinder,
-                    length,
-                    result.base_frame,
-                    types=self._types,
-                    centre=centre,
-                    stamp_ns=stamp_ns,
-                )
-            )
-        if result.known_point is not None:
-            markers.append(
-                points_marker(
-                    result.known_point.point[np.newaxis],
-                    result.base_frame,
-                    types=self._types,
-                    size_m=KNOWN_POINT_MARKER_M,
-                    spheres=True,
-                    stamp_ns=stamp_ns,
-                    ns="known_point",
-                    color=(1.0, 0.85, 0.0, 1.0),
-                )
-            )
+        markers += shape_markers(
+            result.target.shapes(points), result.base_frame, types=self._types, stamp_ns=stamp_ns
+        )
         self._markers_pub.publish(marker_array(markers, types=self._types))
 
 

@@ -47,7 +47,9 @@ from std_srvs.srv import Trigger
 
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import PipelineConfig, Target, validate_sample
+from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
+from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter, read_bag
 from linelaser_calib.io.bags import SESSION_MARKER
@@ -85,10 +87,12 @@ _COLLECTOR = CollectorConfig()
 PARAMETERS = (
     ParamSpec(
         "target",
-        Target.CYLINDER.value,
-        "What the profiles scan, which decides how each is validated: cylinder (an elliptical "
-        "arc) or known_point (a V-shaped weld seam whose corner is the fixed point).",
-        choices=tuple(t.value for t in Target),
+        DEFAULT_TARGET,
+        "What the profiles scan, which decides how each is validated (the target's feature "
+        "fit): "
+        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
+        + ".",
+        choices=target_names(),
         read_only=True,
     ),
     ParamSpec(
@@ -168,7 +172,7 @@ PARAMETERS = (
         "radius",
         0.0,
         "Cylinder radius, m, checked against each profile's ellipse; 0 accepts any radius "
-        "(cylinder target only).",
+        "(cylinder target; refused by the others).",
         bounds=(0.0, 1.0),
         read_only=True,
     ),
@@ -279,9 +283,11 @@ class CollectorNode(Node):
             )
         except ValueError as err:
             raise InputError(f"invalid collector parameters: {err}") from err
+        target = get_target(p["target"])
+        settings = {"radius_m": float(p["radius"])} if p["radius"] else {}
         self._pipeline = PipelineConfig(
-            target=Target(p["target"]),
-            radius_m=p["radius"] or None,
+            target=target.name,
+            target_config=configure(target, Method.DEFAULT.value, settings, {"radius_m": "radius"}),
             seed=p["seed"],
             pairing=pairing,
         )
@@ -323,7 +329,7 @@ class CollectorNode(Node):
         self._validator = threading.Thread(target=self._validate_loop, name="validation")
         self._validator.start()
         self.get_logger().info(
-            f"collecting in {config.mode.value} mode (target {self._pipeline.target.value}) "
+            f"collecting in {config.mode.value} mode (target {self._pipeline.target}) "
             f"from {self._profile_sub.topic_name} and {self._pose_sub.topic_name} into "
             f"{self._session.path}"
         )

@@ -26,10 +26,12 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
    through the shared solver :mod:`linelaser_calib.core.solver` (:func:`~linelaser_calib.core.
    solver.solve` with :func:`~linelaser_calib.core.solver.solve_with_rejection`). Raise
    DegenerateError with advice when too few features remain (:func:`rejection_digest`).
-5. ``check_fit(solution, config)``: raise :class:`~linelaser_calib.core.errors.ModelMismatch`
-   when the model does not fit the data (residual orders of magnitude above the noise, or a
-   feature shape the target cannot have), naming the likely cause (:func:`mismatch_message`).
-   No result is written then.
+5. The model-fit check: ``check_features(features, config)`` before the solve and
+   ``check_fit(solution, config)`` after it raise
+   :class:`~linelaser_calib.core.errors.ModelMismatch` when the model does not fit the data
+   (a feature shape the target cannot have; a residual orders of magnitude above the noise
+   the solution expects, ``TargetSolution.noise_m``), naming the likely cause
+   (:func:`mismatch_message`). No result is written then.
 6. ``offset_cost(features, config, context)``: None, or the cost of the features re-paired
    with other flange poses (for the clock-offset search of continuous scans).
 7. A result section class satisfying :class:`ResultSection` (its YAML key, its plain SI
@@ -127,7 +129,8 @@ class Shape:
     kind : str
         ``cylinder`` (a piece of a cylinder: ``points`` the two ends of its axis, m),
         ``sphere`` (``points`` its centre, (1, 3)), ``points`` (spheres of diameter
-        2·``radius`` at ``points`` (N, 3)) or ``line`` (a segment, ``points`` its ends).
+        2·``radius`` at ``points`` (N, 3)) or ``line`` (segments, ``points`` their ends in
+        pairs).
     points : ndarray, shape (N, 3)
         m.
     radius : float
@@ -144,7 +147,7 @@ class Shape:
     points: FloatArray
     radius: float
     ns: str
-    color: tuple[float, float, float, float] = (0.2, 0.6, 1.0, 0.35)
+    color: tuple[float, float, float, float] = (0.2, 0.6, 1.0, 0.5)
 
     def __post_init__(self) -> None:
         if self.kind not in self.KINDS:
@@ -157,7 +160,8 @@ class ResultSection(Protocol):
     ``key`` is the result file's section name; :meth:`to_mapping` its plain SI content
     (lists and numbers, the base frame named); :meth:`quality_entries` further entries of the
     file's ``quality`` section; :meth:`describe` one line of human text (mm); :meth:`shapes`
-    the markers drawn with the calibrated profile points.
+    the markers drawn with the calibrated profile points; :meth:`given_settings` what a
+    result used as a starting point fixes. ``key`` equals the target's ``name``.
     """
 
     key: ClassVar[str]
@@ -181,6 +185,11 @@ class ResultSection(Protocol):
 
     def shapes(self, points_base: FloatArray) -> list[Shape]:
         """Markers of the section next to the calibrated points (N, 3), base frame, m."""
+        ...
+
+    def given_settings(self) -> dict[str, Any]:
+        """Shared settings (:data:`SETTINGS`) this section fixes when a result file is the
+        starting point of a calibration (e.g. a taught point); usually empty."""
         ...
 
 
@@ -282,8 +291,12 @@ class Target(Protocol[ConfigT]):
         """Maximum likelihood with the robot's per-pose error, via the shared solver."""
         ...
 
+    def check_features(self, features: list[Any], config: ConfigT) -> None:
+        """Raise ModelMismatch when the features have a shape the target cannot produce."""
+        ...
+
     def check_fit(self, solution: TargetSolution, config: ConfigT) -> None:
-        """Raise ModelMismatch when the model does not fit the data."""
+        """Raise ModelMismatch when the solution's residual is far above the noise."""
         ...
 
     def offset_cost(
@@ -365,7 +378,6 @@ def configure(
 
 
 def extract_each(
-    target: Target[ConfigT],
     samples: list[Sample],
     config: ConfigT,
     rng: np.random.Generator,
@@ -396,6 +408,29 @@ def rejection_digest(rejections: Sequence[Rejection]) -> str:
         counts[key] = counts.get(key, 0) + 1
     top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
     return "Rejected: " + "; ".join(f"{n} x {k}" for k, n in top) + ". "
+
+
+def plain_floats(values: Any) -> list[float]:
+    """Plain Python floats of an array (for YAML/JSON sections)."""
+    return [float(v) for v in np.asarray(values, dtype=np.float64).reshape(-1)]
+
+
+def mm_text(values: Any) -> str:
+    """``[+1.000, ...] mm`` from lengths in m."""
+    return "[" + ", ".join(f"{v * 1e3:+.3f}" for v in np.ravel(values)) + "] mm"
+
+
+def read_vector(mapping: Mapping[str, Any], key: str) -> FloatArray:
+    """Three finite numbers at ``key`` of a result file's section (ValueError naming it)."""
+    if key not in mapping:
+        raise ValueError(f"key {key} is missing")
+    try:
+        value = np.asarray(mapping[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"key {key} must be 3 numbers, got {mapping[key]!r}") from None
+    if value.shape != (3,) or not np.all(np.isfinite(value)):
+        raise ValueError(f"key {key} must be 3 finite numbers, got {mapping[key]!r}")
+    return value
 
 
 def mismatch_message(title: str, rms_m: float, noise_m: float, detail: str = "") -> str:

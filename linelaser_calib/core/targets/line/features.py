@@ -3,7 +3,7 @@
 Two kinds of input:
 
 - A whole profile of a V or fillet joint: the V-corner fit of the known-point target
-  (:func:`linelaser_calib.core.known_point.extract_corner`: cleaning, two RANSAC lines,
+  (:func:`linelaser_calib.core.targets.known_point.extract_corner`: cleaning, two RANSAC lines,
   their intersection and its covariance).
 - Feature points only, as seam trackers publish them: a message with at most
   ``max_feature_points`` finite points. One point is the seam point. With three or more,
@@ -23,9 +23,9 @@ import numpy as np
 
 from ...corner import CornerConfig
 from ...errors import InputError
-from ...known_point import CornerSample, KnownPointConfig, extract_corner
 from ...profile import CleaningConfig
 from ...types import Rejection, Sample
+from ..known_point import CornerSample, KnownPointConfig, extract_corner
 
 #: Default largest number of finite points of a feature-point message.
 MAX_FEATURE_POINTS = 8

@@ -56,7 +56,14 @@ from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from ...errors import DegenerateError, InputError
-from ...geometry import orthonormal_basis, project_to_so3, transform_from_rotation_translation
+from ...geometry import (
+    exp_so3,
+    orthonormal_basis,
+    project_to_so3,
+    right_jacobian_so3,
+    skews,
+    transform_from_rotation_translation,
+)
 from ...types import FloatArray
 
 #: Parameters of the line (two turns, two shifts).
@@ -127,37 +134,6 @@ def line_from_points(points: ArrayLike) -> Line:
     return Line.through(centre, Vt[0])
 
 
-def corners_base(
-    corners_xz: ArrayLike, T_base_flange: ArrayLike, T_flange_sensor: ArrayLike
-) -> FloatArray:
-    """Corners (M, 2) (x, z) of M views mapped into the base frame, c_i = T_i · X · s_i, (M, 3)."""
-    c = np.asarray(corners_xz, dtype=np.float64)
-    s = np.column_stack([c[:, 0], np.zeros(len(c)), c[:, 1]])
-    T = np.asarray(T_base_flange, dtype=np.float64)
-    X = np.asarray(T_flange_sensor, dtype=np.float64)
-    flange = s @ X[:3, :3].T + X[:3, 3]
-    return np.asarray(np.einsum("mij,mj->mi", T[:, :3, :3], flange) + T[:, :3, 3])
-
-
-def _skews(v: FloatArray) -> FloatArray:
-    """Skew matrices (M, 3, 3): ``_skews(v)[i] @ u == cross(v[i], u)``."""
-    K = np.zeros((len(v), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
-    return K
-
-
-def _right_jacobians(omega: FloatArray) -> FloatArray:
-    """Right Jacobians (M, 3, 3) of SO(3): Exp(ω + dω) ≈ Exp(ω)·Exp(J_r(ω)·dω)."""
-    theta = np.linalg.norm(omega, axis=1)
-    small = theta < 1e-4
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
-    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
-    K = _skews(omega)
-    return np.asarray(np.eye(3) - a[:, None, None] * K + b[:, None, None] * (K @ K))
-
-
 class LineResiduals(NamedTuple):
     """Whitened residuals and Jacobians of M views.
 
@@ -220,7 +196,7 @@ def line_residuals(
     R_X, t_X = T_flange_sensor[:3, :3], T_flange_sensor[:3, 3]
     R_i, t_i = T_base_flange[:, :3, :3], T_base_flange[:, :3, 3]
     omega, tau = pose_corrections[:, :3], pose_corrections[:, 3:]
-    E = Rotation.from_rotvec(omega).as_matrix()
+    E = exp_so3(omega)
     f = s @ R_X.T + t_X  # (M, 3) corner in the flange frame
     RE = R_i @ E
     c = np.einsum("mij,mj->mi", RE, f) + np.einsum("mij,mj->mi", R_i, tau) + t_i
@@ -245,9 +221,9 @@ def line_residuals(
     u = np.einsum("mij,mj->mi", A_inv, r)
     G = whitening @ A_inv  # (M, 2, 2): d residual / d r
     GP = G @ P  # (M, 2, 3): d residual / d c
-    J_theta = -GP @ R_bs @ _skews(s)
+    J_theta = -GP @ R_bs @ skews(s)
     J_rho = GP @ RE
-    J_omega = -GP @ RE @ _skews(f) @ _right_jacobians(omega)
+    J_omega = -GP @ RE @ skews(f) @ right_jacobian_so3(omega)
     J_tau = GP @ R_i
     c_line = c @ R_L  # (M, 3) in line coordinates
     basis = np.eye(3)
@@ -305,7 +281,7 @@ def solve_line_linear(corners_xz: ArrayLike, T_base_flange: ArrayLike) -> tuple[
         C * c[:, 0, None, None],
         C * c[:, 1, None, None],
         C,
-        _skews(t_i),
+        skews(t_i),
         np.broadcast_to(-np.eye(3), (M, 3, 3)),
     ]
     A = np.concatenate(blocks, axis=2).reshape(3 * M, 33)

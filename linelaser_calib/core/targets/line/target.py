@@ -28,7 +28,6 @@ import numpy as np
 from scipy.stats import chi2
 
 from ...errors import DegenerateError, ModelMismatch
-from ...known_point import CornerSample, KnownPointConfig, paper_correction
 from ...solver import Flag, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
@@ -39,10 +38,13 @@ from ..base import (
     TargetSolution,
     extract_each,
     mismatch_message,
+    plain_floats,
+    read_vector,
     rejection_digest,
 )
+from ..known_point import CornerSample, KnownPointConfig, paper_correction, weld_points_base
 from .features import extract_line_feature
-from .model import Line, corners_base, line_from_points, solve_line_linear
+from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
 from .refine import LineConfig, LineRefinement, refine_line
 
@@ -75,12 +77,16 @@ class LineSection:
         """``{frame, point: [x, y, z] (m), direction: [x, y, z]}``."""
         return {
             "frame": base_frame,
-            "point": [float(v) for v in self.line.point],
-            "direction": [float(v) for v in self.line.direction],
+            "point": plain_floats(self.line.point),
+            "direction": plain_floats(self.line.direction),
         }
 
     def quality_entries(self) -> dict[str, Any]:
         """No further quality entries."""
+        return {}
+
+    def given_settings(self) -> dict[str, Any]:
+        """Nothing: a line fixes no setting of a later calibration."""
         return {}
 
     def describe(self, base_frame: str) -> str:
@@ -134,7 +140,7 @@ def _solution(
 ) -> TargetSolution:
     """The solution record: residuals of the used features, their records."""
     c, _, T = _stack(features)
-    distances = line.distances(corners_base(c, T, T_flange_sensor))
+    distances = line.distances(weld_points_base(c, T, T_flange_sensor))
     return TargetSolution(
         T_flange_sensor=T_flange_sensor,
         section=LineSection(line),
@@ -169,7 +175,7 @@ def _start(features: list[CornerSample], X0: FloatArray | None) -> tuple[FloatAr
     c, _, T = _stack(features)
     if X0 is None:
         return solve_line_linear(c, T)
-    return X0, line_from_points(corners_base(c, T, X0))
+    return X0, line_from_points(weld_points_base(c, T, X0))
 
 
 class LineTarget:
@@ -204,7 +210,6 @@ class LineTarget:
     ) -> tuple[list[Any], list[Rejection]]:
         """The seam corner of every sample (:mod:`.features`)."""
         return extract_each(
-            self,
             samples,
             config,
             np.random.default_rng(seed),
@@ -222,7 +227,7 @@ class LineTarget:
         if X0 is None:
             raise DegenerateError("the paper's method corrects an initial hand-eye: give one")
         c, _, T = _stack(features)
-        reference = line_from_points(corners_base(c, T, X0))
+        reference = line_from_points(weld_points_base(c, T, X0))
         corrected = paper_correction(
             c, T, X0, reference.point, KnownPointConfig(), free_direction=reference.direction
         )
@@ -236,7 +241,7 @@ class LineTarget:
         return _solution(
             features,
             X,
-            line_from_points(corners_base(c, T, X)),
+            line_from_points(weld_points_base(c, T, X)),
             "paper",
             config,
             warnings=warnings,
@@ -325,6 +330,9 @@ class LineTarget:
             history={"refine_cost": list(refined.cost_history)},
         )
 
+    def check_features(self, features: list[Any], config: LineConfig) -> None:
+        """The corner extraction already refuses profiles that are not a V; nothing more."""
+
     def check_fit(self, solution: TargetSolution, config: LineConfig) -> None:
         """Refuse corners that lie far off one line (another target, units, clocks)."""
         factor = PAPER_MISMATCH_FACTOR if solution.method == "paper" else MISMATCH_FACTOR
@@ -358,15 +366,9 @@ class LineTarget:
 
     def read_section(self, mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> LineSection:
         """The ``line`` section of a result file (ValueError naming a bad key)."""
-        try:
-            point = np.asarray(mapping["point"], dtype=np.float64)
-            direction = np.asarray(mapping["direction"], dtype=np.float64)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"line: needs point and direction, 3 numbers each ({exc})") from exc
-        if point.shape != (3,) or direction.shape != (3,):
-            raise ValueError("line: point and direction must be 3 numbers each")
-        if not (np.all(np.isfinite(point)) and np.linalg.norm(direction) > 0):
-            raise ValueError("line: point must be finite and direction non-zero")
+        point, direction = read_vector(mapping, "point"), read_vector(mapping, "direction")
+        if not float(np.linalg.norm(direction)) > 0.0:
+            raise ValueError("key direction must not be zero")
         return LineSection(Line.through(point, direction))
 
 
