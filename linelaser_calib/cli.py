@@ -104,12 +104,15 @@ def simulate_to_bag(
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
-    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input; so do
+    straight-seam scenarios (line target), with the true line.
     Returns the bag directory and the truth file.
     """
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.line import Line, LineSection
+    from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
     from linelaser_calib.sim.weld import (
@@ -120,11 +123,19 @@ def simulate_to_bag(
     )
 
     weld = scenario_name in WELD_PRESETS
+    initial_target: ResultSection | None = None
     if weld:
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+        initial_target = KnownPoint(np.asarray(weld_data.truth.taught_point_m), estimated=False)
+    elif scenario_name in LINE_PRESETS:
+        line_data = simulate_line(line_scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = line_data.scenario, line_data.profiles, line_data.poses
+        intensities, T_true = line_data.intensities, line_data.truth.T_flange_sensor
+        target = LineSection(Line(line_data.truth.line_point, line_data.truth.line_direction))
+        initial_target = target
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
@@ -150,12 +161,12 @@ def simulate_to_bag(
         "command": simulate_command(out, scenario_name, seed, overrides),
     }
     if weld:
-        taught = weld_data.truth.taught_point_m
-        simulation["taught_point"] = taught
+        simulation["taught_point"] = weld_data.truth.taught_point_m
+    if initial_target is not None:
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                target=KnownPoint(np.asarray(taught), estimated=False),
+                target=initial_target,
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
@@ -511,7 +522,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general",
+        help=(
+            "preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general, line, "
+            "line_features"
+        ),
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:

@@ -7,6 +7,7 @@ Modules: :mod:`.model` (the line, the corner-to-line residual, the closed form),
 
 from __future__ import annotations
 
-from .target import TARGET
+from .model import Line
+from .target import TARGET, LineSection, LineTarget
 
-__all__ = ["TARGET"]
+__all__ = ["TARGET", "Line", "LineSection", "LineTarget"]
