@@ -414,6 +414,21 @@ def _input_line(run: OfflineRun) -> str:
 # --- demo -----------------------------------------------------------------------------------
 
 
+def _preset_motion(name: object) -> str | None:
+    """The motion (``step``, ``continuous``) of a simulator preset; None for another name."""
+    from linelaser_calib.sim.line import LINE_PRESETS
+    from linelaser_calib.sim.scenario import PRESETS
+    from linelaser_calib.sim.weld import WELD_PRESETS
+
+    rigs = {
+        **PRESETS,
+        **{k: v.rig for k, v in WELD_PRESETS.items()},
+        **{k: v.rig for k, v in LINE_PRESETS.items()},
+    }
+    rig = rigs.get(name) if isinstance(name, str) else None
+    return None if rig is None else rig.motion
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     root = Path(args.bags)
     bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
@@ -432,16 +447,26 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+        # A continuous scan is calibrated as one: any flange speed, the clock offset estimated.
+        continuous = _preset_motion(truth.raw.get("simulation", {}).get("scenario")) == "continuous"
+        if continuous:
+            label += ", continuous, clock offset estimated"
+        pairing = (
+            PairingConfig(max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
+            if continuous
+            else PairingConfig()
+        )
         for method in (Method.PAPER, Method.DEFAULT):
             config = PipelineConfig(
                 method=method,
                 target=target.name,
                 target_config=configure(target, method.value, settings, SETTING_FLAGS),
                 seed=args.seed,
+                pairing=pairing,
                 initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
             )
             started = time.perf_counter()
-            run = calibrate_bag(bag, config)
+            run = calibrate_bag(bag, config, estimate_offset=continuous)
             seconds = time.perf_counter() - started
             print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
             print(format_summary(run.result, truth))

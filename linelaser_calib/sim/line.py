@@ -33,12 +33,12 @@ trackers publish them: the outermost return of each flank and the seam point (th
 plus the rig's profiler noise), in x order.
 
 Presets (:data:`LINE_PRESETS`): ``line`` (dense V profiles) and ``line_features`` (feature
-points only), both a 90-deg fillet seam, a scanCONTROL-class profiler (70-150 mm, ±25 deg,
-320 points), 40 waypoints over ±80 mm of seam swept at 0.1 m/s on average (two S periods,
-tilts of ±30 deg along and ±15 deg across the seam, turns of ±35 deg), profiles at 25 Hz
-stamped 12 ms late, a 250 Hz (4 ms) pose stream with 0.25 ms stamp jitter, and a UR-class
-robot error of 0.02 mm and 0.002 deg per axis (1σ) drawn at each waypoint and blended
-between them.
+points only), both a 90-deg fillet seam; a scanCONTROL-class profiler (70-150 mm, ±25 deg,
+200 points, dense, no intensity); 60 waypoints over ±80 mm of seam swept at 0.1 m/s on
+average (three S periods, tilts of ±30 deg along and ±15 deg across the seam, turns of
+±35 deg); profiles at 25 Hz stamped 12 ms late; a 250 Hz (4 ms) pose stream with 0.25 ms
+stamp jitter; and a UR-class robot error of 0.02 mm and 0.002 deg per axis (1σ) drawn at
+each waypoint and blended between them.
 """
 
 from __future__ import annotations
@@ -123,7 +123,7 @@ class LineScenario:
     flank_width_m: float = 0.03
     seam_half_length_m: float = 0.2
     sweep_half_length_m: float = 0.08
-    weaves: float = 2.0
+    weaves: float = 3.0
     weave_fraction: float = 0.65
     depth_range_m: tuple[float, float] = (0.08, 0.135)
     tilt_along_rad: float = math.radians(30.0)
@@ -131,7 +131,7 @@ class LineScenario:
     yaw_rad: float = math.radians(35.0)
     stamp_jitter_s: float = 0.0
     feature_points: bool = False
-    min_flank_points: int = 30
+    min_flank_points: int = 15
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -380,8 +380,10 @@ def _line_rig() -> Scenario:
         WELD_PRESETS["weld_seam"].rig,
         name="line",
         motion="continuous",
-        n_poses=40,
-        resolution=320,
+        n_poses=60,
+        resolution=200,
+        organised=False,
+        intensity=False,
         robot_sigma_translation_m=2e-5,
         robot_sigma_rotation_rad=math.radians(0.002),
         robot_rate_hz=250.0,
@@ -397,7 +399,7 @@ LINE_PRESETS: dict[str, LineScenario] = {
     "line": LineScenario(name="line", rig=_line_rig(), stamp_jitter_s=2.5e-4),
     "line_features": LineScenario(
         name="line_features",
-        rig=replace(_line_rig(), name="line_features", organised=False, intensity=False),
+        rig=replace(_line_rig(), name="line_features"),
         stamp_jitter_s=2.5e-4,
         feature_points=True,
     ),
