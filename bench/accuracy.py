@@ -99,7 +99,7 @@ def errors_deg_mm(result: CalibrationResult, T_true: FloatArray) -> tuple[float,
 
 def axis_errors(result: CalibrationResult, T_true: FloatArray) -> FloatArray:
     """[θ (rad, sensor axes), ρ (m, flange axes)], truth = estimate ∘ (Exp θ, +ρ): the
-    parametrisation of the predicted 1σ (``core.refine``)."""
+    parametrisation of the predicted 1σ (``core.targets.cylinder.refine``)."""
     T_est = result.T_flange_sensor
     theta = rotvec_from_matrix(T_est[:3, :3].T @ T_true[:3, :3])
     return np.concatenate([theta, T_true[:3, 3] - T_est[:3, 3]])

@@ -246,12 +246,12 @@ def _cmd_info(args: argparse.Namespace) -> int:
 #: The calibrate flag behind each shared target setting (for refusals).
 SETTING_FLAGS = {
     "radius_m": "--radius",
-    "point_m": "--point",
+    "point_m": "--point x,y,z",
     "sensor_sigma_m": "--sensor-sigma",
     "robot_sigma_t_m": "--robot-sigma-t",
     "robot_sigma_r_rad": "--robot-sigma-r",
     "min_samples": "--min-samples",
-    "initial": "--initial",
+    "initial": "--initial FILE.yaml",
 }
 
 

@@ -272,7 +272,7 @@ def test_regression_table_line_never_captures_the_ellipse() -> None:
     """Arcs with the table in view (cylinder standing on it): RANSAC once accepted large
     ellipses hugging the table line; every accepted fit must have the radius as semi-minor
     axis and lie on the true arc."""
-    from linelaser_calib.core.pipeline import FittedSample, PipelineConfig, fit_sample
+    from linelaser_calib.core.targets.cylinder import CylinderConfig, FittedSample, fit_sample
     from linelaser_calib.core.types import Sample
     from linelaser_calib.sim import random_scenario, simulate
 
@@ -286,7 +286,7 @@ def test_regression_table_line_never_captures_the_ellipse() -> None:
         rng = np.random.default_rng(seed)
         for k, profile in enumerate(data.profiles):
             sample = Sample(k, profile.stamp_ns, data.truth.T_base_flange_true[k], profile.points)
-            outcome = fit_sample(sample, PipelineConfig(), rng)
+            outcome = fit_sample(sample, CylinderConfig(), rng)
             if isinstance(outcome, FittedSample):
                 fitted += 1
                 assert abs(outcome.ellipse.semi_axes[1] - radius) < 2e-4, (seed, k)

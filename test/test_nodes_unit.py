@@ -37,10 +37,11 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_rotvec_translation,
 )
-from linelaser_calib.core.known_point import KnownPointConfig, extract_corner
 from linelaser_calib.core.pairing import NS_PER_S, PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig, Target, validate_sample
+from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
 from linelaser_calib.core.residuals import axis_extent
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.known_point import KnownPoint, KnownPointConfig, extract_corner
 from linelaser_calib.core.types import (
     CalibrationResult,
     Cylinder,
@@ -318,15 +319,23 @@ def test_validate_sample_accepts_cylinder_arcs_and_checks_the_radius() -> None:
     samples = simulated_samples(data.profiles, data.truth.T_base_flange_recorded)
     radius = data.truth.cylinder.radius
     assert validation_stages(samples, PipelineConfig()) == [None] * 6
-    assert validation_stages(samples, PipelineConfig(radius_m=radius)) == [None] * 6
-    assert validation_stages(samples, PipelineConfig(radius_m=2 * radius)) == ["ellipse"] * 6
+    assert (
+        validation_stages(samples, PipelineConfig(target_config=CylinderConfig(radius_m=radius)))
+        == [None] * 6
+    )
+    assert (
+        validation_stages(
+            samples, PipelineConfig(target_config=CylinderConfig(radius_m=2 * radius))
+        )
+        == ["ellipse"] * 6
+    )
 
 
 def test_validate_sample_finds_the_weld_corner_and_rejects_profiles_without_one() -> None:
     data = simulate_weld(weld_scenario_from_preset("weld_seam_general", n_poses=6), seed=4)
     truth = data.truth
     samples = simulated_samples(data.profiles, truth.T_base_flange_recorded)
-    known_point = PipelineConfig(target=Target.KNOWN_POINT)
+    known_point = PipelineConfig(target="known_point")
     assert validation_stages(samples, known_point) == [None] * 6
     for sample, corner in zip(samples, truth.corner_true_sensor, strict=True):
         found = extract_corner(sample, KnownPointConfig(), np.random.default_rng(0))
@@ -393,7 +402,9 @@ def known_result() -> CalibrationResult:
     R = Rotation.from_euler("xyz", [10.0, -5.0, 95.0], degrees=True).as_matrix()
     return CalibrationResult(
         T_flange_sensor=transform_from_rotation_translation(R, [0.012, -0.085, 0.095]),
-        cylinder=Cylinder(np.array([0.45, 0.15, 0.0]), np.array([0.0, 0.0, 1.0]), 0.02),
+        target=CylinderSection(
+            Cylinder(np.array([0.45, 0.15, 0.0]), np.array([0.0, 0.0, 1.0]), 0.02)
+        ),
         method="default",
         samples_used=list(range(28)),
         samples_rejected=[],
@@ -417,8 +428,8 @@ def test_summary_line_gives_every_number_with_its_unit() -> None:
 def test_marker_points_lie_on_the_cylinder_and_respect_the_budget() -> None:
     rng = np.random.default_rng(3)
     result = known_result()
-    cylinder = result.cylinder
-    assert cylinder is not None
+    assert isinstance(result.target, CylinderSection)
+    cylinder = result.target.cylinder
     for k in range(4):
         T_base_flange = transform_from_rotvec_translation(
             rng.normal(0, 0.5, 3), rng.normal([0.4, 0.1, 0.3], 0.05)
@@ -452,21 +463,23 @@ def service_values(**overrides: Any) -> dict[str, Any]:
 
 def test_service_builds_the_known_point_configuration_from_its_parameters() -> None:
     initial = read_result_yaml(WELD_INITIAL)
-    assert initial.known_point is not None
+    assert isinstance(initial.target, KnownPoint)
     default = calibration_service.pipeline_config(service_values())
-    assert (default.target, default.method) == (Target.CYLINDER, Method.DEFAULT)
-    assert default.known_point is None and default.initial_T_flange_sensor is None
+    assert (default.target, default.method) == ("cylinder", Method.DEFAULT)
+    assert isinstance(default.target_config, CylinderConfig)
+    assert default.initial_T_flange_sensor is None
     config = calibration_service.pipeline_config(
         service_values(
             target="known_point",
             method="paper",
-            known_point=tuple(initial.known_point.point),
+            known_point=tuple(initial.target.point),
             initial_hand_eye_path=str(WELD_INITIAL),
         )
     )
-    assert (config.target, config.method) == (Target.KNOWN_POINT, Method.PAPER)
-    assert config.known_point is not None and config.initial_T_flange_sensor is not None
-    np.testing.assert_array_equal(config.known_point, initial.known_point.point)
+    assert (config.target, config.method) == ("known_point", Method.PAPER)
+    point = config.target_config.point_m
+    assert point is not None and config.initial_T_flange_sensor is not None
+    np.testing.assert_array_equal(point, initial.target.point)
     np.testing.assert_array_equal(config.initial_T_flange_sensor, initial.T_flange_sensor)
 
 

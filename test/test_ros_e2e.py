@@ -33,6 +33,8 @@ from ros_helpers import (
 from visualization_msgs.msg import MarkerArray
 
 from linelaser_calib.core.geometry import transform_error, transform_from_rotvec_translation
+from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.targets.known_point import KnownPoint
 from linelaser_calib.core.types import Cylinder, FlangePose
 from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
 from linelaser_calib.nodes.collection import SKIP_NOT_CAPTURED
@@ -93,7 +95,7 @@ def committed_replay() -> Replay:
     truths = {
         p.parent: read_truth_yaml(p) for p in sorted((REPO_ROOT / "bags").glob("*/truth.yaml"))
     }
-    bags = [bag for bag, truth in truths.items() if truth.cylinder is not None]
+    bags = [bag for bag, truth in truths.items() if isinstance(truth.target, CylinderSection)]
     assert bags, "no committed cylinder bag with truth.yaml under bags/"
 
     def duration(bag: Path) -> int:
@@ -106,8 +108,8 @@ def committed_replay() -> Replay:
         contents.profiles, contents.poses, contents.sensor_frame, contents.base_frame
     )
     truth = truths[bag]
-    assert truth.cylinder is not None
-    return Replay(recording, truth.T_flange_sensor, truth.cylinder)
+    assert isinstance(truth.target, CylinderSection)
+    return Replay(recording, truth.T_flange_sensor, truth.target.cylinder)
 
 
 @dataclass
@@ -298,8 +300,8 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     contents = read_bag(WELD_BAG)
     initial = read_result_yaml(WELD_BAG / "initial.yaml")
     truth = read_truth_yaml(WELD_BAG / "truth.yaml")
-    assert initial.known_point is not None
-    taught = initial.known_point.point
+    assert isinstance(initial.target, KnownPoint)
+    taught = initial.target.point
     graph.collector(*params(reliable_inputs=True, target="known_point"))
     graph.service(
         *params(
@@ -332,9 +334,9 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     )
     written = read_result_yaml(graph.tmp / "hand_eye.yaml")
     assert max(transform_error(written.T_flange_sensor, T)) < 1e-6
-    assert written.cylinder is None and written.known_point is not None
-    assert not written.known_point.estimated
-    np.testing.assert_allclose(written.known_point.point, taught, atol=1e-12)
+    assert isinstance(written.target, KnownPoint)
+    assert not written.target.estimated
+    np.testing.assert_allclose(written.target.point, taught, atol=1e-12)
     markers = probe.latched(MarkerArray, "linelaser_calib/markers")
     (sphere,) = [m for m in markers.markers if m.ns == "known_point"]
     assert sphere.type == sphere.SPHERE_LIST and sphere.header.frame_id == contents.base_frame

@@ -1,6 +1,6 @@
 """Which hand-eye motions the flange poses determine, and what to add when they do not.
 
-The refinement (:mod:`linelaser_calib.core.refine`) hands over the marginal information
+The refinement (:mod:`linelaser_calib.core.targets.cylinder.refine`) hands over the marginal information
 matrix of the hand-eye, that is the Gauss-Newton information after the cylinder axis, the
 radius and the per-sample pose corrections have been eliminated (Schur complement). Its
 parameters are ``[θ (3), ρ (3)]``: small rotation angles θ (rad) about the sensor axes

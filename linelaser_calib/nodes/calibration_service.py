@@ -46,7 +46,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
-from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io import ResultFileError, read_result_yaml, write_result_yaml
@@ -101,10 +101,9 @@ PARAMETERS = (
     ParamSpec(
         "target",
         DEFAULT_TARGET,
-        "What was scanned: "
-        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
-        + ".",
-        choices=target_names(),
+        "What was scanned: a registered target's name (cylinder, known_point, ...; "
+        "`linelaser-calib calibrate --help` lists them). An unknown name fails the calibration "
+        "with the list.",
     ),
     ParamSpec(
         "radius",
@@ -143,11 +142,7 @@ PARAMETERS = (
         "min_samples",
         0,
         "Fewest samples with a usable feature (ellipse, corner, ...) that a calibration "
-        "accepts; 0 takes the target's default ("
-        + ", ".join(
-            f"{name} {get_target(name).config_type().min_samples}" for name in target_names()
-        )
-        + ").",
+        "accepts; 0 takes the target's default.",
         bounds=(0, 100000),
     ),
     ParamSpec(

@@ -48,7 +48,7 @@ from std_srvs.srv import Trigger
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
-from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter, read_bag
@@ -89,10 +89,8 @@ PARAMETERS = (
         "target",
         DEFAULT_TARGET,
         "What the profiles scan, which decides how each is validated (the target's feature "
-        "fit): "
-        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
-        + ".",
-        choices=target_names(),
+        "fit): a registered target's name (cylinder, known_point, ...; `linelaser-calib "
+        "calibrate --help` lists them).",
         read_only=True,
     ),
     ParamSpec(

@@ -92,7 +92,8 @@ class Option:
     required_by : tuple of str
         Methods that cannot run without it.
     why_required : str
-        Appended to the refusal when a method needs it and it is missing.
+        What the value is, for the refusal when a method needs it and it is missing
+        ("set --point to <why_required>").
     """
 
     field: str
@@ -368,12 +369,20 @@ def configure(
             )
         if option.field:
             result = _set_path(result, option.field, value)
-    for name, option in target.options.items():
-        if method in option.required_by and name not in settings:
-            raise InputError(
-                f"the {method} method of the {target.title} target needs "
-                f"{labels.get(name, name)}: {option.why_required}"
+    required = {n: o for n, o in target.options.items() if method in o.required_by}
+    if any(name not in settings for name in required):
+        names = [labels.get(name, name) for name in required]
+        raise InputError(
+            f"the {method} method of the {target.title} target needs {' and '.join(names)}: "
+            "set "
+            + " and ".join(
+                f"{labels.get(name, name)} to {option.why_required}"
+                for name, option in required.items()
             )
+            + " (missing: "
+            + ", ".join(labels.get(n, n) for n in required if n not in settings)
+            + ")"
+        )
     return result
 
 

@@ -45,7 +45,7 @@ Methods
        undetermined (the paper's pattern); a1 and a3 then take their initial parts where the
        views are blind, and the projection leaves the start up to ~0.3 mm off, which step 2
        removes.
-    2. Maximum likelihood, as in :mod:`linelaser_calib.core.refine`: per-view flange-pose
+    2. Maximum likelihood, as in :mod:`linelaser_calib.core.targets.cylinder.refine`: per-view flange-pose
        nuisance δ_i = (ω_i, τ_i) in the flange frame, true pose T_i·D(δ_i), with Gaussian
        priors σ_r, σ_t; the corner measured with the covariance of its line fits (floored)
        in x-z and ``aim_sigma_m`` along y (how far the laser plane may miss the point); a
@@ -481,8 +481,8 @@ class KnownPointTarget:
         "point_m": Option(
             "point_m",
             required_by=("paper",),
-            why_required="the paper's method corrects an old hand-eye against the taught "
-            "point (x, y, z in m, base frame)",
+            why_required="the taught point (x, y, z in m, base frame), against which the "
+            "paper's method corrects the old hand-eye",
         ),
         "min_samples": Option("min_samples"),
         "robot_sigma_t_m": Option("robot_sigma_t_m", methods=("default",)),
@@ -490,8 +490,7 @@ class KnownPointTarget:
         "initial": Option(
             "",
             required_by=("paper",),
-            why_required="the paper's method corrects the old hand-eye (a result YAML with "
-            "its hand_eye section)",
+            why_required="the old hand-eye (a result YAML with its hand_eye section)",
         ),
     }
 
