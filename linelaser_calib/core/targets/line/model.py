@@ -61,9 +61,11 @@ from ...geometry import (
     orthonormal_basis,
     project_to_so3,
     right_jacobian_so3,
+    rotvec_from_matrix,
     skews,
     transform_from_rotation_translation,
 )
+from ...observability import SAME_ORIENTATION_RAD
 from ...types import FloatArray
 
 #: Parameters of the line (two turns, two shifts).
@@ -289,10 +291,19 @@ def solve_line_linear(corners_xz: ArrayLike, T_base_flange: ArrayLike) -> tuple[
     scale = np.where(scale > 0.0, scale, 1.0)
     _, singular, Vt = np.linalg.svd(A / scale, full_matrices=False)
     if singular[-2] < NULL_GAP * singular[0]:
+        R_mean = project_to_so3(np.sum(R_i, axis=0))
+        spread = float(np.max(np.linalg.norm(rotvec_from_matrix(R_i @ R_mean.T), axis=-1)))
+        why = (
+            f"all views share one flange orientation (spread {np.degrees(spread):.2f} deg), so "
+            "the sensor's translations cannot be told from a shift of the line"
+            if spread < SAME_ORIENTATION_RAD
+            else f"the flange orientations span only ±{np.degrees(spread):.1f} deg"
+        )
         raise DegenerateError(
-            "the views do not determine the hand-eye and the line in closed form: tilt the "
-            "flange between views about two different axes by 10-20 deg and sweep the seam "
-            "across the laser line, or give an initial hand-eye"
+            f"the views do not determine the hand-eye and the line in closed form: {why}. Tilt "
+            "the flange between views about two different axes by 10-20 deg, turn the laser "
+            "plane about the viewing axis and sweep the seam across the laser line, or give an "
+            "initial hand-eye"
         )
     w = Vt[-1] / scale
     d = w[27:30]
