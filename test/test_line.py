@@ -17,7 +17,7 @@ from linelaser_calib.cli import main
 from linelaser_calib.core.errors import DegenerateError, ModelMismatch
 from linelaser_calib.core.geometry import invert_transform, transform_error
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples, estimate_clock_offset
+from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SolveContext
 from linelaser_calib.core.targets.known_point import CornerSample
@@ -193,12 +193,6 @@ def test_line_target_on_an_s_sweep_of_feature_points(features_run: LineSimulated
         < 5e-4
     )
     assert not solution.warnings
-
-
-def test_clock_offset_is_estimated_through_the_pipeline(features_run: LineSimulatedData) -> None:
-    config = PipelineConfig(target="line", pairing=MOVING)
-    offset = estimate_clock_offset(features_run.profiles, features_run.poses, config)
-    assert abs(offset - (-0.012)) < 5e-4
 
 
 def test_unsynchronised_clocks_are_refused(features_run: LineSimulatedData) -> None:

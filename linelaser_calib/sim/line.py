@@ -44,8 +44,8 @@ each waypoint and blended between them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from dataclasses import dataclass, field, replace
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -60,6 +60,7 @@ from linelaser_calib.sim.simulate import published_profiles, recorded_pose_strea
 from linelaser_calib.sim.weld import (
     WELD_PRESETS,
     Groove,
+    GrooveScene,
     flank_counts,
     nominal_view,
     rigged_preset,
@@ -75,7 +76,7 @@ _TILT_X_CYCLES, _TILT_Y_CYCLES, _YAW_CYCLES = 1.5, 1.0, 0.75
 
 
 @dataclass(frozen=True)
-class LineScenario:
+class LineScenario(GrooveScene):
     """Every parameter of one simulated straight-seam run (see the module docstring).
 
     Attributes
@@ -133,31 +134,14 @@ class LineScenario:
     feature_points: bool = False
     min_flank_points: int = 15
 
+    kind: ClassVar[str] = "line"
+    vectors: ClassVar[tuple[str, ...]] = ("seam_point_m", "seam_direction", "groove_bisector")
+    directions: ClassVar[tuple[str, ...]] = ("seam_direction", "groove_bisector")
+
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, list):
-                object.__setattr__(self, f.name, tuple(float(v) for v in value))
-        self._validate()
-
-    def _validate(self) -> None:
-        def require(ok: bool, what: str) -> None:
-            if not ok:
-                raise InputError(f"line scenario {self.name!r}: {what}")
-
-        for name in ("seam_point_m", "seam_direction", "groove_bisector"):
-            v = np.asarray(getattr(self, name), dtype=np.float64)
-            require(v.shape == (3,) and bool(np.all(np.isfinite(v))), f"{name} must be 3 numbers")
-        for name in ("seam_direction", "groove_bisector"):
-            require(float(np.linalg.norm(getattr(self, name))) > 1e-12, f"{name} must not be zero")
-        s = np.asarray(self.seam_direction) / np.linalg.norm(self.seam_direction)
-        b = np.asarray(self.groove_bisector) / np.linalg.norm(self.groove_bisector)
-        require(
-            abs(float(s @ b)) < math.cos(math.radians(10.0)),
-            "groove_bisector must not be (nearly) parallel to seam_direction",
-        )
-        require(0.0 < self.opening_angle_rad < math.pi, "opening_angle_rad must be in (0, pi) rad")
-        for name in ("flank_width_m", "seam_half_length_m", "sweep_half_length_m", "weaves"):
+        super().__post_init__()
+        require = self.require
+        for name in ("sweep_half_length_m", "weaves"):
             require(getattr(self, name) > 0.0, f"{name} must be > 0, got {getattr(self, name)}")
         require(
             self.sweep_half_length_m < self.seam_half_length_m,
@@ -170,7 +154,6 @@ class LineScenario:
             value = getattr(self, name)
             require(0.0 <= value < math.pi / 2, f"{name} must be in [0, pi/2) rad, got {value}")
         require(self.stamp_jitter_s >= 0.0, "stamp_jitter_s must be >= 0")
-        require(self.min_flank_points >= 2, "min_flank_points must be >= 2")
         require(self.rig.n_poses >= 4, "the rig's n_poses (waypoints) must be >= 4")
         require(self.rig.motion == "continuous", "the rig's motion must be 'continuous'")
 

@@ -91,8 +91,62 @@ def _unit(v: Any) -> FloatArray:
     return np.asarray(a / np.linalg.norm(a))
 
 
+class GrooveScene:
+    """Checks shared by the groove scenes (:class:`WeldScenario`, the line scenes).
+
+    A scene dataclass derives from this class, names its 3-vector fields in ``vectors`` and
+    the ones that must not be zero in ``directions``, and extends :meth:`__post_init__` with
+    its own checks through :meth:`require`. Lists given for tuple fields (as YAML readers
+    produce them) become tuples of floats.
+    """
+
+    kind: ClassVar[str]
+    vectors: ClassVar[tuple[str, ...]]
+    directions: ClassVar[tuple[str, ...]]
+    name: str
+    seam_direction: Vec3
+    groove_bisector: Vec3
+    opening_angle_rad: float
+    flank_width_m: float
+    seam_half_length_m: float
+    min_flank_points: int
+
+    def require(self, ok: bool, what: str) -> None:
+        """Raise InputError naming the scene when ``ok`` is false."""
+        if not ok:
+            raise InputError(f"{self.kind} scenario {self.name!r}: {what}")
+
+    def __post_init__(self) -> None:
+        for f in fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if isinstance(value, list):
+                object.__setattr__(self, f.name, tuple(float(v) for v in value))
+        for name in self.vectors:
+            v = np.asarray(getattr(self, name), dtype=np.float64)
+            self.require(
+                v.shape == (3,) and bool(np.all(np.isfinite(v))), f"{name} must be 3 numbers"
+            )
+        for name in self.directions:
+            self.require(
+                float(np.linalg.norm(getattr(self, name))) > 1e-12, f"{name} must not be zero"
+            )
+        s, b = _unit(self.seam_direction), _unit(self.groove_bisector)
+        self.require(
+            abs(float(s @ b)) < math.cos(math.radians(10.0)),
+            "groove_bisector must not be (nearly) parallel to seam_direction",
+        )
+        self.require(
+            0.0 < self.opening_angle_rad < math.pi, "opening_angle_rad must be in (0, pi) rad"
+        )
+        for name in ("flank_width_m", "seam_half_length_m"):
+            self.require(
+                getattr(self, name) > 0.0, f"{name} must be > 0, got {getattr(self, name)}"
+            )
+        self.require(self.min_flank_points >= 2, "min_flank_points must be >= 2")
+
+
 @dataclass(frozen=True)
-class WeldScenario:
+class WeldScenario(GrooveScene):
     """Every parameter of one simulated weld-seam run (see the module docstring).
 
     Attributes
@@ -161,31 +215,19 @@ class WeldScenario:
     teach_sigma_m: float = 0.0
     min_flank_points: int = 40
 
+    kind: ClassVar[str] = "weld"
+    vectors: ClassVar[tuple[str, ...]] = (
+        "weld_point_m",
+        "seam_direction",
+        "groove_bisector",
+        "view_rotvec_rad",
+    )
+    directions: ClassVar[tuple[str, ...]] = ("seam_direction", "groove_bisector", "step_direction")
+
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, list):
-                object.__setattr__(self, f.name, tuple(float(v) for v in value))
-        self._validate()
-
-    def _validate(self) -> None:
-        def require(ok: bool, what: str) -> None:
-            if not ok:
-                raise InputError(f"weld scenario {self.name!r}: {what}")
-
-        for name in ("weld_point_m", "seam_direction", "groove_bisector", "view_rotvec_rad"):
-            v = np.asarray(getattr(self, name), dtype=np.float64)
-            require(v.shape == (3,) and bool(np.all(np.isfinite(v))), f"{name} must be 3 numbers")
-        for name in ("seam_direction", "groove_bisector", "step_direction"):
-            require(float(np.linalg.norm(getattr(self, name))) > 1e-12, f"{name} must not be zero")
-        s, b = _unit(self.seam_direction), _unit(self.groove_bisector)
-        require(
-            abs(float(s @ b)) < math.cos(math.radians(10.0)),
-            "groove_bisector must not be (nearly) parallel to seam_direction",
-        )
-        require(0.0 < self.opening_angle_rad < math.pi, "opening_angle_rad must be in (0, pi) rad")
-        for name in ("flank_width_m", "seam_half_length_m", "first_depth_m"):
-            require(getattr(self, name) > 0.0, f"{name} must be > 0, got {getattr(self, name)}")
+        super().__post_init__()
+        require = self.require
+        require(self.first_depth_m > 0.0, f"first_depth_m must be > 0, got {self.first_depth_m}")
         for name in ("step_m", "lateral_spread_m", "aim_sigma_m", "teach_sigma_m"):
             require(getattr(self, name) >= 0.0, f"{name} must be >= 0, got {getattr(self, name)}")
         require(self.pose_pattern in POSE_PATTERNS, f"pose_pattern must be one of {POSE_PATTERNS}")
@@ -200,7 +242,6 @@ class WeldScenario:
             0.0 <= self.general_lateral_fraction < 1.0,
             "general_lateral_fraction must be in [0, 1)",
         )
-        require(self.min_flank_points >= 2, "min_flank_points must be >= 2")
         require(self.rig.motion == "step", "the rig's motion must be 'step' (step-and-shoot)")
 
     @property
