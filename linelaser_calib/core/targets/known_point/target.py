@@ -45,17 +45,18 @@ Methods
        undetermined (the paper's pattern); a1 and a3 then take their initial parts where the
        views are blind, and the projection leaves the start up to ~0.3 mm off, which step 2
        removes.
-    2. Maximum likelihood, as in :mod:`linelaser_calib.core.targets.cylinder.refine`: per-view flange-pose
-       nuisance δ_i = (ω_i, τ_i) in the flange frame, true pose T_i·D(δ_i), with Gaussian
-       priors σ_r, σ_t; the corner measured with the covariance of its line fits (floored)
-       in x-z and ``aim_sigma_m`` along y (how far the laser plane may miss the point); a
-       prior on the hand-eye from the initial one (``initial_sigma_*``, loose); p fixed when
-       taught (or with ``point_sigma_m``), else estimated. Levenberg-Marquardt with the
-       nuisance eliminated per view (Schur complement, the refinement's block solver).
-       Views whose residual is implausible (χ², 3 dof) are dropped and the solve repeated.
+    2. Maximum likelihood (:mod:`.refine`, through the shared solver, as the cylinder's
+       refinement): per-view flange-pose nuisance δ_i = (ω_i, τ_i) in the flange frame, true
+       pose T_i·D(δ_i), with Gaussian priors σ_r, σ_t; the corner measured with the
+       covariance of its line fits (floored) in x-z and ``aim_sigma_m`` along y (how far the
+       laser plane may miss the point); a prior on the hand-eye from the initial one
+       (``initial_sigma_*``, loose); p fixed when taught (or with ``point_sigma_m``), else
+       estimated. Levenberg-Marquardt with the nuisance eliminated per view (Schur
+       complement). Views whose residual is implausible (χ², 3 dof) are dropped and the
+       solve repeated (the shared rejection loop).
 
 Observability (:func:`.diagnosis.analyse_known_point`)
--------------------------------------------
+------------------------------------------------------
 The data-only information of the hand-eye (nuisance and point marginalised, initial-guess
 prior left out) is eigen-analysed in lever-scaled units, as the cylinder refinement does:
 
