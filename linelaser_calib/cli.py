@@ -584,9 +584,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--target",
         choices=target_names(),
         default=DEFAULT_TARGET,
-        help="what was scanned: "
-        + "; ".join(f"{name}, {get_target(name).summary}" for name in target_names())
-        + f" (default {DEFAULT_TARGET})",
+        help=f"what was scanned (default {DEFAULT_TARGET}): cylinder, a cylinder of known or "
+        "estimated radius; known_point, one fixed point such as a weld-seam corner; each "
+        "registered target is a choice",
     )
     cal.add_argument("--output", help="result YAML to write (its directory must exist)")
     cal.add_argument(

@@ -19,8 +19,8 @@ from linelaser_calib.core.pairing import pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
 from linelaser_calib.core.targets import all_targets, get_target, target_names
 from linelaser_calib.core.targets.base import SETTINGS, configure
-from linelaser_calib.core.types import Sample
-from linelaser_calib.io import read_bag
+from linelaser_calib.core.types import FlangePose, Sample
+from linelaser_calib.io import read_bag, write_bag
 from linelaser_calib.nodes import calibration_service
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -178,3 +178,24 @@ def test_cylinder_refuses_arcs_of_varying_radius(tmp_path: Path) -> None:
     assert calibrate_samples(samples, PipelineConfig()).rms_residual_m < 1e-4
     with pytest.raises(ModelMismatch, match="not cuts of one cylinder"):
         calibrate_samples(scaled, PipelineConfig())
+
+
+def test_a_model_that_does_not_fit_exits_1_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The known point on a seam whose point moves 5 mm/s under the sensor (as when a seam is
+    scanned along its length): exit 1 with the likely causes, no result file."""
+    contents = read_bag(WELD_BAG)
+    t0 = contents.poses[0].stamp_ns
+    moved = []
+    for pose in contents.poses:
+        T = pose.T_base_flange.copy()
+        T[:3, 3] += np.array([0.005 * (pose.stamp_ns - t0) * 1e-9, 0.0, 0.0])
+        moved.append(FlangePose(pose.stamp_ns, T, pose.frame_id))
+    bag = write_bag(tmp_path / "moving", contents.profiles, moved)
+    out = tmp_path / "result.yaml"
+    args = ["calibrate", str(bag), "--target", "known_point", "--output", str(out)]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "does not fit" in err and "another target" in err and "Traceback" not in err
+    assert not out.exists()

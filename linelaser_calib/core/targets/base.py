@@ -24,7 +24,9 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
 4. ``solve_paper`` and ``solve_default(features, config, context)``: a :class:`TargetSolution`.
    The default method is maximum likelihood with the robot's per-pose error as nuisance,
    through the shared solver :mod:`linelaser_calib.core.solver` (:func:`~linelaser_calib.core.
-   solver.solve` with :func:`~linelaser_calib.core.solver.solve_with_rejection`). Raise
+   solver.solve` with :func:`~linelaser_calib.core.solver.solve_with_rejection`). The
+   solution carries the diagnosis: the hand-eye's 1σ (from the solver's information), what
+   the poses leave undetermined in plain words (``warnings``), outliers as rejections. Raise
    DegenerateError with advice when too few features remain (:func:`rejection_digest`).
 5. The model-fit check: ``check_features(features, config)`` before the solve and
    ``check_fit(solution, config)`` after it raise
