@@ -186,6 +186,7 @@ class LineTarget:
     title: str = "straight line"
     summary: str = "a straight seam or edge seen from many poses; no point taught (teach-free)"
     methods: tuple[str, ...] = ("paper", "default")
+    estimates_clock_offset = True
     config_type: type[LineConfig] = LineConfig
     options: Mapping[str, Option] = {
         "sensor_sigma_m": Option("corner_sigma_floor_m", methods=("default",)),
