@@ -133,7 +133,8 @@ def simulate_to_bag(
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
-    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input; so do
+    straight-seam scenarios (line target), with the true line.
     With ``tf`` the flange poses are also written as a robot_state_publisher-style
     ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
     (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
@@ -142,7 +143,9 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.line import Line, LineSection
     from linelaser_calib.core.targets.sphere import SphereSection
+    from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
     from linelaser_calib.sim.sphere import (
@@ -160,11 +163,13 @@ def simulate_to_bag(
 
     weld = scenario_name in WELD_PRESETS
     arm, joint_states = None, None  # only the cylinder scenes simulate an arm's joints
+    initial_target: ResultSection | None = None
     if weld:
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+        initial_target = KnownPoint(np.asarray(weld_data.truth.taught_point_m), estimated=False)
     elif scenario_name in SPHERE_PRESETS:
         # --radius is the target's radius: the sphere's here.
         own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
@@ -178,6 +183,12 @@ def simulate_to_bag(
             radius_estimated=False,
             side_estimated=False,
         )
+    elif scenario_name in LINE_PRESETS:
+        line_data = simulate_line(line_scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = line_data.scenario, line_data.profiles, line_data.poses
+        intensities, T_true = line_data.intensities, line_data.truth.T_flange_sensor
+        target = LineSection(Line(line_data.truth.line_point, line_data.truth.line_direction))
+        initial_target = target
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
@@ -211,12 +222,12 @@ def simulate_to_bag(
         "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
-        taught = weld_data.truth.taught_point_m
-        simulation["taught_point"] = taught
+        simulation["taught_point"] = weld_data.truth.taught_point_m
+    if initial_target is not None:
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                target=KnownPoint(np.asarray(taught), estimated=False),
+                target=initial_target,
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
@@ -788,16 +799,35 @@ def _cmd_export(args: argparse.Namespace) -> int:
 # --- demo -----------------------------------------------------------------------------------
 
 
+def _preset_motion(name: object) -> str | None:
+    """The motion (``step``, ``continuous``) of a simulator preset; None for another name."""
+    from linelaser_calib.sim.line import LINE_PRESETS
+    from linelaser_calib.sim.scenario import PRESETS
+    from linelaser_calib.sim.sphere import SPHERE_PRESETS
+    from linelaser_calib.sim.weld import WELD_PRESETS
+
+    rigs = {
+        **PRESETS,
+        **{k: v.rig for k, v in WELD_PRESETS.items()},
+        **{k: v.rig for k, v in LINE_PRESETS.items()},
+        **{k: v.rig for k, v in SPHERE_PRESETS.items()},
+    }
+    rig = rigs.get(name) if isinstance(name, str) else None
+    return None if rig is None else rig.motion
+
+
 def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
     """Calibrate one committed bag with both methods, print the summaries, add table rows.
 
     A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
-    corrects that hand-eye); a converted real recording with its ``reference.yaml`` (another
-    tool's hand-eye, calibrated with the settings recorded there). A bag with neither is
-    skipped with a note.
+    corrects that hand-eye; a continuous scan is calibrated as one, at any flange speed with
+    the clock offset estimated); a converted real recording with its ``reference.yaml``
+    (another tool's hand-eye, calibrated with the settings recorded there). A bag with
+    neither is skipped with a note.
     """
     settings: dict[str, object] = {}
     initial = None
+    continuous = False
     truth, note = truth_beside(bag)
     if truth is None and not (bag / "reference.yaml").is_file():
         print(note or f"{bag} has no truth.yaml or reference.yaml; skipped", file=sys.stderr)
@@ -812,22 +842,31 @@ def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, fl
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+        continuous = _preset_motion(truth.raw.get("simulation", {}).get("scenario")) == "continuous"
+        if continuous:
+            label += ", continuous, clock offset estimated"
     else:
         compare, reference = read_reference_yaml(bag / "reference.yaml")
         target = get_target(str(reference["target"]))
         settings = dict(reference.get("settings") or {})
         against = "reference"
         label = f"{target.title}, real scans; reference.yaml is not ground truth"
+    pairing = (
+        PairingConfig(max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
+        if continuous
+        else PairingConfig()
+    )
     for method in (Method.PAPER, Method.DEFAULT):
         config = PipelineConfig(
             method=method,
             target=target.name,
             target_config=configure(target, method.value, settings, SETTING_FLAGS),
             seed=seed,
+            pairing=pairing,
             initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
         )
         started = time.perf_counter()
-        run = calibrate_bag(bag, config)
+        run = calibrate_bag(bag, config, estimate_offset=continuous)
         seconds = time.perf_counter() - started
         print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
         print(format_summary(run.result, truth))
@@ -994,7 +1033,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general, sphere",
+        help=(
+            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, weld_seam, "
+            "weld_seam_general, sphere, line, line_features"
+        ),
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
