@@ -22,8 +22,9 @@ from enum import Enum
 
 import numpy as np
 
+from .arc import ArcConfig, fit_arc_in_scene
 from .cylinder_model import centre_distances
-from .ellipse import EllipseConfig, fit_ellipse_ransac
+from .ellipse import EllipseConfig
 from .errors import CalibrationError, DegenerateError, InputError, PairingError, ProfileRejected
 from .geometry import FloatArray, check_transform
 from .known_point import CornerSample, KnownPointConfig, calibrate_known_point, extract_corner
@@ -108,6 +109,7 @@ class PipelineConfig:
     pairing: PairingConfig = field(default_factory=PairingConfig)
     cleaning: CleaningConfig = field(default_factory=CleaningConfig)
     ellipse: EllipseConfig = field(default_factory=EllipseConfig)
+    arc: ArcConfig = field(default_factory=ArcConfig)
     hybrid: HybridConfig = field(default_factory=HybridConfig)
     seed_hybrid: HybridConfig = field(default_factory=lambda: HybridConfig(accept_early=True))
     refine: RefineConfig = field(default_factory=RefineConfig)
@@ -128,11 +130,12 @@ class PipelineConfig:
 
 @dataclass
 class FittedSample:
-    """A sample with its cleaned points and fitted ellipse."""
+    """A sample with the points of its arc, its fitted ellipse and the grazing points trimmed."""
 
     sample: Sample
     points: FloatArray
     ellipse: EllipseFit
+    trimmed: int = 0
 
     @property
     def inlier_points(self) -> FloatArray:
@@ -166,10 +169,10 @@ def fit_sample(
     except ProfileRejected as exc:
         return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
     try:
-        ellipse = fit_ellipse_ransac(cleaned.points_xz, config.ellipse, rng, radius_m)
+        arc = fit_arc_in_scene(cleaned.points_xz, config.ellipse, rng, radius_m, config.arc)
     except ProfileRejected as exc:
         return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
-    return FittedSample(sample, cleaned.points, ellipse)
+    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc.trimmed)
 
 
 def validate_sample(

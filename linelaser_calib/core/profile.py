@@ -8,7 +8,9 @@ cleaning is, in order:
    ``max_abs_y_m`` means the cloud is probably not in the sensor frame; this is reported
    (or the profile rejected, if so configured), never silently fixed.
 3. Range gate: keep ``min_depth_m <= z <= max_depth_m`` and ``|x| <= max_abs_x_m``.
-4. Sort the points by x (the scan direction) and split them into segments: points up to
+4. Sort the points by their ray angle atan2(x, z) (the scan direction: the sensor's
+   columns; sorting by x alone would interleave a near arc with a far background whose
+   rays are different but whose x overlap) and split them into segments: points up to
    ``MAX_BRIDGED_POINTS + 1`` apart in this order are linked when they are at most
    ``max_gap_m`` apart in the x-z plane, so a few stray points do not split the arc.
    Segments of fewer than ``min_segment_points`` points are dropped: this removes isolated
@@ -72,7 +74,7 @@ class CleaningConfig:
     max_abs_x_m : float
         Largest |x| kept (half the line width), m. The default inf disables it.
     max_gap_m : float
-        Distance between consecutive points (sorted by x) that splits the scan line into
+        Distance between consecutive points (in scan order) that splits the scan line into
         segments, m. The default 2 mm is well above the point spacing of a profiler on a
         cylinder's steep flanks and below the size of a typical reflection spike or of the
         step from the arc to a table behind it. inf disables the split.
@@ -170,6 +172,15 @@ class CleanedProfile:
         return np.asarray(self.points[:, [0, 2]], dtype=np.float64)
 
 
+def scan_angle(xz: ArrayLike) -> FloatArray:
+    """Angle of each point's ray from the sensor's z axis, atan2(x, z), rad, shape (N,).
+
+    The scan-line order of a profile: a profiler's columns are rays from its origin.
+    """
+    p = np.asarray(xz, dtype=np.float64)
+    return np.asarray(np.arctan2(p[:, 0], p[:, 1]))
+
+
 def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
     """Connected pieces of a scan line, bridging up to ``MAX_BRIDGED_POINTS`` stray points.
 
@@ -181,7 +192,7 @@ def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
     Parameters
     ----------
     xz : array-like, shape (N, 2)
-        Points in scan-line order (sorted by x), m.
+        Points in scan-line order (sorted by ray angle), m.
     max_gap_m : float
 
     Returns
@@ -219,7 +230,7 @@ def spike_residuals(
     Parameters
     ----------
     xz : array-like, shape (N, 2)
-        Points in scan-line order (sorted by x), m.
+        Points in scan-line order (sorted by ray angle), m.
     labels : array-like of int, shape (N,)
         Segment of each point, non-decreasing; every segment has at least
         ``2 * half_window + 1`` points.
@@ -330,7 +341,7 @@ def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
     counts["range_gate"] = int(keep.sum() - gate.sum())
 
     idx = np.flatnonzero(gate)
-    idx = idx[np.argsort(p[idx, 0], kind="stable")]
+    idx = idx[np.argsort(scan_angle(p[idx][:, [0, 2]]), kind="stable")]
     labels = segment_labels(p[idx][:, [0, 2]], config.max_gap_m)
     big = np.bincount(labels, minlength=1)[labels] >= config.min_segment_points
     # Without the stray pieces, each segment is a run of the scan line; a run can still be

@@ -2,11 +2,20 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
+from linelaser_calib.sim.clutter import (
+    camera_effects,
+    clustered_poses,
+    clutter_rng,
+    field_errors,
+    has_camera_effects,
+    profile_sigma_factors,
+    scene_from_scenario,
+)
 from linelaser_calib.sim.poses import sample_sensor_poses
 from linelaser_calib.sim.profiler import Measurement, measure, trace
 from linelaser_calib.sim.robot import (
@@ -18,7 +27,7 @@ from linelaser_calib.sim.robot import (
     true_flange,
 )
 from linelaser_calib.sim.scenario import Scenario
-from linelaser_calib.sim.scene import Int8Array, Int64Array, Scene
+from linelaser_calib.sim.scene import Int8Array, Int64Array
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,6 +70,11 @@ class SimulationTruth:
     valid, spike, dropout : ndarray of bool, shape (K, N)
         Ray returned a point; that point is a reflection spike; the ray was dropped at
         random.
+    sigma_factor : ndarray, shape (K,), or None
+        Each profile's noise as a multiple of the scenario's sigmas (None: all 1).
+    field_offset_sensor_m : ndarray, shape (M, 3), or None
+        The robot error field's offset at each waypoint (each shot in step-and-shoot), in
+        the sensor frame, m (None: no field). See :mod:`~linelaser_calib.sim.clutter`.
     """
 
     scenario: Scenario
@@ -79,6 +93,8 @@ class SimulationTruth:
     valid: BoolArray
     spike: BoolArray
     dropout: BoolArray
+    sigma_factor: FloatArray | None = None
+    field_offset_sensor_m: FloatArray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,16 +175,29 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         If the scenario admits too few feasible sensor poses.
     """
     rng = np.random.default_rng(seed)
-    scene = Scene.from_scenario(scenario)
-    sampled = sample_sensor_poses(rng, scenario, scene)
+    extra = clutter_rng(seed)
+    scene = scene_from_scenario(scenario)
+    if scenario.pose_clusters:
+        centres = sample_sensor_poses(rng, replace(scenario, n_poses=scenario.pose_clusters), scene)
+        sampled = clustered_poses(extra, scenario, centres)
+    else:
+        sampled = sample_sensor_poses(rng, scenario, scene)
     motion = plan_motion(sampled.T_base_sensor, scenario)
     errors = draw_errors(rng, scenario, len(sampled.T_base_sensor))
+    offsets: FloatArray | None = None
+    if any(scenario.robot_field_m):
+        translation, offsets = field_errors(extra, scenario, sampled.T_base_sensor)
+        errors[:, :3] += translation
 
     acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
     t_shot = acq_ns / 1e9
     T_sensor_shot = motion.T_base_sensor(t_shot)
     traced = trace(scene, scenario, T_sensor_shot)
     measured = measure(rng, scenario, traced)
+    sigma_factor: FloatArray | None = None
+    if has_camera_effects(scenario):
+        sigma_factor = profile_sigma_factors(extra, scenario, len(t_shot))
+        measured = camera_effects(scenario, traced, measured, sigma_factor)
     poses = recorded_pose_stream(rng, scenario, motion, errors)
     stamps, profiles, intensities = published_profiles(scenario, acq_ns, measured)
     truth = SimulationTruth(
@@ -188,5 +217,7 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         valid=measured.valid,
         spike=measured.spike,
         dropout=measured.dropout,
+        sigma_factor=sigma_factor,
+        field_offset_sensor_m=offsets,
     )
     return SimulatedData(profiles, intensities, poses, truth)
