@@ -12,8 +12,8 @@ aside and measures the noise; :func:`fit_arc_in_scene` then
 3. trims the arc's grazing-angle ends where they bias the fit: the inliers seen at more
    than ``grazing_angle_rad`` between the ray from the sensor origin and the ellipse
    normal are dropped, and the ellipse fitted again, when their mean signed distance from
-   the ellipse differs from zero by more than ``GRAZING_BIAS_SIGMAS`` standard errors (and
-   half a noise sigma). A camera's laser spot smears along a steep surface, and its
+   the ellipse through the rest of the arc (a direct fit) differs from that of the rest by
+   more than ``GRAZING_BIAS_SIGMAS`` standard errors (and half a noise sigma). A camera's laser spot smears along a steep surface, and its
    centroid moves: the ends then pull the radius and the centre. The result says so.
 
 If no candidate gives an ellipse, the rejection of the largest candidate is raised.
@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .ellipse import EllipseConfig, fit_ellipse_ransac, sampson_distance
+from .ellipse import EllipseConfig, fit_ellipse_direct, fit_ellipse_ransac, sampson_distance
 from .errors import ProfileRejected
 from .segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
 from .types import BoolArray, EllipseFit, FloatArray
@@ -115,9 +115,12 @@ def _grazing_biased(
     grazing = incidence_cosines(fit.conic, inliers) < math.cos(config.grazing_angle_rad)
     if grazing.sum() < config.min_grazing_points:
         return None
-    residual = _signed_distance(fit.conic, inliers)
-    front = residual[~grazing]
-    shift = abs(float(np.mean(residual[grazing])) - float(np.median(front)))
+    try:
+        front = fit_ellipse_direct(inliers[~grazing])
+    except ProfileRejected:
+        return None
+    ends = _signed_distance(front, inliers[grazing])
+    shift = abs(float(np.mean(ends)) - float(np.median(_signed_distance(front, inliers[~grazing]))))
     error = sigma_m / math.sqrt(float(grazing.sum()))
     if shift <= max(GRAZING_BIAS_SIGMAS * error, 0.5 * sigma_m):
         return None
@@ -191,4 +194,68 @@ def fit_arc_in_scene(
         ellipse=fit,
         segmented=segmented,
         trimmed=0 if drop is None else int(drop.sum()),
+    )
+
+
+#: Standard errors by which the profiles' radius must differ from a given one to contradict
+#: it, and the smallest relative difference reported (a few tenths of a percent are within
+#: the ellipse fits' bias on short arcs).
+RADIUS_MISMATCH_SIGMAS, RADIUS_MISMATCH_RELATIVE = 3.0, 0.003
+
+
+def radius_mismatch(semi_minor_axes_m: ArrayLike, radius_m: float | None) -> str | None:
+    """A warning when the profiles contradict a given cylinder radius, else None.
+
+    Parameters
+    ----------
+    semi_minor_axes_m : array-like, shape (K,)
+        Semi-minor axes of the fitted ellipses, m (a cylinder cut's is its radius).
+    radius_m : float or None
+        The radius the user gave, m (None: nothing to check).
+
+    Returns
+    -------
+    str or None
+        Both numbers, the median with its standard error (1.4826 MAD / sqrt(K)), and what
+        else than the radius could explain the gap: the sensor's along-line scale.
+    """
+    axes = np.asarray(semi_minor_axes_m, dtype=np.float64)
+    if radius_m is None or len(axes) < 2:
+        return None
+    measured = float(np.median(axes))
+    error = 1.4826 * float(np.median(np.abs(axes - measured))) / math.sqrt(len(axes))
+    # The median's standard error is sqrt(pi / 2) times the mean's.
+    error *= math.sqrt(math.pi / 2.0)
+    gap = measured - radius_m
+    if abs(gap) <= max(RADIUS_MISMATCH_SIGMAS * error, RADIUS_MISMATCH_RELATIVE * radius_m):
+        return None
+    return (
+        f"the profiles fit a radius of {measured * 1e3:.2f} ± {error * 1e3:.2f} mm (median "
+        f"semi-minor axis of {len(axes)} ellipses, 1 sigma) against the given "
+        f"{radius_m * 1e3:.2f} mm, {100.0 * gap / radius_m:+.1f}%: either the cylinder is "
+        f"not the given size (measure it, or omit the radius to estimate it), or the "
+        f"sensor's along-line (x) scale is off by about {100.0 * gap / radius_m:+.1f}%, "
+        "which stretches every profile across the line; the calibration used the given "
+        "radius"
+    )
+
+
+def trimming_note(trimmed: ArrayLike, config: ArcConfig) -> str | None:
+    """A note on the grazing-angle points trimmed from the profiles, or None if none were.
+
+    Parameters
+    ----------
+    trimmed : array-like of int, shape (K,)
+        Points trimmed from each profile's arc.
+    config : ArcConfig
+    """
+    counts = np.asarray(trimmed, dtype=np.intp)
+    if not counts.any():
+        return None
+    return (
+        f"trimmed the grazing-angle ends of {int(np.count_nonzero(counts))} of {len(counts)} "
+        f"arcs ({int(counts.sum())} points seen at more than "
+        f"{math.degrees(config.grazing_angle_rad):.0f} deg from the surface normal), because "
+        "they sat off the ellipse through the rest of the arc and biased its fit (a laser "
+        "spot smeared along a steep surface)"
     )

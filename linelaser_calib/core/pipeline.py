@@ -22,7 +22,7 @@ from enum import Enum
 
 import numpy as np
 
-from .arc import ArcConfig, fit_arc_in_scene
+from .arc import ArcConfig, fit_arc_in_scene, radius_mismatch, trimming_note
 from .cylinder_model import centre_distances
 from .ellipse import EllipseConfig
 from .errors import CalibrationError, DegenerateError, InputError, PairingError, ProfileRejected
@@ -265,6 +265,15 @@ def _check_radius(fitted: list[FittedSample], radius_m: float | None) -> float:
     return radius_m
 
 
+def _arc_notes(fitted: list[FittedSample], config: PipelineConfig) -> list[str]:
+    """Warnings on the arcs: a given radius the profiles contradict, trimmed grazing ends."""
+    notes = (
+        radius_mismatch([f.ellipse.semi_axes[1] for f in fitted], config.radius_m),
+        trimming_note([f.trimmed for f in fitted], config.arc),
+    )
+    return [note for note in notes if note is not None]
+
+
 def calibrate_samples(
     samples: list[Sample],
     config: PipelineConfig,
@@ -313,8 +322,11 @@ def calibrate_samples(
     hybrid = config.hybrid if config.method is Method.PAPER else config.seed_hybrid
     seed_solution = solve_pso_galm(centres, T_base_flange, hybrid, rng)
     progress("global solve", 1, 1)
+    notes = _arc_notes(fitted, config)
     if config.method is Method.PAPER:
-        return _paper_result(seed_solution, fitted, rejections, radius, config)
+        result = _paper_result(seed_solution, fitted, rejections, radius, config)
+        result.warnings.extend(notes)
+        return result
     T_init = (
         seed_solution.T_flange_sensor
         if config.initial_T_flange_sensor is None
@@ -347,7 +359,7 @@ def calibrate_samples(
         uncertainty_translation_m=refined.sigma_translation_m,
         uncertainty_rotation_rad=refined.sigma_rotation_rad,
         radius_estimated=refined.radius_estimated,
-        warnings=list(refined.warnings),
+        warnings=[*refined.warnings, *notes],
         history={**seed_solution.history, "refine_cost": list(refined.cost_history)},
         sample_fits=[fitted[j].record() for j in refined.used],
     )
