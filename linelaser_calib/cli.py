@@ -474,7 +474,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general",
+        help="preset: paper, ur_scancontrol, continuous, cluttered_camera, weld_seam, "
+        "weld_seam_general",
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from linelaser_calib.core.arc import ArcConfig, fit_arc_in_scene, radius_mismatch
+from linelaser_calib.core.arc import fit_arc_in_scene, grazing_ends_biased, radius_mismatch
 from linelaser_calib.core.ellipse import EllipseConfig
 from linelaser_calib.core.segmentation import SegmentKind, estimate_noise, segment_profile
 from linelaser_calib.sim import Surface, scenario_from_preset, simulate
@@ -116,21 +116,24 @@ def test_simulated_arcs_are_extracted_next_to_the_fixture() -> None:
     assert np.median(shares) < 0.15
 
 
-def test_biased_grazing_ends_are_trimmed_and_clean_ones_kept() -> None:
+def test_biased_grazing_ends_are_found_over_a_recording_and_trimmed() -> None:
     rng = np.random.default_rng(6)
-    angle = np.linspace(-1.45, 1.45, 400)  # from the sensor's view, rad from the front
+    angle = np.linspace(-1.45, 1.45, 300)  # surface normal from the sensor's view, rad
     normal = np.stack([np.sin(angle), -np.cos(angle)], axis=1)
-    clean = CENTRE + RADIUS * normal + rng.normal(0.0, 10e-6, (len(angle), 2))
-    fitted = fit_arc_in_scene(clean, EllipseConfig(), rng)
-    assert fitted.trimmed == 0
-    grazing = np.abs(angle) > math.radians(70.0)
-    biased = clean + np.where(grazing, 25e-6, 0.0)[:, None] * normal
-    trimmed = fit_arc_in_scene(biased, EllipseConfig(), rng)
-    kept = fit_arc_in_scene(
-        biased, EllipseConfig(), rng, config=ArcConfig(grazing_angle_rad=math.pi / 2)
-    )
-    assert trimmed.trimmed > 0 and kept.trimmed == 0
-    assert abs(trimmed.ellipse.semi_axes[1] - RADIUS) < abs(kept.ellipse.semi_axes[1] - RADIUS)
+    outward = 20e-6 * np.maximum(1.0 / np.cos(angle) - 1.0, 0.0)
+    clean_shifts, biased_shifts = [], []
+    for _ in range(12):
+        clean = CENTRE + RADIUS * normal + rng.normal(0.0, 20e-6, (len(angle), 2))
+        biased = clean + outward[:, None] * normal
+        clean_shifts.append(fit_arc_in_scene(clean, EllipseConfig(), rng).grazing_shift_sigmas)
+        arc = fit_arc_in_scene(biased, EllipseConfig(), rng)
+        biased_shifts.append(arc.grazing_shift_sigmas)
+        assert arc.trimmed_ellipse is not None and arc.grazing_points > 0
+        trimmed_error = abs(arc.trimmed_ellipse.semi_axes[1] - RADIUS)
+        assert trimmed_error < abs(arc.ellipse.semi_axes[1] - RADIUS)
+    assert grazing_ends_biased(clean_shifts) is None
+    shift = grazing_ends_biased(biased_shifts)
+    assert shift is not None and shift > 0.0
 
 
 def test_radius_mismatch_names_both_numbers_and_the_scale() -> None:

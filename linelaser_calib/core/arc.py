@@ -9,12 +9,12 @@ aside and measures the noise; :func:`fit_arc_in_scene` then
 2. fits an ellipse (:func:`~linelaser_calib.core.ellipse.fit_ellipse_ransac`) to each
    curved candidate with enough points, its share rule applied to the candidate's own
    points rather than to the whole profile, and keeps the fit with the most inliers;
-3. trims the arc's grazing-angle ends where they bias the fit: the inliers seen at more
-   than ``grazing_angle_rad`` between the ray from the sensor origin and the ellipse
-   normal are dropped, and the ellipse fitted again, when their mean signed distance from
-   the ellipse through the rest of the arc (a direct fit) differs from that of the rest by
-   more than ``GRAZING_BIAS_SIGMAS`` standard errors (and half a noise sigma). A camera's laser spot smears along a steep surface, and its
-   centroid moves: the ends then pull the radius and the centre. The result says so.
+3. fits the arc again without its grazing-angle ends, the inliers seen at more than
+   ``grazing_angle_rad`` between the ray from the sensor origin and the ellipse normal,
+   and measures how far outside that ellipse the ends sit. A camera's laser spot smears
+   along a steep surface and its centroid leaves the surface: the ends then pull the
+   radius and the centre. Whether they do is decided over the whole recording
+   (:func:`grazing_ends_biased`), and the trimmed fits are used only then.
 
 If no candidate gives an ellipse, the rejection of the largest candidate is raised.
 """
@@ -27,16 +27,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .ellipse import EllipseConfig, fit_ellipse_direct, fit_ellipse_ransac, sampson_distance
+from .ellipse import EllipseConfig, fit_ellipse_ransac, sampson_distance
 from .errors import ProfileRejected
+from .profile import MAD_TO_SIGMA
 from .segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
-from .types import BoolArray, EllipseFit, FloatArray
+from .types import EllipseFit, FloatArray
 
 #: RANSAC inlier threshold in measured noise sigmas (a hypothesis from five noisy points
 #: must still collect the whole arc).
 ARC_NOISE_SIGMAS = 10.0
-#: Standard errors of the grazing ends' mean residual that count as a bias.
-GRAZING_BIAS_SIGMAS = 3.0
+#: Standard errors of the median grazing-end shift that count as a bias, the smallest
+#: shift that does (noise sigmas), and the fewest profiles the test pools.
+GRAZING_BIAS_SIGMAS, GRAZING_MIN_SHIFT_SIGMAS, MIN_GRAZING_PROFILES = 3.0, 0.5, 5
 
 
 @dataclass(frozen=True)
@@ -71,22 +73,35 @@ class ArcFit:
     Attributes
     ----------
     points_xz : ndarray, shape (M, 2)
-        The candidate segment the ellipse was fitted to (grazing ends removed if trimmed),
-        m; ``ellipse.inliers`` is a mask over these rows.
+        The candidate segment the ellipse was fitted to, m; ``ellipse.inliers`` is a mask
+        over these rows.
     rows : ndarray of int, shape (M,)
         Their rows in the input points.
     ellipse : EllipseFit
     segmented : SegmentedProfile
         The segmentation (noise estimate, straight segments set aside).
-    trimmed : int
-        Grazing-angle points dropped because they biased the fit.
+    trimmed_ellipse : EllipseFit or None
+        The ellipse fitted without the grazing-angle inliers (its ``inliers`` a mask over
+        the same rows, the grazing ones False), when there were at least
+        ``min_grazing_points`` of them and the fit succeeded.
+    grazing_shift_sigmas : float
+        Mean outward distance of the grazing inliers from ``trimmed_ellipse``, less the
+        median of the other inliers', in noise sigmas (NaN without ``trimmed_ellipse``).
     """
 
     points_xz: FloatArray
     rows: IntArray
     ellipse: EllipseFit
     segmented: SegmentedProfile
-    trimmed: int
+    trimmed_ellipse: EllipseFit | None = None
+    grazing_shift_sigmas: float = math.nan
+
+    @property
+    def grazing_points(self) -> int:
+        """Inliers that ``trimmed_ellipse`` leaves out."""
+        if self.trimmed_ellipse is None:
+            return 0
+        return int(self.ellipse.inliers.sum() - self.trimmed_ellipse.inliers.sum())
 
 
 def incidence_cosines(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
@@ -99,34 +114,49 @@ def incidence_cosines(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
         return np.asarray(np.where(norm > 0.0, np.abs(gx * x + gz * z) / norm, 1.0))
 
 
-def _signed_distance(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
-    """Sampson distance with the sign of the conic value (m), shape (M,)."""
-    a, b, c, d, e, f = conic
-    x, z = points_xz[:, 0], points_xz[:, 1]
-    value = a * x * x + b * x * z + c * z * z + d * x + e * z + f
-    return np.asarray(np.sign(value) * np.abs(sampson_distance(conic, points_xz)))
+def outward_distance(fit: EllipseFit, points_xz: FloatArray) -> FloatArray:
+    """Sampson distance of points from an ellipse, positive outside it, m, shape (M,)."""
+
+    def value(q: FloatArray) -> FloatArray:
+        a, b, c, d, e, f = fit.conic
+        x, z = q[:, 0], q[:, 1]
+        return np.asarray(a * x * x + b * x * z + c * z * z + d * x + e * z + f)
+
+    inside = np.sign(value(fit.centre_xz[None, :]))[0]
+    distance = np.abs(sampson_distance(fit.conic, points_xz))
+    return np.asarray(-inside * np.sign(value(points_xz)) * distance)
 
 
-def _grazing_biased(
-    fit: EllipseFit, points_xz: FloatArray, sigma_m: float, config: ArcConfig
-) -> BoolArray | None:
-    """Mask of the inliers to drop as biased grazing ends, or None to keep them all."""
-    inliers = points_xz[fit.inliers]
-    grazing = incidence_cosines(fit.conic, inliers) < math.cos(config.grazing_angle_rad)
+def _without_grazing_ends(
+    fit: EllipseFit,
+    points_xz: FloatArray,
+    sigma_m: float,
+    config: ArcConfig,
+    ellipse_config: EllipseConfig,
+    radius_m: float | None,
+) -> tuple[EllipseFit | None, float]:
+    """The ellipse fitted without the grazing inliers, and how far those sit outside it."""
+    grazing = np.zeros(len(points_xz), dtype=np.bool_)
+    inlier_rows = np.flatnonzero(fit.inliers)
+    cosines = incidence_cosines(fit.conic, points_xz[inlier_rows])
+    grazing[inlier_rows[cosines < math.cos(config.grazing_angle_rad)]] = True
     if grazing.sum() < config.min_grazing_points:
-        return None
+        return None, math.nan
+    rest = ~grazing
     try:
-        front = fit_ellipse_direct(inliers[~grazing])
+        # Its own generator: whether or not a profile has grazing ends does not change the
+        # random draws of the fits after it.
+        front = fit_ellipse_ransac(
+            points_xz[rest], ellipse_config, np.random.default_rng(len(points_xz)), radius_m
+        )
     except ProfileRejected:
-        return None
-    ends = _signed_distance(front, inliers[grazing])
-    shift = abs(float(np.mean(ends)) - float(np.median(_signed_distance(front, inliers[~grazing]))))
-    error = sigma_m / math.sqrt(float(grazing.sum()))
-    if shift <= max(GRAZING_BIAS_SIGMAS * error, 0.5 * sigma_m):
-        return None
-    drop = np.zeros(len(points_xz), dtype=np.bool_)
-    drop[np.flatnonzero(fit.inliers)[grazing]] = True
-    return drop
+        return None, math.nan
+    inliers = np.zeros(len(points_xz), dtype=np.bool_)
+    inliers[np.flatnonzero(rest)[front.inliers]] = True
+    trimmed = replace(front, inliers=inliers)
+    ends = float(np.mean(outward_distance(trimmed, points_xz[grazing])))
+    others = float(np.median(outward_distance(trimmed, points_xz[inliers])))
+    return trimmed, (ends - others) / sigma_m
 
 
 def fit_arc_in_scene(
@@ -147,6 +177,12 @@ def fit_arc_in_scene(
     radius_m : float or None
         Cylinder radius, m, when known (bounds the ellipse's semi-minor axis).
     config : ArcConfig, optional
+
+    Returns
+    -------
+    ArcFit
+        With the fit without the grazing ends alongside; whether the ends are biased is
+        decided over the recording (:func:`grazing_ends_biased`).
 
     Raises
     ------
@@ -180,21 +216,38 @@ def fit_arc_in_scene(
         assert first_error is not None
         raise first_error
     fit, rows = best
-    drop = _grazing_biased(fit, p[rows], sigma, config)
-    if drop is not None:
-        try:
-            trimmed_fit = fit_ellipse_ransac(p[rows[~drop]], scaled, rng, radius_m)
-        except ProfileRejected:
-            drop = None
-        else:
-            fit, rows = trimmed_fit, rows[~drop]
-    return ArcFit(
-        points_xz=p[rows],
-        rows=rows,
-        ellipse=fit,
-        segmented=segmented,
-        trimmed=0 if drop is None else int(drop.sum()),
-    )
+    trimmed, shift = _without_grazing_ends(fit, p[rows], sigma, config, scaled, radius_m)
+    return ArcFit(p[rows], rows, fit, segmented, trimmed, shift)
+
+
+def grazing_ends_biased(shifts_sigmas: ArrayLike) -> float | None:
+    """Whether the arcs' grazing ends sit off the rest of the arcs, over a recording.
+
+    One profile has only a few grazing points, and the ellipse through the rest of its arc
+    extrapolates with an error of its own, so the test pools the profiles: the median
+    shift (in noise sigmas) must differ from zero by more than ``GRAZING_BIAS_SIGMAS``
+    standard errors of a median and by more than ``GRAZING_MIN_SHIFT_SIGMAS``.
+
+    Parameters
+    ----------
+    shifts_sigmas : array-like, shape (K,)
+        :attr:`ArcFit.grazing_shift_sigmas` of the profiles (NaN entries are ignored).
+
+    Returns
+    -------
+    float or None
+        The median shift in sigmas when the ends are biased, else None.
+    """
+    shifts = np.asarray(shifts_sigmas, dtype=np.float64)
+    shifts = shifts[np.isfinite(shifts)]
+    if len(shifts) < MIN_GRAZING_PROFILES:
+        return None
+    median = float(np.median(shifts))
+    spread = MAD_TO_SIGMA * float(np.median(np.abs(shifts - median)))
+    error = math.sqrt(math.pi / 2.0) * spread / math.sqrt(len(shifts))
+    if abs(median) <= max(GRAZING_BIAS_SIGMAS * error, GRAZING_MIN_SHIFT_SIGMAS):
+        return None
+    return median
 
 
 #: Standard errors by which the profiles' radius must differ from a given one to contradict
@@ -240,22 +293,24 @@ def radius_mismatch(semi_minor_axes_m: ArrayLike, radius_m: float | None) -> str
     )
 
 
-def trimming_note(trimmed: ArrayLike, config: ArcConfig) -> str | None:
-    """A note on the grazing-angle points trimmed from the profiles, or None if none were.
+def trimming_note(trimmed: ArrayLike, shift_sigmas: float, config: ArcConfig) -> str:
+    """The note on the grazing-angle points trimmed from the profiles.
 
     Parameters
     ----------
     trimmed : array-like of int, shape (K,)
         Points trimmed from each profile's arc.
+    shift_sigmas : float
+        Median shift of the grazing ends (:func:`grazing_ends_biased`), noise sigmas.
     config : ArcConfig
     """
     counts = np.asarray(trimmed, dtype=np.intp)
-    if not counts.any():
-        return None
+    side = "outside" if shift_sigmas > 0.0 else "inside"
     return (
         f"trimmed the grazing-angle ends of {int(np.count_nonzero(counts))} of {len(counts)} "
         f"arcs ({int(counts.sum())} points seen at more than "
-        f"{math.degrees(config.grazing_angle_rad):.0f} deg from the surface normal), because "
-        "they sat off the ellipse through the rest of the arc and biased its fit (a laser "
-        "spot smeared along a steep surface)"
+        f"{math.degrees(config.grazing_angle_rad):.0f} deg from the surface normal): they sit "
+        f"a median {abs(shift_sigmas):.1f} noise sigmas {side} the ellipse through the rest "
+        "of the arc and would bias the radius and the centre (a laser spot smeared along a "
+        "steep surface)"
     )

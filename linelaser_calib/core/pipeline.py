@@ -22,7 +22,14 @@ from enum import Enum
 
 import numpy as np
 
-from .arc import ArcConfig, fit_arc_in_scene, radius_mismatch, trimming_note
+from .arc import (
+    ArcConfig,
+    ArcFit,
+    fit_arc_in_scene,
+    grazing_ends_biased,
+    radius_mismatch,
+    trimming_note,
+)
 from .cylinder_model import centre_distances
 from .ellipse import EllipseConfig
 from .errors import CalibrationError, DegenerateError, InputError, PairingError, ProfileRejected
@@ -130,11 +137,13 @@ class PipelineConfig:
 
 @dataclass
 class FittedSample:
-    """A sample with the points of its arc, its fitted ellipse and the grazing points trimmed."""
+    """A sample with the points of its arc, its fitted ellipse (``arc``: how it was found)
+    and the number of grazing-angle points trimmed from it."""
 
     sample: Sample
     points: FloatArray
     ellipse: EllipseFit
+    arc: ArcFit | None = None
     trimmed: int = 0
 
     @property
@@ -172,7 +181,7 @@ def fit_sample(
         arc = fit_arc_in_scene(cleaned.points_xz, config.ellipse, rng, radius_m, config.arc)
     except ProfileRejected as exc:
         return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
-    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc.trimmed)
+    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc)
 
 
 def validate_sample(
@@ -230,7 +239,18 @@ def fit_samples(
             _check_radius(free_fitted, config.radius_m)
     if not fitted:
         return fitted, rejections, config.radius_m or 0.0
+    _trim_biased_grazing_ends(fitted)
     return fitted, rejections, _check_radius(fitted, config.radius_m)
+
+
+def _trim_biased_grazing_ends(fitted: list[FittedSample]) -> None:
+    """Use the arcs' fits without their grazing ends when those ends are biased."""
+    arcs = [f.arc for f in fitted if f.arc is not None]
+    if grazing_ends_biased([a.grazing_shift_sigmas for a in arcs]) is None:
+        return
+    for f in fitted:
+        if f.arc is not None and f.arc.trimmed_ellipse is not None:
+            f.ellipse, f.trimmed = f.arc.trimmed_ellipse, f.arc.grazing_points
 
 
 def check_units(samples: list[Sample]) -> None:
@@ -267,10 +287,10 @@ def _check_radius(fitted: list[FittedSample], radius_m: float | None) -> float:
 
 def _arc_notes(fitted: list[FittedSample], config: PipelineConfig) -> list[str]:
     """Warnings on the arcs: a given radius the profiles contradict, trimmed grazing ends."""
-    notes = (
-        radius_mismatch([f.ellipse.semi_axes[1] for f in fitted], config.radius_m),
-        trimming_note([f.trimmed for f in fitted], config.arc),
-    )
+    notes = [radius_mismatch([f.ellipse.semi_axes[1] for f in fitted], config.radius_m)]
+    shift = grazing_ends_biased([f.arc.grazing_shift_sigmas for f in fitted if f.arc is not None])
+    if shift is not None:
+        notes.append(trimming_note([f.trimmed for f in fitted], shift, config.arc))
     return [note for note in notes if note is not None]
 
 

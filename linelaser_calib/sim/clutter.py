@@ -23,9 +23,10 @@ The pieces a real recording adds to the plain cylinder scan, each off by default
 - **Camera profiler effects** (applied to the measured points):
   the noise of each profile is scaled by a factor uniform in
   [1 - ``sigma_spread``, 1 + ``sigma_spread``] (exposure and range differ per shot);
-  a grazing-angle bias pushes each return away from the sensor along its ray by
+  a grazing-angle bias moves each return out along the surface normal by
   ``edge_bias_m * (1 / cos(incidence) - 1)``, capped at 10 ``edge_bias_m`` (the laser spot
-  smears along a steep surface and its centroid moves back); the along-line coordinate is
+  smears along a steep surface and the peak detector's centroid leaves the surface), so
+  the arc's steep ends bulge outwards; the along-line coordinate is
   scaled by ``1 + lateral_scale_error`` (a calibration error of the sensor's x scale); and
   the depth is rounded to multiples of ``depth_quantum_m`` (the sub-pixel resolution of the
   camera).
@@ -44,7 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.types import FloatArray
 from linelaser_calib.sim.poses import SensorPoses
-from linelaser_calib.sim.profiler import Measurement, Trace, ray_directions
+from linelaser_calib.sim.profiler import Measurement, Trace
 from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Scene, Surface
 
@@ -201,7 +202,11 @@ def profile_sigma_factors(rng: np.random.Generator, scenario: Scenario, count: i
 
 
 def camera_effects(
-    scenario: Scenario, traced: Trace, measured: Measurement, sigma_factor: FloatArray
+    scenario: Scenario,
+    traced: Trace,
+    measured: Measurement,
+    sigma_factor: FloatArray,
+    R_base_sensor: FloatArray,
 ) -> Measurement:
     """Per-profile noise scale, grazing-angle bias, along-line scale and depth quantisation.
 
@@ -213,6 +218,8 @@ def camera_effects(
     measured : Measurement
     sigma_factor : ndarray, shape (K,)
         Noise factor of each profile (:func:`profile_sigma_factors`).
+    R_base_sensor : ndarray, shape (K, 3, 3)
+        Orientation of each shot's sensor (turns the surface normals into its frame).
     """
     truth = np.nan_to_num(traced.points_sensor)
     noise = np.nan_to_num(measured.points) - truth
@@ -220,7 +227,8 @@ def camera_effects(
     with np.errstate(divide="ignore", invalid="ignore"):
         grazing = 1.0 / np.abs(np.nan_to_num(traced.cos_incidence, nan=1.0)) - 1.0
     bias = scenario.edge_bias_m * np.minimum(grazing, MAX_EDGE_BIAS_FACTOR)
-    p = p + bias[..., None] * ray_directions(scenario)
+    normals = np.einsum("kji,knj->kni", R_base_sensor, np.nan_to_num(traced.normals_base))
+    p = p + bias[..., None] * normals
     p[..., 0] *= 1.0 + scenario.lateral_scale_error
     if scenario.depth_quantum_m > 0.0:
         p[..., 2] = np.round(p[..., 2] / scenario.depth_quantum_m) * scenario.depth_quantum_m

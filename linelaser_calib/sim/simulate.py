@@ -197,7 +197,9 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
     sigma_factor: FloatArray | None = None
     if has_camera_effects(scenario):
         sigma_factor = profile_sigma_factors(extra, scenario, len(t_shot))
-        measured = camera_effects(scenario, traced, measured, sigma_factor)
+        measured = camera_effects(
+            scenario, traced, measured, sigma_factor, T_sensor_shot[:, :3, :3]
+        )
     poses = recorded_pose_stream(rng, scenario, motion, errors)
     stamps, profiles, intensities = published_profiles(scenario, acq_ns, measured)
     truth = SimulationTruth(
