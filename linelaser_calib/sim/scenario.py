@@ -35,6 +35,19 @@ Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
     ``ur_scancontrol`` scanned while the robot moves through 6 waypoints without stopping
     (spline path, 0.15 m/s and 1.5 rad/s on average, sensor roll not flipped), profiles at
     10 Hz with 320 points, a 500 Hz pose stream and profiles stamped 4 ms late.
+``cluttered_camera``
+    A real cell as a coarse camera-based profiler sees it (:mod:`~linelaser_calib.sim.clutter`):
+    an upright Ø25 x 400 mm bar at (0.95, 0, -0.2) m about 1 m from the sensor, a wall
+    300 mm behind it turned 45° to the view, and a fixture fin 80 mm long on one side over
+    20 mm of the bar's height (a profile crossing it runs from the arc into the fin with no
+    gap); range 0.7-1.4 m, 3200 columns over a fan of ±16.7° (0.18-0.22 mm pitch at the
+    bar), depth quantised in 16 µm steps, depth noise 50 µm ± 40 % per profile and 10 µm
+    along the line, a 0.5 % along-line scale error, a grazing-angle bias of 30 µm ·
+    (1 / cos(incidence) - 1) out of the surface, a 150 mm camera baseline; 120 poses in 6
+    clusters (±3°, ±30 mm within), cut angles 10°-35° so that each arc is about 25 mm wide
+    (110-140 points, 5-10 % of a profile); a smooth robot error field of about ±0.7 mm
+    along the line, ±0.2 mm across and ±0.35 mm in depth over 0.4 m of the workspace, on top
+    of robot σ 0.05 mm and 0.005°; 25 Hz pose stream, 0.2 s dwell.
 
 Bag size: a streamed pose costs ~120 bytes and a point 12-16 bytes in a rosbag2 MCAP file,
 so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` and
