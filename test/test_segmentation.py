@@ -3,13 +3,18 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from linelaser_calib.core.arc import fit_arc_in_scene, grazing_ends_biased, radius_mismatch
 from linelaser_calib.core.ellipse import EllipseConfig
+from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.pipeline import PipelineConfig
 from linelaser_calib.core.segmentation import SegmentKind, estimate_noise, segment_profile
+from linelaser_calib.io.results import read_truth_yaml
+from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.sim import Surface, scenario_from_preset, simulate
 
 RADIUS = 0.0125
@@ -155,3 +160,21 @@ def test_segments_partition_in_scan_order() -> None:
     assert len(np.unique(rows)) == len(rows)
     kinds = {s.kind for s in segmented.segments}
     assert kinds == {SegmentKind.LINE, SegmentKind.CURVE}
+
+
+def test_committed_cluttered_bag_uses_every_profile_and_names_the_radius_mismatch() -> None:
+    """The given radius is the bar's true one, but the sensor's 0.5 % along-line scale and
+    the grazing-angle bias make the profiles fit a larger one: the warning names both."""
+    bag = Path(__file__).resolve().parent.parent / "bags" / "cluttered_camera"
+    truth = read_truth_yaml(bag / "truth.yaml")
+    run = calibrate_bag(bag, PipelineConfig(radius_m=RADIUS))
+    result = run.result
+    assert not result.samples_rejected
+    mismatch = [w for w in result.warnings if w.startswith("the profiles fit a radius")]
+    assert len(mismatch) == 1
+    assert "12.50 mm" in mismatch[0] and "scale" in mismatch[0]
+    free = calibrate_bag(bag, PipelineConfig()).result
+    assert free.cylinder.radius > RADIUS
+    assert not any(w.startswith("the profiles fit a radius") for w in free.warnings)
+    rotation, translation = transform_error(free.T_flange_sensor, truth.T_flange_sensor)
+    assert translation < 5e-3 and rotation < math.radians(0.5)
