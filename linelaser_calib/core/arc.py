@@ -198,9 +198,9 @@ def fit_arc_in_scene(
     candidates = [s for s in segmented.curves() if len(s.indices) >= scaled.min_inliers]
     if not candidates:
         raise ProfileRejected(
-            f"no curved piece of at least {scaled.min_inliers} points in the profile "
-            f"({len(segmented.lines())} straight pieces set aside as planes, noise "
-            f"{sigma * 1e6:.0f} um); the laser line may miss the cylinder"
+            f"no curved piece of at least {scaled.min_inliers} points in the profile: "
+            f"{len(segmented.lines())} straight piece(s) set aside as planes (tables, walls), "
+            f"measured noise {sigma * 1e6:.0f} um; the laser line may miss the cylinder"
         )
     best: tuple[EllipseFit, IntArray] | None = None
     first_error: ProfileRejected | None = None

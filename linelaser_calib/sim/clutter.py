@@ -23,7 +23,8 @@ The pieces a real recording adds to the plain cylinder scan, each off by default
 - **Camera profiler effects** (applied to the measured points):
   the noise of each profile is scaled by a factor uniform in
   [1 - ``sigma_spread``, 1 + ``sigma_spread``] (exposure and range differ per shot);
-  a grazing-angle bias moves each return out along the surface normal by
+  a grazing-angle bias moves each return out along the surface normal (its direction in
+  the laser plane) by
   ``edge_bias_m * (1 / cos(incidence) - 1)``, capped at 10 ``edge_bias_m`` (the laser spot
   smears along a steep surface and the peak detector's centroid leaves the surface), so
   the arc's steep ends bulge outwards; the along-line coordinate is
@@ -228,7 +229,10 @@ def camera_effects(
         grazing = 1.0 / np.abs(np.nan_to_num(traced.cos_incidence, nan=1.0)) - 1.0
     bias = scenario.edge_bias_m * np.minimum(grazing, MAX_EDGE_BIAS_FACTOR)
     normals = np.einsum("kji,knj->kni", R_base_sensor, np.nan_to_num(traced.normals_base))
-    p = p + bias[..., None] * normals
+    normals[..., 1] = 0.0  # the sensor measures in its laser plane only
+    length = np.linalg.norm(normals, axis=-1, keepdims=True)
+    in_plane = np.divide(normals, length, out=np.zeros_like(normals), where=length > 0.0)
+    p = p + bias[..., None] * in_plane
     p[..., 0] *= 1.0 + scenario.lateral_scale_error
     if scenario.depth_quantum_m > 0.0:
         p[..., 2] = np.round(p[..., 2] / scenario.depth_quantum_m) * scenario.depth_quantum_m
