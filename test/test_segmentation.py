@@ -8,7 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linelaser_calib.core.arc import fit_arc_in_scene, grazing_ends_biased, radius_mismatch
+from linelaser_calib.core.arc import (
+    fit_arc_in_scene,
+    grazing_ends_biased,
+    radius_mismatch,
+    without_grazing_ends,
+)
 from linelaser_calib.core.ellipse import EllipseConfig
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pipeline import PipelineConfig
@@ -133,8 +138,10 @@ def test_biased_grazing_ends_are_found_over_a_recording_and_trimmed() -> None:
         clean_shifts.append(fit_arc_in_scene(clean, EllipseConfig(), rng).grazing_shift_sigmas)
         arc = fit_arc_in_scene(biased, EllipseConfig(), rng)
         biased_shifts.append(arc.grazing_shift_sigmas)
-        assert arc.trimmed_ellipse is not None and arc.grazing_points > 0
-        trimmed_error = abs(arc.trimmed_ellipse.semi_axes[1] - RADIUS)
+        trimmed = without_grazing_ends(arc, None)
+        assert trimmed is not None and arc.grazing.sum() > 0
+        assert not np.any(trimmed.inliers & arc.grazing)
+        trimmed_error = abs(trimmed.semi_axes[1] - RADIUS)
         assert trimmed_error < abs(arc.ellipse.semi_axes[1] - RADIUS)
     assert grazing_ends_biased(clean_shifts) is None
     shift = grazing_ends_biased(biased_shifts)

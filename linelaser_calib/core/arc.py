@@ -9,9 +9,9 @@ aside and measures the noise; :func:`fit_arc_in_scene` then
 2. fits an ellipse (:func:`~linelaser_calib.core.ellipse.fit_ellipse_ransac`) to each
    curved candidate with enough points, its share rule applied to the candidate's own
    points rather than to the whole profile, and keeps the fit with the most inliers;
-3. fits the arc again without its grazing-angle ends, the inliers seen at more than
-   ``grazing_angle_rad`` between the ray from the sensor origin and the ellipse normal,
-   and measures how far outside that ellipse the ends sit. A camera's laser spot smears
+3. polishes the ellipse on the arc without its grazing-angle ends, the inliers seen at
+   more than ``grazing_angle_rad`` between the ray from the sensor origin and the ellipse
+   normal, and measures how far outside that ellipse the ends sit. A camera's laser spot smears
    along a steep surface and its centroid leaves the surface: the ends then pull the
    radius and the centre. Whether they do is decided over the whole recording
    (:func:`grazing_ends_biased`), and the trimmed fits are used only then.
@@ -27,11 +27,17 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .ellipse import EllipseConfig, fit_ellipse_ransac, sampson_distance
+from .ellipse import (
+    EllipseConfig,
+    centre_from_conic,
+    fit_ellipse_ransac,
+    refine_conic,
+    sampson_distance,
+)
 from .errors import ProfileRejected
 from .profile import MAD_TO_SIGMA
 from .segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
-from .types import EllipseFit, FloatArray
+from .types import BoolArray, EllipseFit, FloatArray
 
 #: RANSAC inlier threshold in measured noise sigmas (a hypothesis from five noisy points
 #: must still collect the whole arc).
@@ -80,28 +86,23 @@ class ArcFit:
     ellipse : EllipseFit
     segmented : SegmentedProfile
         The segmentation (noise estimate, straight segments set aside).
-    trimmed_ellipse : EllipseFit or None
-        The ellipse fitted without the grazing-angle inliers (its ``inliers`` a mask over
-        the same rows, the grazing ones False), when there were at least
-        ``min_grazing_points`` of them and the fit succeeded.
+    ellipse_config : EllipseConfig
+        The ellipse parameters used, inlier threshold scaled to the noise.
+    grazing : ndarray of bool, shape (M,)
+        The inliers seen at more than ``grazing_angle_rad`` from the surface normal (all
+        False when fewer than ``min_grazing_points``).
     grazing_shift_sigmas : float
-        Mean outward distance of the grazing inliers from ``trimmed_ellipse``, less the
-        median of the other inliers', in noise sigmas (NaN without ``trimmed_ellipse``).
+        Mean outward distance of the grazing inliers from the ellipse through the other
+        inliers, less the median of the others', in noise sigmas (NaN when not measured).
     """
 
     points_xz: FloatArray
     rows: IntArray
     ellipse: EllipseFit
     segmented: SegmentedProfile
-    trimmed_ellipse: EllipseFit | None = None
+    ellipse_config: EllipseConfig
+    grazing: BoolArray
     grazing_shift_sigmas: float = math.nan
-
-    @property
-    def grazing_points(self) -> int:
-        """Inliers that ``trimmed_ellipse`` leaves out."""
-        if self.trimmed_ellipse is None:
-            return 0
-        return int(self.ellipse.inliers.sum() - self.trimmed_ellipse.inliers.sum())
 
 
 def incidence_cosines(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
@@ -114,49 +115,60 @@ def incidence_cosines(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
         return np.asarray(np.where(norm > 0.0, np.abs(gx * x + gz * z) / norm, 1.0))
 
 
-def outward_distance(fit: EllipseFit, points_xz: FloatArray) -> FloatArray:
+def outward_distance(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
     """Sampson distance of points from an ellipse, positive outside it, m, shape (M,)."""
 
     def value(q: FloatArray) -> FloatArray:
-        a, b, c, d, e, f = fit.conic
+        a, b, c, d, e, f = conic
         x, z = q[:, 0], q[:, 1]
         return np.asarray(a * x * x + b * x * z + c * z * z + d * x + e * z + f)
 
-    inside = np.sign(value(fit.centre_xz[None, :]))[0]
-    distance = np.abs(sampson_distance(fit.conic, points_xz))
+    inside = np.sign(value(centre_from_conic(conic)[None, :]))[0]
+    distance = np.abs(sampson_distance(conic, points_xz))
     return np.asarray(-inside * np.sign(value(points_xz)) * distance)
 
 
-def _without_grazing_ends(
-    fit: EllipseFit,
-    points_xz: FloatArray,
-    sigma_m: float,
-    config: ArcConfig,
-    ellipse_config: EllipseConfig,
-    radius_m: float | None,
-) -> tuple[EllipseFit | None, float]:
-    """The ellipse fitted without the grazing inliers, and how far those sit outside it."""
+def _grazing_shift(
+    fit: EllipseFit, points_xz: FloatArray, sigma_m: float, config: ArcConfig
+) -> tuple[BoolArray, float]:
+    """The grazing inliers, and how far outside the ellipse through the others they sit."""
     grazing = np.zeros(len(points_xz), dtype=np.bool_)
     inlier_rows = np.flatnonzero(fit.inliers)
     cosines = incidence_cosines(fit.conic, points_xz[inlier_rows])
     grazing[inlier_rows[cosines < math.cos(config.grazing_angle_rad)]] = True
     if grazing.sum() < config.min_grazing_points:
-        return None, math.nan
-    rest = ~grazing
+        return np.zeros_like(grazing), math.nan
+    rest = fit.inliers & ~grazing
     try:
-        # Its own generator: whether or not a profile has grazing ends does not change the
-        # random draws of the fits after it.
-        front = fit_ellipse_ransac(
-            points_xz[rest], ellipse_config, np.random.default_rng(len(points_xz)), radius_m
+        front = refine_conic(fit.conic, points_xz[rest])
+    except ProfileRejected:
+        return grazing, math.nan
+    ends = float(np.mean(outward_distance(front, points_xz[grazing])))
+    others = float(np.median(outward_distance(front, points_xz[rest])))
+    return grazing, (ends - others) / sigma_m
+
+
+def without_grazing_ends(arc: ArcFit, radius_m: float | None) -> EllipseFit | None:
+    """The arc's ellipse fitted again without its grazing inliers (None if that fails).
+
+    Its ``inliers`` mask covers the same rows as ``arc.ellipse.inliers``, the grazing
+    ones False.
+    """
+    if not arc.grazing.any():
+        return None
+    keep = ~arc.grazing
+    try:
+        fit = fit_ellipse_ransac(
+            arc.points_xz[keep],
+            arc.ellipse_config,
+            np.random.default_rng(len(arc.points_xz)),
+            radius_m,
         )
     except ProfileRejected:
-        return None, math.nan
-    inliers = np.zeros(len(points_xz), dtype=np.bool_)
-    inliers[np.flatnonzero(rest)[front.inliers]] = True
-    trimmed = replace(front, inliers=inliers)
-    ends = float(np.mean(outward_distance(trimmed, points_xz[grazing])))
-    others = float(np.median(outward_distance(trimmed, points_xz[inliers])))
-    return trimmed, (ends - others) / sigma_m
+        return None
+    inliers = np.zeros(len(arc.points_xz), dtype=np.bool_)
+    inliers[np.flatnonzero(keep)[fit.inliers]] = True
+    return replace(fit, inliers=inliers)
 
 
 def fit_arc_in_scene(
@@ -181,8 +193,9 @@ def fit_arc_in_scene(
     Returns
     -------
     ArcFit
-        With the fit without the grazing ends alongside; whether the ends are biased is
-        decided over the recording (:func:`grazing_ends_biased`).
+        With its grazing ends and how far they sit off the rest; whether they are biased
+        is decided over the recording (:func:`grazing_ends_biased`), and the trimmed
+        ellipse (:func:`without_grazing_ends`) used only then.
 
     Raises
     ------
@@ -216,8 +229,8 @@ def fit_arc_in_scene(
         assert first_error is not None
         raise first_error
     fit, rows = best
-    trimmed, shift = _without_grazing_ends(fit, p[rows], sigma, config, scaled, radius_m)
-    return ArcFit(p[rows], rows, fit, segmented, trimmed, shift)
+    grazing, shift = _grazing_shift(fit, p[rows], sigma, config)
+    return ArcFit(p[rows], rows, fit, segmented, scaled, grazing, shift)
 
 
 def grazing_ends_biased(shifts_sigmas: ArrayLike) -> float | None:

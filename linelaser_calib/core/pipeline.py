@@ -29,6 +29,7 @@ from .arc import (
     grazing_ends_biased,
     radius_mismatch,
     trimming_note,
+    without_grazing_ends,
 )
 from .cylinder_model import centre_distances
 from .ellipse import EllipseConfig
@@ -239,18 +240,20 @@ def fit_samples(
             _check_radius(free_fitted, config.radius_m)
     if not fitted:
         return fitted, rejections, config.radius_m or 0.0
-    _trim_biased_grazing_ends(fitted)
+    _trim_biased_grazing_ends(fitted, config.radius_m)
     return fitted, rejections, _check_radius(fitted, config.radius_m)
 
 
-def _trim_biased_grazing_ends(fitted: list[FittedSample]) -> None:
-    """Use the arcs' fits without their grazing ends when those ends are biased."""
+def _trim_biased_grazing_ends(fitted: list[FittedSample], radius_m: float | None) -> None:
+    """Fit the arcs again without their grazing ends when those ends are biased."""
     arcs = [f.arc for f in fitted if f.arc is not None]
     if grazing_ends_biased([a.grazing_shift_sigmas for a in arcs]) is None:
         return
     for f in fitted:
-        if f.arc is not None and f.arc.trimmed_ellipse is not None:
-            f.ellipse, f.trimmed = f.arc.trimmed_ellipse, f.arc.grazing_points
+        trimmed = None if f.arc is None else without_grazing_ends(f.arc, radius_m)
+        if trimmed is not None:
+            f.trimmed = int(f.ellipse.inliers.sum() - trimmed.inliers.sum())
+            f.ellipse = trimmed
 
 
 def check_units(samples: list[Sample]) -> None:
