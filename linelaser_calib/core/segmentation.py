@@ -31,6 +31,11 @@ Steps of :func:`segment_profile`, on points in scan-line order (sorted by ray an
 4. **Curved pieces.** What is left of each gap-free piece, in runs of at least
    ``min_segment_points`` points, are the candidates for the target's feature.
 
+Each target's fitter picks its feature from the result: the cylinder fits an ellipse to
+each curved segment (:mod:`~linelaser_calib.core.arc`); a sphere's circle is found the
+same way; a seam's V corner is where two adjacent straight segments meet (their line fits
+are in the result). The noise estimate scales every target's inlier thresholds.
+
 The RANSAC draws of step 3 come from a generator seeded by the number of points, so the
 result is deterministic and does not consume the caller's random stream.
 """
