@@ -92,7 +92,9 @@ class SegmentationConfig:
     min_segment_points : int
         Fewest points of a curved candidate segment.
     line_hypotheses : int
-        RANSAC line hypotheses per search.
+        RANSAC line hypotheses per search. A hypothesis joins two points a few line
+        lengths apart in the scan order, so it lies on a plane as often as the plane's
+        share of the piece: 48 miss a plane of 15 % share once in 2500 searches.
     max_lines : int
         Most straight segments taken out of one profile.
     """
@@ -103,7 +105,7 @@ class SegmentationConfig:
     min_line_length_m: float = 0.02
     min_line_points: int = 20
     min_segment_points: int = 10
-    line_hypotheses: int = 200
+    line_hypotheses: int = 48
     max_lines: int = 8
 
     def __post_init__(self) -> None:
