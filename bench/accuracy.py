@@ -103,7 +103,7 @@ def errors_deg_mm(result: CalibrationResult, T_true: FloatArray) -> tuple[float,
 
 def axis_errors(result: CalibrationResult, T_true: FloatArray) -> FloatArray:
     """[θ (rad, sensor axes), ρ (m, flange axes)], truth = estimate ∘ (Exp θ, +ρ): the
-    parametrisation of the predicted 1σ (``core.refine``)."""
+    parametrisation of the predicted 1σ (``core.targets.cylinder.refine``)."""
     T_est = result.T_flange_sensor
     theta = rotvec_from_matrix(T_est[:3, :3].T @ T_true[:3, :3])
     return np.concatenate([theta, T_true[:3, 3] - T_est[:3, 3]])
@@ -634,7 +634,7 @@ def _cluttered_run(seed: int) -> dict[str, Any]:
         "profiles": len(data.profiles),
         "errors": errors_deg_mm(result, data.truth.T_flange_sensor),
         "ratio": np.abs(axis_errors(result, data.truth.T_flange_sensor)) / sigma,
-        "radius_mm": result.cylinder.radius * 1e3,
+        "radius_mm": result.target.cylinder.radius * 1e3,
         "trimmed": any(w.startswith("trimmed the grazing") for w in result.warnings),
     }
 

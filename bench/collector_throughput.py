@@ -1,18 +1,23 @@
 """Throughput of the collector node: high-rate profiles and flange poses, CPU, latency, drops.
 
-Starts ``python -m linelaser_calib.nodes.collector`` on a private ROS domain and streams, from
-this process, 2048-point profiles at 100 Hz and flange poses at 500 Hz for 20 s, stamped with
-the wall clock. The simulated robot rests at one of a few scan poses for a second, then jumps
-to the next (the profiles around a jump are rejected as taken in motion). Prints:
+For each profile rate (default 100, 200 and 500 Hz), starts ``python -m
+linelaser_calib.nodes.collector`` (``continuous`` mode, store first) on a private ROS domain
+and streams, from this process, 2048-point profiles and flange poses at 500 Hz for 10 s,
+stamped with the wall clock. The simulated robot rests at one of a few scan poses for a
+second, then jumps to the next (the profiles around a jump are rejected as taken in motion).
+Prints the collector's counts per rate, then a table:
 
-- CPU of the collector process (all threads, from /proc/<pid>/stat), % of one core;
-- latency from a profile's stamp to the publication of its sample, as received here;
-- drops: profiles published here minus profiles the collector counted (must be 0);
-- the collector's own counts (accepted, rejected and skipped per reason).
+- sent, received by the collector, lost in transport as the collector counted it;
+- stored: samples in the session file afterwards, and per second of streaming;
+- skipped and rejected (with the reasons in the counts above);
+- CPU of the collector process (all threads, from /proc/<pid>/stat) and of this publisher,
+  % of one core;
+- latency from a profile's stamp to the publication of its sample (stored and flushed
+  first), as received here.
 
 Run from the repository root (not part of the test suite)::
 
-    .venv/bin/python bench/collector_throughput.py [--duration 20] [--min-sample-interval 0.1]
+    .venv/bin/python bench/collector_throughput.py [--duration 10] [--profile-rates 100 200]
 """
 
 from __future__ import annotations
@@ -38,7 +43,15 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
 
 from linelaser_calib.core.types import FlangePose
-from linelaser_calib.nodes.collection import KEY_PENDING, KEY_RECEIVED
+from linelaser_calib.io import read_bag
+from linelaser_calib.nodes.collection import (
+    KEY_PENDING,
+    KEY_PROFILES_BEFORE,
+    KEY_PROFILES_LOST,
+    KEY_RECEIVED,
+    KEY_REJECTED,
+    KEY_SKIPPED,
+)
 from linelaser_calib.nodes.common import SAMPLE_PROFILE_TOPIC
 from linelaser_calib.sim import scenario_from_preset, simulate
 from msg_adapters import (
@@ -126,49 +139,45 @@ def scan_poses(points: int, count: int) -> tuple[list[PointCloud2], list[PoseSta
 def stream(
     bench: Bench, clouds: list[PointCloud2], poses: list[PoseStamped], args: argparse.Namespace
 ) -> int:
-    """Publish poses and profiles on a fixed schedule for ``args.duration`` s; profiles sent."""
+    """Publish poses and profiles, each at its own rate, for ``args.duration`` s (stamped with
+    the wall clock at publication); profiles sent."""
     types = rclpy_types()
-    tick_s = 1.0 / args.pose_rate
-    profile_every = round(args.pose_rate / args.profile_rate)
-    ticks = round(args.duration / tick_s)
+    events = sorted(
+        [(k / args.pose_rate, False) for k in range(round(args.duration * args.pose_rate))]
+        + [(k / args.profile_rate, True) for k in range(round(args.duration * args.profile_rate))]
+    )
     start = time.monotonic()
     sent = 0
-    for k in range(ticks):
-        delay = start + k * tick_s - time.monotonic()
+    for t, is_profile in events:
+        delay = start + t - time.monotonic()
         if delay > 0:
             time.sleep(delay)
-        waypoint = int(k * tick_s / args.dwell) % len(poses)
+        waypoint = int(t / args.dwell) % len(poses)
         stamp = time_msg_from_ns(time.time_ns(), types)
-        pose = poses[waypoint]
-        pose.header.stamp = stamp
-        bench.pose_pub.publish(pose)
-        if k % profile_every == 0:
+        if is_profile:
             cloud = clouds[waypoint]
             cloud.header.stamp = stamp
             bench.profile_pub.publish(cloud)
             sent += 1
+        else:
+            pose = poses[waypoint]
+            pose.header.stamp = stamp
+            bench.pose_pub.publish(pose)
     return sent
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--duration", type=float, default=20.0, help="streaming time, s")
-    parser.add_argument("--profile-rate", type=float, default=100.0, help="Hz")
-    parser.add_argument("--pose-rate", type=float, default=500.0, help="Hz")
-    parser.add_argument("--points", type=int, default=2048, help="points per profile")
-    parser.add_argument("--dwell", type=float, default=1.0, help="time at each scan pose, s")
-    parser.add_argument(
-        "--min-sample-interval", type=float, default=0.0, help="collector parameter, s"
-    )
-    parser.add_argument("--reliable", action="store_true", help="collector reliable_inputs")
-    parser.add_argument("--domain", type=int, default=150 + os.getpid() % 50)
-    args = parser.parse_args()
-
-    clouds, poses = scan_poses(args.points, 12)
-    workdir = Path(tempfile.mkdtemp(prefix="collector_bench_"))
+def run_rate(
+    profile_rate: float,
+    clouds: list[PointCloud2],
+    poses: list[PoseStamped],
+    args: argparse.Namespace,
+) -> dict[str, int | float]:
+    """Stream at one profile rate to a fresh collector; the row of the table."""
+    workdir = Path(tempfile.mkdtemp(prefix=f"collector_bench_{profile_rate:g}hz_"))
+    domain = args.domain + int(profile_rate) % 50
     env = dict(
         os.environ,
-        ROS_DOMAIN_ID=str(args.domain),
+        ROS_DOMAIN_ID=str(domain),
         ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
         ROS_LOG_DIR=str(workdir / "ros_log"),
     )
@@ -181,7 +190,9 @@ def main() -> int:
         "-p",
         f"session_dir:={workdir / 'sessions'}",
         "-p",
-        f"min_sample_interval_s:={args.min_sample_interval}",
+        f"mode:={args.mode}",
+        "-p",
+        f"max_rate_hz:={args.max_rate}",
         "-p",
         f"reliable_inputs:={str(args.reliable).lower()}",
         "-p",
@@ -189,7 +200,8 @@ def main() -> int:
     ]
     log = (workdir / "collector.log").open("wb")
     collector = subprocess.Popen(command, env=env, stdout=log, stderr=subprocess.STDOUT)
-    bench = Bench(args.domain)
+    bench = Bench(domain)
+    rate_args = argparse.Namespace(**{**vars(args), "profile_rate": profile_rate})
     try:
         deadline = time.monotonic() + 60.0
         while not (
@@ -201,7 +213,7 @@ def main() -> int:
         time.sleep(1.0)
         cpu0, wall0 = cpu_seconds(collector.pid), time.monotonic()
         bench_cpu0 = time.process_time()
-        sent = stream(bench, clouds, poses, args)
+        sent = stream(bench, clouds, poses, rate_args)
         cpu1, wall1 = cpu_seconds(collector.pid), time.monotonic()
         bench_cpu1 = time.process_time()
         deadline = time.monotonic() + 30.0
@@ -221,30 +233,63 @@ def main() -> int:
         except subprocess.TimeoutExpired:
             collector.kill()
         log.close()
-
     wall = wall1 - wall0
+    stored = len(read_bag(sorted((workdir / "sessions").glob("session_*"))[-1]).profiles)
     received = int(counts.get(KEY_RECEIVED, 0))
-    print(
-        f"collector throughput: {args.duration:g} s of {args.profile_rate:g} Hz profiles x "
-        f"{args.points} points + {args.pose_rate:g} Hz poses, min_sample_interval_s "
-        f"{args.min_sample_interval:g}, {'reliable' if args.reliable else 'best-effort'} inputs"
-    )
-    print(f"  profiles published            {sent}")
-    print(f"  profiles counted by collector {received}")
-    print(f"  drops                         {sent - received}")
-    print(f"  collector CPU                 {100 * (cpu1 - cpu0) / wall:.0f} % of one core")
-    print(f"  bench (publisher) CPU         {100 * (bench_cpu1 - bench_cpu0) / wall:.0f} %")
-    if latencies.size:
-        p50, p95, p99 = np.percentile(latencies * 1e3, [50, 95, 99])
-        print(
-            f"  latency stamp -> sample       median {p50:.1f} ms, p95 {p95:.1f} ms, "
-            f"p99 {p99:.1f} ms, max {latencies.max() * 1e3:.1f} ms ({latencies.size} samples)"
-        )
-    print("  collector counts:")
+    p50, p95 = np.percentile(latencies * 1e3, [50, 95]) if latencies.size else (np.nan, np.nan)
+    print(f"  {profile_rate:g} Hz: collector counts (session and log in {workdir}):")
     for key, value in counts.items():
         print(f"    {key:<70} {value}")
-    print(f"  (session and log in {workdir})")
-    return 0 if sent == received else 1
+    return {
+        "Hz": profile_rate,
+        "sent": sent,
+        "received": received,
+        "lost (counted)": int(counts.get(KEY_PROFILES_LOST, 0))
+        + int(counts.get(KEY_PROFILES_BEFORE, 0)),
+        "stored": stored,
+        "stored/s": stored / args.duration,
+        "skipped": int(counts.get(KEY_SKIPPED, 0)),
+        "rejected": int(counts.get(KEY_REJECTED, 0)),
+        "CPU %": 100 * (cpu1 - cpu0) / wall,
+        "bench CPU %": 100 * (bench_cpu1 - bench_cpu0) / wall,
+        "latency p50 ms": float(p50),
+        "latency p95 ms": float(p95),
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--duration", type=float, default=10.0, help="streaming time, s")
+    parser.add_argument(
+        "--profile-rates", type=float, nargs="+", default=[100.0, 200.0, 500.0], help="Hz"
+    )
+    parser.add_argument("--pose-rate", type=float, default=500.0, help="Hz")
+    parser.add_argument("--points", type=int, default=2048, help="points per profile")
+    parser.add_argument("--dwell", type=float, default=1.0, help="time at each scan pose, s")
+    parser.add_argument("--mode", default="continuous", help="collector mode")
+    parser.add_argument("--max-rate", type=float, default=0.0, help="collector max_rate_hz")
+    parser.add_argument("--reliable", action="store_true", help="collector reliable_inputs")
+    parser.add_argument("--domain", type=int, default=150 + os.getpid() % 50)
+    args = parser.parse_args()
+
+    clouds, poses = scan_poses(args.points, 12)
+    load = os.getloadavg()
+    print(
+        f"collector throughput: {args.duration:g} s of profiles x {args.points} points + "
+        f"{args.pose_rate:g} Hz poses, mode {args.mode}, max_rate_hz {args.max_rate:g}, "
+        f"{'reliable' if args.reliable else 'best-effort'} inputs; {os.cpu_count()} cores, "
+        f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} at the start"
+    )
+    rows = [run_rate(rate, clouds, poses, args) for rate in args.profile_rates]
+    print("| " + " | ".join(rows[0]) + " |")
+    print("|" + "---|" * len(rows[0]))
+    for row in rows:
+        cells = [f"{v:.0f}" if isinstance(v, float) else str(v) for v in row.values()]
+        print("| " + " | ".join(cells) + " |")
+    load = os.getloadavg()
+    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} at the end")
+    lost = sum(int(row["sent"]) - int(row["received"]) - int(row["lost (counted)"]) for row in rows)
+    return 0 if lost == 0 else 1
 
 
 if __name__ == "__main__":

@@ -1,4 +1,4 @@
-"""Reproduce the cylinder paper's simulation tables (papers.md §A, §4.1) next to its numbers.
+"""Reproduce the cylinder paper's simulation tables (§4.1) next to its numbers.
 
 Run from the repository root, e.g.::
 
@@ -36,6 +36,7 @@ from linelaser_calib.core.pso_alm import (
     search_box,
     solve_pso_galm,
 )
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
 from linelaser_calib.core.types import Cylinder
 from linelaser_calib.sim import scenario_from_preset, simulate
 
@@ -100,7 +101,7 @@ def _parameter_errors(
 def _simulated_errors(seeds: int) -> dict[str, np.ndarray]:
     """RMS over seeds of the Table 1 errors through the simulator and the pipeline."""
     configs = {
-        "faithful": PipelineConfig(method=Method.PAPER, hybrid=PAPER),
+        "faithful": PipelineConfig(method=Method.PAPER, target_config=CylinderConfig(hybrid=PAPER)),
         "--method paper": PipelineConfig(method=Method.PAPER),
     }
     errors: dict[str, list[list[float]]] = {name: [] for name in configs}
@@ -109,10 +110,13 @@ def _simulated_errors(seeds: int) -> dict[str, np.ndarray]:
         truth = data.truth
         for name, config in configs.items():
             result = run_pipeline(data.profiles, data.poses, replace(config, seed=seed))
-            assert result.cylinder is not None  # a cylinder calibration always fits one
+            assert isinstance(result.target, CylinderSection)
             errors[name].append(
                 _parameter_errors(
-                    result.T_flange_sensor, result.cylinder, truth.T_flange_sensor, truth.cylinder
+                    result.T_flange_sensor,
+                    result.target.cylinder,
+                    truth.T_flange_sensor,
+                    truth.cylinder,
                 )
             )
     return {k: np.sqrt(np.mean(np.square(v), axis=0)) for k, v in errors.items()}

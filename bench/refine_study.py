@@ -35,7 +35,7 @@ from linelaser_calib.core.geometry import (
     rotvec_from_matrix,
     transform_from_rotation_translation,
 )
-from linelaser_calib.core.refine import RefineConfig, RefineResult, refine
+from linelaser_calib.core.targets.cylinder.refine import RefineConfig, RefineResult, refine
 from linelaser_calib.core.types import Cylinder
 
 RADIUS = 0.02

@@ -43,13 +43,13 @@ from linelaser_calib.core.geometry import (
     transform_error,
     transform_from_rotation_translation,
 )
-from linelaser_calib.core.known_point import (
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.targets.known_point import (
     KnownPointConfig,
     KnownPointResult,
     calibrate_known_point,
     weld_points_base,
 )
-from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.sim.weld import WeldTruth, simulate_weld, weld_scenario_from_preset
 
 PATTERNS = {

@@ -1,8 +1,10 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
-Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration) and ``demo`` (calibrate the committed bags and show
-the error against their truth). Exit code 0 means success; a user error prints one
+Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
+recordings into a bag), ``info`` (what a bag holds), ``calibrate`` (the offline
+calibration), ``export`` (a result as a URDF joint, a static TF command or a launch file)
+and ``demo`` (calibrate the committed bags and show the error against their truth). Exit
+code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -14,7 +16,6 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -22,15 +23,18 @@ import numpy as np
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig, Target
-from linelaser_calib.core.refine import RefineConfig
-from linelaser_calib.core.types import CalibrationResult, KnownPoint
+from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
+from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
-from linelaser_calib.io.errors import ResultFileError
+from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
 from linelaser_calib.io.results import (
+    read_reference_yaml,
     read_result_yaml,
-    read_truth_yaml,
     result_to_dict,
+    truth_beside,
     write_result_yaml,
     write_truth_yaml,
 )
@@ -60,6 +64,17 @@ def _non_negative_float(text: str) -> float:
     return value
 
 
+def _min_samples(text: str) -> int:
+    """Parse a sample count >= 3."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {text!r}") from None
+    if value < 3:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {value}")
+    return value
+
+
 def _offset(text: str) -> float | str:
     """Parse a clock offset in s, or ``auto``."""
     if text == "auto":
@@ -71,6 +86,13 @@ def _offset(text: str) -> float | str:
     if not np.isfinite(value):
         raise argparse.ArgumentTypeError(f"expected finite seconds, got {text!r}")
     return value
+
+
+def _centre_side(text: str) -> str:
+    """Parse ``+y`` or ``-y``."""
+    if text not in ("+y", "-y"):
+        raise argparse.ArgumentTypeError(f"expected +y or -y, got {text!r}")
+    return text
 
 
 def _xyz(text: str) -> tuple[float, float, float]:
@@ -88,16 +110,29 @@ def _xyz(text: str) -> tuple[float, float, float]:
 
 
 def simulate_to_bag(
-    out: Path, scenario_name: str, seed: int, overrides: dict[str, object]
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
 ) -> tuple[Path, Path]:
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
     truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    With ``tf`` the flange poses are also written as a robot_state_publisher-style
+    ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
+    (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
     Returns the bag directory and the truth file.
     """
+    from linelaser_calib.core.targets.base import ResultSection
+    from linelaser_calib.core.targets.cylinder import CylinderSection
+    from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.sphere import SphereSection
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.sphere import (
+        SPHERE_PRESETS,
+        simulate_sphere,
+        sphere_scenario_from_preset,
+    )
+    from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
         bumped_hand_eye,
@@ -110,12 +145,28 @@ def simulate_to_bag(
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
-        cylinder, known_point = None, weld_data.truth.weld_point_m
+        target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+    elif scenario_name in SPHERE_PRESETS:
+        # --radius is the target's radius: the sphere's here.
+        own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
+        ball = simulate_sphere(sphere_scenario_from_preset(scenario_name, **own), seed)
+        scenario, profiles, poses = ball.scenario, ball.profiles, ball.poses
+        intensities, T_true = ball.intensities, ball.truth.T_flange_sensor
+        target = SphereSection(
+            ball.truth.centre_m,
+            ball.truth.radius_m,
+            ball.truth.centre_side,
+            radius_estimated=False,
+            side_estimated=False,
+        )
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
-        cylinder, known_point = data.truth.cylinder, None
+        target = CylinderSection(data.truth.cylinder)
+    tf_dynamic, tf_static = (
+        ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
+    )
     write_bag(
         out,
         profiles,
@@ -126,6 +177,8 @@ def simulate_to_bag(
         base_frame=scenario.base_frame,
         organised=scenario.organised,
         intensities=intensities if scenario.intensity else None,
+        tf=tf_dynamic,
+        tf_static=tf_static,
     )
     simulation: dict[str, object] = {
         "scenario": scenario_name,
@@ -133,7 +186,7 @@ def simulate_to_bag(
         "overrides": overrides,
         "profiles": len(profiles),
         "poses": len(poses),
-        "command": simulate_command(out, scenario_name, seed, overrides),
+        "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
         taught = weld_data.truth.taught_point_m
@@ -141,12 +194,11 @@ def simulate_to_bag(
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                cylinder=None,
+                target=KnownPoint(np.asarray(taught), estimated=False),
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
                 rms_residual_m=0.0,
-                known_point=KnownPoint(np.asarray(taught), estimated=False),
                 parent_frame=scenario.flange_frame,
                 child_frame=scenario.sensor_frame,
                 base_frame=scenario.base_frame,
@@ -156,8 +208,7 @@ def simulate_to_bag(
     truth = write_truth_yaml(
         out / "truth.yaml",
         T_true,
-        cylinder,
-        known_point=known_point,
+        target,
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
@@ -169,7 +220,7 @@ def simulate_to_bag(
 #: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
 SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--poses", "n_poses", int),
-    ("--radius", "cylinder_radius_m", float),
+    ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
     ("--points", "resolution", int),
     ("--sensor-sigma", "sigma_depth_m", float),
     ("--robot-sigma-t", "robot_sigma_translation_m", float),
@@ -183,7 +234,9 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
 )
 
 
-def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[str, object]) -> str:
+def simulate_command(
+    out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
+) -> str:
     """The ``linelaser-calib simulate`` command line that regenerates a bag."""
     flags = {field: flag for flag, field, _ in SIMULATE_OPTIONS}
     words = [PROG, "simulate", str(out), "--scenario", scenario_name, "--seed", str(seed)]
@@ -192,6 +245,8 @@ def simulate_command(out: Path, scenario_name: str, seed: int, overrides: dict[s
             words.append("--organised" if value else "--dense")
         else:
             words += [flags[field], str(value)]
+    if tf:
+        words.append("--tf")
     return " ".join(words)
 
 
@@ -203,7 +258,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     }
     if args.organised is not None:
         overrides["organised"] = args.organised
-    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides)
+    bag, truth = simulate_to_bag(Path(args.out), args.scenario, args.seed, overrides, tf=args.tf)
     print(f"wrote {bag} and {truth}")
     print(format_bag_info(bag_info(bag)))
     return 0
@@ -217,45 +272,67 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- convert --------------------------------------------------------------------------------
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.robcalibrator import convert_robcalibrator
+
+    command = f"{PROG} convert {args.format} {args.folder} --output {args.output}"
+    bag = convert_robcalibrator(args.folder, args.output, command)
+    print(f"wrote {bag} (with reference.yaml, LICENSE and README.md)")
+    print(format_bag_info(bag_info(bag)))
+    return 0
+
+
 # --- calibrate ------------------------------------------------------------------------------
 
 
+#: The calibrate flag behind each shared target setting (for refusals).
+SETTING_FLAGS = {
+    "radius_m": "--radius",
+    "point_m": "--point x,y,z",
+    "centre_side": "--centre-side",
+    "sensor_sigma_m": "--sensor-sigma",
+    "robot_sigma_t_m": "--robot-sigma-t",
+    "robot_sigma_r_rad": "--robot-sigma-r",
+    "min_samples": "--min-samples",
+    "initial": "--initial FILE.yaml",
+}
+
+
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+    """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
     initial = None
     if args.initial is not None:
         try:
-            initial = read_result_yaml(args.initial).T_flange_sensor
-        except ResultFileError as exc:
-            raise ResultFileError(
-                f"cannot use the initial hand-eye (--initial): {exc}; give a result YAML "
-                "written by linelaser-calib (its hand_eye section)"
-            ) from exc
-    if (
-        args.target == Target.KNOWN_POINT.value
-        and args.method == Method.PAPER.value
-        and (args.point is None or initial is None)
-    ):
-        raise InputError(
-            "--method paper with --target known_point corrects an old hand-eye against the "
-            "taught point: it needs --point x,y,z (the taught point, m, base frame) and "
-            "--initial FILE.yaml (the old hand-eye)"
-        )
+            initial, warnings = read_initial_hand_eye(args.initial)
+        except CalibrationError as exc:
+            raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
+        for warning in warnings:
+            print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
+    given = {
+        "radius_m": args.radius,
+        "point_m": None if args.point is None else np.array(args.point),
+        "centre_side": args.centre_side,
+        "sensor_sigma_m": args.sensor_sigma,
+        "robot_sigma_t_m": args.robot_sigma_t,
+        "robot_sigma_r_rad": args.robot_sigma_r,
+        "min_samples": args.min_samples,
+        "initial": initial,
+    }
+    target = get_target(args.target)
+    settings = {name: value for name, value in given.items() if value is not None}
     return PipelineConfig(
         method=Method(args.method),
-        target=Target(args.target),
-        known_point=None if args.point is None else np.array(args.point),
-        radius_m=args.radius,
+        target=target.name,
+        target_config=configure(target, args.method, settings, SETTING_FLAGS),
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
             clock_offset_s=0.0 if args.clock_offset == "auto" else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
-        ),
-        refine=RefineConfig(
-            sensor_sigma_m=args.sensor_sigma,
-            robot_sigma_t_m=args.robot_sigma_t,
-            robot_sigma_r_rad=args.robot_sigma_r,
         ),
         initial_T_flange_sensor=initial,
     )
@@ -333,13 +410,17 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             flange_frame=args.flange_frame,
             estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
+            pose_source=PoseSource(args.pose_source),
+            base_frame=args.base_frame,
+            invalid_values_m=tuple(args.invalid_value),
         )
     except PairingError as exc:
         raise PairingError(
             f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
-    truth_path = Path(args.bag) / "truth.yaml"
-    truth = read_truth_yaml(truth_path) if truth_path.is_file() else None
+    truth, note = truth_beside(args.bag)
+    if note:
+        print(note, file=sys.stderr)
     written = []
     if args.output is not None:
         written.append(write_result_yaml(run.result, args.output))
@@ -368,19 +449,83 @@ def _input_rows(run: OfflineRun) -> list[tuple[str, str]]:
     return [
         ("bag", str(bag.path)),
         ("profiles", f"{len(bag.profiles)} on {bag.profile_topic} (frame {bag.sensor_frame})"),
-        ("flange poses", f"{len(bag.poses)} on {bag.pose_topic} (frame {bag.base_frame})"),
+        ("flange poses", run.poses.description),
     ]
 
 
 def _input_line(run: OfflineRun) -> str:
     bag = run.bag
     return (
-        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, "
-        f"{len(bag.poses)} poses on {bag.pose_topic}"
+        f"{bag.path}: {len(bag.profiles)} profiles on {bag.profile_topic}, {run.poses.description}"
     )
 
 
+# --- export ---------------------------------------------------------------------------------
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from linelaser_calib.export import ExportFormat, export_text
+
+    print(export_text(read_result_yaml(args.result), ExportFormat(args.format)))
+    return 0
+
+
 # --- demo -----------------------------------------------------------------------------------
+
+
+def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
+    """Calibrate one committed bag with both methods, print the summaries, add table rows.
+
+    A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
+    corrects that hand-eye); a converted real recording with its ``reference.yaml`` (another
+    tool's hand-eye, calibrated with the settings recorded there). A bag with neither is
+    skipped with a note.
+    """
+    settings: dict[str, object] = {}
+    initial = None
+    truth, note = truth_beside(bag)
+    if truth is None and not (bag / "reference.yaml").is_file():
+        print(note or f"{bag} has no truth.yaml or reference.yaml; skipped", file=sys.stderr)
+        return
+    if truth is not None:
+        target = get_target(truth.target.key)
+        compare, against = truth.T_flange_sensor, "truth"
+        label = target.title
+        if (bag / "initial.yaml").is_file():
+            initial = read_result_yaml(bag / "initial.yaml")
+            settings = {**initial.target.given_settings(), "initial": initial.T_flange_sensor}
+            label += ", from initial.yaml"
+            rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
+            rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+    else:
+        compare, reference = read_reference_yaml(bag / "reference.yaml")
+        target = get_target(str(reference["target"]))
+        settings = dict(reference.get("settings") or {})
+        against = "reference"
+        label = f"{target.title}, real scans; reference.yaml is not ground truth"
+    for method in (Method.PAPER, Method.DEFAULT):
+        config = PipelineConfig(
+            method=method,
+            target=target.name,
+            target_config=configure(target, method.value, settings, SETTING_FLAGS),
+            seed=seed,
+            initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+        )
+        started = time.perf_counter()
+        run = calibrate_bag(bag, config)
+        seconds = time.perf_counter() - started
+        print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
+        print(format_summary(run.result, truth))
+        rot, trans = transform_error(run.result.T_flange_sensor, compare)
+        if truth is None:
+            print(
+                f"Difference to the reference hand-eye: rotation {np.degrees(rot):.4f} deg, "
+                f"translation {trans * 1e3:.4f} mm (not ground truth)"
+            )
+        print()
+        rows.append(
+            (bag.name, f"{method.value} vs {against}", np.degrees(rot), trans * 1e3, seconds)
+        )
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
@@ -388,44 +533,20 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
     if not bags:
         raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
-    rows = []
+    rows: list[tuple[str, str, float, float, float]] = []
     for bag in bags:
-        truth = read_truth_yaml(bag / "truth.yaml")
-        for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(method=method, seed=args.seed)
-            target = "cylinder"
-            if truth.known_point is not None:
-                initial = read_result_yaml(bag / "initial.yaml")
-                taught = None if initial.known_point is None else initial.known_point.point
-                config = replace(
-                    config,
-                    target=Target.KNOWN_POINT,
-                    known_point=taught,
-                    initial_T_flange_sensor=initial.T_flange_sensor,
-                )
-                target = "known point, from initial.yaml"
-                if method is Method.PAPER:
-                    rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
-                    rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
-            started = time.perf_counter()
-            run = calibrate_bag(bag, config)
-            seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({target}), method {method.value} ({seconds:.2f} s) ===")
-            print(format_summary(run.result, truth))
-            print()
-            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
-            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
-    print("Error against truth (hand-eye T_flange_sensor):")
-    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
+        _demo_runs(bag, args.seed, rows)
+    print("Difference of the hand-eye T_flange_sensor to the truth (simulated bags) or to the")
+    print("reference (real scans: another tool's published hand-eye, not ground truth):")
+    print(f"  {'bag':<24}{'method':<22}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
     for name, label, rot_deg, trans_mm, seconds in rows:
-        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+        print(f"  {name:<24}{label:<22}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
     return 0
 
 
 # --- parser ---------------------------------------------------------------------------------
 
-#: Numeric options of ``calibrate`` for the pairing gate and the default method's priors:
-#: (flag, parser, default, help).
+#: Numeric options of ``calibrate`` for the pairing gate: (flag, parser, default, help).
 CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = (
     (
         "--max-speed",
@@ -440,32 +561,93 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
         PairingConfig.max_angular_speed_rad_s,
         "reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
     ),
+)
+
+#: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
+#: one the target or method does not use is refused): (flag, parser, help).
+TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
+    ("--radius", _positive_float, "cylinder or sphere radius, m (default: estimate)"),
+    (
+        "--point",
+        _xyz,
+        "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
+    (
+        "--centre-side",
+        _centre_side,
+        "sphere target: the side of the laser plane the sphere centre lies on, +y or -y "
+        "(sensor frame; default: resolved from the data)",
+    ),
     (
         "--sensor-sigma",
         _positive_float,
-        RefineConfig.sensor_sigma_m,
-        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals)",
+        "profiler noise, 1 sigma, m (default method; re-estimated from the residuals; "
+        "cylinder default 5 um)",
     ),
     (
         "--robot-sigma-t",
         _positive_float,
-        RefineConfig.robot_sigma_t_m,
-        "robot pose error per pose, 1 sigma per axis, m (default: UR-class 0.1 mm)",
+        "robot pose error per pose, 1 sigma per axis, m (default method; cylinder default "
+        "0.1 mm, known_point 0.05 mm)",
     ),
     (
         "--robot-sigma-r",
         _positive_float,
-        RefineConfig.robot_sigma_r_rad,
-        "robot orientation error per pose, 1 sigma per axis, rad (default 0.01 deg)",
+        "robot orientation error per pose, 1 sigma per axis, rad (default method; cylinder "
+        "default 0.01 deg, known_point 0.005 deg)",
+    ),
+    (
+        "--min-samples",
+        _min_samples,
+        "fewest samples with a usable feature (ellipse, corner, ...); default the target's",
     ),
 )
+
+
+def _sentinel(text: str) -> float:
+    """Parse a sentinel depth, m (finite)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a depth in metres, got {text!r}") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(
+            f"NaN and +-Inf are always no return; give a finite depth, got {text!r}"
+        )
+    return value
+
+
+def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
+    """Where the flange poses come from, the frames, and the profiler's no-return value."""
+    cal.add_argument(
+        "--pose-source",
+        choices=[s.value for s in PoseSource],
+        default=PoseSource.POSE.value,
+        help="flange poses from a PoseStamped topic (pose, default) or from the /tf + "
+        "/tf_static chain --base-frame -> --flange-frame (tf)",
+    )
+    cal.add_argument(
+        "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
+    )
+    cal.add_argument(
+        "--flange-frame", default="tool0", help="frame id of the flange (end of the TF chain)"
+    )
+    cal.add_argument(
+        "--invalid-value",
+        type=_sentinel,
+        action="append",
+        default=[],
+        metavar="M",
+        help="a depth z, m, that the profiler sends for no return besides NaN/Inf, e.g. "
+        "-0.999999 (Keyence's -999.999 mm) or 0; repeat for several",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
         prog=PROG,
-        description="Hand-eye calibration of a line-laser profile sensor from cylinder scans.",
+        description="Hand-eye calibration of a line-laser profile sensor from scans of a target.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -475,7 +657,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenario",
         default="paper",
         help="preset: paper, ur_scancontrol, continuous, cluttered_camera, weld_seam, "
-        "weld_seam_general",
+        "weld_seam_general, sphere",
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
@@ -494,7 +676,25 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_false",
         help="dense profiles, invalid rays dropped",
     )
+    sim.add_argument(
+        "--tf",
+        action="store_true",
+        help="also write the flange poses as a /tf chain (UR-like links) with /tf_static",
+    )
     sim.set_defaults(func=_cmd_simulate)
+
+    convert = sub.add_parser(
+        "convert", help="convert another tool's recordings into a rosbag2 bag (SI units)"
+    )
+    convert.add_argument(
+        "format",
+        choices=["robcalibrator"],
+        help="robcalibrator: a RobCalibrator scan folder (p1.yml..., RobPoses.rob, "
+        "calibration.sec, LICENSE)",
+    )
+    convert.add_argument("folder", help="the folder to convert")
+    convert.add_argument("--output", required=True, help="bag directory to create (must not exist)")
+    convert.set_defaults(func=_cmd_convert)
 
     info = sub.add_parser("info", help="print what a bag holds")
     info.add_argument("bag")
@@ -504,20 +704,14 @@ def build_parser() -> argparse.ArgumentParser:
     cal.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
     cal.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
     cal.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
-    cal.add_argument(
-        "--radius", type=_positive_float, help="cylinder radius, m (default: estimate)"
-    )
     cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
     cal.add_argument(
         "--target",
-        choices=[t.value for t in Target],
-        default=Target.CYLINDER.value,
-        help="cylinder (default), or known_point: one fixed point such as a weld-seam corner",
-    )
-    cal.add_argument(
-        "--point",
-        type=_xyz,
-        help="known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+        choices=target_names(),
+        default=DEFAULT_TARGET,
+        help=f"what was scanned (default {DEFAULT_TARGET}): cylinder, a cylinder of known or "
+        "estimated radius; known_point, one fixed point such as a weld-seam corner; each "
+        "registered target is a choice",
     )
     cal.add_argument("--output", help="result YAML to write (its directory must exist)")
     cal.add_argument(
@@ -530,7 +724,11 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument("--initial", help="result YAML holding an initial hand-eye (e.g. from CAD)")
+    cal.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     cal.add_argument(
         "--sync-tolerance",
@@ -547,7 +745,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     for flag, parse, default, text in CALIBRATE_NUMBERS:
         cal.add_argument(flag, type=parse, default=default, help=text)
-    cal.add_argument("--flange-frame", default="tool0", help="frame id of the flange")
+    for flag, parse_setting, text in TARGET_OPTIONS:
+        cal.add_argument(flag, type=parse_setting, default=None, help=text)
+    _add_pose_source_arguments(cal)
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(
         "--progress",
@@ -556,6 +756,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="print progress on stderr (default: when stderr is a terminal)",
     )
     cal.set_defaults(func=_cmd_calibrate)
+
+    export = sub.add_parser(
+        "export", help="print a result as a URDF joint, a static TF command or a launch file"
+    )
+    export.add_argument("result", help="result YAML written by calibrate")
+    export.add_argument(
+        "--format",
+        choices=["urdf", "static-tf", "launch"],
+        required=True,
+        help="urdf: a fixed <joint>; static-tf: the static_transform_publisher command line; "
+        "launch: a Python launch file publishing it",
+    )
+    export.set_defaults(func=_cmd_export)
 
     demo = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
     demo.add_argument("bags", nargs="?", default="bags")

@@ -6,22 +6,21 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.pipeline import (
-    PipelineConfig,
-    Progress,
-    estimate_clock_offset,
-    run_pipeline,
-)
+from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
+from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.targets.base import Progress
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import BagContents, read_bag
+from linelaser_calib.io.pose_sources import POSE_SOURCES, FlangePoses, PoseRequest
 
 
 @dataclass
 class OfflineRun:
-    """A calibration of one bag: the result and what was read."""
+    """A calibration of one bag: the result, what was read and where the poses came from."""
 
     result: CalibrationResult
     bag: BagContents
+    poses: FlangePoses
 
 
 def _silent(stage: str, done: int, total: int) -> None:
@@ -37,8 +36,11 @@ def calibrate_bag(
     flange_frame: str = "tool0",
     estimate_offset: bool = False,
     progress: Progress = _silent,
+    pose_source: PoseSource = PoseSource.POSE,
+    base_frame: str = "base_link",
+    invalid_values_m: tuple[float, ...] = (),
 ) -> OfflineRun:
-    """Calibrate from a bag holding profiles (PointCloud2) and flange poses (PoseStamped).
+    """Calibrate from a bag holding profiles (PointCloud2) and flange poses (any source).
 
     Parameters
     ----------
@@ -48,13 +50,20 @@ def calibrate_bag(
     profile_topic, pose_topic : str, optional
         Auto-detected by message type when there is exactly one topic of each type.
     flange_frame : str
-        Frame id of the flange (PoseStamped does not carry it).
+        Frame id of the flange (PoseStamped does not carry it; the end of the TF chain).
     estimate_offset : bool
         Estimate the clock offset between profile and pose stamps (continuous scanning,
         :func:`~linelaser_calib.core.pipeline.estimate_clock_offset`), starting from the
         configured one.
     progress : callable, optional
         Called as ``progress(stage, done, total)``.
+    pose_source : PoseSource
+        Where the flange poses come from (:data:`~linelaser_calib.io.pose_sources.POSE_SOURCES`).
+    base_frame : str
+        The robot base frame: the start of the TF chain; with PoseStamped poses in another
+        frame (UR's ``base``) a warning says what that means.
+    invalid_values_m : tuple of float
+        Depths z, m, that the profiler sends for no return, besides NaN and +-Inf.
 
     Raises
     ------
@@ -62,11 +71,21 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
+    if pose_source is not PoseSource.POSE and pose_topic is not None:
+        raise InputError(
+            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
+            f"--pose-source {pose_source.value}: drop --pose-topic, or use --pose-source pose"
+        )
     bag = read_bag(
         path,
         profile_topic=profile_topic,
         pose_topic=pose_topic,
         progress=lambda done, total: progress("reading", done, total),
+        read_poses=pose_source is PoseSource.POSE,
+        invalid_values_m=invalid_values_m,
+    )
+    flange_poses = POSE_SOURCES[pose_source](
+        bag, PoseRequest(base_frame, flange_frame, config.pairing.sync_tolerance_s)
     )
     if all(len(p.points) == 0 for p in bag.profiles):
         raise InputError(
@@ -77,17 +96,18 @@ def calibrate_bag(
         )
     if estimate_offset:
         progress("clock offset", 0, 1)
-        offset = estimate_clock_offset(bag.profiles, bag.poses, config)
+        offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config)
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
         progress("clock offset", 1, 1)
-    result = run_pipeline(bag.profiles, bag.poses, config, progress)
+    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress)
     result.clock_offset_estimated = estimate_offset
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame
-    result.base_frame = bag.base_frame
+    result.base_frame = flange_poses.base_frame
+    result.warnings.extend(flange_poses.warnings)
     if bag.skipped:
         reasons = sorted({s.reason for s in bag.skipped})
         result.warnings.append(
             f"{len(bag.skipped)} malformed messages were skipped: {'; '.join(reasons[:3])}"
         )
-    return OfflineRun(result, bag)
+    return OfflineRun(result, bag, flange_poses)

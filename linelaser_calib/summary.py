@@ -1,6 +1,6 @@
 """Human-readable text for a calibration result: mm and degrees, each number labelled.
 
-The pieces (:func:`hand_eye_rows`, :func:`cylinder_text`, :func:`residual_rows`,
+The pieces (:func:`hand_eye_rows`, :func:`target_text`, :func:`residual_rows`,
 :func:`rejection_lines`, :func:`truth_rows`) are shared by the text summary of the CLI
 (:func:`format_summary`) and the HTML report, so both say the same thing the same way.
 """
@@ -19,6 +19,7 @@ from linelaser_calib.core.geometry import (
     rotvec_from_matrix,
     rpy_from_matrix,
 )
+from linelaser_calib.core.targets.base import mm_text
 from linelaser_calib.core.types import CalibrationResult, Rejection
 from linelaser_calib.io.results import Truth
 
@@ -29,11 +30,6 @@ ROTATION_AXES = "small angles about the sensor x, y, z axes"
 
 #: (label, text) pairs of a table.
 Rows = list[tuple[str, str]]
-
-
-def mm_text(values: ArrayLike) -> str:
-    """``[+1.000, ...] mm`` from lengths in m."""
-    return "[" + ", ".join(f"{v * 1e3:+.3f}" for v in np.ravel(values)) + "] mm"
 
 
 def deg_text(values: ArrayLike, digits: int = 4) -> str:
@@ -102,33 +98,14 @@ def hand_eye_rows(result: CalibrationResult) -> Rows:
     return rows
 
 
-def cylinder_text(result: CalibrationResult) -> str:
-    """The fitted cylinder (axis point, direction, radius) or the known point, base frame."""
-    c = result.cylinder
-    if c is None:
-        target = result.known_point
-        if target is None:
-            return "No target geometry in the result"
-        text = f"Known point in {result.base_frame}: {mm_text(target.point)}"
-        if target.estimated and target.sigma_m is not None:
-            return text + f" (estimated, 1 sigma {mm_text(target.sigma_m)})"
-        return text + (" (estimated)" if target.estimated else " (taught)")
-    return (
-        f"Cylinder in {result.base_frame}: point {mm_text(c.point)}, direction "
-        + "["
-        + ", ".join(f"{v:+.5f}" for v in c.direction)
-        + f"], radius {c.radius * 1e3:.3f} mm"
-        + (" (estimated)" if result.radius_estimated else " (given)")
-    )
+def target_text(result: CalibrationResult) -> str:
+    """The target's part of the result (e.g. the fitted cylinder, the known point), base frame."""
+    return result.target.describe(result.base_frame)
 
 
 def residual_kind(result: CalibrationResult) -> str:
     """What the method's residual measures."""
-    if result.known_point is not None:
-        return "distance of each view's corner, mapped into the base frame, from the point"
-    if result.method == "paper":
-        return "ellipse centre-to-axis distance"
-    return "point-to-surface distance, flange poses corrected for the estimated robot error"
+    return result.target.residual_kind(result.method)
 
 
 def residual_rows(result: CalibrationResult) -> Rows:
@@ -230,7 +207,7 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
         f"Hand-eye T_flange_sensor ({result.parent_frame} -> {result.child_frame}), "
         f"method {result.method}:",
         *table(hand_eye_rows(result)),
-        cylinder_text(result),
+        target_text(result),
         "Residual:",
         *table(residual_rows(result)),
     ]
@@ -247,6 +224,13 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
         how = "estimated from the data" if result.clock_offset_estimated else "given"
         lines.append(
             f"Clock offset added to profile stamps: {result.clock_offset_s * 1e3:+.2f} ms ({how})"
+        )
+    if result.clock_offset_live_s is not None:
+        sigma = result.clock_offset_live_sigma_s
+        spread = "" if sigma is None else f" +- {sigma * 1e3:.2f} ms (1 sigma)"
+        lines.append(
+            f"Clock offset estimated live by the collector: {result.clock_offset_live_s * 1e3:+.2f}"
+            f" ms{spread}"
         )
     lines += [f"WARNING: {warning}" for warning in result.warnings]
     if truth is not None:

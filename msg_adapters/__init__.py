@@ -8,7 +8,7 @@ classes: pass ``types=rclpy_types()`` (live nodes) or ``types=rosbags_types(type
 from __future__ import annotations
 
 from msg_adapters.errors import MessageError
-from msg_adapters.markers import cylinder_marker, marker_array, points_marker
+from msg_adapters.markers import cylinder_marker, marker_array, points_marker, shape_markers
 from msg_adapters.message_types import (
     TypeResolver,
     rclpy_types,
@@ -24,7 +24,11 @@ from msg_adapters.pointcloud2 import (
     profile_from_pointcloud2,
 )
 from msg_adapters.pose import flange_pose_from_pose_stamped, pose_stamped_from_flange_pose
-from msg_adapters.transform import transform_stamped_from_matrix
+from msg_adapters.transform import (
+    stamped_transform_from_msg,
+    stamped_transforms_from_msgs,
+    transform_stamped_from_matrix,
+)
 
 __all__ = [
     "DecodedCloud",
@@ -41,7 +45,10 @@ __all__ = [
     "profile_from_pointcloud2",
     "rclpy_types",
     "rosbags_types",
+    "shape_markers",
     "stamp_ns_from_msg",
+    "stamped_transform_from_msg",
+    "stamped_transforms_from_msgs",
     "time_msg_from_ns",
     "transform_stamped_from_matrix",
 ]

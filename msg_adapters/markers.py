@@ -1,4 +1,8 @@
-"""``visualization_msgs/msg/MarkerArray`` for RViz: the fitted cylinder and point sets.
+"""``visualization_msgs/msg/MarkerArray`` for RViz: a result's target shapes and point sets.
+
+A target's result section lists its markers as shapes
+(:class:`~linelaser_calib.core.targets.base.Shape`); :func:`shape_markers` turns them into
+markers by their geometric kind, whatever the target.
 
 A ROS CYLINDER marker is centred on its pose, with its axis along the pose's local z,
 ``scale.x`` and ``scale.y`` the diameters and ``scale.z`` the length. POINTS and SPHERE_LIST
@@ -14,6 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from linelaser_calib.core.geometry import orthonormal_basis, transform_from_rotation_translation
+from linelaser_calib.core.targets.base import Shape
 from linelaser_calib.core.types import Cylinder
 from msg_adapters.errors import MessageError
 from msg_adapters.message_types import TypeResolver, header_msg, uint8_field, vector_fields
@@ -177,3 +182,68 @@ def points_marker(
 def marker_array(markers: Sequence[Any], *, types: TypeResolver) -> Any:
     """``visualization_msgs/msg/MarkerArray`` holding ``markers``."""
     return types("visualization_msgs/msg/MarkerArray")(markers=list(markers))
+
+
+def shape_markers(
+    shapes: Sequence[Shape], frame_id: str, *, types: TypeResolver, stamp_ns: int = 0
+) -> list[Any]:
+    """Markers of a result section's shapes (in ``frame_id``), one per shape.
+
+    ``cylinder``: a CYLINDER between its two axis ends; ``sphere`` and ``points``: a
+    SPHERE_LIST of diameter 2·radius; ``line``: a LINE_LIST of width 2·radius.
+
+    Raises
+    ------
+    MessageError
+        A degenerate shape (see :func:`cylinder_marker`).
+    """
+    markers = []
+    for shape in shapes:
+        points = np.asarray(shape.points, dtype=np.float64)
+        size = 2.0 * float(shape.radius)
+        if shape.kind == "cylinder":
+            axis = points[1] - points[0]
+            length = float(np.linalg.norm(axis))
+            centre = 0.5 * (points[0] + points[1])
+            cylinder = Cylinder(centre, axis / max(length, 1e-300), float(shape.radius))
+            markers.append(
+                cylinder_marker(
+                    cylinder,
+                    length,
+                    frame_id,
+                    types=types,
+                    stamp_ns=stamp_ns,
+                    ns=shape.ns,
+                    color=shape.color,
+                )
+            )
+        elif shape.kind == "line":
+            point_cls = types("geometry_msgs/msg/Point")
+            markers.append(
+                _marker(
+                    "LINE_LIST",
+                    frame_id,
+                    stamp_ns,
+                    shape.ns,
+                    0,
+                    np.eye(4),
+                    (size, 0.0, 0.0),
+                    shape.color,
+                    [point_cls(**vector_fields(p)) for p in points],
+                    types,
+                )
+            )
+        else:
+            markers.append(
+                points_marker(
+                    points,
+                    frame_id,
+                    types=types,
+                    size_m=size,
+                    spheres=True,
+                    stamp_ns=stamp_ns,
+                    ns=shape.ns,
+                    color=shape.color,
+                )
+            )
+    return markers

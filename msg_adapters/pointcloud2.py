@@ -2,9 +2,10 @@
 
 Reading accepts any layout the message definition allows: fields in any order and at any
 offset, extra fields and padding bytes, FLOAT32 or FLOAT64 coordinates, either byte order,
-organised (height > 1) or dense clouds. Invalid points (REP 117: NaN or +-Inf in x, y or z)
-are dropped unless the caller asks to keep the organised layout. A layout that contradicts
-itself raises :class:`~msg_adapters.errors.MessageError` naming the inconsistency.
+organised (height > 1) or dense clouds. Invalid points (REP 117: NaN or +-Inf in x, y or z,
+and the depths z a driver uses as a sentinel for no return, such as Keyence's -999.999 mm or
+0, when given) are dropped unless the caller asks to keep the organised layout. A layout that
+contradicts itself raises :class:`~msg_adapters.errors.MessageError` naming the inconsistency.
 
 Points are rows of an (N, 3) float64 array in the message frame, in metres; the row order
 is the message's row-major point order (``index = row * width + column``).
@@ -44,6 +45,8 @@ POINTFIELD_DTYPES: dict[int, tuple[str, int]] = {
 }
 _FLOAT_DATATYPES = {"f4": 7, "f8": 8}
 _XYZ = ("x", "y", "z")
+#: A depth z within this relative distance of a sentinel is that sentinel (float32 rounding).
+SENTINEL_RTOL = 1e-6
 
 
 @dataclass(frozen=True)
@@ -106,8 +109,29 @@ def _check_layout(msg: Any) -> None:
         )
 
 
+def invalid_rows(points: FloatArray, invalid_values_m: Sequence[float] = ()) -> NDArray[np.bool_]:
+    """Mask (N,) of points that are no return: NaN or +-Inf anywhere, or a sentinel depth.
+
+    Parameters
+    ----------
+    points : ndarray, shape (N, 3)
+        Sensor-frame points, m.
+    invalid_values_m : sequence of float
+        Depths z, m, that mean no return (equal within :data:`SENTINEL_RTOL` relative, so
+        that a float32 -0.999999 matches; 0 matches exactly 0 only).
+    """
+    invalid = ~np.all(np.isfinite(points), axis=1)
+    for value in invalid_values_m:
+        invalid |= np.isclose(points[:, 2], float(value), rtol=SENTINEL_RTOL, atol=0.0)
+    return invalid
+
+
 def cloud_from_pointcloud2(
-    msg: Any, *, extra_fields: Sequence[str] = (), keep_invalid: bool = False
+    msg: Any,
+    *,
+    extra_fields: Sequence[str] = (),
+    keep_invalid: bool = False,
+    invalid_values_m: Sequence[float] = (),
 ) -> DecodedCloud:
     """Decode x, y, z (and optional extra fields) of a PointCloud2.
 
@@ -118,9 +142,12 @@ def cloud_from_pointcloud2(
     extra_fields : sequence of str
         Further fields to return as float64 (e.g. ``('intensity',)``); any datatype.
     keep_invalid : bool
-        False (default): drop points with NaN or +-Inf in x, y or z.
-        True: keep all ``height * width`` points in row-major order, invalid values as sent,
-        so the caller sees the full scan line.
+        False (default): drop points with NaN or +-Inf in x, y or z, or a sentinel depth.
+        True: keep all ``height * width`` points in row-major order, NaN and +-Inf as sent
+        and sentinel points set to NaN, so the caller sees the full scan line.
+    invalid_values_m : sequence of float
+        Depths z, m, that the driver sends for no return (e.g. -0.999999 for Keyence's
+        -999.999 mm, or 0.0); see :func:`invalid_rows`.
 
     Returns
     -------
@@ -164,26 +191,41 @@ def cloud_from_pointcloud2(
     records = np.frombuffer(uint8_array(msg.data), dtype=dtype, count=n_points)
     points = np.stack([records[name].astype(np.float64) for name in _XYZ], axis=1).reshape(-1, 3)
     extras = {name: records[name].astype(np.float64) for name in extra_fields}
-    if not keep_invalid:
-        valid = np.all(np.isfinite(points), axis=1)
-        points = points[valid]
-        extras = {name: values[valid] for name, values in extras.items()}
+    invalid = invalid_rows(points, invalid_values_m)
+    if keep_invalid:
+        sentinel = invalid & np.all(np.isfinite(points), axis=1)
+        points[sentinel] = np.nan
+    else:
+        points = points[~invalid]
+        extras = {name: values[~invalid] for name, values in extras.items()}
     return DecodedCloud(points=points, extras=extras)
 
 
-def points_from_pointcloud2(msg: Any, *, keep_invalid: bool = False) -> FloatArray:
+def points_from_pointcloud2(
+    msg: Any, *, keep_invalid: bool = False, invalid_values_m: Sequence[float] = ()
+) -> FloatArray:
     """x, y, z of a PointCloud2 as an (N, 3) float64 array in m.
 
-    See :func:`cloud_from_pointcloud2` for the accepted layouts, ``keep_invalid`` and errors.
+    See :func:`cloud_from_pointcloud2` for the accepted layouts, ``keep_invalid``,
+    ``invalid_values_m`` and errors.
     """
-    return cloud_from_pointcloud2(msg, keep_invalid=keep_invalid).points
+    return cloud_from_pointcloud2(
+        msg, keep_invalid=keep_invalid, invalid_values_m=invalid_values_m
+    ).points
 
 
-def profile_from_pointcloud2(msg: Any, *, keep_invalid: bool = False) -> Profile:
-    """A :class:`~linelaser_calib.core.types.Profile` (stamp, points, frame) from a PointCloud2."""
+def profile_from_pointcloud2(
+    msg: Any, *, keep_invalid: bool = False, invalid_values_m: Sequence[float] = ()
+) -> Profile:
+    """A :class:`~linelaser_calib.core.types.Profile` (stamp, points, frame) from a PointCloud2.
+
+    See :func:`cloud_from_pointcloud2` for ``keep_invalid`` and ``invalid_values_m``.
+    """
     return Profile(
         stamp_ns=stamp_ns_from_msg(msg.header.stamp),
-        points=points_from_pointcloud2(msg, keep_invalid=keep_invalid),
+        points=points_from_pointcloud2(
+            msg, keep_invalid=keep_invalid, invalid_values_m=invalid_values_m
+        ),
         frame_id=str(msg.header.frame_id),
     )
 

@@ -34,28 +34,40 @@ FloatArray = NDArray[np.float64]
 ROTATION_TOLERANCE = 1e-4
 
 
-def transform_from_pose_msg(pose: Any, what: str = "pose") -> FloatArray:
-    """4x4 transform from a ``geometry_msgs/msg/Pose`` (position m, orientation xyzw).
+def transform_from_vector_quaternion_msgs(position: Any, orientation: Any, what: str) -> FloatArray:
+    """4x4 transform from a Point or Vector3 (m) and a Quaternion (xyzw) message.
 
     Parameters
     ----------
-    pose : geometry_msgs/msg/Pose
+    position : geometry_msgs/msg/Point or Vector3
+    orientation : geometry_msgs/msg/Quaternion
     what : str
-        Names the pose in error messages (e.g. ``'PoseStamped at 12.5 s'``).
+        Names the message in error messages (e.g. ``'PoseStamped at 12.5 s'``).
 
     Raises
     ------
     MessageError
-        NaN/Inf position, or a zero, NaN or non-unit orientation quaternion.
+        NaN/Inf position, or a zero, NaN or non-unit quaternion.
     """
-    position = vector_from_msg(pose.position)
-    if not np.all(np.isfinite(position)):
-        raise MessageError(f"{what}: position contains NaN or Inf: {position} m")
+    translation = vector_from_msg(position)
+    if not np.all(np.isfinite(translation)):
+        raise MessageError(f"{what}: position contains NaN or Inf: {translation} m")
     try:
-        q_xyzw = check_quaternion_xyzw(vector_from_msg(pose.orientation, "xyzw"))
+        q_xyzw = check_quaternion_xyzw(vector_from_msg(orientation, "xyzw"))
     except ValueError as err:
         raise MessageError(f"{what}: invalid orientation: {err}") from None
-    return transform_from_translation_quaternion(position, q_xyzw)
+    return transform_from_translation_quaternion(translation, q_xyzw)
+
+
+def transform_from_pose_msg(pose: Any, what: str = "pose") -> FloatArray:
+    """4x4 transform from a ``geometry_msgs/msg/Pose`` (position m, orientation xyzw).
+
+    Raises
+    ------
+    MessageError
+        See :func:`transform_from_vector_quaternion_msgs`; ``what`` names the pose.
+    """
+    return transform_from_vector_quaternion_msgs(pose.position, pose.orientation, what)
 
 
 def checked_translation_quaternion(T: ArrayLike, what: str) -> tuple[FloatArray, FloatArray]:

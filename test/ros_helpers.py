@@ -433,8 +433,9 @@ class Player:
         self.profile_pub = probe.node.create_publisher(PointCloud2, profile_topic, qos)
         self.pose_pub = probe.node.create_publisher(PoseStamped, pose_topic, qos)
 
-    def wait_matched(self, timeout_s: float = 30.0) -> None:
-        """Wait until the collector subscribes to both topics (plus a discovery settle)."""
+    def wait_matched(self, timeout_s: float = 30.0, settle_s: float = 0.5) -> None:
+        """Wait until the collector subscribes to both topics, then ``settle_s`` more (the
+        collector's side of the discovery may still be under way)."""
         wait_for(
             lambda: (
                 self.profile_pub.get_subscription_count() > 0
@@ -443,7 +444,7 @@ class Player:
             timeout_s,
             "the collector's subscriptions",
         )
-        time.sleep(0.5)
+        time.sleep(settle_s)
 
     def play(
         self, recording: Recording, rate: float, start: int = 0, stop: int | None = None

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +13,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from linelaser_calib.core.geometry import transform_from_rotvec_translation
@@ -24,6 +26,7 @@ from linelaser_calib.io import (
     read_bag,
     write_bag,
 )
+from linelaser_calib.io.bags import SESSION_FILE, SESSION_MARKER
 from msg_adapters import (
     pointcloud2_from_points,
     points_from_pointcloud2,
@@ -361,14 +364,16 @@ def test_bag_info_reports_counts_and_points_per_profile(
     assert "flange poses: 70 on /flange_pose (frame base_link)" in text
 
 
-def test_session_samples_are_readable_while_the_writer_is_open(
+def test_session_samples_are_readable_once_flushed_while_the_writer_is_open(
     tmp_path: Path, recording: tuple[list[Profile], list[FlangePose]]
 ) -> None:
     profiles, poses = recording
     session = SessionBagWriter(tmp_path / "session")
     for i, profile in enumerate(profiles[:5]):
         pose_at_profile = FlangePose(profile.stamp_ns + 123, poses[i].T_base_flange, "world")
-        assert session.append(profile, pose_at_profile).name == f"sample_{i:06d}"
+        assert session.append(profile, pose_at_profile) == i
+        session.flush()
+        assert session.durable == i + 1
         contents = read_bag(tmp_path / "session")  # durable before close
         assert len(contents.profiles) == len(contents.poses) == i + 1
     assert [p.stamp_ns for p in contents.poses] == [p.stamp_ns for p in contents.profiles]
@@ -376,39 +381,88 @@ def test_session_samples_are_readable_while_the_writer_is_open(
     for got, sent in zip(contents.profiles, profiles[:5], strict=True):
         np.testing.assert_array_equal(got.points, expected_points(sent))
     session.close()
+    # Closed: a plain MCAP file with its summary, which rosbags (and ros2 bag) read too.
+    assert len(read_bag(tmp_path / "session" / SESSION_FILE).profiles) == 5
+    reader = Reader(tmp_path / "session" / SESSION_FILE)
+    reader.open()
+    assert sorted((c.topic, c.msgcount) for c in reader.connections) == [
+        ("/flange_pose", 5),
+        ("/profile", 5),
+    ]
+    reader.close()
     with pytest.raises(BagError, match="is closed"):
         session.append(profiles[5], poses[5])
     with pytest.raises(BagError, match="exists already"):
         SessionBagWriter(tmp_path / "session")
 
 
-def test_session_survives_a_crash_losing_at_most_the_sample_being_written(tmp_path: Path) -> None:
-    # The child appends three samples, starts a fourth whose write never finishes (it dies
-    # inside rosbags' Writer.write), and exits without any clean-up.
+def test_session_survives_sigkill_keeping_every_flushed_sample(tmp_path: Path) -> None:
+    # The child appends samples and flushes after each third, printing how many are on disk,
+    # until it is killed (SIGKILL: no clean-up at all, maybe in the middle of a write).
     code = f"""
-import os, numpy as np
-from rosbags.rosbag2 import Writer
+import numpy as np
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import SessionBagWriter
-session = SessionBagWriter({str(tmp_path / "session")!r})
-for i in range(3):
-    session.append(Profile(10**9 + i, np.ones((10, 3))), FlangePose(10**9 + i, np.eye(4)))
-Writer.write = lambda *args: os._exit(3)
-session.append(Profile(10**9 + 3, np.ones((10, 3))), FlangePose(10**9 + 3, np.eye(4)))
+session = SessionBagWriter({str(tmp_path / "session")!r}, organised=False)
+points = np.random.default_rng(0).normal(size=(2048, 3))
+for i in range(10**6):
+    session.append(Profile(10**9 + i, points), FlangePose(10**9 + i, np.eye(4)))
+    if i % 3 == 2:
+        session.flush()
+        print(session.durable, flush=True)
 """
-    child = subprocess.run([sys.executable, "-c", code], cwd=Path(__file__).parents[1], check=False)
-    assert child.returncode == 3
-    leftovers = [p.name for p in (tmp_path / "session").iterdir() if p.name.endswith(".partial")]
-    assert len(leftovers) == 1 and leftovers[0].startswith(".sample_000003")
+    child = subprocess.Popen(
+        [sys.executable, "-c", code],
+        cwd=Path(__file__).parents[1],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert child.stdout is not None
+    durable = 0
+    while durable < 300:
+        durable = int(child.stdout.readline())
+    os.kill(child.pid, signal.SIGKILL)
+    child.wait(10.0)
+    contents = read_bag(tmp_path / "session")
+    stamps = [p.stamp_ns for p in contents.profiles]
+    assert len(stamps) >= durable  # every flushed sample, perhaps a few more
+    assert stamps == [10**9 + i for i in range(len(stamps))]
+    assert len(contents.poses) in (len(stamps), len(stamps) + 1) and contents.skipped == []
+
+
+def test_session_with_a_torn_last_record_keeps_every_complete_sample(tmp_path: Path) -> None:
+    session = SessionBagWriter(tmp_path / "session")
+    for i in range(4):
+        session.append(Profile(10**9 + i, np.ones((10, 3))), FlangePose(10**9 + i, np.eye(4)))
+    session.flush()
+    file = tmp_path / "session" / SESSION_FILE
+    data = file.read_bytes()
+    file.write_bytes(data[:-7])  # the last profile's record cut short, as a crash leaves it
     contents = read_bag(tmp_path / "session")
     assert [p.stamp_ns for p in contents.profiles] == [10**9, 10**9 + 1, 10**9 + 2]
-    assert len(contents.poses) == 3 and contents.skipped == []
+    assert len(contents.poses) == 4
 
 
 def test_empty_session_says_so(tmp_path: Path) -> None:
     SessionBagWriter(tmp_path / "session").close()
     with pytest.raises(BagError, match="holds no samples yet"):
         read_bag(tmp_path / "session")
+
+
+def test_session_of_one_bag_per_sample_from_earlier_versions_still_reads(tmp_path: Path) -> None:
+    session = tmp_path / "session"
+    session.mkdir()
+    (session / SESSION_MARKER).write_text("linelaser_calib sample session\n", encoding="utf-8")
+    for i in range(3):
+        stamp = 10**9 + i
+        write_bag(
+            session / f"sample_{i:06d}",
+            [Profile(stamp, np.ones((10, 3)))],
+            [FlangePose(stamp, np.eye(4))],
+        )
+    contents = read_bag(session)
+    assert [p.stamp_ns for p in contents.profiles] == [10**9, 10**9 + 1, 10**9 + 2]
+    assert [p.stamp_ns for p in contents.poses] == [10**9, 10**9 + 1, 10**9 + 2]
 
 
 def test_fast_pose_decoding_equals_the_message_adapter() -> None:

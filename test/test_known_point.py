@@ -20,7 +20,7 @@ from linelaser_calib.core.geometry import (
     transform_error,
     transform_from_rotation_translation,
 )
-from linelaser_calib.core.known_point import (
+from linelaser_calib.core.targets.known_point import (
     GridStep,
     HandEyePrior,
     KnownPointConfig,

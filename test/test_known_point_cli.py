@@ -9,6 +9,7 @@ import pytest
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.targets.known_point import KnownPoint
 from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
 
 
@@ -27,10 +28,10 @@ def test_known_point_corrects_the_bumped_hand_eye(
 ) -> None:
     truth = read_truth_yaml(weld_bag / "truth.yaml")
     initial = read_result_yaml(weld_bag / "initial.yaml")
-    assert truth.known_point is not None and initial.known_point is not None
+    assert isinstance(truth.target, KnownPoint) and isinstance(initial.target, KnownPoint)
     rot0, trans0 = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot0) > 0.9 and trans0 > 0.9e-3  # the old hand-eye is off
-    taught = ",".join(str(v) for v in initial.known_point.point)
+    taught = ",".join(str(v) for v in initial.target.point)
     out = tmp_path / "result.yaml"
     code = main(
         [
@@ -50,8 +51,8 @@ def test_known_point_corrects_the_bumped_hand_eye(
     )
     assert code == 0
     result = read_result_yaml(out)
-    assert result.cylinder is None and result.known_point is not None
-    np.testing.assert_allclose(result.known_point.point, initial.known_point.point)
+    assert isinstance(result.target, KnownPoint)
+    np.testing.assert_allclose(result.target.point, initial.target.point)
     rot, trans = transform_error(result.T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot) < rot_deg and trans * 1e3 < trans_mm
     assert rot < rot0 and trans < trans0

@@ -6,6 +6,7 @@ vectorised numpy code under test.
 
 from __future__ import annotations
 
+import dataclasses
 import struct
 import subprocess
 import sys
@@ -37,6 +38,8 @@ from msg_adapters import (
     rclpy_types,
     rosbags_types,
     stamp_ns_from_msg,
+    stamped_transform_from_msg,
+    stamped_transforms_from_msgs,
     time_msg_from_ns,
     transform_stamped_from_matrix,
 )
@@ -226,6 +229,65 @@ def test_messages_cross_serialise_between_worlds() -> None:
     np.testing.assert_array_equal(points_from_pointcloud2(as_rclpy), expected)
 
 
+def serialised_round_trip(msg: Any) -> Any:
+    """The message after CDR serialisation and back, in its own world."""
+    if dataclasses.is_dataclass(msg):
+        raw = TYPESTORE.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2")
+        return TYPESTORE.deserialize_cdr(raw, "sensor_msgs/msg/PointCloud2")
+    return deserialize_message(serialize_message(msg), type(msg))
+
+
+#: Point layouts that drivers send: (fields (name, kind, offset), point_step).
+DRIVER_LAYOUTS = {
+    "float64 xyz + uint16 intensity, 26-byte point": (
+        [("x", "f8", 0), ("y", "f8", 8), ("z", "f8", 16), ("intensity", "u2", 24)],
+        26,
+    ),
+    "float32 xyz at odd offsets, 15-byte point": (
+        [("intensity", "u1", 0), ("x", "f4", 1), ("y", "f4", 5), ("z", "f4", 9)],
+        15,
+    ),
+}
+
+
+@pytest.mark.parametrize("layout_name", sorted(DRIVER_LAYOUTS))
+@pytest.mark.parametrize("sentinel", [-0.999999, 0.0])
+def test_sentinel_depths_are_no_return_in_any_layout(
+    types: Any, layout_name: str, sentinel: float
+) -> None:
+    layout, point_step = DRIVER_LAYOUTS[layout_name]
+    kind = dict((name, k) for name, k, _ in layout)["x"]
+    rng = np.random.default_rng(7)
+    truth = scan_line(rng, 40)
+    no_return = np.zeros(40, dtype=bool)
+    no_return[[3, 17, 18, 39]] = True
+    truth[no_return] = [0.0, 0.0, sentinel]  # how drivers mark a missing return
+    truth[5] = [0.01, 0.0, sentinel]  # a sentinel depth with a valid-looking x
+    no_return[5] = True
+    truth = truth.astype(np.dtype(kind)).astype(np.float64)
+    values = {"x": truth[:, 0], "y": truth[:, 1], "z": truth[:, 2]}
+    values["intensity"] = rng.integers(0, 200, 40)
+    msg = serialised_round_trip(
+        reference_cloud(
+            types, layout, values, height=1, width=40, point_step=point_step, bigendian=False
+        )
+    )
+    finite = np.all(np.isfinite(truth), axis=1)
+
+    plain = points_from_pointcloud2(msg)
+    np.testing.assert_array_equal(plain, truth[finite])  # without the sentinel: kept
+    cloud = cloud_from_pointcloud2(msg, extra_fields=("intensity",), invalid_values_m=[sentinel])
+    np.testing.assert_array_equal(cloud.points, truth[finite & ~no_return])
+    np.testing.assert_array_equal(
+        cloud.extras["intensity"], values["intensity"][finite & ~no_return]
+    )
+    full = points_from_pointcloud2(msg, keep_invalid=True, invalid_values_m=[sentinel])
+    assert np.all(np.isnan(full[no_return]))
+    np.testing.assert_array_equal(full[~no_return], truth[~no_return])
+    profile = profile_from_pointcloud2(msg, invalid_values_m=[1.5, sentinel])
+    assert profile.points.shape == (int(np.sum(finite & ~no_return)), 3)
+
+
 def test_organised_clouds_keep_invalid_rows_and_dense_ones_drop_them(types: Any) -> None:
     points = scan_line(np.random.default_rng(4), 30)
     valid = np.all(np.isfinite(points), axis=1)
@@ -400,6 +462,25 @@ def test_transform_stamped_carries_the_transform(types: Any) -> None:
     )
     with pytest.raises(MessageError, match="not a proper rotation"):
         transform_stamped_from_matrix(np.diag([1.0, 2.0, 1.0, 1.0]), 0, "a", "b", types=types)
+
+
+def test_tf_transforms_read_back_with_frames_and_stamp(types: Any) -> None:
+    T = random_transform(np.random.default_rng(9))
+    msg = transform_stamped_from_matrix(T, 1_700_000_000_000_000_042, "tool0", "laser", types=types)
+    read = stamped_transform_from_msg(msg)
+    assert (read.stamp_ns, read.parent, read.child) == (1_700_000_000_000_000_042, "tool0", "laser")
+    np.testing.assert_allclose(read.T_parent_child, T, atol=1e-12)
+    good = transform_stamped_from_matrix(T, 7, "base_link", "tool0", types=types)
+    msg.transform.rotation.w = 0.0
+    msg.transform.rotation.x = msg.transform.rotation.y = msg.transform.rotation.z = 0.0
+    with pytest.raises(MessageError, match="TransformStamped tool0 -> laser at stamp"):
+        stamped_transform_from_msg(msg)
+    first, bad, last = stamped_transforms_from_msgs([good, msg, good])
+    assert isinstance(bad, str) and "zero quaternion" in bad
+    for item in (first, last):
+        assert not isinstance(item, str)
+        assert (item.stamp_ns, item.parent, item.child) == (7, "base_link", "tool0")
+        np.testing.assert_allclose(item.T_parent_child, T, atol=1e-12)
 
 
 def test_cylinder_marker_axis_is_the_local_z(types: Any) -> None:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from _compare import assert_floats_close
 from geometry_msgs.msg import PoseStamped
 from rclpy.context import Context
 from rclpy.executors import MultiThreadedExecutor
@@ -37,10 +38,11 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_rotvec_translation,
 )
-from linelaser_calib.core.known_point import KnownPointConfig, extract_corner
 from linelaser_calib.core.pairing import NS_PER_S, PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig, Target, validate_sample
+from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
 from linelaser_calib.core.residuals import axis_extent
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.known_point import KnownPoint, KnownPointConfig, extract_corner
 from linelaser_calib.core.types import (
     CalibrationResult,
     Cylinder,
@@ -53,10 +55,16 @@ from linelaser_calib.core.types import (
 from linelaser_calib.io import ResultFileError, SessionBagWriter, read_bag, read_result_yaml
 from linelaser_calib.nodes import calibration_service, collector
 from linelaser_calib.nodes.collection import (
+    KEY_PROFILES_BEFORE,
+    KEY_PROFILES_LOST,
     SKIP_BACKLOG,
+    SKIP_CANDIDATE,
     SKIP_CLEARED,
-    SKIP_INTERVAL,
+    SKIP_MOVING,
     SKIP_NOT_CAPTURED,
+    SKIP_RATE,
+    SKIP_SAMPLED,
+    ClockOffsetTracker,
     CollectorConfig,
     LiveCollector,
     Mode,
@@ -103,7 +111,9 @@ class Logged:
 
 
 def make_collector(**config: Any) -> tuple[LiveCollector, Logged]:
+    """A collector in ``continuous`` mode unless ``mode`` says otherwise."""
     logged = Logged()
+    config.setdefault("mode", Mode.CONTINUOUS)
     return LiveCollector(CollectorConfig(**config), logged), logged
 
 
@@ -113,17 +123,16 @@ def feed_poses(c: LiveCollector, poses: list[FlangePose], now_s: float = 0.0) ->
 
 
 def drain(c: LiveCollector, admit: bool = True) -> list[int]:
-    """Validate everything queued (admitting or rejecting); profile indices admitted."""
-    admitted = []
+    """Validate every candidate (admitting or rejecting it), then take the samples to store;
+    their profile indices."""
     while (pending := c.next_to_validate()) is not None:
         if admit:
-            if c.admit(pending):
-                admitted.append(pending.sample.index)
+            c.admit(pending)
         else:
             c.reject_validated(
                 Rejection(pending.sample.index, pending.sample.stamp_ns, "ellipse", "bad")
             )
-    return admitted
+    return [p.sample.index for p in c.take_to_store()]
 
 
 def assert_all_counted(c: LiveCollector) -> None:
@@ -149,14 +158,11 @@ def test_profile_waits_until_the_poses_around_it_arrived() -> None:
     c.add_profile(profile(0.995), now_s=0.0)
     assert (c.paired, c.pending) == (0, 1)
     feed_poses(c, resting_poses(1.008, 1.024))
-    assert (c.paired, c.pending) == (1, 1)
-    pending = c.next_to_validate()
-    assert pending is not None
-    assert pending.sample.stamp_ns == ns(0.995)
-    np.testing.assert_allclose(pending.sample.T_base_flange, T_REST, atol=1e-12)
-    assert (pending.sensor_frame, pending.base_frame) == ("laser", "base_link")
-    assert c.admit(pending)
-    assert (c.accepted, c.session_samples, c.pending) == (1, 1, 0)
+    assert (c.paired, c.pending, c.accepted, c.session_samples) == (1, 0, 1, 1)
+    (stored,) = c.take_to_store()  # continuous: stored first, checked beside
+    assert stored.sample.stamp_ns == ns(0.995)
+    np.testing.assert_allclose(stored.sample.T_base_flange, T_REST, atol=1e-12)
+    assert (stored.sensor_frame, stored.base_frame) == ("laser", "base_link")
     assert_all_counted(c)
 
 
@@ -217,9 +223,10 @@ def test_moving_robot_and_missing_poses_are_rejected_with_reasons() -> None:
     assert_all_counted(c)
 
 
-def test_every_profile_is_counted_once_in_a_random_stream() -> None:
+@pytest.mark.parametrize("mode", list(Mode))
+def test_every_profile_is_counted_once_in_a_random_stream(mode: Mode) -> None:
     rng = np.random.default_rng(7)
-    c, _ = make_collector(validation_queue_size=3, min_sample_interval_s=0.05)
+    c, _ = make_collector(mode=mode, validation_queue_size=3, max_rate_hz=20.0)
     now = 0.0
     t = 0.0
     for _ in range(400):
@@ -234,6 +241,8 @@ def test_every_profile_is_counted_once_in_a_random_stream() -> None:
             c.reject_profile("garbage")
         elif rng.random() < 0.5:
             drain(c, admit=bool(rng.random() < 0.5))
+        else:
+            c.arm_capture()
         assert_all_counted(c)
     c.release(now + 10.0)
     drain(c)
@@ -255,29 +264,37 @@ def test_on_demand_takes_only_the_next_valid_sample_after_a_capture() -> None:
     c.reject_validated(Rejection(1, first.sample.stamp_ns, "ellipse", "arc too short"))
     assert c.capture_pending
     assert c.admit(second)
-    assert not c.capture_pending
+    assert not c.capture_pending and c.captured == second.sample.index
     c.add_profile(profile(1.8), now_s=0.0)
-    assert drain(c) == []
+    assert drain(c) == [second.sample.index]
     assert (c.accepted, c.skipped.total) == (1, 2)
     assert_all_counted(c)
 
 
-def test_min_interval_and_a_full_validation_queue_skip_profiles() -> None:
-    c, _ = make_collector(min_sample_interval_s=0.1, validation_queue_size=2)
+def test_max_rate_decimates_on_purpose_and_a_full_validation_queue_skips() -> None:
+    c, logged = make_collector(max_rate_hz=10.0)
     feed_poses(c, resting_poses(0.0, 1.5))
     for k in range(30):
         c.add_profile(profile(0.5 + k * 0.02), now_s=0.0)  # 50 Hz
-    counts = c.skipped.counts()
-    assert counts[f"skipped: {SKIP_INTERVAL}"] == 8  # 20 ms and 40, 60, 80 ms after 0 and 5
-    assert counts[f"skipped: {SKIP_BACKLOG}"] == 20  # every later one: the queue holds 0 and 5
-    assert drain(c) == [0, 5]
+    assert c.skipped.counts() == {f"skipped: {SKIP_RATE}": 24}  # 4 of every 5
+    assert drain(c) == [0, 5, 10, 15, 20, 25]
+    assert logged.calls == [(f"skipped: {SKIP_RATE}", f"skipped: {SKIP_RATE}")]
+    assert_all_counted(c)
+
+    c, _ = make_collector(mode=Mode.ON_DEMAND, validation_queue_size=2)
+    feed_poses(c, resting_poses(0.0, 1.5))
+    c.arm_capture()
+    for k in range(5):
+        c.add_profile(profile(0.5 + k * 0.02), now_s=0.0)
+    assert c.skipped.counts() == {f"skipped: {SKIP_BACKLOG}": 3}
+    assert drain(c) == [0]
     assert_all_counted(c)
 
 
 def test_clear_keeps_earlier_profiles_out_of_the_new_session() -> None:
     c, _ = make_collector()
     feed_poses(c, resting_poses(0.0, 1.0))
-    c.add_profile(profile(0.5), now_s=0.0)  # paired, awaiting validation
+    c.add_profile(profile(0.5), now_s=0.0)  # accepted, not yet stored
     c.add_profile(profile(0.995), now_s=0.0)  # waiting for poses
     c.clear(reloaded=3)
     feed_poses(c, resting_poses(1.008, 1.1))
@@ -288,6 +305,115 @@ def test_clear_keeps_earlier_profiles_out_of_the_new_session() -> None:
     assert drain(c) == [2]
     assert c.session_samples == 4
     assert_all_counted(c)
+
+
+def test_first_profile_lost_before_matching_is_counted_from_sequence_numbers() -> None:
+    # A publisher starts as soon as it sees the subscription; a best-effort subscription that
+    # has not matched it yet drops the first messages. They never reach the collector, but
+    # the sequence numbers of the ones that do tell how many were lost.
+    c, _ = make_collector()
+    feed_poses(c, resting_poses(0.0, 1.0))
+    c.add_profile(profile(0.2), now_s=0.0, sequence=2)
+    c.add_profile(profile(0.3), now_s=0.0, sequence=3)
+    c.add_profile(profile(0.6), now_s=0.0, sequence=6)
+    values = c.diagnostic_values()
+    assert values[KEY_PROFILES_BEFORE] == "1"
+    assert values[KEY_PROFILES_LOST] == "2"
+    published = 6
+    accounted = c.accepted + c.rejected.total + c.skipped.total + c.pending
+    assert accounted + int(values[KEY_PROFILES_BEFORE]) + int(values[KEY_PROFILES_LOST]) == (
+        published
+    )
+
+
+def stop_and_go_poses(rng: np.random.Generator) -> tuple[list[FlangePose], list[tuple[int, int]]]:
+    """Five stops of 1.2 s joined by 0.5 s moves (0.1 m/s, 0.3 rad/s), at 250 Hz with
+    10 µm noise; and each stop's [start, end] stamps."""
+    poses, stops, t = [], [], 0.0
+    position, angle = np.zeros(3), 0.0
+    for _ in range(5):
+        stops.append((ns(t), ns(t + 1.2)))
+        for k in range(300):
+            noisy = position + rng.normal(0.0, 10e-6, 3)
+            poses.append(
+                FlangePose(ns(t + k / 250), transform_from_rotvec_translation([0, 0, angle], noisy))
+            )
+        t += 1.2
+        for k in range(125):
+            position = position + np.array([0.1, 0.0, 0.0]) / 250
+            angle += 0.3 / 250
+            poses.append(
+                FlangePose(
+                    ns(t + k / 250), transform_from_rotvec_translation([0, 0, angle], position)
+                )
+            )
+        t += 0.5
+    return poses, stops
+
+
+def test_stop_and_go_takes_one_valid_sample_per_standstill_and_counts_the_moving_ones() -> None:
+    poses, stops = stop_and_go_poses(np.random.default_rng(3))
+    c, logged = make_collector(mode=Mode.STOP_AND_GO, standstill_s=0.3)
+    profiles = [profile(k / 100) for k in range(850)]  # 100 Hz for 8.5 s
+    events = sorted([(p.stamp_ns, 0, p) for p in poses] + [(q.stamp_ns, 1, q) for q in profiles])
+    stored = []
+    first_candidate_fails = True
+    for k, (_, kind, item) in enumerate(events):
+        if kind == 0:
+            c.add_pose(item, now_s=0.0)
+        else:
+            c.add_profile(item, now_s=0.0)
+        if k % 10:
+            continue  # validation is slower than the profile rate
+        pending = c.next_to_validate()
+        if pending is not None and first_candidate_fails:  # the stop's first profile is bad
+            c.reject_validated(Rejection(pending.sample.index, pending.sample.stamp_ns, "e", "x"))
+            first_candidate_fails = False
+        elif pending is not None:
+            c.admit(pending)
+        stored += c.take_to_store()
+    c.release(now_s=100.0)
+    stored += c.take_to_store()
+    # One sample in each of the five stops, taken once the flange has been still for 0.3 s.
+    horizon = 0.02 * NS_PER_S
+    assert len(stored) == len(stops)
+    for sample, (start, end) in zip(stored, stops, strict=True):
+        assert start + 0.3 * NS_PER_S <= sample.sample.stamp_ns <= end - horizon
+    assert stored[0].sample.stamp_ns > stops[0][0] + 0.3 * NS_PER_S + 0.005 * NS_PER_S
+    counts = c.skipped.counts()
+    moving = sum(
+        1 for p in profiles if not any(a + 0.3e9 <= p.stamp_ns <= b - horizon for a, b in stops)
+    )
+    # Profiles of the moves and of each stop's first 0.3 s (and its last 20 ms) are left
+    # because the flange moved; a few more at each stop's start, where the 20 ms speed
+    # window still reaches into the move.
+    assert 0 <= counts[f"skipped: {SKIP_MOVING}"] - moving <= 3 * len(stops)
+    assert counts[f"skipped: {SKIP_SAMPLED}"] > 0
+    assert f"skipped: {SKIP_CANDIDATE}" not in counts  # the queue (20) holds a stop's profiles
+    assert any(key == f"skipped: {SKIP_MOVING}" for key, _ in logged.calls)
+    assert (c.accepted, c.rejected.total) == (5, 1)
+    assert_all_counted(c)
+
+
+def test_live_clock_offset_on_a_continuous_scan() -> None:
+    scenario = scenario_from_preset("continuous", n_poses=20)
+    data = simulate(scenario, seed=1)
+    truth = -scenario.latency_s  # profiles stamped late: the offset added to their stamps
+    tracker = ClockOffsetTracker(PipelineConfig(), period_s=6.0)
+    waiting: list[Profile] = []  # a sample reaches the tracker once paired and stored
+    for pose in data.poses:
+        tracker.add_pose(pose)
+        while data.profiles and data.profiles[0].stamp_ns <= pose.stamp_ns:
+            waiting.append(data.profiles.pop(0))
+        while waiting and waiting[0].stamp_ns < pose.stamp_ns - 0.3 * NS_PER_S:
+            tracker.add_sample(waiting.pop(0))
+        batch = tracker.take_batch()
+        if batch is not None:
+            assert tracker.add_estimate(tracker.estimate_batch(*batch)) is None  # no drift
+    estimate = tracker.estimate
+    assert estimate is not None and estimate.batches >= 2 and estimate.sigma_s is not None
+    assert abs(estimate.offset_s - truth) < max(3 * estimate.sigma_s, 0.5e-3)
+    assert tracker.add_estimate(truth + 0.02) is not None  # a 20 ms jump is a drift
 
 
 def test_collector_config_rejects_a_pose_window_shorter_than_the_pairing_horizon() -> None:
@@ -318,15 +444,23 @@ def test_validate_sample_accepts_cylinder_arcs_and_checks_the_radius() -> None:
     samples = simulated_samples(data.profiles, data.truth.T_base_flange_recorded)
     radius = data.truth.cylinder.radius
     assert validation_stages(samples, PipelineConfig()) == [None] * 6
-    assert validation_stages(samples, PipelineConfig(radius_m=radius)) == [None] * 6
-    assert validation_stages(samples, PipelineConfig(radius_m=2 * radius)) == ["ellipse"] * 6
+    assert (
+        validation_stages(samples, PipelineConfig(target_config=CylinderConfig(radius_m=radius)))
+        == [None] * 6
+    )
+    assert (
+        validation_stages(
+            samples, PipelineConfig(target_config=CylinderConfig(radius_m=2 * radius))
+        )
+        == ["ellipse"] * 6
+    )
 
 
 def test_validate_sample_finds_the_weld_corner_and_rejects_profiles_without_one() -> None:
     data = simulate_weld(weld_scenario_from_preset("weld_seam_general", n_poses=6), seed=4)
     truth = data.truth
     samples = simulated_samples(data.profiles, truth.T_base_flange_recorded)
-    known_point = PipelineConfig(target=Target.KNOWN_POINT)
+    known_point = PipelineConfig(target="known_point")
     assert validation_stages(samples, known_point) == [None] * 6
     for sample, corner in zip(samples, truth.corner_true_sensor, strict=True):
         found = extract_corner(sample, KnownPointConfig(), np.random.default_rng(0))
@@ -393,7 +527,9 @@ def known_result() -> CalibrationResult:
     R = Rotation.from_euler("xyz", [10.0, -5.0, 95.0], degrees=True).as_matrix()
     return CalibrationResult(
         T_flange_sensor=transform_from_rotation_translation(R, [0.012, -0.085, 0.095]),
-        cylinder=Cylinder(np.array([0.45, 0.15, 0.0]), np.array([0.0, 0.0, 1.0]), 0.02),
+        target=CylinderSection(
+            Cylinder(np.array([0.45, 0.15, 0.0]), np.array([0.0, 0.0, 1.0]), 0.02)
+        ),
         method="default",
         samples_used=list(range(28)),
         samples_rejected=[],
@@ -417,8 +553,8 @@ def test_summary_line_gives_every_number_with_its_unit() -> None:
 def test_marker_points_lie_on_the_cylinder_and_respect_the_budget() -> None:
     rng = np.random.default_rng(3)
     result = known_result()
-    cylinder = result.cylinder
-    assert cylinder is not None
+    assert isinstance(result.target, CylinderSection)
+    cylinder = result.target.cylinder
     for k in range(4):
         T_base_flange = transform_from_rotvec_translation(
             rng.normal(0, 0.5, 3), rng.normal([0.4, 0.1, 0.3], 0.05)
@@ -450,24 +586,61 @@ def service_values(**overrides: Any) -> dict[str, Any]:
     return {**values, **overrides}
 
 
+def test_service_puts_the_live_clock_offset_in_the_result_and_warns_on_a_mismatch() -> None:
+    def result() -> CalibrationResult:
+        return CalibrationResult(np.eye(4), None, "default", [0], [], 1e-5)
+
+    agreeing = result()
+    calibration_service.add_live_clock_offset(agreeing, -0.004, -0.0041, 0.0002)
+    assert agreeing.clock_offset_s == -0.004
+    assert (agreeing.clock_offset_live_s, agreeing.clock_offset_live_sigma_s) == (-0.0041, 0.0002)
+    assert agreeing.warnings == []
+    mismatched = result()
+    calibration_service.add_live_clock_offset(mismatched, 0.0, -0.004, 0.0002)
+    (warning,) = mismatched.warnings
+    assert "-4.00 +- 0.20 ms" in warning and "clock_offset_s to -0.0040" in warning
+    no_sigma_yet = result()
+    calibration_service.add_live_clock_offset(no_sigma_yet, 0.0, -0.004, float("nan"))
+    assert no_sigma_yet.clock_offset_live_sigma_s is None and no_sigma_yet.warnings == []
+    none = result()
+    calibration_service.add_live_clock_offset(none, 0.002, float("nan"), float("nan"))
+    assert (none.clock_offset_s, none.clock_offset_live_s) == (0.002, None)
+
+
 def test_service_builds_the_known_point_configuration_from_its_parameters() -> None:
     initial = read_result_yaml(WELD_INITIAL)
-    assert initial.known_point is not None
+    assert isinstance(initial.target, KnownPoint)
     default = calibration_service.pipeline_config(service_values())
-    assert (default.target, default.method) == (Target.CYLINDER, Method.DEFAULT)
-    assert default.known_point is None and default.initial_T_flange_sensor is None
+    assert (default.target, default.method) == ("cylinder", Method.DEFAULT)
+    assert isinstance(default.target_config, CylinderConfig)
+    assert default.initial_T_flange_sensor is None
     config = calibration_service.pipeline_config(
         service_values(
             target="known_point",
             method="paper",
-            known_point=tuple(initial.known_point.point),
+            known_point=tuple(initial.target.point),
             initial_hand_eye_path=str(WELD_INITIAL),
         )
     )
-    assert (config.target, config.method) == (Target.KNOWN_POINT, Method.PAPER)
-    assert config.known_point is not None and config.initial_T_flange_sensor is not None
-    np.testing.assert_array_equal(config.known_point, initial.known_point.point)
-    np.testing.assert_array_equal(config.initial_T_flange_sensor, initial.T_flange_sensor)
+    assert (config.target, config.method) == ("known_point", Method.PAPER)
+    point = config.target_config.point_m
+    assert point is not None and config.initial_T_flange_sensor is not None
+    np.testing.assert_array_equal(point, initial.target.point)
+    assert_floats_close(config.initial_T_flange_sensor, initial.T_flange_sensor)
+
+
+def test_service_takes_the_initial_hand_eye_as_numbers_and_logs_normalisation() -> None:
+    warnings: list[str] = []
+    config = calibration_service.pipeline_config(
+        service_values(initial_hand_eye_path="0.1 0.2 0.3 0 0 0.7071 0.7071"), warnings.append
+    )
+    assert config.initial_T_flange_sensor is not None
+    assert_floats_close(config.initial_T_flange_sensor[:3, 3], [0.1, 0.2, 0.3])
+    assert len(warnings) == 1 and warnings[0].startswith("initial_hand_eye_path: the quaternion")
+    with pytest.raises(InputError, match=r"initial_hand_eye_path: .*millimetres"):
+        calibration_service.pipeline_config(
+            service_values(initial_hand_eye_path="100 200 300 0 0 0 1")
+        )
 
 
 def test_service_configuration_errors_name_the_parameters(tmp_path: Path) -> None:

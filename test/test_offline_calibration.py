@@ -9,6 +9,7 @@ import pytest
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"
@@ -27,9 +28,11 @@ def test_committed_bag_recovers_truth(bag: str, method: str, tmp_path: Path) -> 
     rot, trans = transform_error(result.T_flange_sensor, truth.T_flange_sensor)
     max_deg, max_mm = BOUNDS[method]
     assert np.degrees(rot) < max_deg and trans * 1e3 < max_mm
-    assert result.cylinder is not None and truth.cylinder is not None
-    assert result.cylinder.radius == pytest.approx(truth.cylinder.radius, abs=2e-4)
-    assert abs(result.cylinder.direction @ truth.cylinder.direction) > np.cos(np.radians(1.0))
+    assert isinstance(result.target, CylinderSection)
+    assert result.target.cylinder.radius == pytest.approx(truth.target.cylinder.radius, abs=2e-4)
+    assert abs(result.target.cylinder.direction @ truth.target.cylinder.direction) > np.cos(
+        np.radians(1.0)
+    )
     if method == "default":
         assert result.uncertainty_translation_m is not None
         assert np.all(result.uncertainty_translation_m < 1e-3)
@@ -51,10 +54,10 @@ def test_other_names_radius_and_axis(tmp_path: Path) -> None:
     )
     rot, trans = transform_error(result.T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot) < 0.05 and trans < 1e-4
-    assert result.cylinder is not None
-    assert result.cylinder.radius == pytest.approx(0.03, abs=1e-4)
+    assert isinstance(result.target, CylinderSection)
+    assert result.target.cylinder.radius == pytest.approx(0.03, abs=1e-4)
     assert main(["calibrate", str(bag), "--radius", "0.03", "--output", str(out)]) == 0
-    assert read_result_yaml(out).cylinder.radius == 0.03  # type: ignore[union-attr]
+    assert read_result_yaml(out).target.cylinder.radius == 0.03
 
 
 def test_continuous_motion_needs_the_speed_gate_opened_and_the_latency(tmp_path: Path) -> None:

@@ -38,6 +38,7 @@ def test_colcon_installs_executables_ament_index_and_share_files(install: Colcon
         "config/collector.yaml",
         "config/calibration_service.yaml",
         "launch/linelaser_calib.launch.py",
+        "launch/publish.launch.py",
     ):
         assert (share / relative).is_file(), relative
         assert (share / relative).read_bytes() == (REPO_ROOT / relative).read_bytes()

@@ -1,4 +1,5 @@
-"""Tests of the maximum-likelihood refinement (core/refine.py) and its observability check."""
+"""Tests of the cylinder's maximum-likelihood refinement (core/targets/cylinder/refine.py), its
+block form for the shared solver (core/solver) and its observability check."""
 
 from __future__ import annotations
 
@@ -8,12 +9,14 @@ import numpy as np
 import pytest
 from _cylinder_points import Scene, make_scene, perturbed_start
 
-from linelaser_calib.core import refine as refine_module
 from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
-from linelaser_calib.core.refine import (
+from linelaser_calib.core.solver import normal_equations, solve_damped
+from linelaser_calib.core.targets.cylinder.refine import (
     RefineConfig,
     RefineResult,
+    build_problem,
+    initial_state,
     refine,
     refine_with_outlier_rejection,
 )
@@ -76,23 +79,21 @@ def test_jacobian_matches_finite_differences() -> None:
     # Unequal profile lengths exercise the padded layout (padding rows must stay zero).
     points = [p[: 10 + j] for j, p in enumerate(scene.points)]
     config = RefineConfig()
-    problem = refine_module._build_problem(points, scene.T_base_flange, config, True)
+    problem = build_problem(points, scene.T_base_flange, config, True)
     T0, cylinder0 = perturbed_start(rng, scene, radius_offset=1e-3)
-    state = refine_module._initial_state(problem, T0, cylinder0, cylinder0.radius)
+    state = initial_state(problem, T0, cylinder0, cylinder0.radius)
     # Evaluate away from zero corrections so that the right Jacobian of Exp matters.
-    state = refine_module._retract(
-        problem,
+    state = problem.retract(
         state,
         np.zeros(problem.n_global),
         np.hstack([rng.normal(0.0, 0.05, (6, 3)), rng.normal(0.0, 2e-3, (6, 3))]),
     )
-    geo = refine_module._geometry(problem, state)
-    J_global, J_local = refine_module._jacobians(problem, state, geo)
+    linearisation = problem.linearise(state)
+    J_global, J_local = linearisation.J_global, linearisation.J_local
 
     def residuals(step_global: FloatArray, step_local: FloatArray) -> FloatArray:
-        moved = refine_module._retract(problem, state, step_global, step_local)
-        e, _ = refine_module._residuals(problem, moved, refine_module._geometry(problem, moved))
-        return e.ravel()
+        moved = problem.retract(state, step_global, step_local)
+        return problem.residuals(moved).points.ravel()
 
     h = 1e-7
     for k in range(problem.n_global):
@@ -118,14 +119,12 @@ def test_schur_solve_equals_dense_solve() -> None:
     rng = np.random.default_rng(3)
     scene = make_scene(rng, n_poses=7, n_points=20)
     points = [p[: 12 + j] for j, p in enumerate(scene.points)]
-    problem = refine_module._build_problem(points, scene.T_base_flange, RefineConfig(), True)
+    problem = build_problem(points, scene.T_base_flange, RefineConfig(), True)
     T0, cylinder0 = perturbed_start(rng, scene)
-    state = refine_module._initial_state(problem, T0, cylinder0, RADIUS)
-    normal = refine_module._normal_equations(
-        problem, state, refine_module._geometry(problem, state)
-    )
+    state = initial_state(problem, T0, cylinder0, RADIUS)
+    normal = normal_equations(problem.linearise(state), RefineConfig().solver)
     damping = 1e-3
-    step_global, step_local = refine_module._solve(normal, damping)
+    step_global, step_local = solve_damped(normal, damping)
 
     G, M = problem.n_global, problem.n_samples
     H = np.zeros((G + 6 * M, G + 6 * M))

@@ -194,7 +194,7 @@ def test_report_states_the_result(
         assert f"{value:+.6f}" in text
     assert "fixed axes x-y-z" in text
     assert str(bag) in text
-    assert f"{result.cylinder.radius * 1e3:.3f} mm" in text
+    assert f"{result.target.cylinder.radius * 1e3:.3f} mm" in text
     assert f"{len(result.samples_used)} used, 0 rejected" in text
     rotation, translation = transform_error(T, truth.T_flange_sensor)
     assert "Error against truth" in text

@@ -14,6 +14,7 @@ from linelaser_calib.core.geometry import (
     matrix_from_quaternion_xyzw,
     transform_from_rotvec_translation,
 )
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection
 from linelaser_calib.io import (
     ResultFileError,
@@ -36,7 +37,7 @@ def random_result(rng: np.random.Generator, *, with_uncertainty: bool = True) ->
         T_flange_sensor=transform_from_rotvec_translation(
             rng.normal(size=3), 0.1 * rng.normal(size=3)
         ),
-        cylinder=random_cylinder(rng),
+        target=CylinderSection(random_cylinder(rng), radius_estimated=True),
         method="default",
         samples_used=[0, 1, 2, 4, 7],
         samples_rejected=[
@@ -47,9 +48,10 @@ def random_result(rng: np.random.Generator, *, with_uncertainty: bool = True) ->
         sample_residuals_m={i: float(rng.random() * 1e-4) for i in (0, 1, 2, 4, 7)},
         uncertainty_translation_m=rng.random(3) * 1e-4 if with_uncertainty else None,
         uncertainty_rotation_rad=rng.random(3) * 1e-3 if with_uncertainty else None,
-        radius_estimated=True,
         warnings=["rotation about the sensor x axis is weakly observed"],
         history={"refine_cost": [3.0, 2.0, 1.0]},
+        clock_offset_live_s=-0.004 + 1e-4 * float(rng.normal()) if with_uncertainty else None,
+        clock_offset_live_sigma_s=1e-4 if with_uncertainty else None,
     )
 
 
@@ -89,15 +91,19 @@ def test_result_round_trips_exactly(tmp_path: Path) -> None:
         result = random_result(rng, with_uncertainty=i % 2 == 0)
         back = read_result_yaml(write_result_yaml(result, tmp_path / f"r{i}.yaml"))
         np.testing.assert_allclose(back.T_flange_sensor, result.T_flange_sensor, atol=1e-15)
-        np.testing.assert_array_equal(back.cylinder.point, result.cylinder.point)
-        np.testing.assert_allclose(back.cylinder.direction, result.cylinder.direction, atol=1e-16)
-        assert back.cylinder.radius == result.cylinder.radius
+        np.testing.assert_array_equal(back.target.cylinder.point, result.target.cylinder.point)
+        np.testing.assert_allclose(
+            back.target.cylinder.direction, result.target.cylinder.direction, atol=1e-16
+        )
+        assert back.target.cylinder.radius == result.target.cylinder.radius
         assert back.samples_used == result.samples_used
         assert back.samples_rejected == result.samples_rejected
         assert back.rms_residual_m == result.rms_residual_m
         assert back.sample_residuals_m == result.sample_residuals_m
         assert back.warnings == result.warnings
-        assert back.radius_estimated is True
+        assert back.target.radius_estimated is True
+        assert back.clock_offset_live_s == result.clock_offset_live_s
+        assert back.clock_offset_live_sigma_s == result.clock_offset_live_sigma_s
         assert (back.method, back.parent_frame, back.child_frame, back.base_frame) == (
             "default",
             "tool0",
@@ -150,12 +156,14 @@ def test_truth_round_trips_with_plain_extras(tmp_path: Path) -> None:
         "noise": {"sigma_m": np.float32(2e-5)},
         "poses": np.arange(3),
     }
-    path = write_truth_yaml(tmp_path / "truth.yaml", T, cylinder, base_frame="world", extra=extra)
+    path = write_truth_yaml(
+        tmp_path / "truth.yaml", T, CylinderSection(cylinder), base_frame="world", extra=extra
+    )
     assert "!!" not in path.read_text()
     truth = read_truth_yaml(path)
     np.testing.assert_allclose(truth.T_flange_sensor, T, atol=1e-15)
-    np.testing.assert_array_equal(truth.cylinder.point, cylinder.point)
-    assert truth.cylinder.radius == cylinder.radius
+    np.testing.assert_array_equal(truth.target.cylinder.point, cylinder.point)
+    assert truth.target.cylinder.radius == cylinder.radius
     assert (truth.parent_frame, truth.child_frame, truth.base_frame) == ("tool0", "laser", "world")
     assert truth.raw["seed"] == 7 and truth.raw["poses"] == [0, 1, 2]
     assert truth.raw["noise"]["sigma_m"] == float(np.float32(2e-5))
@@ -163,7 +171,7 @@ def test_truth_round_trips_with_plain_extras(tmp_path: Path) -> None:
 
 
 def test_truth_extras_cannot_replace_the_truth_or_hold_objects(tmp_path: Path) -> None:
-    cylinder = Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02)
+    cylinder = CylinderSection(Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02))
     with pytest.raises(InputError, match="overwrite the truth"):
         write_truth_yaml(tmp_path / "t.yaml", np.eye(4), cylinder, extra={"cylinder": 1})
     with pytest.raises(InputError, match="not plain YAML data"):

@@ -33,6 +33,8 @@ from ros_helpers import (
 from visualization_msgs.msg import MarkerArray
 
 from linelaser_calib.core.geometry import transform_error, transform_from_rotvec_translation
+from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.targets.known_point import KnownPoint
 from linelaser_calib.core.types import Cylinder, FlangePose
 from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
 from linelaser_calib.io.results import Truth
@@ -52,10 +54,11 @@ MAX_KNOWN_POINT_ROTATION_ERROR_RAD = math.radians(0.2)
 #: The committed weld-seam bag: 20 profiles of one V-groove corner, its truth and the old
 #: hand-eye with the taught point (initial.yaml).
 WELD_BAG = REPO_ROOT / "bags" / "weld_seam"
-#: A step-and-shoot scan of 16 poses in about 7 s, short enough to replay in real time.
+#: A step-and-shoot scan of 16 poses in about 10 s, short enough to replay in real time; each
+#: profile is taken 0.15 s into a stop, so the default stop_and_go mode takes every one.
 SHORT_SCAN = {
     "n_poses": 16,
-    "dwell_s": 0.1,
+    "dwell_s": 0.3,
     "min_move_s": 0.15,
     "move_speed_m_s": 0.5,
     "move_angular_speed_rad_s": 3.0,
@@ -101,7 +104,9 @@ def committed_replay() -> Replay:
         return preset is None or not any(preset.robot_field_m)
 
     bags = [
-        bag for bag, truth in truths.items() if truth.cylinder is not None and exact_robot(truth)
+        bag
+        for bag, truth in truths.items()
+        if isinstance(truth.target, CylinderSection) and exact_robot(truth)
     ]
     assert bags, "no committed cylinder bag with truth.yaml under bags/"
 
@@ -115,8 +120,8 @@ def committed_replay() -> Replay:
         contents.profiles, contents.poses, contents.sensor_frame, contents.base_frame
     )
     truth = truths[bag]
-    assert truth.cylinder is not None
-    return Replay(recording, truth.T_flange_sensor, truth.cylinder)
+    assert isinstance(truth.target, CylinderSection)
+    return Replay(recording, truth.T_flange_sensor, truth.target.cylinder)
 
 
 @dataclass
@@ -262,8 +267,9 @@ def test_restarted_service_gets_every_sample_again_at_10x(
 
     graph.service()
     sent = first + player.play(committed_replay.recording, rate=10.0, start=half)
-    accepted = settled(probe.wait_counts(20.0, profiles_received=sent, profiles_pending=0))
-    assert accepted == sent
+    values = probe.wait_counts(20.0, profiles_received=sent, profiles_pending=0)
+    assert settled(values) == sent, values
+    accepted = sent
     probe.wait_counts(20.0, node="calibration_service", samples=accepted)
     answer = probe.call("/calibrate")
     assert answer.success, answer.message + graph.procs.logs()
@@ -287,7 +293,7 @@ def test_on_demand_capture_and_clear(graph: Graph, committed_replay: Replay) -> 
     sent = first + player.play(committed_replay.recording, rate=10.0, start=half)
     wait_for(capture.done, 10.0, "the capture")
     assert capture.result().success, capture.result().message
-    assert "captured sample sample_000000" in capture.result().message
+    assert "captured sample 0 of session" in capture.result().message
     values = probe.wait_counts(20.0, profiles_received=sent, profiles_pending=0)
     assert settled(values) == 1
     probe.wait_counts(10.0, node="calibration_service", samples=1)
@@ -307,8 +313,8 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     contents = read_bag(WELD_BAG)
     initial = read_result_yaml(WELD_BAG / "initial.yaml")
     truth = read_truth_yaml(WELD_BAG / "truth.yaml")
-    assert initial.known_point is not None
-    taught = initial.known_point.point
+    assert isinstance(initial.target, KnownPoint)
+    taught = initial.target.point
     graph.collector(*params(reliable_inputs=True, target="known_point"))
     graph.service(
         *params(
@@ -341,9 +347,9 @@ def test_known_point_weld_seam_bag_through_both_nodes(graph: Graph) -> None:
     )
     written = read_result_yaml(graph.tmp / "hand_eye.yaml")
     assert max(transform_error(written.T_flange_sensor, T)) < 1e-6
-    assert written.cylinder is None and written.known_point is not None
-    assert not written.known_point.estimated
-    np.testing.assert_allclose(written.known_point.point, taught, atol=1e-12)
+    assert isinstance(written.target, KnownPoint)
+    assert not written.target.estimated
+    np.testing.assert_allclose(written.target.point, taught, atol=1e-12)
     markers = probe.latched(MarkerArray, "linelaser_calib/markers")
     (sphere,) = [m for m in markers.markers if m.ns == "known_point"]
     assert sphere.type == sphere.SPHERE_LIST and sphere.header.frame_id == contents.base_frame
@@ -367,18 +373,18 @@ def test_bad_messages_are_counted_and_logged_once_and_no_node_crashes(graph: Gra
         return pointcloud2_from_points(points, stamp_ns, "laser", types=types)
 
     def poses_around(stamp_ns: int, T: np.ndarray) -> None:
-        for k in range(-12, 13):
+        for k in range(-25, 26):  # a standstill of 0.4 s (stop_and_go takes one sample)
             pose = FlangePose(stamp_ns + k * 8_000_000, T)
             player.publish_pose(pose_stamped_from_flange_pose(pose, types=types))
 
     def profile_count(expected: int) -> None:
         probe.wait_counts(20.0, profiles_received=expected, profiles_pending=0)
 
-    # A valid sample, then a NaN-only profile at a paired stamp.
+    # A NaN-only profile at a paired stamp, then a valid sample in the same standstill.
     poses_around(good[0].stamp_ns, T_rest[0])
-    player.publish_profile(cloud(good[0].points, good[0].stamp_ns))
     nan_only = np.full((640, 3), np.nan)
-    player.publish_profile(cloud(nan_only, good[0].stamp_ns + 1_000_000))
+    player.publish_profile(cloud(nan_only, good[0].stamp_ns - 1_000_000))
+    player.publish_profile(cloud(good[0].points, good[0].stamp_ns))
     # Inconsistent layouts: a row_step that disagrees (3 times), then no z field.
     for _ in range(3):
         bad = cloud(good[0].points, good[0].stamp_ns + 2_000_000)
@@ -399,8 +405,8 @@ def test_bad_messages_are_counted_and_logged_once_and_no_node_crashes(graph: Gra
         zero.pose.orientation.x = zero.pose.orientation.y = zero.pose.orientation.z = 0.0
         player.publish_pose(zero)
     poses_around(good[1].stamp_ns, T_rest[1])
+    player.publish_profile(cloud(nan_only, good[1].stamp_ns - 1_000_000))
     player.publish_profile(cloud(good[1].points, good[1].stamp_ns))
-    player.publish_profile(cloud(nan_only, good[1].stamp_ns + 1_000_000))
     profile_count(9)
     # The pose clock jumps back (a replay restarted).
     jump = FlangePose(

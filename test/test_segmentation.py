@@ -18,6 +18,7 @@ from linelaser_calib.core.ellipse import EllipseConfig
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pipeline import PipelineConfig
 from linelaser_calib.core.segmentation import SegmentKind, estimate_noise, segment_profile
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
 from linelaser_calib.io.results import read_truth_yaml
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.sim import Surface, scenario_from_preset, simulate
@@ -174,14 +175,15 @@ def test_committed_cluttered_bag_uses_every_profile_and_names_the_radius_mismatc
     the grazing-angle bias make the profiles fit a larger one: the warning names both."""
     bag = Path(__file__).resolve().parent.parent / "bags" / "cluttered_camera"
     truth = read_truth_yaml(bag / "truth.yaml")
-    run = calibrate_bag(bag, PipelineConfig(radius_m=RADIUS))
+    run = calibrate_bag(bag, PipelineConfig(target_config=CylinderConfig(radius_m=RADIUS)))
     result = run.result
     assert not result.samples_rejected
     mismatch = [w for w in result.warnings if w.startswith("the profiles fit a radius")]
     assert len(mismatch) == 1
     assert "12.50 mm" in mismatch[0] and "scale" in mismatch[0]
     free = calibrate_bag(bag, PipelineConfig()).result
-    assert free.cylinder.radius > RADIUS
+    assert isinstance(free.target, CylinderSection)
+    assert free.target.cylinder.radius > RADIUS
     assert not any(w.startswith("the profiles fit a radius") for w in free.warnings)
     rotation, translation = transform_error(free.T_flange_sensor, truth.T_flange_sensor)
     assert translation < 5e-3 and rotation < math.radians(0.5)

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from _compare import assert_floats_close
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import (
@@ -313,7 +314,7 @@ def test_recorded_poses_equal_truth_without_robot_noise() -> None:
     s = scenario_from_preset("ur_scancontrol", robot_sigma_translation_m=0.0)
     s = replace(s, robot_sigma_rotation_rad=0.0)
     truth = run(s, 0).truth
-    np.testing.assert_array_equal(truth.T_base_flange_recorded, truth.T_base_flange_true)
+    assert_floats_close(truth.T_base_flange_recorded, truth.T_base_flange_true)
 
 
 def test_systematic_robot_error_is_a_fixed_flange_offset() -> None:
@@ -363,7 +364,7 @@ def test_step_stream_holds_the_recorded_pose_during_each_dwell() -> None:
     ):
         near = np.abs(stamps - stamp) <= 0.1e9  # dwell is 0.3 s, profile mid-dwell
         assert near.sum() >= 20
-        np.testing.assert_array_equal(poses[near], np.broadcast_to(recorded, poses[near].shape))
+        assert_floats_close(poses[near], np.broadcast_to(recorded, poses[near].shape))
     step = np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)
     assert step.max() * data.scenario.robot_rate_hz < 1.0  # flange below 1 m/s: no jumps
 
@@ -401,10 +402,10 @@ def test_same_seed_same_output_other_seed_other_output() -> None:
     a, b, c = simulate(s, 11), simulate(s, 11), simulate(s, 12)
     for pa, pb in zip(a.profiles, b.profiles, strict=True):
         assert pa.stamp_ns == pb.stamp_ns
-        np.testing.assert_array_equal(pa.points, pb.points)
+        assert_floats_close(pa.points, pb.points)
     for ia, ib in zip(a.intensities, b.intensities, strict=True):
-        np.testing.assert_array_equal(ia, ib)
-    np.testing.assert_array_equal(stream(a)[1], stream(b)[1])
+        assert_floats_close(ia, ib)
+    assert_floats_close(stream(a)[1], stream(b)[1])
     assert not np.array_equal(a.truth.T_base_flange_true[0], c.truth.T_base_flange_true[0])
     assert not np.array_equal(a.truth.T_base_flange_recorded, c.truth.T_base_flange_recorded)
 
@@ -412,7 +413,7 @@ def test_same_seed_same_output_other_seed_other_output() -> None:
 def test_sensor_noise_has_the_configured_sigma() -> None:
     # Noise draws do not change the poses, so the two runs differ by the noise alone.
     noisy, exact = run(PRESETS["paper"], 4), run(quiet(PRESETS["paper"]), 4)
-    np.testing.assert_array_equal(noisy.truth.T_base_flange_true, exact.truth.T_base_flange_true)
+    assert_floats_close(noisy.truth.T_base_flange_true, exact.truth.T_base_flange_true)
     diff = np.concatenate(
         [valid_points(noisy, k) - valid_points(exact, k) for k in range(len(noisy.profiles))]
     )

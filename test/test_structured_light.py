@@ -6,6 +6,8 @@ independently of the module, then triangulated back.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -17,6 +19,7 @@ from linelaser_calib.core.structured_light import (
     CameraIntrinsics,
     T_camera_sensor_from_light_plane,
     camera_points_from_pixels,
+    normalised_from_pixels,
     sensor_points_from_pixels,
 )
 
@@ -137,3 +140,42 @@ def test_invalid_intrinsics_are_refused() -> None:
         CameraIntrinsics(100.0, 100.0, 0.0, 1000.0)
     with pytest.raises(InputError, match=r"shape \(N, 2\)"):
         camera_points_from_pixels(np.zeros((3, 3)), PAPER_INTRINSICS, PAPER_LIGHT_PLANE)
+
+
+def distort(points: np.ndarray, k: CameraIntrinsics) -> np.ndarray:
+    """Projection with OpenCV's lens distortion (k1, k2, p1, p2, k3), written out here."""
+    k1, k2, p1, p2, k3 = k.distortion
+    x, y = points[:, 0] / points[:, 2], points[:, 1] / points[:, 2]
+    r2 = x**2 + y**2
+    radial = 1.0 + k1 * r2 + k2 * r2**2 + k3 * r2**3
+    xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x**2)
+    yd = y * radial + p1 * (r2 + 2.0 * y**2) + 2.0 * p2 * x * y
+    return np.column_stack([k.u0 + k.alpha * xd, k.v0 + k.beta * yd])
+
+
+def test_opencv_undistortion_without_distortion_equals_the_pinhole_formula() -> None:
+    rng = np.random.default_rng(5)
+    pixels = rng.uniform([0.0, 0.0], [2592.0, 1944.0], (500, 2))
+    pinhole = normalised_from_pixels(pixels, PAPER_INTRINSICS)
+    opencv = normalised_from_pixels(pixels, replace(PAPER_INTRINSICS, distortion=(0.0,) * 4))
+    np.testing.assert_allclose(opencv, pinhole, rtol=0.0, atol=1e-12)
+
+
+def test_distorted_pixels_triangulate_back_to_the_plane() -> None:
+    """A wide-angle lens (barrel distortion, decentring): points come back within 1 nm."""
+    rng = np.random.default_rng(6)
+    k = CameraIntrinsics(640.0, 480.0, 900.0, 905.0, (-0.25, 0.08, 1e-3, -5e-4, -0.01))
+    for _ in range(10):
+        plane = random_plane(rng)
+        truth = points_on_plane(plane, rng, 200, (0.1, 0.3))
+        truth = truth[np.hypot(*(truth[:, :2] / truth[:, 2:]).T) < 0.6]  # within the lens's view
+        pixels = distort(truth, k)
+        back = camera_points_from_pixels(pixels, k, plane)
+        np.testing.assert_allclose(back, truth, rtol=0.0, atol=1e-9)
+        ignored = camera_points_from_pixels(pixels, replace(k, distortion=()), plane)
+        assert np.nanmax(np.linalg.norm(ignored - truth, axis=1)) > 1e-4
+
+
+def test_distortion_needs_opencv_s_coefficient_count() -> None:
+    with pytest.raises(InputError, match="4, 5, 8, 12 or 14"):
+        CameraIntrinsics(100.0, 100.0, 1000.0, 1000.0, (0.1, 0.2, 0.3))

@@ -499,3 +499,36 @@ def test_executable_prints_one_line_and_no_traceback(
     assert "Traceback" not in done.stderr
     assert done.stderr.startswith("linelaser-calib: error: ")
     assert done.stderr.count("\n") == 1
+
+
+FOREIGN_TRUTH = {
+    "list": "hand_eye: [1, 2, 3]\n",
+    "note": "Calibrated by hand on Tuesday, see the lab book.\n",
+    "other_tool": "hand_eye: {translation: [0.1, 0.2, 0.3], rotation_xyzw: [0, 0, 0, 1]}\n",
+    "invalid_yaml": "hand_eye: [1, 2\n",
+    "damaged_simulator_file": "simulation: {scenario: paper, seed: 1}\nhand_eye: {}\n",
+}
+
+
+@pytest.mark.parametrize("text", FOREIGN_TRUTH.values(), ids=FOREIGN_TRUTH.keys())
+def test_a_foreign_truth_yaml_is_skipped_with_one_line(
+    text: str, good_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = shutil.copytree(good_bag, tmp_path / "bag")
+    (bag / "truth.yaml").write_text(text)
+    code, out, err = run_cli(["calibrate", str(bag), "--output", str(tmp_path / "r.yaml")], capsys)
+    assert code == 0, err
+    assert err.count("\n") == 1 and str(bag / "truth.yaml") in err and "not compared" in err
+    assert "Error against truth" not in out
+    assert read_result_yaml(tmp_path / "r.yaml").samples_used
+
+
+def test_the_simulators_truth_yaml_is_compared(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = tmp_path / "bag"
+    assert main(["simulate", str(bag), "--scenario", "paper", "--poses", "12", "--seed", "7"]) == 0
+    capsys.readouterr()
+    code, out, err = run_cli(["calibrate", str(bag)], capsys)
+    assert code == 0 and err == ""
+    assert "Error against truth" in out

@@ -101,7 +101,7 @@ def test_profiles_lie_on_the_cylinder_within_their_residual(
     messages: dict[str, list[tuple[str, int, Any]]], result: CalibrationResult, data: SimulatedData
 ) -> None:
     fits = sorted(result.sample_fits, key=lambda f: f.stamp_ns)
-    residuals = sample_surface_residuals(fits, result.T_flange_sensor, result.cylinder)
+    residuals = sample_surface_residuals(fits, result.T_flange_sensor, result.target.cylinder)
     for fit, residual, (_, log_ns, cloud) in zip(
         fits, residuals, messages["/linelaser_calib/profiles"], strict=True
     ):
@@ -111,7 +111,7 @@ def test_profiles_lie_on_the_cylinder_within_their_residual(
         np.testing.assert_allclose(
             points, sample_points_base(fit, result.T_flange_sensor), atol=FLOAT32_M
         )
-        distance = cylinder_coordinates(points, result.cylinder).residual_m
+        distance = cylinder_coordinates(points, result.target.cylinder).residual_m
         assert np.all(np.abs(distance) <= np.max(np.abs(residual)) + FLOAT32_M)
     ((_, _, combined),) = messages["/linelaser_calib/cloud"]
     every = points_from_pointcloud2(combined)
@@ -128,14 +128,14 @@ def test_cylinder_marker_covers_the_profiles(
     (marker,) = array.markers
     assert marker.type == 3  # visualization_msgs/Marker CYLINDER
     assert marker.header.frame_id == "base_link"
-    diameter = 2.0 * result.cylinder.radius
+    diameter = 2.0 * result.target.cylinder.radius
     assert marker.scale.x == pytest.approx(diameter) and marker.scale.y == pytest.approx(diameter)
     p, q = marker.pose.position, marker.pose.orientation
     T = transform_from_translation_quaternion([p.x, p.y, p.z], [q.x, q.y, q.z, q.w])
-    direction = result.cylinder.direction / np.linalg.norm(result.cylinder.direction)
+    direction = result.target.cylinder.direction / np.linalg.norm(result.target.cylinder.direction)
     assert abs(float(T[:3, 2] @ direction)) == pytest.approx(1.0, abs=1e-9)
-    assert cylinder_coordinates(T[:3, 3], result.cylinder).residual_m[0] == pytest.approx(
-        -result.cylinder.radius, abs=1e-9
+    assert cylinder_coordinates(T[:3, 3], result.target.cylinder).residual_m[0] == pytest.approx(
+        -result.target.cylinder.radius, abs=1e-9
     )  # the marker's centre is on the axis
     ((_, _, combined),) = messages["/linelaser_calib/cloud"]
     along = (points_from_pointcloud2(combined) - T[:3, 3]) @ T[:3, 2]

@@ -216,8 +216,8 @@ def fit_arc_in_scene(
     candidates = [s for s in segmented.curves() if len(s.indices) >= scaled.min_inliers]
     if not candidates:
         raise ProfileRejected(
-            f"no curved piece of at least {scaled.min_inliers} points in the profile: "
-            f"{len(segmented.lines())} straight piece(s) set aside as planes (tables, walls), "
+            f"no curved piece of at least {scaled.min_inliers} points beside the "
+            f"{len(segmented.lines())} straight piece(s) set aside as planes (tables, walls): "
             f"measured noise {sigma * 1e6:.0f} um; the laser line may miss the cylinder"
         )
     best: tuple[EllipseFit, IntArray] | None = None

@@ -1,4 +1,4 @@
-"""The cylinder paper's centre-to-axis model (papers.md §A, eq. 6-12).
+"""The cylinder paper's centre-to-axis model (eq. 6-12).
 
 Every ellipse centre ``(x_c, z_c)`` measured in the sensor frame lies on the cylinder axis.
 Mapped into the base frame through the flange pose and the unknown hand-eye (eq. 6),

@@ -33,3 +33,7 @@ class DegenerateError(CalibrationError):
 
 class SolverError(CalibrationError):
     """The solver failed to converge to a usable solution."""
+
+
+class ModelMismatch(CalibrationError):
+    """The target's model does not fit the data (another target, units, clocks, motion)."""

@@ -1,6 +1,6 @@
 """Rigid-body geometry on plain numpy arrays.
 
-Conventions (see DESIGN.md):
+Conventions (those of the whole package):
 
 - ``T_a_b`` is a (4, 4) homogeneous matrix, the pose of frame b in frame a; it maps
   b-coordinates into a-coordinates: ``p_a = T_a_b @ p_b``.
@@ -223,3 +223,27 @@ def orthonormal_basis(direction: ArrayLike) -> tuple[FloatArray, FloatArray]:
     u = np.cross(d, helper)
     u /= np.linalg.norm(u)
     return u, np.cross(d, u)
+
+
+def exp_so3(omega: FloatArray) -> FloatArray:
+    """Rotation matrices (M, 3, 3) of rotation vectors (M, 3), rad."""
+    return np.asarray(Rotation.from_rotvec(omega).as_matrix())
+
+
+def skews(v: FloatArray) -> FloatArray:
+    """Skew matrices (M, 3, 3) of vectors (M, 3): ``skews(v)[i] @ u == cross(v[i], u)``."""
+    K = np.zeros((len(v), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return K
+
+
+def right_jacobian_so3(omega: FloatArray) -> FloatArray:
+    """Right Jacobians (M, 3, 3) of SO(3): Exp(ω + dω) ≈ Exp(ω)·Exp(J_r(ω)·dω)."""
+    theta = np.linalg.norm(omega, axis=1)
+    small = theta < 1e-4
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
+    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
+    K = skews(omega)
+    return np.asarray(np.eye(3) - a[:, None, None] * K + b[:, None, None] * (K @ K))

@@ -1,10 +1,10 @@
 """Which hand-eye motions the flange poses determine, and what to add when they do not.
 
-The refinement (:mod:`linelaser_calib.core.refine`) hands over the marginal information
-matrix of the hand-eye, that is the Gauss-Newton information after the cylinder axis, the
-radius and the per-sample pose corrections have been eliminated (Schur complement). Its
-parameters are ``[θ (3), ρ (3)]``: small rotation angles θ (rad) about the sensor axes
-(``R = R̂ · Exp(θ)``) and a translation ρ (m) in the flange frame (``t = t̂ + ρ``).
+The cylinder's refinement (:mod:`linelaser_calib.core.targets.cylinder.refine`) hands over
+the marginal information matrix of the hand-eye, that is the Gauss-Newton information after
+the cylinder axis, the radius and the per-sample pose corrections have been eliminated (Schur
+complement). Its parameters are ``[θ (3), ρ (3)]``: small rotation angles θ (rad) about the
+sensor axes (``R = R̂ · Exp(θ)``) and a translation ρ (m) in the flange frame (``t = t̂ + ρ``).
 
 To compare rotations with translations, rotations are scaled by a lever length L (the
 stand-off, about the distance of the profile points from the sensor): a rotation of θ rad

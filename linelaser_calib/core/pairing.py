@@ -135,6 +135,11 @@ class PoseBuffer:
         """Stamp of the newest pose, or None when empty."""
         return self._stamps[-1] if self._stamps else None
 
+    @property
+    def stamps_ns(self) -> list[int]:
+        """Stamps of the poses held, ns, sorted (a copy)."""
+        return list(self._stamps)
+
     def add(self, pose: FlangePose) -> None:
         """Insert one pose in stamp order (duplicates of an existing stamp are ignored)."""
         stamps = self._stamps

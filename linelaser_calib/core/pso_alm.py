@@ -1,6 +1,6 @@
 """The cylinder paper's seed solver: PSO fused with the generalized Lagrange multiplier method.
 
-Faithful parts (papers.md §A, §3.3, Fig. 4):
+Faithful parts (the cylinder paper, §3.3, Fig. 4):
 
 - :func:`galm` is the generalized Lagrange multiplier method of §3.3.1: BFGS minimises
   φ(x, λ, σ) = f(x) − λᵀh(x) + σ/2 ‖h(x)‖² (eq. 14); stop when ‖h‖ ≤ ε; σ ← ησ when

@@ -116,7 +116,7 @@ def sample_centre_distances(
     """
     if not fits:
         return np.zeros(0)
-    centres = np.array([f.centre_xz for f in fits])
+    centres = np.array([f.feature_xz for f in fits])
     T_base_flange = np.stack([f.T_base_flange for f in fits])
     return centre_distances(centres, T_base_flange, T_flange_sensor, cylinder)
 

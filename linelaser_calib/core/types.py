@@ -6,9 +6,13 @@ All arrays are float64 in SI units (metres, radians); stamps are integer nanosec
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from .targets.base import ResultSection
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -82,7 +86,8 @@ class Rejection:
         Profile index in the input stream.
     stamp_ns : int
     stage : str
-        ``pairing``, ``cleaning``, ``ellipse``, ``corner`` or ``outlier``.
+        ``pairing``, ``cleaning``, ``outlier`` or the target's feature stage (``ellipse``,
+        ``corner``, ...).
     reason : str
         Human-readable reason, with units.
     """
@@ -142,25 +147,6 @@ class Cylinder:
 
 
 @dataclass(frozen=True)
-class KnownPoint:
-    """A fixed point (e.g. a weld-seam corner) in the base frame, for the known-point target.
-
-    Attributes
-    ----------
-    point : ndarray, shape (3,)
-        m.
-    estimated : bool
-        True if solved for, False if taught (given).
-    sigma_m : ndarray, shape (3,) or None
-        1-sigma per base axis when estimated, m.
-    """
-
-    point: FloatArray
-    estimated: bool
-    sigma_m: FloatArray | None = None
-
-
-@dataclass(frozen=True)
 class SampleFit:
     """What the solve used of one sample, kept for reports and markers.
 
@@ -172,17 +158,18 @@ class SampleFit:
     T_base_flange : ndarray, shape (4, 4)
         Flange pose as paired (recorded, not corrected).
     points : ndarray, shape (K, 3)
-        Inlier points in the sensor frame, m (ellipse inliers; for the known-point target, the
+        The points the target's model used, sensor frame, m (e.g. the ellipse inliers, the
         points of the two V lines).
-    centre_xz : ndarray, shape (2,)
-        Ellipse centre in the sensor x-z plane, m (for the known-point target, the V corner).
+    feature_xz : ndarray, shape (2,)
+        The profile's feature point in the sensor x-z plane, m: the point of the profile that
+        the target's paper method uses (e.g. the ellipse centre, the V corner).
     """
 
     index: int
     stamp_ns: int
     T_base_flange: FloatArray
     points: FloatArray
-    centre_xz: FloatArray
+    feature_xz: FloatArray
 
 
 @dataclass
@@ -193,40 +180,39 @@ class CalibrationResult:
     ----------
     T_flange_sensor : ndarray, shape (4, 4)
         The hand-eye (the paper's T_EL).
-    cylinder : Cylinder or None
-        Fitted cylinder in the base frame (cylinder target); None for the known-point target.
+    target : ResultSection
+        The target's part of the result (e.g. the fitted cylinder, the known point), base
+        frame; see :class:`linelaser_calib.core.targets.base.ResultSection`.
     method : str
         ``paper`` or ``default`` (maximum likelihood).
     samples_used : list of int
         Profile indices that entered the final solve.
     samples_rejected : list of Rejection
     rms_residual_m : float
-        RMS residual of the final cost, m (centre-to-axis for ``paper``,
-        point-to-surface for ``default``).
+        RMS residual of the final cost, m (what it measures: ``target.residual_kind``).
     sample_residuals_m : dict of int to float
         Per-sample RMS residual, m, keyed by profile index.
     uncertainty_translation_m, uncertainty_rotation_rad : ndarray, shape (3,) or None
         1-sigma of the hand-eye translation (m) and rotation (rad, small angles about the
         sensor-frame axes), when the method estimates it.
-    radius_estimated : bool
-        True if the radius was estimated rather than given.
     warnings : list of str
     history : dict of str to list of float
         Convergence traces for reports (e.g. ``pso_best``, ``galm_phi``, ``refine_cost``).
     sample_fits : list of SampleFit
         The fitted samples the final solve used (not written to result files).
-    known_point : KnownPoint or None
-        The fixed point of the known-point target (weld seam); None for the cylinder.
     clock_offset_s : float
         Offset added to the profile stamps to pair them with the poses, s.
     clock_offset_estimated : bool
         True when that offset was estimated from the data (continuous scanning).
+    clock_offset_live_s, clock_offset_live_sigma_s : float or None
+        The collector's live estimate of the clock offset and its 1σ, s (continuous
+        scanning through the nodes); None when there is none.
     parent_frame, child_frame, base_frame : str
         Frame ids: flange, sensor and robot base.
     """
 
     T_flange_sensor: FloatArray
-    cylinder: Cylinder | None
+    target: ResultSection
     method: str
     samples_used: list[int]
     samples_rejected: list[Rejection]
@@ -234,13 +220,13 @@ class CalibrationResult:
     sample_residuals_m: dict[int, float] = field(default_factory=dict)
     uncertainty_translation_m: FloatArray | None = None
     uncertainty_rotation_rad: FloatArray | None = None
-    radius_estimated: bool = False
     warnings: list[str] = field(default_factory=list)
     history: dict[str, list[float]] = field(default_factory=dict)
     sample_fits: list[SampleFit] = field(default_factory=list)
-    known_point: KnownPoint | None = None
     clock_offset_s: float = 0.0
     clock_offset_estimated: bool = False
+    clock_offset_live_s: float | None = None
+    clock_offset_live_sigma_s: float | None = None
     parent_frame: str = "tool0"
     child_frame: str = "laser"
     base_frame: str = "base_link"

@@ -22,6 +22,7 @@ from linelaser_calib.io.results import (
     read_result_yaml,
     read_truth_yaml,
     result_to_dict,
+    truth_beside,
     write_result_yaml,
     write_truth_yaml,
 )
@@ -41,6 +42,7 @@ __all__ = [
     "read_result_yaml",
     "read_truth_yaml",
     "result_to_dict",
+    "truth_beside",
     "write_bag",
     "write_result_yaml",
     "write_truth_yaml",

@@ -14,9 +14,11 @@ chunk index, the summary and ``metadata.yaml`` only on close; its reader needs a
 So a rosbag2 bag is readable only once closed. :func:`write_bag` therefore writes into a
 hidden temporary directory and renames it into place when complete: a crash leaves no
 half-written bag under the requested name. :class:`SessionBagWriter`, for live collection,
-writes each sample (one profile and its flange pose) as its own small closed bag inside a
-session directory, so a crash loses at most the sample being written. :func:`read_bag`
-reads a session directory like a single bag.
+appends the samples (each a profile and its flange pose) to one MCAP file of unchunked
+records, flushed and fsynced on request, which this module reads record by record up to a
+torn tail; a crash loses only what was not flushed yet. :func:`read_bag` reads a session
+directory like a single bag (also a session of one bag per sample, written by earlier
+versions).
 
 Topics are auto-detected by type when exactly one topic of each type holds messages.
 Every user-caused failure (missing, empty, truncated or corrupt bag, missing or ambiguous
@@ -30,23 +32,34 @@ import datetime
 import functools
 import os
 import shutil
+import struct
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from io import BufferedWriter, BytesIO
 from pathlib import Path
 from types import TracebackType
 from typing import Any, NamedTuple
 
 import numpy as np
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel as McapChannel
+from mcap.records import Message as McapMessage
+from mcap.records import Schema as McapSchema
+from mcap.well_known import MessageEncoding, SchemaEncoding
+from mcap.writer import Writer as McapWriter
 from numpy.typing import NDArray
+from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
+from linelaser_calib.core.tf import StampedTransform
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io.errors import BagError
 from msg_adapters import (
@@ -57,14 +70,23 @@ from msg_adapters import (
     profile_from_pointcloud2,
     rosbags_types,
     stamp_ns_from_msg,
+    transform_stamped_from_matrix,
 )
 from msg_adapters.message_types import NS_PER_S
 
 PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+TF_TOPIC = "/tf"
+TF_STATIC_TOPIC = "/tf_static"
 #: File in a session directory that marks it as one (see :class:`SessionBagWriter`).
 SESSION_MARKER = "linelaser_calib_session.txt"
+#: The MCAP file of a session's samples (see :class:`SessionBagWriter`).
+SESSION_FILE = "session.mcap"
 _SAMPLE_PREFIX = "sample_"
+
+#: The first bytes of every MCAP file.
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 #: Called as ``progress(done, total)`` while messages are decoded.
 Progress = Callable[[int, int], None]
@@ -159,8 +181,36 @@ class BagInfo:
 
 @functools.cache
 def _typestore() -> Typestore:
-    """The ROS 2 Jazzy typestore that serialises and deserialises every message."""
+    """The ROS 2 Jazzy typestore that serialises every message written."""
     return get_typestore(Stores.ROS2_JAZZY)
+
+
+@functools.cache
+def _store_from_definitions(definitions: tuple[tuple[str, str], ...]) -> Typestore:
+    """A typestore of just the given (type, ``.msg`` definition) pairs and their fields."""
+    store = get_typestore(Stores.EMPTY)
+    for msgtype, text in definitions:
+        store.register(get_types_from_msg(text, msgtype))
+    return store
+
+
+def _reading_store(connections: Sequence[Connection | _SessionConnection]) -> Typestore:
+    """The typestore that decodes the messages of ``connections``.
+
+    Built from the message definitions the recording carries (rosbag2 >= 8, MCAP) when each
+    connection has one in ``.msg`` form: ~30 ms, against ~0.25 s for every type of Jazzy
+    (:func:`_typestore`, the fallback), which would be most of a calibration's start-up.
+    """
+    definitions = set()
+    for connection in connections:
+        msgdef = getattr(connection, "msgdef", None)  # session files carry no definitions
+        if msgdef is None or msgdef.format != MessageDefinitionFormat.MSG or not msgdef.data:
+            return _typestore()
+        definitions.add((connection.msgtype, msgdef.data))
+    try:
+        return _store_from_definitions(tuple(sorted(definitions)))
+    except TypesysError:  # a definition rosbags cannot parse, or two that disagree
+        return _typestore()
 
 
 def _fsync_tree(directory: Path) -> None:
@@ -189,6 +239,24 @@ class _ProfilePoseWriter:
         self._types = rosbags_types(store)
         self._profiles = writer.add_connection(profile_topic, PROFILE_TYPE, typestore=store)
         self._poses = writer.add_connection(pose_topic, POSE_TYPE, typestore=store)
+        self._tf: dict[str, Any] = {}
+
+    def write_transforms(
+        self, topic: str, stamp_ns: int, transforms: Sequence[StampedTransform]
+    ) -> None:
+        """One ``tf2_msgs/msg/TFMessage`` holding ``transforms`` on ``topic``."""
+        store = _typestore()
+        if topic not in self._tf:
+            self._tf[topic] = self._writer.add_connection(topic, TF_TYPE, typestore=store)
+        msg = self._types(TF_TYPE)(
+            transforms=[
+                transform_stamped_from_matrix(
+                    t.T_parent_child, t.stamp_ns, t.parent, t.child, types=self._types
+                )
+                for t in transforms
+            ]
+        )
+        self._writer.write(self._tf[topic], stamp_ns, store.serialize_cdr(msg, TF_TYPE))
 
     def write_profile(
         self,
@@ -260,6 +328,8 @@ def write_bag(
     organised: bool = True,
     intensities: Sequence[NDArray[np.float64] | None] | None = None,
     padding_bytes: int = 0,
+    tf: Sequence[StampedTransform] = (),
+    tf_static: Sequence[StampedTransform] = (),
 ) -> Path:
     """Write profiles and flange poses to a new rosbag2 MCAP bag, in stamp order.
 
@@ -280,6 +350,9 @@ def write_bag(
         Per-profile intensity field (float32 in the message).
     padding_bytes : int
         Unused bytes per point, as some drivers send.
+    tf, tf_static : sequence of StampedTransform
+        Transforms for ``/tf`` (one ``TFMessage`` per stamp, as robot_state_publisher
+        sends) and ``/tf_static`` (one message, logged with the first message of the bag).
 
     Returns
     -------
@@ -298,13 +371,21 @@ def write_bag(
         intensities = [None] * len(profiles)
     if len(intensities) != len(profiles):
         raise InputError(f"{len(intensities)} intensity arrays given for {len(profiles)} profiles")
+    tf_by_stamp: dict[int, list[StampedTransform]] = {}
+    for transform in tf:
+        tf_by_stamp.setdefault(transform.stamp_ns, []).append(transform)
     events = sorted(
         [(pose.stamp_ns, 0, i) for i, pose in enumerate(poses)]
         + [(profile.stamp_ns, 1, i) for i, profile in enumerate(profiles)]
+        + [(stamp, 2, 0) for stamp in tf_by_stamp]
     )
     with _new_bag(path, profile_topic, pose_topic) as bag:
-        for _, kind, i in events:
-            if kind == 0:
+        if tf_static and events:
+            bag.write_transforms(TF_STATIC_TOPIC, events[0][0], tf_static)
+        for stamp, kind, i in events:
+            if kind == 2:
+                bag.write_transforms(TF_TOPIC, stamp, tf_by_stamp[stamp])
+            elif kind == 0:
                 pose = poses[i]
                 bag.write_pose(FlangePose(pose.stamp_ns, pose.T_base_flange, base_frame))
             else:
@@ -321,15 +402,18 @@ def write_bag(
 
 
 class SessionBagWriter:
-    """Persist samples one by one during live collection; a crash loses at most one sample.
+    """Persist samples as they arrive during live collection, in one MCAP file per session.
 
-    The session is a directory holding a marker file and one complete rosbag2 MCAP bag per
-    sample, ``sample_000000/``, ``sample_000001/``, ... Each bag holds the flange pose and
-    the profile, both stamped with the profile stamp. :meth:`append` returns only after the
-    sample's bag is closed, flushed to disk (fsync) and renamed into place, so every
-    appended sample survives a crash; a sample interrupted mid-write stays in a hidden
-    ``.sample_*.partial`` directory that readers ignore. :func:`read_bag` and
-    :func:`bag_info` read the session directory as one bag.
+    The session is a directory holding a marker file and ``session.mcap``: a ``ros2`` profile
+    MCAP file (``ros2msg`` schemas, CDR messages, as rosbag2 writes them) with a flange pose
+    and a profile per sample, both stamped with the profile stamp. Records are written
+    unchunked, so every :meth:`flush` ends on a record boundary: :meth:`append` only buffers,
+    and :meth:`flush` writes, flushes and fsyncs what was appended, after which those samples
+    survive a crash (the collector flushes at a bounded interval). A crash leaves the file
+    without its summary and footer, and perhaps a torn last record; :func:`read_bag` reads
+    every complete sample of such a file. :meth:`close` writes the summary and footer, after
+    which any MCAP reader opens the file. :func:`read_bag` and :func:`bag_info` read the
+    session directory (or its ``session.mcap``) as one bag.
 
     Parameters
     ----------
@@ -349,11 +433,9 @@ class SessionBagWriter:
         organised: bool = True,
     ) -> None:
         self.path = Path(path)
-        self.profile_topic = profile_topic
-        self.pose_topic = pose_topic
         self.organised = organised
         self.count = 0
-        self._closed = False
+        self.durable = 0
         if self.path.exists():
             raise BagError(
                 f"{self.path} exists already and sessions are never overwritten; "
@@ -362,15 +444,29 @@ class SessionBagWriter:
         try:
             self.path.mkdir(parents=True)
             (self.path / SESSION_MARKER).write_text(
-                "linelaser_calib sample session: one rosbag2 bag per sample in sample_*/\n",
+                f"linelaser_calib sample session: the samples are in {SESSION_FILE}\n",
                 encoding="utf-8",
             )
-            _fsync_tree(self.path)
+            self._stream: BufferedWriter | None = (self.path / SESSION_FILE).open("wb")
+            self._writer = McapWriter(self._stream, use_chunking=False)
+            self._writer.start(profile="ros2", library="linelaser_calib")
+            store = _typestore()
+            channels = {}
+            for topic, msgtype in ((pose_topic, POSE_TYPE), (profile_topic, PROFILE_TYPE)):
+                text, _ = store.generate_msgdef(msgtype, ros_version=2)
+                schema = self._writer.register_schema(msgtype, SchemaEncoding.ROS2, text.encode())
+                channels[msgtype] = self._writer.register_channel(
+                    topic, MessageEncoding.CDR, schema
+                )
+            self._pose_channel, self._profile_channel = channels[POSE_TYPE], channels[PROFILE_TYPE]
+            self._types = rosbags_types(store)
+            self.flush()
+            _fsync_directory(self.path)
         except OSError as err:
-            raise BagError(f"cannot create session directory {self.path}: {err}") from err
+            raise BagError(f"cannot create session {self.path}: {err}") from err
 
-    def append(self, profile: Profile, pose_at_profile: FlangePose) -> Path:
-        """Write one sample durably.
+    def append(self, profile: Profile, pose_at_profile: FlangePose) -> int:
+        """Buffer one sample; it is on disk after the next :meth:`flush`.
 
         Parameters
         ----------
@@ -382,29 +478,54 @@ class SessionBagWriter:
 
         Returns
         -------
-        Path
-            The sample's bag directory.
+        int
+            The sample's number in the session (0-based).
         """
-        if self._closed:
+        if self._stream is None:
             raise BagError(f"session {self.path} is closed; start a new session to record more")
-        sample_path = self.path / f"{_SAMPLE_PREFIX}{self.count:06d}"
-        pose = FlangePose(profile.stamp_ns, pose_at_profile.T_base_flange, pose_at_profile.frame_id)
-        with _new_bag(sample_path, self.profile_topic, self.pose_topic) as bag:
-            bag.write_pose(pose)
-            bag.write_profile(
-                profile.stamp_ns,
-                profile.points,
-                profile.frame_id,
-                intensity=None,
-                organised=self.organised,
-                padding_bytes=0,
-            )
+        stamp = profile.stamp_ns
+        pose = pose_stamped_from_flange_pose(
+            FlangePose(stamp, pose_at_profile.T_base_flange, pose_at_profile.frame_id),
+            types=self._types,
+        )
+        cloud = pointcloud2_from_points(
+            profile.points, stamp, profile.frame_id, types=self._types, organised=self.organised
+        )
+        store = _typestore()
+        try:
+            for channel, data in (
+                (self._pose_channel, store.serialize_cdr(pose, POSE_TYPE)),
+                (self._profile_channel, store.serialize_cdr(cloud, PROFILE_TYPE)),
+            ):
+                self._writer.add_message(channel, stamp, data.tobytes(), stamp, self.count)
+        except OSError as err:
+            raise BagError(f"cannot write to session {self.path}: {err}") from err
         self.count += 1
-        return sample_path
+        return self.count - 1
+
+    def flush(self) -> None:
+        """Write every appended sample to disk (flush and fsync); they then survive a crash."""
+        if self._stream is None:
+            return
+        try:
+            self._stream.flush()
+            os.fsync(self._stream.fileno())
+        except OSError as err:
+            raise BagError(f"cannot write to session {self.path}: {err}") from err
+        self.durable = self.count
 
     def close(self) -> None:
-        """Stop appending. Every appended sample is already on disk."""
-        self._closed = True
+        """Write the MCAP summary and footer and close the file; appending then fails."""
+        if self._stream is None:
+            return
+        try:
+            self._writer.finish()  # type: ignore[no-untyped-call]  # mcap has no annotation here
+            self.flush()
+            self._stream.close()
+        except OSError as err:
+            raise BagError(f"cannot close session {self.path}: {err}") from err
+        finally:
+            self._stream = None
 
     def __enter__(self) -> SessionBagWriter:
         return self
@@ -416,6 +537,75 @@ class SessionBagWriter:
         traceback: TracebackType | None,
     ) -> None:
         self.close()
+
+
+class _SessionConnection(NamedTuple):
+    """One channel of a session file, shaped like the rosbags connections read_bag uses."""
+
+    topic: str
+    msgtype: str
+    msgcount: int
+
+
+class _SessionReader:
+    """Reads a session file, complete or not (see :class:`SessionBagWriter`).
+
+    It walks the records from the start and stops at the first incomplete one (the torn
+    tail of a session whose writer crashed), so it needs neither the summary nor the footer.
+    It offers the parts of rosbags' ``Reader`` that :func:`read_bag` uses.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.connections: list[_SessionConnection] = []
+        self.start_time = 0
+        self.end_time = 0
+        self._messages: list[tuple[int, int, bytes]] = []  # (channel, log ns, data)
+        self._by_key: dict[int, _SessionConnection] = {}
+
+    def open(self) -> None:
+        data = self.path.read_bytes()
+        if data[: len(MCAP_MAGIC)] != MCAP_MAGIC:
+            raise BagError(f"{self.path} is not an MCAP file (wrong magic bytes)")
+        schemas: dict[int, str] = {}
+        channels: dict[int, tuple[str, str]] = {}
+        position = len(MCAP_MAGIC)
+        while position + 9 <= len(data):
+            opcode = data[position]
+            (length,) = struct.unpack_from("<Q", data, position + 1)
+            body = position + 9
+            if body + length > len(data):
+                break  # the torn tail of a crashed writer
+            stream = ReadDataStream(BytesIO(data[body : body + length]))
+            if opcode == Opcode.SCHEMA:
+                schema = McapSchema.read(stream)
+                schemas[schema.id] = schema.name
+            elif opcode == Opcode.CHANNEL:
+                channel = McapChannel.read(stream)
+                channels[channel.id] = (channel.topic, schemas.get(channel.schema_id, ""))
+            elif opcode == Opcode.MESSAGE:
+                message = McapMessage.read(stream, length)
+                self._messages.append((message.channel_id, message.log_time, message.data))
+            position = body + length
+        self._by_key = {
+            key: _SessionConnection(topic, msgtype, sum(m[0] == key for m in self._messages))
+            for key, (topic, msgtype) in channels.items()
+        }
+        self.connections = list(self._by_key.values())
+        stamps = [log_ns for _, log_ns, _ in self._messages]
+        self.start_time, self.end_time = min(stamps, default=0), max(stamps, default=-1) + 1
+
+    def messages(
+        self, connections: Sequence[_SessionConnection]
+    ) -> Iterator[tuple[_SessionConnection, int, bytes]]:
+        wanted = set(connections)
+        for key, log_ns, data in self._messages:
+            conn = self._by_key.get(key)
+            if conn in wanted:
+                yield conn, log_ns, data
+
+    def close(self) -> None:
+        self._messages = []
 
 
 def _bag_parts(path: Path) -> list[Path]:
@@ -431,7 +621,9 @@ def _bag_parts(path: Path) -> list[Path]:
         return [path]
     if (path / "metadata.yaml").is_file():
         return [path]
-    if (path / SESSION_MARKER).is_file():
+    if (path / SESSION_FILE).is_file():
+        return [path / SESSION_FILE]
+    if (path / SESSION_MARKER).is_file():  # a session written one bag per sample
         samples = sorted(
             p for p in path.glob(f"{_SAMPLE_PREFIX}*") if (p / "metadata.yaml").is_file()
         )
@@ -452,11 +644,17 @@ def _bag_parts(path: Path) -> list[Path]:
     raise BagError(f"{path} is not a rosbag2 bag (it has no metadata.yaml){hint}")
 
 
+def _is_session_file(path: Path) -> bool:
+    """True for the MCAP file of a :class:`SessionBagWriter` session."""
+    return path.name == SESSION_FILE and (path.parent / SESSION_MARKER).is_file()
+
+
 @contextmanager
-def _open_part(part: Path, bag: Path) -> Iterator[Reader]:
-    """Open one bag with rosbags; any failure to parse it becomes a :class:`BagError`."""
+def _open_part(part: Path, bag: Path) -> Iterator[Reader | _SessionReader]:
+    """Open one bag (rosbags) or session file; any failure to parse it becomes a
+    :class:`BagError`."""
     try:
-        reader = Reader(part)
+        reader = _SessionReader(part) if _is_session_file(part) else Reader(part)
         reader.open()
     # A damaged file makes the parsers raise almost anything (seen: UnicodeDecodeError,
     # KeyError, MemoryError, rosbags' own errors); all mean the same to the user.
@@ -537,7 +735,7 @@ def _choose_topic(
 
 
 def _raw_messages(
-    reader: Reader, connections: Sequence[Any], bag: Path, part: Path
+    reader: Reader | _SessionReader, connections: Sequence[Any], bag: Path, part: Path
 ) -> Iterator[tuple[Any, int, Any]]:
     """``reader.messages(connections)``, with a damaged chunk turned into :class:`BagError`."""
     iterator = iter(reader.messages(connections))
@@ -551,19 +749,19 @@ def _raw_messages(
         yield item
 
 
-def _decode(topic: str, msgtype: str, log_ns: int, raw: Any) -> Any:
+def _decode(store: Typestore, topic: str, msgtype: str, log_ns: int, raw: Any) -> Any:
     """Deserialise one message; undecodable bytes become a :class:`SkippedMessage`."""
     try:
-        return _typestore().deserialize_cdr(raw, msgtype)
+        return store.deserialize_cdr(raw, msgtype)
     # Corrupt message bytes make the deserialiser raise various errors; skip the message.
     except Exception as err:
         return SkippedMessage(topic, log_ns, f"cannot decode the message: {err}")
 
 
-def _profile(topic: str, msg: Any) -> Profile | SkippedMessage:
+def _profile(topic: str, msg: Any, invalid_values_m: Sequence[float]) -> Profile | SkippedMessage:
     """Profile of a decoded PointCloud2; a malformed one becomes a :class:`SkippedMessage`."""
     try:
-        return profile_from_pointcloud2(msg)
+        return profile_from_pointcloud2(msg, invalid_values_m=invalid_values_m)
     except MessageError as err:
         return SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err))
 
@@ -660,7 +858,7 @@ def _flange_poses(
         if good[k]:
             out.append(FlangePose(int(records.stamps_ns[k]), T[k], records.frame_ids[k]))
             continue
-        msg = _decode(topic, POSE_TYPE, log_ns[k], raws[k])
+        msg = _decode(_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
         if isinstance(msg, SkippedMessage):
             out.append(msg)
             continue
@@ -677,6 +875,8 @@ def read_bag(
     profile_topic: str | None = None,
     pose_topic: str | None = None,
     progress: Progress | None = None,
+    read_poses: bool = True,
+    invalid_values_m: Sequence[float] = (),
 ) -> BagContents:
     """Read the profiles and flange poses of a bag (or a :class:`SessionBagWriter` session).
 
@@ -689,6 +889,12 @@ def read_bag(
         holding messages.
     progress : callable(done, total), optional
         Called after each message of the two topics.
+    read_poses : bool
+        False: read the profiles only (the flange poses come from another source, e.g.
+        ``/tf``); ``poses`` is then empty and ``pose_topic`` and ``base_frame`` are ''.
+    invalid_values_m : sequence of float
+        Depths z, m, that mark a point as no return besides NaN and +-Inf (driver
+        sentinels such as -0.999999 for Keyence's -999.999 mm, or 0).
 
     Returns
     -------
@@ -706,12 +912,16 @@ def read_bag(
     parts = _bag_parts(bag)
     summary = _summarise(bag, parts)
     if summary.start_ns is None or summary.end_ns is None:
+        if any(_is_session_file(part) for part in parts):
+            raise BagError(f"session {bag} holds no samples yet; record some first")
         raise BagError(
             f"bag {bag} is empty (topics: {_listing(summary.topics)}); record the profile "
             "and flange pose topics"
         )
     chosen_profile = _choose_topic(bag, summary.topics, PROFILE_TYPE, profile_topic, "profile")
-    chosen_pose = _choose_topic(bag, summary.topics, POSE_TYPE, pose_topic, "pose")
+    chosen_pose = (
+        _choose_topic(bag, summary.topics, POSE_TYPE, pose_topic, "pose") if read_poses else ""
+    )
     wanted = {(chosen_profile, PROFILE_TYPE), (chosen_pose, POSE_TYPE)}
     total = sum(t.msgcount for t in summary.topics if (t.topic, t.msgtype) in wanted)
 
@@ -722,11 +932,14 @@ def read_bag(
     for part in parts:
         with _open_part(part, bag) as reader:
             connections = [c for c in reader.connections if (c.topic, c.msgtype) in wanted]
+            store = _reading_store(connections)
             for conn, log_ns, raw in _raw_messages(reader, connections, bag, part):
                 if conn.msgtype == PROFILE_TYPE:
-                    msg = _decode(conn.topic, conn.msgtype, log_ns, raw)
+                    msg = _decode(store, conn.topic, conn.msgtype, log_ns, raw)
                     decoded.append(
-                        msg if isinstance(msg, SkippedMessage) else _profile(conn.topic, msg)
+                        msg
+                        if isinstance(msg, SkippedMessage)
+                        else _profile(conn.topic, msg, invalid_values_m)
                     )
                 else:
                     decoded.append(None)
@@ -749,7 +962,7 @@ def read_bag(
             skipped.append(entry)
 
     for items, topic, what in ((profiles, chosen_profile, "profile"), (poses, chosen_pose, "pose")):
-        if not items:
+        if not items and topic:
             first = next((s.reason for s in skipped if s.topic == topic), "none")
             raise BagError(
                 f"bag {bag}: no readable {what} on {topic} "
@@ -764,7 +977,7 @@ def read_bag(
         profile_topic=chosen_profile,
         pose_topic=chosen_pose,
         sensor_frame=profiles[0].frame_id,
-        base_frame=poses[0].frame_id,
+        base_frame=poses[0].frame_id if poses else "",
         topics=summary.topics,
         start_ns=summary.start_ns,
         end_ns=summary.end_ns,

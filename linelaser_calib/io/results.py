@@ -1,6 +1,6 @@
 """Result and truth YAML files: the one place calibration results are written and read.
 
-The result file layout is the DESIGN.md contract::
+The result file layout (the README's "Result file")::
 
     hand_eye:                       # T_flange_sensor
       parent_frame: tool0
@@ -13,9 +13,15 @@ The result file layout is the DESIGN.md contract::
     quality: {method: ..., samples_used: N, samples_rejected: [...], rms_residual_m: ...,
               warnings: [...]}
 
-``quality`` also carries ``samples_used_indices``, ``sample_residuals_m`` (profile index ->
-RMS m) and ``radius_estimated``. Truth files (simulator output) use the same ``hand_eye`` and
-``cylinder`` keys (no uncertainty, no quality) plus free extra top-level keys.
+The target's section (``cylinder`` above; ``known_point``, ...) is the target's own: its
+name, content and extra ``quality`` entries (the cylinder's ``radius_estimated``) come from
+the result's section object (:class:`~linelaser_calib.core.targets.base.ResultSection`), and
+reading finds it through the target registry. ``quality`` also carries
+``samples_used_indices`` and ``sample_residuals_m`` (profile index -> RMS m). Truth files
+(simulator output) use the same ``hand_eye`` and target keys (no uncertainty, no quality)
+plus free extra top-level keys; the simulator's carry a ``simulation`` section (scenario,
+seed, the command that regenerates them), by which :func:`truth_beside` tells them from an
+unrelated ``truth.yaml``.
 
 Values are plain Python floats, ints and strings (no numpy tags). Files are written
 atomically: a temporary file in the same directory is flushed and renamed over the target,
@@ -43,10 +49,15 @@ from linelaser_calib.core.geometry import (
     transform_from_translation_quaternion,
     translation_quaternion_from_transform,
 )
-from linelaser_calib.core.types import CalibrationResult, Cylinder, KnownPoint, Rejection
+from linelaser_calib.core.targets import get_target, target_names
+from linelaser_calib.core.targets.base import ResultSection, plain_floats
+from linelaser_calib.core.types import CalibrationResult, Rejection
 from linelaser_calib.io.errors import ResultFileError
 
 FloatArray = NDArray[np.float64]
+
+#: Top-level section of the simulator's truth files (scenario, seed, command): their marker.
+SIMULATION_KEY = "simulation"
 
 #: Largest accepted difference between ``matrix`` and ``translation``/``rotation_xyzw``.
 MATRIX_TOLERANCE = 1e-6
@@ -63,31 +74,24 @@ _TRUTH_HEADER = (
 
 @dataclass(frozen=True)
 class Truth:
-    """A truth file: the true hand-eye and cylinder, plus the whole file as read.
+    """A truth file: the true hand-eye and target, plus the whole file as read.
 
     Attributes
     ----------
     T_flange_sensor : ndarray, shape (4, 4)
-    cylinder : Cylinder or None
-        In ``base_frame``, m (cylinder scenes).
+    target : ResultSection
+        The true target (e.g. the cylinder, the fixed point) in ``base_frame``, m.
     parent_frame, child_frame, base_frame : str
     raw : dict
         The parsed YAML, including extra keys (scenario, seed, noise, ...).
-    known_point : ndarray, shape (3,) or None
-        The fixed point in ``base_frame``, m (known-point scenes such as a weld seam).
     """
 
     T_flange_sensor: FloatArray
-    cylinder: Cylinder | None
+    target: ResultSection
     parent_frame: str
     child_frame: str
     base_frame: str
     raw: dict[str, Any]
-    known_point: FloatArray | None = None
-
-
-def _floats(values: ArrayLike) -> list[float]:
-    return [float(v) for v in np.asarray(values, dtype=np.float64).reshape(-1)]
 
 
 def _plain(value: Any) -> Any:
@@ -109,42 +113,15 @@ def _hand_eye_section(
     return {
         "parent_frame": parent_frame,
         "child_frame": child_frame,
-        "translation": _floats(translation),
-        "rotation_xyzw": _floats(q_xyzw),
-        "matrix": [_floats(row) for row in T],
+        "translation": plain_floats(translation),
+        "rotation_xyzw": plain_floats(q_xyzw),
+        "matrix": [plain_floats(row) for row in T],
     }
 
 
-def _cylinder_section(cylinder: Cylinder, frame: str) -> dict[str, Any]:
-    return {
-        "frame": frame,
-        "point": _floats(cylinder.point),
-        "direction": _floats(cylinder.direction),
-        "radius": float(cylinder.radius),
-    }
-
-
-def _known_point_section(target: KnownPoint, frame: str) -> dict[str, Any]:
-    return {
-        "frame": frame,
-        "point": _floats(target.point),
-        "estimated": bool(target.estimated),
-        "uncertainty_m": None if target.sigma_m is None else _floats(target.sigma_m),
-    }
-
-
-def _target_sections(
-    cylinder: Cylinder | None, known_point: KnownPoint | None, frame: str
-) -> dict[str, Any]:
-    """The ``cylinder`` and/or ``known_point`` sections (at least one is required)."""
-    if cylinder is None and known_point is None:
-        raise InputError("a result needs a cylinder or a known point; got neither")
-    sections: dict[str, Any] = {}
-    if cylinder is not None:
-        sections["cylinder"] = _cylinder_section(cylinder, frame)
-    if known_point is not None:
-        sections["known_point"] = _known_point_section(known_point, frame)
-    return sections
+def _target_section(section: ResultSection, frame: str) -> dict[str, Any]:
+    """``{key: mapping}`` of a target section."""
+    return {section.key: _plain(section.to_mapping(frame))}
 
 
 def _write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Path:
@@ -181,13 +158,13 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
         None
         if unc_t is None and unc_r is None
         else {
-            "translation_m": None if unc_t is None else _floats(unc_t),
-            "rotation_rad": None if unc_r is None else _floats(unc_r),
+            "translation_m": None if unc_t is None else plain_floats(unc_t),
+            "rotation_rad": None if unc_r is None else plain_floats(unc_r),
         }
     )
     return {
         "hand_eye": hand_eye,
-        **_target_sections(result.cylinder, result.known_point, result.base_frame),
+        **_target_section(result.target, result.base_frame),
         "quality": {
             "method": result.method,
             "samples_used": len(result.samples_used),
@@ -202,9 +179,17 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             ],
             "rms_residual_m": float(result.rms_residual_m),
             "warnings": [str(w) for w in result.warnings],
-            "radius_estimated": bool(result.radius_estimated),
+            **_plain(result.target.quality_entries()),
             "clock_offset_s": float(result.clock_offset_s),
             "clock_offset_estimated": bool(result.clock_offset_estimated),
+            **{
+                key: float(value)
+                for key, value in (
+                    ("clock_offset_live_s", result.clock_offset_live_s),
+                    ("clock_offset_live_sigma_s", result.clock_offset_live_sigma_s),
+                )
+                if value is not None
+            },
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
@@ -237,25 +222,22 @@ def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
 def write_truth_yaml(
     path: str | Path,
     T_flange_sensor: ArrayLike,
-    cylinder: Cylinder | None,
+    target: ResultSection,
     *,
-    known_point: ArrayLike | None = None,
     parent_frame: str = "tool0",
     child_frame: str = "laser",
     base_frame: str = "base_link",
     extra: Mapping[str, Any] | None = None,
 ) -> Path:
-    """Write a truth file (same ``hand_eye``/``cylinder`` keys as a result), atomically.
+    """Write a truth file (same ``hand_eye`` and target keys as a result), atomically.
 
     Parameters
     ----------
     path : str or Path
     T_flange_sensor : array-like, shape (4, 4)
         True hand-eye, translation in m.
-    cylinder : Cylinder or None
-        True cylinder in ``base_frame``, m.
-    known_point : array-like, shape (3,), optional
-        True fixed point in ``base_frame``, m (known-point scenes).
+    target : ResultSection
+        The true target in ``base_frame``, m.
     parent_frame, child_frame, base_frame : str
     extra : mapping, optional
         Further top-level keys (scenario, seed, noise levels, ...); numpy values are
@@ -264,22 +246,17 @@ def write_truth_yaml(
     Raises
     ------
     InputError
-        If ``extra`` reuses ``hand_eye`` or ``cylinder`` or holds values YAML cannot store.
+        If ``extra`` reuses ``hand_eye`` or a target key or holds values YAML cannot store.
     ResultFileError
         If the file cannot be written.
     """
     extra = dict(extra or {})
-    clash = sorted({"hand_eye", "cylinder", "known_point"} & set(extra))
+    clash = sorted({"hand_eye", *target_names()} & set(extra))
     if clash:
         raise InputError(f"extra keys {clash} would overwrite the truth itself; rename them")
-    point = (
-        None
-        if known_point is None
-        else KnownPoint(np.asarray(known_point, dtype=np.float64), estimated=False)
-    )
     data = {
         "hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame),
-        **_target_sections(cylinder, point, base_frame),
+        **_target_section(target, base_frame),
         **_plain(extra),
     }
     return _write_yaml_atomically(Path(path), _TRUTH_HEADER, data)
@@ -392,40 +369,22 @@ def _read_hand_eye(fields: _Fields) -> tuple[FloatArray, str, str]:
     return T, hand_eye.text("parent_frame"), hand_eye.text("child_frame")
 
 
-def _read_cylinder(fields: _Fields) -> tuple[Cylinder, str]:
-    """Cylinder (unit direction) and its frame from the ``cylinder`` section."""
-    section = fields.section("cylinder")
-    direction = section.array("direction", (3,))
-    norm = float(np.linalg.norm(direction))
-    radius = section.number("radius")
-    if norm < 1e-12 or not radius > 0.0:
-        raise ResultFileError(
-            f"{fields.path}: cylinder needs a non-zero direction and a radius > 0 m, got "
-            f"direction {direction.tolist()} and radius {radius} m"
-        )
-    cylinder = Cylinder(section.array("point", (3,)), direction / norm, radius)
-    return cylinder, section.text("frame")
-
-
-def _read_known_point(fields: _Fields) -> tuple[KnownPoint, str]:
-    """The fixed point and its frame from the ``known_point`` section."""
-    section = fields.section("known_point")
-    sigma = None
-    if section.has("uncertainty_m") and section.get("uncertainty_m") is not None:
-        sigma = section.array("uncertainty_m", (3,))
-    point = section.array("point", (3,))
-    return KnownPoint(point, section.flag("estimated"), sigma), section.text("frame")
-
-
-def _read_targets(fields: _Fields) -> tuple[Cylinder | None, KnownPoint | None, str]:
-    """Cylinder and/or known point, and the base frame; at least one must be present."""
-    cylinder = target = None
-    frame = ""
-    if fields.has("known_point"):
-        target, frame = _read_known_point(fields)
-    if fields.has("cylinder") or target is None:
-        cylinder, frame = _read_cylinder(fields)
-    return cylinder, target, frame
+def _read_target(fields: _Fields) -> tuple[ResultSection, str]:
+    """The target section (the first registered target whose key is present) and its frame."""
+    quality = fields.data.get("quality")
+    quality = quality if isinstance(quality, dict) else {}
+    for name in target_names():
+        if fields.has(name):
+            section = fields.section(name)
+            try:
+                target = get_target(name).read_section(section.data, quality)
+            except ValueError as err:
+                raise ResultFileError(f"{fields.path}: {name}: {err}") from None
+            return target, section.text("frame")
+    raise ResultFileError(
+        f"{fields.path}: no target section: a result or truth file needs one of the keys "
+        + ", ".join(target_names())
+    )
 
 
 def _read_uncertainty(hand_eye: _Fields, key: str) -> FloatArray | None:
@@ -449,7 +408,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
     """
     path, fields = _load(path)
     T, parent_frame, child_frame = _read_hand_eye(fields)
-    cylinder, target, base_frame = _read_targets(fields)
+    target, base_frame = _read_target(fields)
     hand_eye = fields.section("hand_eye")
     quality = fields.section("quality")
     rejected = []
@@ -475,7 +434,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
             residuals[key] = section.number(key)
     return CalibrationResult(
         T_flange_sensor=T,
-        cylinder=cylinder,
+        target=target,
         method=quality.text("method"),
         samples_used=quality.integers("samples_used_indices"),
         samples_rejected=rejected,
@@ -483,11 +442,17 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         sample_residuals_m=residuals,
         uncertainty_translation_m=_read_uncertainty(hand_eye, "translation_m"),
         uncertainty_rotation_rad=_read_uncertainty(hand_eye, "rotation_rad"),
-        radius_estimated=quality.flag("radius_estimated"),
         clock_offset_s=quality.number("clock_offset_s") if quality.has("clock_offset_s") else 0.0,
         clock_offset_estimated=quality.flag("clock_offset_estimated"),
+        clock_offset_live_s=(
+            quality.number("clock_offset_live_s") if quality.has("clock_offset_live_s") else None
+        ),
+        clock_offset_live_sigma_s=(
+            quality.number("clock_offset_live_sigma_s")
+            if quality.has("clock_offset_live_sigma_s")
+            else None
+        ),
         warnings=[str(w) for w in quality.items("warnings")],
-        known_point=target,
         parent_frame=parent_frame,
         child_frame=child_frame,
         base_frame=base_frame,
@@ -504,6 +469,93 @@ def read_truth_yaml(path: str | Path) -> Truth:
     """
     path, fields = _load(path)
     T, parent_frame, child_frame = _read_hand_eye(fields)
-    cylinder, target, base_frame = _read_targets(fields)
-    point = None if target is None else target.point
-    return Truth(T, cylinder, parent_frame, child_frame, base_frame, fields.data, point)
+    target, base_frame = _read_target(fields)
+    return Truth(T, target, parent_frame, child_frame, base_frame, fields.data)
+
+
+def truth_beside(bag: str | Path) -> tuple[Truth | None, str]:
+    """The simulator's ``truth.yaml`` in a bag directory, if it holds one.
+
+    A ``truth.yaml`` without the simulator's ``simulation`` section (another tool's file, a
+    note), or one that cannot be read, is not an error: the truth only serves to compare.
+
+    Parameters
+    ----------
+    bag : str or Path
+        A bag directory (a file path has no truth beside it).
+
+    Returns
+    -------
+    truth : Truth or None
+    note : str
+        Empty, or one line saying why a ``truth.yaml`` that is there is not used.
+    """
+    path = Path(bag) / "truth.yaml"
+    if not path.is_file():
+        return None, ""
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        data = None
+    simulation = data.get(SIMULATION_KEY) if isinstance(data, dict) else None
+    if not (isinstance(simulation, dict) and {"scenario", "seed"} <= set(simulation)):
+        return None, (
+            f"{path} is not a truth file of linelaser-calib simulate (no {SIMULATION_KEY} "
+            "section with scenario and seed); not compared"
+        )
+    try:
+        return read_truth_yaml(path), ""
+    except ResultFileError as err:
+        return None, f"{err}; the truth file is not compared"
+
+
+_REFERENCE_HEADER = (
+    "# A hand-eye from elsewhere (not ground truth), for comparison. hand_eye is\n"
+    "# T_flange_sensor; lengths in m, quaternions xyzw.\n"
+)
+
+
+def write_reference_yaml(
+    path: str | Path,
+    T_flange_sensor: ArrayLike,
+    *,
+    parent_frame: str = "tool0",
+    child_frame: str = "laser",
+    extra: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write another tool's hand-eye in the result's ``hand_eye`` keys (SI), atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    T_flange_sensor : array-like, shape (4, 4)
+        Translation in m.
+    parent_frame, child_frame : str
+    extra : mapping, optional
+        Further top-level keys (where the hand-eye comes from); not ``hand_eye``.
+
+    Raises
+    ------
+    InputError
+        If ``extra`` holds ``hand_eye`` or values YAML cannot store.
+    ResultFileError
+        If the file cannot be written.
+    """
+    extra = dict(extra or {})
+    if "hand_eye" in extra:
+        raise InputError("extra must not hold hand_eye, the reference itself")
+    data = {"hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame)}
+    return _write_yaml_atomically(Path(path), _REFERENCE_HEADER, {**data, **_plain(extra)})
+
+
+def read_reference_yaml(path: str | Path) -> tuple[FloatArray, dict[str, Any]]:
+    """The hand-eye (4, 4) of a file with a ``hand_eye`` section, and the whole file as read.
+
+    Raises
+    ------
+    ResultFileError
+        Missing file, invalid YAML, or a missing or malformed ``hand_eye`` key.
+    """
+    _, fields = _load(path)
+    T, _, _ = _read_hand_eye(fields)
+    return T, fields.data

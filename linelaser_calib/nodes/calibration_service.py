@@ -11,45 +11,54 @@
   :func:`~linelaser_calib.core.pipeline.calibrate_samples` in its own callback group on a
   MultiThreadedExecutor, so samples keep arriving during a solve. The pipeline
   configuration is built from the parameters at each call (:func:`pipeline_config`):
-  ``target`` cylinder or known_point (a weld-seam corner, with the taught ``known_point``
-  or estimating it), ``method``, and an optional initial hand-eye read from
+  ``target`` (a registered target: cylinder, known_point, ...), ``method``, the target's
+  settings (``radius``, ``known_point``, ``min_samples``; one that does not act on the target
+  and method is refused), and an optional initial hand-eye read from
   ``initial_hand_eye_path``. A second call during a solve, no samples, too few or
-  degenerate samples, or an unusable initial hand-eye file answer ``success: false`` with
-  the reason; the node keeps running.
+  degenerate samples, data the target's model does not fit, or an unusable initial hand-eye
+  file answer ``success: false`` with the reason; the node keeps running.
 - On success it answers a one-line summary, publishes ``linelaser_calib/hand_eye``
   (TransformStamped ``flange_frame`` -> ``sensor_frame``, transient_local) and
-  ``linelaser_calib/markers`` (in ``base_frame``: the fitted cylinder and the profiles
-  mapped through the result, or a sphere at the known point), broadcasts ``/tf_static``
-  where ``tf2_ros`` is importable, and writes the result YAML to ``output_path``
-  atomically. A failed calibration leaves the last good file.
+  ``linelaser_calib/markers`` (in ``base_frame``: the profiles mapped through the result and
+  the target's shapes, e.g. the fitted cylinder or the known point), puts the collector's
+  clock offset and live estimate (``linelaser_calib/clock_offset``) in the result, broadcasts
+  ``/tf_static`` where ``tf2_ros`` is importable, and writes the result YAML to
+  ``output_path`` atomically. A failed calibration leaves the last good file.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import String
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from linelaser_calib.core.errors import CalibrationError, InputError
-from linelaser_calib.core.pipeline import Method, PipelineConfig, Target, calibrate_samples
-from linelaser_calib.core.residuals import axis_extent
+from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
+from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.io import ResultFileError, read_result_yaml, write_result_yaml
+from linelaser_calib.io import write_result_yaml
+from linelaser_calib.io.initial import read_initial_hand_eye
+from linelaser_calib.nodes.collection import DRIFT_FLOOR_S
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
+    CLOCK_OFFSET_TOPIC,
     HAND_EYE_TOPIC,
     MARKERS_TOPIC,
     SAMPLE_POSE_TOPIC,
@@ -65,43 +74,49 @@ from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
 from linelaser_calib.summary import one_line_summary
 from msg_adapters import (
     MessageError,
-    cylinder_marker,
     flange_pose_from_pose_stamped,
     marker_array,
     points_marker,
     profile_from_pointcloud2,
     rclpy_types,
+    shape_markers,
     transform_stamped_from_matrix,
 )
 
 try:  # a full ROS install has tf2_ros; the PyPI wheels do not
-    from tf2_ros import StaticTransformBroadcaster
+    from tf2_ros import Buffer, StaticTransformBroadcaster, TransformListener
 except ImportError:
-    StaticTransformBroadcaster = None
+    Buffer = StaticTransformBroadcaster = TransformListener = None
 
 NODE_NAME = "calibration_service"
 #: Diagnostic value: complete samples held.
 KEY_SAMPLES = "samples"
 #: Most profile points drawn in the markers (evenly subsampled over the used samples).
 MAX_MARKER_POINTS = 5000
-#: Diameter of the sphere marker at the known point, m.
-KNOWN_POINT_MARKER_M = 0.004
 _PIPELINE = PipelineConfig()
+#: How the shared target settings are named as parameters (for refusals).
+SETTING_LABELS = {
+    "radius_m": "radius",
+    "point_m": "known_point",
+    "min_samples": "min_samples",
+    "initial": "initial_hand_eye_path",
+}
 
 #: Every parameter; all but the read-only ones are read at each calibration, so
 #: ``ros2 param set`` applies to the next one. config/calibration_service.yaml repeats the defaults.
 PARAMETERS = (
     ParamSpec(
         "target",
-        _PIPELINE.target.value,
-        "What was scanned: cylinder (the cylinder paper) or known_point (one fixed point such "
-        "as a weld-seam corner seen from many poses, the weld-seam paper).",
-        choices=tuple(t.value for t in Target),
+        DEFAULT_TARGET,
+        "What was scanned: a registered target's name (cylinder, known_point, ...; "
+        "`linelaser-calib calibrate --help` lists them). An unknown name fails the calibration "
+        "with the list.",
     ),
     ParamSpec(
         "radius",
         0.0,
-        "Cylinder radius, m (half the diameter); 0 estimates it from the profiles.",
+        "Cylinder radius, m (half the diameter); 0 estimates it from the profiles (cylinder "
+        "target; refused by the others).",
         bounds=(0.0, 1.0),
     ),
     ParamSpec(
@@ -114,8 +129,9 @@ PARAMETERS = (
     ParamSpec(
         "initial_hand_eye_path",
         "",
-        "Result YAML whose hand_eye is the initial (old) hand-eye, e.g. an earlier result; "
-        "'' for none. The default method starts from it; the paper method with target "
+        "Initial (old) hand-eye: a result YAML (e.g. an earlier result) or a YAML with a "
+        "hand_eye section, or the numbers 'x y z qx qy qz qw' or 'x y z roll pitch yaw' (m, "
+        "rad); '' for none. The default method starts from it; the paper method with target "
         "known_point corrects it and needs it.",
     ),
     ParamSpec(
@@ -132,10 +148,10 @@ PARAMETERS = (
     ),
     ParamSpec(
         "min_samples",
-        _PIPELINE.min_samples,
-        "Fewest samples with a usable ellipse that a calibration accepts (cylinder target; "
-        f"known_point needs {_PIPELINE.known_point_config.min_samples} corners).",
-        bounds=(3, 100000),
+        0,
+        "Fewest samples with a usable feature (ellipse, corner, ...) that a calibration "
+        "accepts; 0 takes the target's default.",
+        bounds=(0, 100000),
     ),
     ParamSpec(
         "max_samples",
@@ -164,45 +180,95 @@ PARAMETERS = (
 )
 
 
-def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
+def pipeline_config(
+    values: dict[str, Any], warn: Callable[[str], None] = lambda line: None
+) -> PipelineConfig:
     """The pipeline configuration from the parameter values in effect (by name).
+
+    ``radius`` 0, ``known_point`` [], ``min_samples`` 0 and ``initial_hand_eye_path`` '' mean
+    "not given"; a given one that does not act on the target and method is refused. ``warn``
+    receives one line per value of the initial hand-eye that was normalised.
 
     Raises
     ------
     CalibrationError
-        ``initial_hand_eye_path`` cannot be read as a result file, or ``method`` paper with
-        ``target`` known_point lacks the taught point or the initial hand-eye.
+        ``initial_hand_eye_path`` cannot be read as a result file, a setting does not apply,
+        or the method needs a setting that is not given (e.g. paper with known_point).
     """
+    settings: dict[str, Any] = {}
     initial = None
     if values["initial_hand_eye_path"]:
-        path = Path(values["initial_hand_eye_path"]).expanduser()
         try:
-            initial = read_result_yaml(path).T_flange_sensor
-        except ResultFileError as err:
-            raise ResultFileError(
-                f"cannot use initial_hand_eye_path: {err} (it must name a result YAML with a "
-                "hand_eye section, e.g. an earlier calibration's output_path, or be '' for none)"
+            initial, warnings = read_initial_hand_eye(values["initial_hand_eye_path"])
+        except CalibrationError as err:
+            raise type(err)(
+                f"cannot use initial_hand_eye_path: {err} (or set it to '' for none)"
             ) from err
-    target, method = Target(values["target"]), Method(values["method"])
-    point = np.array(values["known_point"]) if values["known_point"] else None
-    if (
-        target is Target.KNOWN_POINT
-        and method is Method.PAPER
-        and (point is None or initial is None)
-    ):
-        raise InputError(
-            "method paper with target known_point corrects an old hand-eye against the taught "
-            "point: set known_point to [x, y, z] (m, base frame) and initial_hand_eye_path to "
-            "the old hand-eye's result YAML, or use method default"
-        )
+        for line in warnings:
+            warn(f"initial_hand_eye_path: {line}")
+        settings["initial"] = initial
+    if values["radius"]:
+        settings["radius_m"] = float(values["radius"])
+    if values["known_point"]:
+        settings["point_m"] = np.array(values["known_point"], dtype=np.float64)
+    if values["min_samples"]:
+        settings["min_samples"] = int(values["min_samples"])
+    method = Method(values["method"])
+    target = get_target(values["target"])
     return PipelineConfig(
         method=method,
-        target=target,
-        known_point=point,
-        radius_m=values["radius"] or None,
+        target=target.name,
+        target_config=configure(target, method.value, settings, SETTING_LABELS),
         seed=values["seed"],
-        min_samples=values["min_samples"],
         initial_T_flange_sensor=initial,
+    )
+
+
+def second_parent_warning(frames_yaml: str, child: str, parent: str) -> str | None:
+    """A warning when ``child`` already has a parent other than ``parent`` in /tf.
+
+    Parameters
+    ----------
+    frames_yaml : str
+        ``tf2_ros.Buffer.all_frames_as_yaml()``: ``frame: {parent: ..., ...}`` per frame.
+    child, parent : str
+        The hand-eye about to be broadcast: sensor frame and flange frame.
+    """
+    frames = yaml.safe_load(frames_yaml) or {}
+    entry = frames.get(child) if isinstance(frames, dict) else None
+    known = entry.get("parent") if isinstance(entry, dict) else None
+    if known is None or str(known) == parent:
+        return None
+    return (
+        f"the sensor frame {child} already has parent {known} in /tf (e.g. a joint of the "
+        f"URDF); broadcasting {parent} -> {child} gives it two parents, which breaks the TF "
+        f"tree. Remove the other transform (replace the URDF joint with `linelaser-calib "
+        f"export RESULT.yaml --format urdf`), or give the sensor another frame name "
+        f"(sensor_frame)"
+    )
+
+
+def add_live_clock_offset(
+    result: CalibrationResult, used_s: float, estimate_s: float, sigma_s: float
+) -> None:
+    """Put the collector's clock offsets in the result (NaN: no estimate, or no 1σ yet).
+
+    ``used_s`` is what the collector added to the profile stamps when pairing. A warning
+    says so when the live estimate disagrees with it by more than three sigma and
+    ``DRIFT_FLOOR_S``: the samples were then paired with poses from the wrong moment.
+    """
+    result.clock_offset_s = used_s
+    if math.isnan(estimate_s):
+        return
+    result.clock_offset_live_s = estimate_s
+    result.clock_offset_live_sigma_s = None if math.isnan(sigma_s) else sigma_s
+    if math.isnan(sigma_s) or abs(estimate_s - used_s) <= max(3.0 * sigma_s, DRIFT_FLOOR_S):
+        return
+    result.warnings.append(
+        f"the collector estimates the profile-to-pose clock offset live at "
+        f"{estimate_s * 1e3:+.2f} +- {sigma_s * 1e3:.2f} ms (1 sigma) but paired the samples "
+        f"with {used_s * 1e3:+.2f} ms: set the collector's clock_offset_s to "
+        f"{estimate_s:.4f} and collect again"
     )
 
 
@@ -235,10 +301,22 @@ class CalibrationServiceNode(Node):
         self.create_subscription(
             String, SESSION_TOPIC, self._on_session, latched_qos(1), callback_group=receive
         )
+        self._clock_offset: list[float] = []
+        self.create_subscription(
+            Float64MultiArray,
+            CLOCK_OFFSET_TOPIC,
+            self._on_clock_offset,
+            latched_qos(1),
+            callback_group=receive,
+        )
         self._hand_eye_pub = self.create_publisher(TransformStamped, HAND_EYE_TOPIC, latched_qos(1))
         self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, latched_qos(1))
         self._tf_static = (
             None if StaticTransformBroadcaster is None else StaticTransformBroadcaster(self)
+        )
+        self._tf_buffer = None if Buffer is None else Buffer()
+        self._tf_listener = (
+            None if self._tf_buffer is None else TransformListener(self._tf_buffer, self)
         )
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(
@@ -289,6 +367,9 @@ class CalibrationServiceNode(Node):
                 f"the collector started session {msg.data}: dropped the {dropped} samples of "
                 "the previous session"
             )
+
+    def _on_clock_offset(self, msg: Float64MultiArray) -> None:
+        self._clock_offset = list(msg.data)
 
     def _publish_diagnostics(self) -> None:
         store = self._store
@@ -354,12 +435,14 @@ class CalibrationServiceNode(Node):
         )
         start = time.monotonic()
         try:
-            result = calibrate_samples(samples, pipeline_config(p))
+            result = calibrate_samples(samples, pipeline_config(p, self._warn))
         except CalibrationError as err:
             return False, str(err)
         result.parent_frame = p["flange_frame"]
         result.child_frame = p["sensor_frame"]
         result.base_frame = p["base_frame"]
+        if len(self._clock_offset) == 4:
+            add_live_clock_offset(result, *self._clock_offset[:3])
         summary = one_line_summary(result, len(samples))
         self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")
         self._publish(result)
@@ -385,8 +468,14 @@ class CalibrationServiceNode(Node):
         )
         self._hand_eye_pub.publish(transform)
         if self._tf_static is not None:
+            if self._tf_buffer is not None:
+                warning = second_parent_warning(
+                    self._tf_buffer.all_frames_as_yaml(), result.child_frame, result.parent_frame
+                )
+                if warning is not None:
+                    self.get_logger().warning(warning)
             self._tf_static.sendTransform(transform)
-        # Clear what an earlier calibration drew (e.g. a cylinder before a known point).
+        # Clear what an earlier calibration drew (e.g. another target's shapes).
         markers = [Marker(action=Marker.DELETEALL)]
         points = points_in_base(result, MAX_MARKER_POINTS)
         if len(points):
@@ -400,31 +489,9 @@ class CalibrationServiceNode(Node):
                     ns="profiles",
                 )
             )
-        if result.cylinder is not None:
-            centre, length = axis_extent(points, result.cylinder)
-            markers.append(
-                cylinder_marker(
-                    result.cylinder,
-                    length,
-                    result.base_frame,
-                    types=self._types,
-                    centre=centre,
-                    stamp_ns=stamp_ns,
-                )
-            )
-        if result.known_point is not None:
-            markers.append(
-                points_marker(
-                    result.known_point.point[np.newaxis],
-                    result.base_frame,
-                    types=self._types,
-                    size_m=KNOWN_POINT_MARKER_M,
-                    spheres=True,
-                    stamp_ns=stamp_ns,
-                    ns="known_point",
-                    color=(1.0, 0.85, 0.0, 1.0),
-                )
-            )
+        markers += shape_markers(
+            result.target.shapes(points), result.base_frame, types=self._types, stamp_ns=stamp_ns
+        )
         self._markers_pub.publish(marker_array(markers, types=self._types))
 
 

@@ -1,6 +1,6 @@
 # mypy: disallow-untyped-calls=False
 # rclpy is only partly annotated: calling its untyped functions is expected here.
-"""ROS 2 node ``collector``: pair live profiles with flange poses, validate, persist, publish.
+"""ROS 2 node ``collector``: pair live profiles with flange poses, choose samples, store, publish.
 
 Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and ``flange_pose``
 (``geometry_msgs/PoseStamped``); remap both to the driver's topics. The logic lives in
@@ -8,26 +8,32 @@ Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and ``flange_pose``
 
 - receive callbacks decode messages and pair profiles (cheap), on a SingleThreadedExecutor:
   rclpy's MultiThreadedExecutor takes only a few hundred messages per second here, far
-  below a 500 Hz flange-pose stream, while the single-threaded one keeps up;
-- a validation thread checks each paired profile as the calibration will use it
-  (``validate_sample``: cleaning, then the ellipse of a cylinder or, with ``target``
-  ``known_point``, the V corner of a weld seam), so a slow fit never stalls reception;
-- every accepted sample is written to the session directory (one closed rosbag2 bag per
-  sample, a valid input to ``linelaser-calib calibrate``) before it is published on
+  below a 500 Hz flange-pose stream, while the single-threaded one keeps up. They also note
+  each message's publisher sequence number, so profiles lost by the transport are counted;
+- a storage thread appends the samples to the session's MCAP file, flushes and fsyncs it
+  every ``flush_period_s``, and only then publishes them on
   ``linelaser_calib/samples/profile`` and ``linelaser_calib/samples/flange_pose`` with
   identical stamps (reliable, transient_local, ``sample_history_depth`` deep, so a late or
   restarted calibration service receives every sample of the session);
+- a validation thread checks profiles as the calibration will use them
+  (``validate_sample``: cleaning, then the ellipse of a cylinder or, with ``target``
+  ``known_point``, the V corner of a weld seam): in ``stop_and_go`` and ``on_demand`` modes
+  the candidates before they become samples; in ``continuous`` mode the newest stored
+  sample every ``LIVE_CHECK_PERIOD_S`` (store first: a slow fit never holds a sample back),
+  and every ``clock_offset_period_s`` the live estimate of the profile-to-pose clock offset;
 - ``~/capture`` (std_srvs/Trigger) waits, as a coroutine that lets the executor run on, for
-  the next valid sample (``on_demand`` mode takes only these); ``~/clear`` starts a new
-  session directory and keeps the old one on disk;
+  the next sample (``on_demand`` mode takes only these); ``~/clear`` starts a new session
+  directory and keeps the old one on disk;
 - ``/diagnostics`` carries the counts: received, paired, accepted, rejected and skipped per
-  reason. Each new reason is logged once;
+  reason, lost in transport, and the clock offset estimate. Each new reason is logged once;
+  the live clock offset is also published on ``linelaser_calib/clock_offset``;
 - with ``auto_calibrate_samples`` > 0 it calls ``calibrate`` once the session holds that many.
 """
 
 from __future__ import annotations
 
 import datetime
+import math
 import threading
 import time
 from collections.abc import Generator
@@ -42,23 +48,30 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.task import Future
 from sensor_msgs.msg import PointCloud2
-from std_msgs.msg import String
+from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import PipelineConfig, Target, validate_sample
+from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
+from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
+from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.tf import base_frame_warning
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter, read_bag
 from linelaser_calib.io.bags import SESSION_MARKER
 from linelaser_calib.nodes.collection import (
+    ClockOffsetTracker,
     CollectorConfig,
     LiveCollector,
     Mode,
+    OffsetEstimate,
     PendingSample,
 )
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
+    CLOCK_OFFSET_TOPIC,
     SAMPLE_POSE_TOPIC,
     SAMPLE_PROFILE_TOPIC,
     SESSION_TOPIC,
@@ -68,6 +81,7 @@ from linelaser_calib.nodes.common import (
     latched_qos,
     run_node,
 )
+from linelaser_calib.nodes.tf_input import TfPoseInput
 from msg_adapters import (
     MessageError,
     flange_pose_from_pose_stamped,
@@ -78,6 +92,11 @@ from msg_adapters import (
 )
 
 NODE_NAME = "collector"
+#: ``continuous``: at most one live check of a stored sample per period, s (a check costs a
+#: few ms of CPU; the calibration checks every sample anyway).
+LIVE_CHECK_PERIOD_S = 0.2
+#: Diagnostic value: samples on disk in the session file.
+KEY_STORED = "samples stored"
 _PAIRING = PairingConfig()
 _COLLECTOR = CollectorConfig()
 
@@ -85,18 +104,28 @@ _COLLECTOR = CollectorConfig()
 PARAMETERS = (
     ParamSpec(
         "target",
-        Target.CYLINDER.value,
-        "What the profiles scan, which decides how each is validated: cylinder (an elliptical "
-        "arc) or known_point (a V-shaped weld seam whose corner is the fixed point).",
-        choices=tuple(t.value for t in Target),
+        DEFAULT_TARGET,
+        "What the profiles scan, which decides how each is validated (the target's feature "
+        "fit): a registered target's name (cylinder, known_point, ...; `linelaser-calib "
+        "calibrate --help` lists them).",
         read_only=True,
     ),
     ParamSpec(
         "mode",
-        Mode.CONTINUOUS.value,
-        "continuous: every valid profile paired with a pose joins the session; on_demand: "
-        "only the next valid one after each ~/capture call (step-and-shoot cells).",
+        _COLLECTOR.mode.value,
+        "stop_and_go: one valid sample per standstill of the flange (move, stop, move: no "
+        "trigger needed); continuous: every profile paired with a pose joins the session "
+        "(scanning in motion; see max_rate_hz); on_demand: only the next valid one after "
+        "each ~/capture call (robot programs that trigger).",
         choices=tuple(m.value for m in Mode),
+        read_only=True,
+    ),
+    ParamSpec(
+        "standstill_s",
+        _COLLECTOR.standstill_s,
+        "stop_and_go: the flange must have been slower than max_linear_speed_m_s and "
+        "max_angular_speed_rad_s for this long before a profile is taken, s.",
+        bounds=(0.0, 10.0),
         read_only=True,
     ),
     ParamSpec(
@@ -104,6 +133,35 @@ PARAMETERS = (
         False,
         "Subscribe profile and flange_pose with reliable QoS (nothing lost, needs reliable "
         "publishers) instead of best effort (sensor-data QoS, matches any publisher).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "pose_source",
+        PoseSource.POSE.value,
+        "Where flange poses come from: pose (geometry_msgs/PoseStamped on flange_pose) or tf "
+        "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs).",
+        choices=tuple(s.value for s in PoseSource),
+        read_only=True,
+    ),
+    ParamSpec(
+        "base_frame",
+        "base_link",
+        "Robot base frame: start of the TF chain (pose_source tf); with PoseStamped poses in "
+        "UR's 'base' instead, a warning says what that means.",
+        read_only=True,
+    ),
+    ParamSpec(
+        "flange_frame",
+        "tool0",
+        "Flange frame: end of the TF chain (pose_source tf).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "invalid_values_m",
+        (),
+        "Depths z, m, that the profiler sends for no return besides NaN and +-Inf, e.g. "
+        "[-0.999999] (Keyence's -999.999 mm) or [0.0].",
+        sizes=tuple(range(9)),
         read_only=True,
     ),
     ParamSpec(
@@ -144,31 +202,47 @@ PARAMETERS = (
     ParamSpec(
         "pose_window_s",
         _COLLECTOR.pose_window_s,
-        "Flange poses kept behind the newest one, s; a profile waits at most this long "
-        "(wall time) for the poses around its stamp.",
+        "Flange poses kept behind the newest one, s; a profile waits for the poses around its "
+        "stamp until the pose stream has been silent this long (wall time).",
         bounds=(0.05, 60.0),
         read_only=True,
     ),
     ParamSpec(
-        "min_sample_interval_s",
-        _COLLECTOR.min_sample_interval_s,
-        "Skip paired profiles stamped less than this after the previous one validated, s; "
-        "0 validates every one (set e.g. 0.1 for a 100 Hz sensor).",
-        bounds=(0.0, 3600.0),
+        "max_rate_hz",
+        _COLLECTOR.max_rate_hz,
+        "continuous: keep at most this many samples per second of profile stamps, skipping "
+        "(and counting) the others on purpose, Hz; 0 keeps every paired profile.",
+        bounds=(0.0, 100000.0),
         read_only=True,
     ),
     ParamSpec(
         "validation_queue_size",
         _COLLECTOR.validation_queue_size,
-        "Paired profiles waiting for validation; more are skipped and counted.",
+        "stop_and_go and on_demand: profiles waiting for validation; more are skipped and counted.",
         bounds=(1, 100000),
+        read_only=True,
+    ),
+    ParamSpec(
+        "flush_period_s",
+        0.1,
+        "The session file is flushed and fsynced this often, s; samples are published once "
+        "on disk, and a crash loses at most the samples of the last period.",
+        bounds=(0.001, 10.0),
+        read_only=True,
+    ),
+    ParamSpec(
+        "clock_offset_period_s",
+        10.0,
+        "continuous (cylinder target): estimate the profile-to-pose clock offset from the "
+        "samples of every period this long, s; 0 disables the live estimate.",
+        bounds=(0.0, 3600.0),
         read_only=True,
     ),
     ParamSpec(
         "radius",
         0.0,
         "Cylinder radius, m, checked against each profile's ellipse; 0 accepts any radius "
-        "(cylinder target only).",
+        "(cylinder target; refused by the others).",
         bounds=(0.0, 1.0),
         read_only=True,
     ),
@@ -182,8 +256,8 @@ PARAMETERS = (
     ParamSpec(
         "session_dir",
         "~/.ros/linelaser_calib/sessions",
-        "Directory under which each session gets its own directory of sample bags "
-        "(session_YYYYmmdd_HHMMSS); sessions are never deleted or overwritten.",
+        "Directory under which each session gets its own directory (session_YYYYmmdd_HHMMSS, "
+        "holding session.mcap); sessions are never deleted or overwritten.",
         read_only=True,
     ),
     ParamSpec(
@@ -274,29 +348,44 @@ class CollectorNode(Node):
                 pairing=pairing,
                 pose_window_s=p["pose_window_s"],
                 mode=Mode(p["mode"]),
-                min_sample_interval_s=p["min_sample_interval_s"],
+                max_rate_hz=p["max_rate_hz"],
+                standstill_s=p["standstill_s"],
                 validation_queue_size=p["validation_queue_size"],
             )
         except ValueError as err:
             raise InputError(f"invalid collector parameters: {err}") from err
+        target = get_target(p["target"])
+        settings = {"radius_m": float(p["radius"])} if p["radius"] else {}
         self._pipeline = PipelineConfig(
-            target=Target(p["target"]),
-            radius_m=p["radius"] or None,
+            target=target.name,
+            target_config=configure(target, Method.DEFAULT.value, settings, {"radius_m": "radius"}),
             seed=p["seed"],
             pairing=pairing,
         )
         self._rng = np.random.default_rng(p["seed"])
         self._types = rclpy_types()
         self._collector = LiveCollector(config, self._log_new_reason)
+        self._offsets = (
+            ClockOffsetTracker(self._pipeline, p["clock_offset_period_s"])
+            if config.mode is Mode.CONTINUOUS
+            and self._pipeline.target_impl.estimates_clock_offset
+            and p["clock_offset_period_s"] > 0.0
+            else None
+        )
         self._history_depth = int(p["sample_history_depth"])
         self._auto_calibrate_samples = int(p["auto_calibrate_samples"])
         self._auto_calibrate_done = False
         self._capture_timeout_s = float(p["capture_timeout_s"])
+        self._flush_period_s = float(p["flush_period_s"])
         self._captured = threading.Event()
         self._captured_text = ""
         self._session_lock = threading.Lock()
+        self._to_check: PendingSample | None = None
 
         self._session_pub = self.create_publisher(String, SESSION_TOPIC, latched_qos(1))
+        self._offset_pub = self.create_publisher(
+            Float64MultiArray, CLOCK_OFFSET_TOPIC, latched_qos(1)
+        )
         self._profile_pub = self.create_publisher(
             PointCloud2, SAMPLE_PROFILE_TOPIC, latched_qos(self._history_depth)
         )
@@ -305,8 +394,34 @@ class CollectorNode(Node):
         )
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         qos = input_qos(bool(p["reliable_inputs"]))
-        self._profile_sub = self.create_subscription(PointCloud2, "profile", self._on_profile, qos)
-        self._pose_sub = self.create_subscription(PoseStamped, "flange_pose", self._on_pose, qos)
+        self._invalid_values_m = tuple(p["invalid_values_m"] or ())
+        self._base_frame = str(p["base_frame"])
+        self._base_frame_warned = False
+        # rclpy hands a two-argument callback the message info too (its stubs say one).
+        self._profile_sub = self.create_subscription(
+            PointCloud2,
+            "profile",
+            self._on_profile,  # type: ignore[arg-type]
+            qos,
+        )
+        self._tf_input = None
+        if PoseSource(p["pose_source"]) is PoseSource.TF:
+            self._tf_input = TfPoseInput(
+                self,
+                self._base_frame,
+                str(p["flange_frame"]),
+                pairing.sync_tolerance_s,
+                config.pose_window_s,
+                qos,
+                self._add_pose,
+                self._reject_pose,
+            )
+        self._pose_sub = self.create_subscription(
+            PoseStamped,
+            "flange_pose",
+            self._on_pose,  # type: ignore[arg-type]
+            qos,
+        )
         # Its own group: while a capture waits, the default group (inputs, timers) runs on.
         self.create_service(
             Trigger, "~/capture", self._on_capture, callback_group=ReentrantCallbackGroup()
@@ -315,15 +430,21 @@ class CollectorNode(Node):
         self._calibrate_client = self.create_client(Trigger, CALIBRATE_SERVICE)
         self.create_timer(p["diagnostics_period_s"], self._on_timer)
 
+        self._publish_offset(None)
         self._session_root = Path(p["session_dir"]).expanduser()
         reload_from = self._reload_source(str(p["reload_session"]))
         self._session = self._open_session(reload_from)
         self._work = threading.Event()
+        self._stored = threading.Event()
         self._stopping = threading.Event()
-        self._validator = threading.Thread(target=self._validate_loop, name="validation")
-        self._validator.start()
+        self._threads = [
+            threading.Thread(target=self._store_loop, name="storage"),
+            threading.Thread(target=self._validate_loop, name="validation"),
+        ]
+        for thread in self._threads:
+            thread.start()
         self.get_logger().info(
-            f"collecting in {config.mode.value} mode (target {self._pipeline.target.value}) "
+            f"collecting in {config.mode.value} mode (target {self._pipeline.target}) "
             f"from {self._profile_sub.topic_name} and {self._pose_sub.topic_name} into "
             f"{self._session.path}"
         )
@@ -349,6 +470,8 @@ class CollectorNode(Node):
         self._session_pub.publish(String(data=str(writer.path)))
         for profile, pose in pairs:
             writer.append(profile, pose)
+        writer.flush()
+        for profile, pose in pairs:
             self._publish_sample(profile, pose)
         with self._collector.lock:
             self._collector.clear(reloaded=len(pairs))
@@ -361,7 +484,10 @@ class CollectorNode(Node):
     def _on_clear(self, request: Trigger.Request, response: Trigger.Response) -> Any:
         with self._session_lock:
             old = self._session
-            old.close()
+            try:
+                old.close()
+            except BagError as err:
+                self.get_logger().error(str(err))
             for publisher in (self._profile_pub, self._pose_pub):
                 self.destroy_publisher(publisher)
             self._profile_pub = self.create_publisher(
@@ -387,30 +513,45 @@ class CollectorNode(Node):
 
     # -- reception -----------------------------------------------------------------------
 
-    def _on_profile(self, msg: PointCloud2) -> None:
+    def _on_profile(self, msg: PointCloud2, info: dict[str, Any]) -> None:
         now = time.monotonic()
+        sequence = info.get("publication_sequence_number")
         try:
-            profile = profile_from_pointcloud2(msg)
+            profile = profile_from_pointcloud2(msg, invalid_values_m=self._invalid_values_m)
         except MessageError as err:
             with self._collector.lock:
-                self._collector.reject_profile(str(err))
+                self._collector.reject_profile(str(err), sequence)
             return
         with self._collector.lock:
-            self._collector.add_profile(profile, now)
+            self._collector.add_profile(profile, now, sequence)
             work = self._collector.has_work
         if work:
             self._work.set()
 
-    def _on_pose(self, msg: PoseStamped) -> None:
-        now = time.monotonic()
+    def _on_pose(self, msg: PoseStamped, info: dict[str, Any]) -> None:
+        if self._tf_input is not None:  # pose_source tf: the poses come from /tf only
+            return
         try:
             pose = flange_pose_from_pose_stamped(msg)
         except MessageError as err:
-            with self._collector.lock:
-                self._collector.reject_pose(str(err))
+            self._reject_pose(str(err))
             return
+        warning = base_frame_warning(pose.frame_id, self._base_frame)
+        if warning is not None and not self._base_frame_warned:
+            self._base_frame_warned = True
+            self.get_logger().warning(warning)
+        self._add_pose(pose, info.get("publication_sequence_number"))
+
+    def _reject_pose(self, reason: str) -> None:
         with self._collector.lock:
-            self._collector.add_pose(pose, now)
+            self._collector.reject_pose(reason)
+
+    def _add_pose(self, pose: FlangePose, sequence: int | None = None) -> None:
+        now = time.monotonic()
+        with self._collector.lock:
+            self._collector.add_pose(pose, now, sequence)
+            if self._offsets is not None:
+                self._offsets.add_pose(pose)
             work = self._collector.has_work
         if work:
             self._work.set()
@@ -418,50 +559,61 @@ class CollectorNode(Node):
     def _log_new_reason(self, key: str, message: str) -> None:
         self.get_logger().warning(f"{message} [first of its kind; counted in /diagnostics]")
 
-    # -- validation and storage ----------------------------------------------------------
+    # -- storage -------------------------------------------------------------------------
 
-    def _validate_loop(self) -> None:
-        """The validation thread: validate and store queued samples until the node stops."""
-        while not self._stopping.is_set():
-            self._work.wait(0.5)
-            self._work.clear()
-            while not self._stopping.is_set():
+    def _store_loop(self) -> None:
+        """The storage thread: store, flush and publish the accepted samples every period."""
+        while True:
+            stopping = self._stopping.wait(self._flush_period_s)
+            # Under the session lock, so that a sample accepted before ~/clear is never
+            # stored in the new session (clear counts it as skipped instead).
+            with self._session_lock:
                 with self._collector.lock:
-                    pending = self._collector.next_to_validate()
-                if pending is None:
-                    break
-                rejection = validate_sample(pending.sample, self._pipeline, self._rng)
-                if rejection is None:
-                    self._store(pending)
-                else:
-                    with self._collector.lock:
-                        self._collector.reject_validated(rejection)
-
-    def _store(self, pending: PendingSample) -> None:
-        """Admit a valid sample: persist it, then publish it."""
-        sample = pending.sample
-        profile = Profile(sample.stamp_ns, sample.points, pending.sensor_frame)
-        pose = FlangePose(sample.stamp_ns, sample.T_base_flange, pending.base_frame)
-        with self._session_lock:
-            with self._collector.lock:
-                capturing = self._collector.capture_pending
-                if not self._collector.admit(pending):
-                    return
-                captured = capturing and not self._collector.capture_pending
-            try:
-                path = self._session.append(profile, pose)
-            except BagError as err:
-                self.get_logger().error(str(err))
-                with self._collector.lock:
-                    self._collector.revoke("session", str(err))
+                    batch = self._collector.take_to_store()
+                    captured, self._collector.captured = self._collector.captured, None
+                if batch:
+                    self._store(batch, captured)
+            if stopping:
                 return
+
+    def _store(self, batch: list[PendingSample], captured: int | None) -> None:
+        """Persist samples (flushed to disk), then publish them; the session lock is held."""
+        samples = []
+        for pending in batch:
+            sample = pending.sample
+            profile = Profile(sample.stamp_ns, sample.points, pending.sensor_frame)
+            pose = FlangePose(sample.stamp_ns, sample.T_base_flange, pending.base_frame)
+            samples.append((profile, pose, pending))
+        try:
+            numbers = [self._session.append(profile, pose) for profile, pose, _ in samples]
+            self._session.flush()
+        except BagError as err:
+            self.get_logger().error(str(err))
+            with self._collector.lock:
+                for _ in samples:
+                    self._collector.revoke("session", str(err))
+            return
+        for profile, pose, _ in samples:
+            if not self.context.ok():
+                break  # shutting down: the samples are on disk, and reloadable from there
             self._publish_sample(profile, pose)
-        if captured:
-            self._captured_text = f"captured sample {path.name} (stamp {sample.stamp_ns} ns)"
-            self._captured.set()
-            executor = self.executor
-            if executor is not None:
-                executor.wake()
+        with self._collector.lock:
+            if self._offsets is not None:
+                for profile, _, _ in samples:
+                    self._offsets.add_sample(profile)
+            if self._collector.config.mode is Mode.CONTINUOUS:
+                self._to_check = samples[-1][2]
+                self._work.set()
+        for number, (_, _, pending) in zip(numbers, samples, strict=True):
+            if pending.sample.index == captured:
+                self._captured_text = (
+                    f"captured sample {number} of session {self._session.path.name} "
+                    f"(stamp {pending.sample.stamp_ns} ns)"
+                )
+                self._captured.set()
+                executor = self.executor
+                if executor is not None:
+                    executor.wake()
 
     def _publish_sample(self, profile: Profile, pose: FlangePose) -> None:
         """Publish one sample on the two sample topics, both stamped with the profile stamp."""
@@ -480,10 +632,66 @@ class CollectorNode(Node):
             )
         )
 
+    # -- validation, live checks and the clock offset ------------------------------------
+
+    def _validate_loop(self) -> None:
+        """The validation thread: candidates, live checks and clock offset batches."""
+        next_check = 0.0
+        while not self._stopping.is_set():
+            self._work.wait(0.5)
+            self._work.clear()
+            while not self._stopping.is_set():
+                with self._collector.lock:
+                    pending = self._collector.next_to_validate()
+                    check, self._to_check = self._to_check, None
+                    batch = None if self._offsets is None else self._offsets.take_batch()
+                if pending is not None:
+                    rejection = validate_sample(pending.sample, self._pipeline, self._rng)
+                    with self._collector.lock:
+                        if rejection is None:
+                            self._collector.admit(pending)
+                        else:
+                            self._collector.reject_validated(rejection)
+                elif batch is not None:
+                    self._estimate_offset(*batch)
+                elif check is not None and time.monotonic() >= next_check:
+                    next_check = time.monotonic() + LIVE_CHECK_PERIOD_S
+                    rejection = validate_sample(check.sample, self._pipeline, self._rng)
+                    with self._collector.lock:
+                        self._collector.note_check(rejection)
+                else:
+                    break
+
+    def _estimate_offset(self, profiles: list[Profile], poses: list[FlangePose]) -> None:
+        """Estimate the clock offset from one batch; publish it, warn when it drifts."""
+        assert self._offsets is not None
+        outcome = self._offsets.estimate_batch(profiles, poses)
+        with self._collector.lock:
+            warning = self._offsets.add_estimate(outcome)
+            estimate = self._offsets.estimate
+        if isinstance(outcome, str):
+            self.get_logger().warning(
+                f"no clock offset estimate from {len(profiles)} samples: {outcome}",
+                throttle_duration_sec=60.0,
+            )
+        if warning is not None:
+            self.get_logger().warning(warning)
+        self._publish_offset(estimate)
+
+    def _publish_offset(self, estimate: OffsetEstimate | None) -> None:
+        """Publish the pairing's clock offset and the live estimate (see CLOCK_OFFSET_TOPIC)."""
+        used = self._pipeline.pairing.clock_offset_s
+        if estimate is None:
+            data = [used, math.nan, math.nan, 0.0]
+        else:
+            sigma = math.nan if estimate.sigma_s is None else estimate.sigma_s
+            data = [used, estimate.offset_s, sigma, float(estimate.batches)]
+        self._offset_pub.publish(Float64MultiArray(data=data))
+
     # -- capture -------------------------------------------------------------------------
 
     async def _on_capture(self, request: Trigger.Request, response: Trigger.Response) -> Any:
-        """Wait for the next valid sample without blocking the executor."""
+        """Wait for the next sample without blocking the executor."""
         with self._collector.lock:
             if self._collector.capture_pending:
                 response.success = False
@@ -521,9 +729,19 @@ class CollectorNode(Node):
             last = self._collector.last_rejection
             session_samples = self._collector.session_samples
             received = self._collector.received
+            offset = None if self._offsets is None else self._offsets.estimate
+            offset_failure = "" if self._offsets is None else self._offsets.last_failure
         if work:
             self._work.set()
-        self._publish_diagnostics(values, received, session_samples, last)
+        values[KEY_STORED] = str(self._session.durable)
+        level = DiagnosticStatus.OK
+        if offset is not None:
+            values.update(offset_values(offset))
+            if self._offsets is not None and self._offsets.drifting:
+                level = DiagnosticStatus.WARN
+        elif offset_failure:
+            values["clock offset"] = f"no estimate yet: {offset_failure}"
+        self._publish_diagnostics(values, received, session_samples, last, level)
         if (
             self._auto_calibrate_samples
             and not self._auto_calibrate_done
@@ -548,13 +766,12 @@ class CollectorNode(Node):
             self.get_logger().warning(f"calibration failed: {result.message}")
 
     def _publish_diagnostics(
-        self, values: dict[str, str], received: int, session_samples: int, last: str
+        self, values: dict[str, str], received: int, session_samples: int, last: str, level: int
     ) -> None:
         if received and not session_samples:
             level = DiagnosticStatus.WARN
             message = f"no sample accepted yet; last rejection: {last or 'none'}"
         else:
-            level = DiagnosticStatus.OK
             message = f"{session_samples} samples in session {self._session.path}"
         status = DiagnosticStatus(
             level=level,
@@ -568,12 +785,27 @@ class CollectorNode(Node):
         self._diagnostics_pub.publish(array)
 
     def destroy_node(self) -> None:
-        """Stop validating, close the session (every sample is on disk), destroy the node."""
+        """Stop the threads, store what is accepted, close the session, destroy the node."""
         self._stopping.set()
         self._work.set()
-        self._validator.join()
-        self._session.close()
+        for thread in self._threads:
+            thread.join()
+        try:
+            self._session.close()
+        except BagError as err:
+            self.get_logger().error(str(err))
         super().destroy_node()
+
+
+def offset_values(estimate: OffsetEstimate) -> dict[str, str]:
+    """Diagnostic values of the live clock offset (ms, labelled)."""
+    sigma = "n/a (needs 2 batches)" if estimate.sigma_s is None else f"{estimate.sigma_s * 1e3:.3f}"
+    return {
+        "clock offset (ms)": f"{estimate.offset_s * 1e3:+.3f}",
+        "clock offset 1 sigma (ms)": sigma,
+        "clock offset batches": str(estimate.batches),
+        "clock offset latest batch (ms)": f"{estimate.latest_s * 1e3:+.3f}",
+    }
 
 
 class _NextWake:

@@ -43,6 +43,10 @@ SAMPLE_PROFILE_TOPIC = "linelaser_calib/samples/profile"
 SAMPLE_POSE_TOPIC = "linelaser_calib/samples/flange_pose"
 #: The collector's current session directory (std_msgs/String, latched).
 SESSION_TOPIC = "linelaser_calib/session"
+#: The collector's clock offset (std_msgs/Float64MultiArray, latched): [offset it adds to
+#: profile stamps for pairing (s), live estimate (s), its 1 sigma (s), batches]; NaN where
+#: there is no estimate (yet) or fewer than two batches.
+CLOCK_OFFSET_TOPIC = "linelaser_calib/clock_offset"
 #: Results of the calibration service.
 HAND_EYE_TOPIC = "linelaser_calib/hand_eye"
 MARKERS_TOPIC = "linelaser_calib/markers"

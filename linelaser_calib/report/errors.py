@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.types import CalibrationResult, Cylinder
 
 
@@ -11,10 +12,15 @@ class ReportError(CalibrationError):
 
 
 def require_cylinder(result: CalibrationResult) -> Cylinder:
-    """The result's cylinder, or ReportError for a target that has none (known point)."""
-    if result.cylinder is None:
+    """The result's cylinder, or ReportError for a target whose section is not a cylinder.
+
+    The report's figures and the visualisation draw profiles against a fitted cylinder;
+    they exist for the cylinder target only.
+    """
+    if not isinstance(result.target, CylinderSection):
         raise ReportError(
             "the report and the visualisation show profiles against the fitted cylinder; "
-            "this result (known-point target) has no cylinder: use the result YAML instead"
+            f"this result ({result.target.title} target) has no cylinder: use the result "
+            "YAML instead"
         )
-    return result.cylinder
+    return result.target.cylinder

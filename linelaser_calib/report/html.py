@@ -21,10 +21,10 @@ from linelaser_calib.io.results import Truth
 from linelaser_calib.report.errors import ReportError
 from linelaser_calib.summary import (
     Rows,
-    cylinder_text,
     hand_eye_rows,
     rejection_lines,
     residual_rows,
+    target_text,
     truth_rows,
 )
 
@@ -94,7 +94,7 @@ def _page(
         f"{html.escape(result.child_frame)})</h2>",
         _table(hand_eye_rows(result)),
         "<h2>Cylinder and residual</h2>",
-        f"<p>{html.escape(cylinder_text(result))}</p>",
+        f"<p>{html.escape(target_text(result))}</p>",
         _table(residual_rows(result)),
         "<h2>Samples</h2>",
         f"<p>{len(result.samples_used)} used, {len(result.samples_rejected)} rejected.</p>",

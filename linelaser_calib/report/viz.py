@@ -10,8 +10,8 @@ The file holds, with the samples' original stamps:
   in the base frame, ``T_base_flange · T_flange_sensor · p``, at the sample's stamp.
 - ``/linelaser_calib/cloud`` (``sensor_msgs/msg/PointCloud2``): all of them in one cloud, at
   the first stamp, so that a viewer shows every profile at once.
-- ``/linelaser_calib/markers`` (``visualization_msgs/msg/MarkerArray``): the fitted cylinder
-  over the scanned length, at the first stamp.
+- ``/linelaser_calib/markers`` (``visualization_msgs/msg/MarkerArray``): the target's shapes
+  (e.g. the fitted cylinder over the scanned length, the known point), at the first stamp.
 
 It is a plain MCAP file as rosbag2 writes them (``ros2msg`` schemas from the rosbags
 typestore, CDR messages), written with the ``mcap`` library: Foxglove opens it directly and
@@ -31,14 +31,14 @@ from mcap.writer import Writer
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from linelaser_calib.core.residuals import axis_extent, sample_points_base
+from linelaser_calib.core.residuals import sample_points_base
 from linelaser_calib.core.types import CalibrationResult
-from linelaser_calib.report.errors import ReportError, require_cylinder
+from linelaser_calib.report.errors import ReportError
 from msg_adapters import (
-    cylinder_marker,
     marker_array,
     pointcloud2_from_points,
     rosbags_types,
+    shape_markers,
     transform_stamped_from_matrix,
 )
 
@@ -101,10 +101,8 @@ def _write(writer: Writer, result: CalibrationResult) -> None:
     channels.write("tf_static", first, tf_message(transforms=[hand_eye]))
     points = [sample_points_base(f, result.T_flange_sensor) for f in fits]
     every = np.concatenate(points) if points else np.zeros((0, 3))
-    cylinder = require_cylinder(result)
-    centre, length = axis_extent(every, cylinder)
-    marker = cylinder_marker(cylinder, length, base, types=types, centre=centre)
-    channels.write("markers", first, marker_array([marker], types=types))
+    markers = shape_markers(result.target.shapes(every), base, types=types)
+    channels.write("markers", first, marker_array(markers, types=types))
     channels.write("cloud", first, pointcloud2_from_points(every, first, base, types=types))
     for fit, sample_points in zip(fits, points, strict=True):
         pose = transform_stamped_from_matrix(

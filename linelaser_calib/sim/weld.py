@@ -4,7 +4,7 @@ The target (``v_groove``) is two half-planes (the flanks) meeting along a straig
 laser plane crosses the seam, so every profile is a V whose corner is the seam point in the
 plane. The user has taught the weld point (a point on the seam) with the tool tip and scans
 it from several flange poses, each aimed so that the laser line passes through it (weld-seam
-paper §2.3, ``papers.md`` §B).
+paper §2.3).
 
 :class:`WeldScenario` holds the weld geometry and the view pattern and, in its ``rig`` field,
 an ordinary :class:`~linelaser_calib.sim.scenario.Scenario` for everything else: profiler
@@ -52,7 +52,7 @@ the safe side) and 0.002 deg per axis.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -66,12 +66,11 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_rotvec_translation,
 )
-from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
-from linelaser_calib.sim.profiler import Trace, measure, ray_directions
-from linelaser_calib.sim.robot import StepMotion, draw_errors, reported_flange
-from linelaser_calib.sim.scenario import Scenario
+from linelaser_calib.core.types import BoolArray, FloatArray
+from linelaser_calib.sim.profiler import Trace, ray_directions
+from linelaser_calib.sim.scenario import Scenario, rig_scene_from_preset
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
-from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
+from linelaser_calib.sim.simulate import RigSimulatedData, step_and_shoot
 
 Vec3 = tuple[float, float, float]
 
@@ -520,28 +519,8 @@ class WeldTruth:
     dropout: BoolArray
 
 
-@dataclass(frozen=True, eq=False)
-class WeldSimulatedData:
-    """Everything a weld-seam run produces; the same layout as ``SimulatedData``.
-
-    Attributes
-    ----------
-    profiles : list of Profile
-    intensities : list of (ndarray or None)
-    poses : list of FlangePose
-        The full reported flange-pose stream, sorted by stamp.
-    truth : WeldTruth
-    """
-
-    profiles: list[Profile]
-    intensities: list[FloatArray | None]
-    poses: list[FlangePose]
-    truth: WeldTruth
-
-    @property
-    def scenario(self) -> Scenario:
-        """The rig (topics, frame names, output format), as ``SimulatedData.scenario``."""
-        return self.truth.scenario.rig
+#: Everything a weld-seam run produces.
+WeldSimulatedData = RigSimulatedData[WeldTruth]
 
 
 def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
@@ -561,16 +540,9 @@ def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
     )
     views[:, :3, 3] += rng.normal(size=(len(views), 1)) * scenario.aim_sigma_m * views[:, :3, 1]
     taught = groove.point + rng.normal(size=3) * scenario.teach_sigma_m
-    motion = StepMotion.plan(views, rig)
-    errors = draw_errors(rng, rig, len(views))
-
-    acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
-    t_shot = acq_ns / 1e9
-    T_sensor_shot = motion.T_base_sensor(t_shot)
-    traced, flank = trace_groove(groove, rig, T_sensor_shot)
-    measured = measure(rng, rig, traced)
-    poses = recorded_pose_stream(rng, rig, motion, errors)
-    stamps, profiles, intensities = published_profiles(rig, acq_ns, measured)
+    run = step_and_shoot(rng, rig, views, lambda T: trace_groove(groove, rig, T)[0])
+    T_sensor_shot = run.T_base_sensor
+    _, flank = trace_groove(groove, rig, T_sensor_shot)
     corner_base = groove.seam_point_in_plane(T_sensor_shot)
     corner_sensor = np.einsum(
         "kji,kj->ki", T_sensor_shot[:, :3, :3], corner_base - T_sensor_shot[:, :3, 3]
@@ -582,20 +554,20 @@ def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
         weld_point_m=groove.point.copy(),
         taught_point_m=taught,
         seam_direction=groove.seam.copy(),
-        T_base_flange_true=T_sensor_shot @ invert_transform(rig.T_flange_sensor),
-        T_base_flange_recorded=reported_flange(motion, rig, errors, t_shot),
-        stamps_ns=stamps,
-        acquisition_stamps_ns=rig.epoch_ns + acq_ns,
+        T_base_flange_true=run.T_base_flange_true,
+        T_base_flange_recorded=run.T_base_flange_recorded,
+        stamps_ns=run.stamps_ns,
+        acquisition_stamps_ns=rig.epoch_ns + run.acquisition_ns,
         T_base_sensor_waypoints=views,
         corner_true_sensor=corner_sensor,
         corner_true_base=corner_base,
         flank=flank,
-        points_true_sensor=traced.points_sensor,
-        valid=measured.valid,
-        spike=measured.spike,
-        dropout=measured.dropout,
+        points_true_sensor=run.traced.points_sensor,
+        valid=run.measured.valid,
+        spike=run.measured.spike,
+        dropout=run.measured.dropout,
     )
-    return WeldSimulatedData(profiles, intensities, poses, truth)
+    return WeldSimulatedData(run.profiles, run.intensities, run.poses, truth)
 
 
 def _weld_rig() -> Scenario:
@@ -650,21 +622,7 @@ def weld_scenario_from_preset(name: str, **overrides: Any) -> WeldScenario:
     InputError
         For an unknown preset or field, or an invalid value.
     """
-    if name not in WELD_PRESETS:
-        raise InputError(f"unknown weld preset {name!r}; choose one of {sorted(WELD_PRESETS)}")
-    own = {f.name for f in fields(WeldScenario)} - {"rig"}
-    rig_fields = {f.name for f in fields(Scenario)} - {"name"}
-    unknown = sorted(set(overrides) - own - rig_fields)
-    if unknown:
-        raise InputError(
-            f"unknown weld scenario field(s) {unknown}; see linelaser_calib.sim.weld.WeldScenario "
-            "and linelaser_calib.sim.Scenario"
-        )
-    preset = WELD_PRESETS[name]
-    rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
-    own_overrides = {k: v for k, v in overrides.items() if k in own}
-    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
-    return replace(preset, rig=rig, **own_overrides)
+    return rig_scene_from_preset(WELD_PRESETS, name, "weld", overrides)
 
 
 def bumped_hand_eye(

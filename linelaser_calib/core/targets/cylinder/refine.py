@@ -40,10 +40,11 @@ Every iteration linearises around the current estimate in local coordinates:
 - corrections: ω_j, τ_j additively (exact right Jacobian of Exp).
 
 The Jacobian is analytic and block-sparse: a point depends on the G = 10 or 11 global
-numbers and on its sample's 6. Levenberg–Marquardt (Marquardt scaling, Nielsen's damping
-update) with iteratively re-weighted robust weights solves the normal equations by a Schur
-complement: each sample's 6×6 block is inverted on its own and eliminated, leaving a G×G
-system. Cost and time grow linearly with the number of samples.
+numbers and on its sample's 6. The shared block solver
+(:mod:`linelaser_calib.core.solver`: Levenberg–Marquardt with Marquardt scaling, Nielsen's
+damping update and iteratively re-weighted robust weights) solves the normal equations by a
+Schur complement: each sample's 6×6 block is inverted on its own and eliminated, leaving a
+G×G system. Cost and time grow linearly with the number of samples.
 
 Covariance
 ----------
@@ -73,38 +74,42 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation
-from scipy.stats import chi2
+from scipy.special import chdtri
 
-from .errors import DegenerateError, InputError, SolverError
-from .geometry import (
+from ...errors import DegenerateError, InputError, SolverError
+from ...geometry import (
     FloatArray,
     check_transform,
+    exp_so3,
     orthonormal_basis,
+    right_jacobian_so3,
     transform_from_rotation_translation,
 )
-from .observability import (
+from ...observability import (
     Observability,
     ObservabilityConfig,
     analyse_observability,
     pose_geometry,
 )
-from .types import Cylinder
+from ...solver import (
+    LOSSES,
+    N_HAND_EYE,
+    N_LOCAL,
+    Flag,
+    Linearisation,
+    Residuals,
+    Solution,
+    SolverConfig,
+    evaluate_loss,
+    normal_equations,
+    solve,
+    solve_with_rejection,
+    variance_factors,
+)
+from ...types import Cylinder
 
-#: Robust losses: ρ(s) of the squared normalised residual s = (e / scale)².
-LOSSES = ("huber", "soft_l1", "linear")
-#: Number of hand-eye parameters (θ, ρ) and axis parameters (a, b) in the global block.
-N_HAND_EYE = 6
+#: Axis parameters (a, b) in the global block, after the hand-eye's 6.
 N_AXIS = 4
-#: Parameters of one pose correction (ω, τ).
-N_LOCAL = 6
-#: Initial Levenberg–Marquardt damping, relative to the diagonal of the information.
-INITIAL_DAMPING = 1e-7
-#: Floor of the re-estimated variance factors: a σ is never taken as below 0.1 of the
-#: configured one (noise-free data would otherwise make the information singular).
-MIN_VARIANCE_FACTOR = 0.01
-#: Damping beyond which no step lowers the cost any more: a minimum to machine precision.
-MAX_DAMPING = 1e16
 
 
 @dataclass(frozen=True)
@@ -217,6 +222,17 @@ class RefineConfig:
         if not 0.0 < self.outlier_prior_probability < 1.0:
             raise InputError("RefineConfig.outlier_prior_probability must be in (0, 1)")
 
+    @property
+    def solver(self) -> SolverConfig:
+        """The shared solver's settings."""
+        return SolverConfig(
+            loss=self.loss,
+            loss_scale=self.loss_scale,
+            max_iterations=self.max_iterations,
+            tolerance=self.tolerance,
+            step_tolerance_m=self.step_tolerance_m,
+        )
+
 
 class DroppedSample(NamedTuple):
     """A sample removed as an outlier: its index in the caller's list and why (µm, mm, deg)."""
@@ -315,46 +331,35 @@ class RefineResult:
 
 
 # --------------------------------------------------------------------------------------
-# Problem data, state and residuals
+# The problem in the shared solver's block form
 
 
 @dataclass(frozen=True)
-class _Problem:
-    """Validated, subsampled data in a padded (samples × points) layout.
+class CylinderState:
+    """Current estimate (absolute values, not increments).
 
-    Sample j's points fill ``points[j, :counts[j]]``; the rest repeat its first point and are
-    masked out (residual and Jacobian rows zero), so that every per-point operation is a
-    batched array operation without gathers.
+    Attributes
+    ----------
+    R_fs : ndarray, shape (3, 3)
+    t_fs : ndarray, shape (3,)
+        Hand-eye, m.
+    point : ndarray, shape (3,)
+        On the axis, base frame, m.
+    direction : ndarray, shape (3,)
+        Unit axis direction.
+    radius : float
+        m.
+    omega, tau : ndarray, shape (M, 3)
+        Pose corrections, rad and m, flange frame.
     """
 
-    points: FloatArray  # (M, K, 3) sensor frame, m
-    mask: FloatArray  # (M, K) 1 for a real point, 0 for padding
-    counts: np.ndarray  # (M,) real points per sample
-    R_bf: FloatArray  # (M, 3, 3)
-    t_bf: FloatArray  # (M, 3)
-    estimate_radius: bool
-    config: RefineConfig
-
-    @property
-    def n_samples(self) -> int:
-        return int(self.R_bf.shape[0])
-
-    @property
-    def n_global(self) -> int:
-        return N_HAND_EYE + N_AXIS + int(self.estimate_radius)
-
-
-@dataclass(frozen=True)
-class _State:
-    """Current estimate (absolute values, not increments)."""
-
-    R_fs: FloatArray  # (3, 3)
-    t_fs: FloatArray  # (3,)
-    point: FloatArray  # (3,) on the axis
-    direction: FloatArray  # (3,) unit
+    R_fs: FloatArray
+    t_fs: FloatArray
+    point: FloatArray
+    direction: FloatArray
     radius: float
-    omega: FloatArray  # (M, 3) rad, flange frame
-    tau: FloatArray  # (M, 3) m, flange frame
+    omega: FloatArray
+    tau: FloatArray
 
 
 class _Geometry(NamedTuple):
@@ -367,33 +372,111 @@ class _Geometry(NamedTuple):
     along: FloatArray  # (M, K) d · (x − c)
 
 
-def _exp_so3(omega: FloatArray) -> FloatArray:
-    """Rotation matrices (M, 3, 3) of rotation vectors (M, 3)."""
-    return np.asarray(Rotation.from_rotvec(omega).as_matrix())
+@dataclass(frozen=True)
+class CylinderProblem:
+    """Validated, subsampled data in a padded (samples × points) layout; a
+    :class:`~linelaser_calib.core.solver.BlockProblem`.
+
+    Sample j's points fill ``points[j, :counts[j]]``; the rest repeat its first point and are
+    masked out (residual and Jacobian rows zero), so that every per-point operation is a
+    batched array operation without gathers. Global step: θ (3), ρ (3), a (2), b (2) and,
+    when estimated, the radius (see the module docstring). With ``centroid`` set, a
+    retraction slides the axis point along the axis to the point nearest it (same cylinder).
+    """
+
+    points: FloatArray  # (M, K, 3) sensor frame, m
+    mask: FloatArray  # (M, K) 1 for a real point, 0 for padding
+    counts: np.ndarray  # (M,) real points per sample
+    R_bf: FloatArray  # (M, 3, 3)
+    t_bf: FloatArray  # (M, 3)
+    estimate_radius: bool
+    config: RefineConfig
+    centroid: FloatArray | None = None
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.R_bf.shape[0])
+
+    @property
+    def n_global(self) -> int:
+        return N_HAND_EYE + N_AXIS + int(self.estimate_radius)
+
+    @property
+    def step_scale(self) -> FloatArray:
+        """Rotations times the lever, lengths as they are."""
+        scale = np.ones(self.n_global)
+        scale[:3] = _lever(self)
+        return scale
+
+    def _prior_sqrt_information(self) -> FloatArray:
+        cfg = self.config
+        return np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
+
+    def residuals(self, state: CylinderState) -> Residuals:
+        """Normalised point residuals (M, K), zero on padding, and pose priors (M, 6)."""
+        return self._residuals(state, _geometry(self, state))
+
+    def _residuals(self, state: CylinderState, geo: _Geometry) -> Residuals:
+        cfg = self.config
+        e = (geo.distance - state.radius) * (self.mask / cfg.sensor_sigma_m)
+        prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
+        return Residuals(e, prior)
+
+    def linearise(self, state: CylinderState) -> Linearisation:
+        """Residuals and their analytic Jacobians.
+
+        ``J_global`` (M, K, G) has the columns θ (3), ρ (3), a (2), b (2) and, when
+        estimated, the radius; ``J_local`` (M, K, 6) the columns ω (3), τ (3) of the point's
+        own sample; both zero on padding.
+        """
+        geo = _geometry(self, state)
+        scale = (self.mask / self.config.sensor_sigma_m)[..., None]
+        n_base = geo.normal * scale
+        n_corrected = n_base @ self.R_bf  # rows R_bfᵀ n: d r / d τ
+        n_flange = n_base @ geo.RE  # rows Exp(ω)ᵀ R_bfᵀ n: d r / d ρ
+        n_sensor = n_flange @ state.R_fs  # rows R_fsᵀ n_flange
+        u, v = orthonormal_basis(state.direction)
+        n_uv = n_base @ np.column_stack([u, v])
+        columns = [_cross(self.points, n_sensor), n_flange, -geo.along[..., None] * n_uv, -n_uv]
+        if self.estimate_radius:
+            columns.append(-scale)
+        J_omega = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
+        return Linearisation(
+            residuals=self._residuals(state, geo),
+            J_global=np.concatenate(columns, axis=2),
+            J_local=np.concatenate([J_omega, n_corrected], axis=2),
+            pose_prior_sqrt_information=self._prior_sqrt_information(),
+        )
+
+    def retract(
+        self, state: CylinderState, step_global: FloatArray, step_local: FloatArray
+    ) -> CylinderState:
+        """Apply increments in the local coordinates of :meth:`linearise`."""
+        u, v = orthonormal_basis(state.direction)
+        direction = state.direction + step_global[6] * u + step_global[7] * v
+        moved = CylinderState(
+            R_fs=state.R_fs @ exp_so3(step_global[None, :3])[0],
+            t_fs=state.t_fs + step_global[3:6],
+            point=state.point + step_global[8] * u + step_global[9] * v,
+            direction=direction / np.linalg.norm(direction),
+            radius=state.radius + (float(step_global[10]) if self.estimate_radius else 0.0),
+            omega=state.omega + step_local[:, :3],
+            tau=state.tau + step_local[:, 3:],
+        )
+        return moved if self.centroid is None else _recentred(moved, self.centroid)
 
 
-def _right_jacobian(omega: FloatArray) -> FloatArray:
-    """Right Jacobians (M, 3, 3) of SO(3): Exp(ω + dω) ≈ Exp(ω)·Exp(J_r(ω)·dω)."""
-    theta = np.linalg.norm(omega, axis=1)
-    small = theta < 1e-4
-    t = np.where(small, 1.0, theta)
-    a = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
-    b = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
-    K = np.zeros((len(omega), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -omega[:, 2], omega[:, 1], -omega[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = omega[:, 2], -omega[:, 1], omega[:, 0]
-    return np.asarray(np.eye(3) - a[:, None, None] * K + b[:, None, None] * (K @ K))
-
-
-def _sample_transforms(problem: _Problem, state: _State) -> tuple[FloatArray, FloatArray]:
+def _sample_transforms(
+    problem: CylinderProblem, state: CylinderState
+) -> tuple[FloatArray, FloatArray]:
     """Per-sample rotation R_bf·Exp(ω) (M, 3, 3) and the base position of the flange-frame
     origin after correction, t_bf + R_bf·τ (M, 3)."""
-    RE = problem.R_bf @ _exp_so3(state.omega)
+    RE = problem.R_bf @ exp_so3(state.omega)
     offset = problem.t_bf + np.einsum("mij,mj->mi", problem.R_bf, state.tau)
     return RE, offset
 
 
-def _geometry(problem: _Problem, state: _State) -> _Geometry:
+def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
     """Base-frame points and their relation to the axis."""
     RE, offset = _sample_transforms(problem, state)
     y = problem.points @ state.R_fs.T + state.t_fs
@@ -405,38 +488,6 @@ def _geometry(problem: _Problem, state: _State) -> _Geometry:
     return _Geometry(y, RE, distance, normal, along)
 
 
-def _residuals(problem: _Problem, state: _State, geo: _Geometry) -> tuple[FloatArray, FloatArray]:
-    """Normalised point residuals (M, K), zero on padding, and prior residuals (M, 6)."""
-    cfg = problem.config
-    e = (geo.distance - state.radius) * (problem.mask / cfg.sensor_sigma_m)
-    prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
-    return e, prior
-
-
-def _jacobians(problem: _Problem, state: _State, geo: _Geometry) -> tuple[FloatArray, FloatArray]:
-    """Analytic Jacobians of the normalised point residuals.
-
-    Returns
-    -------
-    J_global : ndarray, shape (M, K, G)
-        Columns θ (3), ρ (3), a (2), b (2) and, when estimated, the radius; zero on padding.
-    J_local : ndarray, shape (M, K, 6)
-        Columns ω (3), τ (3) of the point's own sample; zero on padding.
-    """
-    scale = (problem.mask / problem.config.sensor_sigma_m)[..., None]
-    n_base = geo.normal * scale
-    n_corrected = n_base @ problem.R_bf  # rows R_bfᵀ n: d r / d τ
-    n_flange = n_base @ geo.RE  # rows Exp(ω)ᵀ R_bfᵀ n: d r / d ρ
-    n_sensor = n_flange @ state.R_fs  # rows R_fsᵀ n_flange
-    u, v = orthonormal_basis(state.direction)
-    n_uv = n_base @ np.column_stack([u, v])
-    columns = [_cross(problem.points, n_sensor), n_flange, -geo.along[..., None] * n_uv, -n_uv]
-    if problem.estimate_radius:
-        columns.append(-scale)
-    J_omega = _cross(geo.y, n_flange) @ _right_jacobian(state.omega)
-    return np.concatenate(columns, axis=2), np.concatenate([J_omega, n_corrected], axis=2)
-
-
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
     """Cross products of (..., 3) arrays (cheaper than numpy.cross on small last axes)."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
@@ -444,24 +495,7 @@ def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def _retract(
-    problem: _Problem, state: _State, step_global: FloatArray, step_local: FloatArray
-) -> _State:
-    """Apply increments in the local coordinates of :func:`_jacobians`."""
-    u, v = orthonormal_basis(state.direction)
-    direction = state.direction + step_global[6] * u + step_global[7] * v
-    return _State(
-        R_fs=state.R_fs @ _exp_so3(step_global[None, :3])[0],
-        t_fs=state.t_fs + step_global[3:6],
-        point=state.point + step_global[8] * u + step_global[9] * v,
-        direction=direction / np.linalg.norm(direction),
-        radius=state.radius + (float(step_global[10]) if problem.estimate_radius else 0.0),
-        omega=state.omega + step_local[:, :3],
-        tau=state.tau + step_local[:, 3:],
-    )
-
-
-def _data_centroid(problem: _Problem, state: _State) -> FloatArray:
+def _data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray:
     """Mean of the profiles' centroids in the base frame (3,), m."""
     RE, offset = _sample_transforms(problem, state)
     means = np.sum(problem.points * problem.mask[..., None], axis=1) / problem.counts[:, None]
@@ -469,120 +503,10 @@ def _data_centroid(problem: _Problem, state: _State) -> FloatArray:
     return np.asarray(np.mean(np.einsum("mij,mj->mi", RE, y) + offset, axis=0))
 
 
-def _recentred(state: _State, centroid: FloatArray) -> _State:
+def _recentred(state: CylinderState, centroid: FloatArray) -> CylinderState:
     """Slide the axis point along the axis to the point nearest ``centroid`` (same cylinder)."""
     point = state.point + float((centroid - state.point) @ state.direction) * state.direction
     return replace(state, point=point)
-
-
-# --------------------------------------------------------------------------------------
-# Robust loss, cost and normal equations
-
-
-def _loss(e: FloatArray, config: RefineConfig) -> tuple[FloatArray, FloatArray]:
-    """Robust cost terms c²·ρ(s) (twice the cost) and IRLS weights ρ'(s), shaped like ``e``."""
-    c = config.loss_scale
-    s = (e / c) ** 2
-    if config.loss == "linear":
-        return e**2, np.ones_like(e)
-    if config.loss == "huber":
-        root = np.sqrt(s)
-        inside = s <= 1.0
-        rho = np.where(inside, s, 2.0 * root - 1.0)
-        weight = np.where(inside, 1.0, 1.0 / np.maximum(root, 1.0))
-        return c**2 * rho, weight
-    root = np.sqrt(1.0 + s)
-    return c**2 * 2.0 * (root - 1.0), 1.0 / root
-
-
-def _cost(problem: _Problem, state: _State) -> float:
-    """½ Σ robust point cost + ½ Σ prior², dimensionless."""
-    e, prior = _residuals(problem, state, _geometry(problem, state))
-    rho, _ = _loss(e, problem.config)
-    return 0.5 * float(np.sum(rho) + np.sum(prior**2))
-
-
-@dataclass(frozen=True)
-class _Normal:
-    """Gauss-Newton normal equations H·δ = −g in block form (A, B_j, C_j)."""
-
-    A: FloatArray  # (G, G) global-global
-    B: FloatArray  # (M, G, 6) global-local per sample
-    C_data: FloatArray  # (M, 6, 6) local-local per sample, from the points only
-    prior_precision: FloatArray  # (6,) diagonal prior information of a pose correction
-    g_global: FloatArray  # (G,)
-    g_local: FloatArray  # (M, 6) priors included
-
-    def C(self, sensor_factor: float = 1.0, robot_factor: float = 1.0) -> FloatArray:
-        """Local blocks (M, 6, 6) with the point and prior information divided by the
-        sensor and robot variance factors."""
-        return np.asarray(
-            self.C_data / sensor_factor + np.diag(self.prior_precision / robot_factor)
-        )
-
-
-def _normal_equations(
-    problem: _Problem, state: _State, geo: _Geometry, weights: FloatArray | None = None
-) -> _Normal:
-    """Weighted normal equations at ``state``; ``weights`` None uses the robust IRLS weights."""
-    cfg = problem.config
-    e, prior = _residuals(problem, state, geo)
-    if weights is None:
-        _, weights = _loss(e, cfg)
-    J = np.concatenate(_jacobians(problem, state, geo), axis=2)
-    WJ = J * weights[..., None]
-    H = J.transpose(0, 2, 1) @ WJ
-    gradient = np.einsum("mkp,mk->mp", WJ, e)
-    G = problem.n_global
-    prior_info = np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
-    return _Normal(
-        A=H[:, :G, :G].sum(axis=0),
-        B=H[:, :G, G:],
-        C_data=H[:, G:, G:],
-        prior_precision=prior_info**2,
-        g_global=gradient[:, :G].sum(axis=0),
-        g_local=gradient[:, G:] + prior * prior_info,
-    )
-
-
-def _solve(normal: _Normal, damping: float) -> tuple[FloatArray, FloatArray]:
-    """Solve (H + damping·diag H)·δ = −g by eliminating each sample's block (Schur)."""
-    A = normal.A + damping * np.diag(np.diag(normal.A))
-    C = normal.C()
-    C = C + damping * np.einsum("mii->mi", C)[:, :, None] * np.eye(N_LOCAL)
-    C_inv = np.linalg.inv(C)
-    BC = normal.B @ C_inv
-    S = A - np.einsum("mgk,mhk->gh", BC, normal.B)
-    rhs = -normal.g_global + np.einsum("mgk,mk->g", BC, normal.g_local)
-    step_global = np.linalg.solve(S, rhs)
-    step_local = -np.einsum(
-        "mkl,ml->mk", C_inv, normal.g_local + np.einsum("mgk,g->mk", normal.B, step_global)
-    )
-    return step_global, step_local
-
-
-def _schur_information(
-    normal: _Normal, sensor_factor: float = 1.0, robot_factor: float = 1.0
-) -> FloatArray:
-    """Information (G, G) of the global parameters with the pose corrections marginalised,
-    the point and prior information divided by the sensor and robot variance factors."""
-    B = normal.B / sensor_factor
-    BC = B @ np.linalg.inv(normal.C(sensor_factor, robot_factor))
-    S = normal.A / sensor_factor - np.einsum("mgk,mhk->gh", BC, B)
-    return np.asarray(0.5 * (S + S.T))
-
-
-def _variance_factors(
-    normal: _Normal, point_cost: float, prior_cost: float, n_points: int, n_global: int
-) -> tuple[float, float]:
-    """Sensor and robot variance factors (s_s², s_r²) from the residuals and the redundancies
-    (see the module docstring); 1 where a group keeps less than one degree of freedom."""
-    C_inv = np.linalg.inv(normal.C())
-    r_prior = float(np.sum(N_LOCAL - np.einsum("mii,i->m", C_inv, normal.prior_precision)))
-    r_points = n_points - n_global - r_prior
-    sensor = point_cost / r_points if r_points >= 1.0 else 1.0
-    robot = prior_cost / r_prior if r_prior >= 1.0 else 1.0
-    return max(sensor, MIN_VARIANCE_FACTOR), max(robot, MIN_VARIANCE_FACTOR)
 
 
 def _marginal_hand_eye(information: FloatArray) -> FloatArray:
@@ -605,13 +529,17 @@ def _subsample(points: FloatArray, limit: int) -> FloatArray:
     return np.asarray(points[np.round(np.linspace(0, len(points) - 1, limit)).astype(int)])
 
 
-def _build_problem(
+def build_problem(
     samples_points: list[FloatArray],
     T_base_flange: ArrayLike,
     config: RefineConfig,
     estimate_radius: bool,
-) -> _Problem:
-    """Validate the input (InputError/DegenerateError with advice) and stack it."""
+) -> CylinderProblem:
+    """Validate the input (InputError/DegenerateError with advice) and stack it.
+
+    Parameters are those of :func:`refine`; ``estimate_radius`` adds the radius to the
+    global parameters.
+    """
     T_all = np.asarray(T_base_flange, dtype=np.float64)
     M = len(samples_points)
     if T_all.shape != (M, 4, 4):
@@ -649,7 +577,7 @@ def _build_problem(
         points[j, : len(q)] = q
         points[j, len(q) :] = q[0]
         mask[j, : len(q)] = 1.0
-    return _Problem(
+    return CylinderProblem(
         points=points,
         mask=mask,
         counts=counts,
@@ -660,9 +588,16 @@ def _build_problem(
     )
 
 
-def _initial_state(
-    problem: _Problem, T_flange_sensor0: ArrayLike, cylinder0: Cylinder, radius: float
-) -> _State:
+def initial_state(
+    problem: CylinderProblem, T_flange_sensor0: ArrayLike, cylinder0: Cylinder, radius: float
+) -> CylinderState:
+    """The start of the solve: the given hand-eye and axis, zero pose corrections.
+
+    Raises
+    ------
+    InputError
+        A start that is not a rigid transform, a degenerate axis or a bad radius.
+    """
     try:
         T0 = check_transform(T_flange_sensor0, tolerance=1e-4)
     except ValueError as exc:
@@ -676,7 +611,7 @@ def _initial_state(
     if not (np.isfinite(radius) and radius > 0.0):
         raise InputError(f"the cylinder radius must be a positive length in m, got {radius}")
     M = problem.n_samples
-    return _State(
+    return CylinderState(
         R_fs=T0[:3, :3].copy(),
         t_fs=T0[:3, 3].copy(),
         point=c,
@@ -698,7 +633,7 @@ def _robust_zscore(values: FloatArray) -> FloatArray:
     return np.asarray((values - median) / max(mad, 1e-3 * abs(median), 1e-300))
 
 
-def _lever(problem: _Problem) -> float:
+def _lever(problem: CylinderProblem) -> float:
     """Median distance of the profile points from the sensor origin, m."""
     lever = problem.config.observability.lever_m
     if lever is not None:
@@ -706,7 +641,9 @@ def _lever(problem: _Problem) -> float:
     return float(np.median(np.linalg.norm(problem.points, axis=2)[problem.mask > 0.0]))
 
 
-def _observability(problem: _Problem, state: _State, information: FloatArray) -> Observability:
+def _observability(
+    problem: CylinderProblem, state: CylinderState, information: FloatArray
+) -> Observability:
     T = transform_from_rotation_translation(state.R_fs, state.t_fs)
     T_base_flange = np.zeros((problem.n_samples, 4, 4))
     T_base_flange[:, :3, :3] = problem.R_bf
@@ -718,58 +655,6 @@ def _observability(problem: _Problem, state: _State, information: FloatArray) ->
         pose_geometry(T_base_flange, T, state.point, state.direction),
         problem.config.observability,
     )
-
-
-def _levenberg_marquardt(problem: _Problem, state: _State) -> tuple[_State, list[float], int, bool]:
-    """Minimise the cost from ``state``; returns the state, cost history, iterations, converged."""
-    cfg = problem.config
-    centroid = _data_centroid(problem, state)
-    state = _recentred(state, centroid)
-    cost = _cost(problem, state)
-    history = [cost]
-    damping, growth = INITIAL_DAMPING, 2.0
-    scale = np.ones(problem.n_global)
-    scale[:3] = _lever(problem)
-    converged = False
-    iterations = 0
-    normal = None
-    while iterations < cfg.max_iterations:
-        if normal is None:
-            normal = _normal_equations(problem, state, _geometry(problem, state))
-            iterations += 1
-        step_global, step_local = _solve(normal, damping)
-        if float(np.max(np.abs(step_global * scale))) < cfg.step_tolerance_m:
-            converged = True
-            break
-        candidate = _retract(problem, state, step_global, step_local)
-        new_cost = _cost(problem, candidate)
-        diag_step = np.concatenate(
-            [
-                np.diag(normal.A) * step_global,
-                np.einsum("mii->mi", normal.C()).ravel() * step_local.ravel(),
-            ]
-        )
-        step = np.concatenate([step_global, step_local.ravel()])
-        gradient = np.concatenate([normal.g_global, normal.g_local.ravel()])
-        predicted = 0.5 * float(damping * step @ diag_step - gradient @ step)
-        gain = (cost - new_cost) / predicted if predicted > 0.0 else -1.0
-        if gain > 0.0:
-            decrease = cost - new_cost
-            state, cost = _recentred(candidate, centroid), new_cost
-            history.append(cost)
-            normal = None
-            damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
-            growth = 2.0
-            if decrease <= cfg.tolerance * max(cost, 1e-300):
-                converged = True
-                break
-        else:
-            damping *= growth
-            growth *= 2.0
-            if damping > MAX_DAMPING:
-                converged = True
-                break
-    return state, history, iterations, converged
 
 
 def refine(
@@ -813,40 +698,36 @@ def refine(
     """
     cfg = RefineConfig() if config is None else config
     estimate_radius = radius_m is None or cfg.estimate_radius
-    problem = _build_problem(samples_points, T_base_flange, cfg, estimate_radius)
-    state = _initial_state(
+    problem = build_problem(samples_points, T_base_flange, cfg, estimate_radius)
+    state = initial_state(
         problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
     )
+    geometric = normal_equations(problem.linearise(state), cfg.solver, np.ones_like(problem.mask))
+    _observability(problem, state, geometric.schur_information()).raise_if_unobservable()
 
-    geometric = _normal_equations(
-        problem, state, _geometry(problem, state), np.ones_like(problem.mask)
-    )
-    _observability(problem, state, _schur_information(geometric)).raise_if_unobservable()
-
-    state, history, iterations, converged = _levenberg_marquardt(problem, state)
-    if not (np.all(np.isfinite(state.R_fs)) and np.isfinite(history[-1])):
+    centroid = _data_centroid(problem, state)
+    problem = replace(problem, centroid=centroid)
+    solution = solve(problem, _recentred(state, centroid), cfg.solver)
+    if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError("the refinement produced non-finite values: check the initial estimate")
-    return _summarise(problem, state, history, iterations, converged)
+    return _summarise(problem, solution)
 
 
-def _summarise(
-    problem: _Problem, state: _State, history: list[float], iterations: int, converged: bool
-) -> RefineResult:
+def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> RefineResult:
     """Covariance, observability and per-sample statistics at the solution."""
     cfg = problem.config
-    geo = _geometry(problem, state)
-    e, prior = _residuals(problem, state, geo)
-    normal = _normal_equations(problem, state, geo)
-    rho, _ = _loss(e, cfg)
+    state, normal = solution.state, solution.normal
+    e, prior = solution.residuals.points, solution.residuals.pose_prior
+    rho, _ = evaluate_loss(e, cfg.solver)
     point_cost, prior_cost = float(np.sum(rho)), float(np.sum(prior**2))
     n_points = int(problem.counts.sum())
     chi2_dof = (point_cost + prior_cost) / max(n_points - problem.n_global, 1)
     factors = (1.0, 1.0)
     if cfg.estimate_variance_factors:
-        factors = _variance_factors(normal, point_cost, prior_cost, n_points, problem.n_global)
-    observability = _observability(problem, state, _schur_information(normal))
+        factors = variance_factors(normal, point_cost, prior_cost, n_points, problem.n_global)
+    observability = _observability(problem, state, normal.schur_information())
     observability.raise_if_unobservable()
-    covariance = np.linalg.inv(_schur_information(normal, *factors))
+    covariance = np.linalg.inv(normal.schur_information(*factors))
     sigma = np.sqrt(np.diag(covariance))
 
     squares = np.sum((e * cfg.sensor_sigma_m) ** 2, axis=1)
@@ -854,9 +735,10 @@ def _summarise(
     beyond = np.sum(np.abs(e) > cfg.loss_scale, axis=1)
     cylinder_point = state.point - float(state.point @ state.direction) * state.direction
     warnings = list(observability.warnings)
-    if not converged:
+    history = solution.cost_history
+    if not solution.converged:
         warnings.append(
-            f"the refinement stopped after {iterations} iterations without converging "
+            f"the refinement stopped after {solution.iterations} iterations without converging "
             f"(cost {history[-1]:.6g}); the result may be inaccurate"
         )
     return RefineResult(
@@ -881,8 +763,8 @@ def _summarise(
         sensor_sigma_estimated_m=cfg.sensor_sigma_m * float(np.sqrt(factors[0])),
         robot_sigma_scale=float(np.sqrt(factors[1])),
         cost_history=history,
-        iterations=iterations,
-        converged=converged,
+        iterations=solution.iterations,
+        converged=solution.converged,
         n_points=n_points,
         observability=observability,
         warnings=warnings,
@@ -893,13 +775,12 @@ def _summarise(
 # Outlier samples
 
 
-def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[tuple[float, int, str]]:
-    """Samples inconsistent with the rest: (severity, position in ``result.used``, reason),
-    most severe first."""
+def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[Flag]:
+    """Samples inconsistent with the rest (positions in ``result.used``), with reasons."""
     rms, z_rms = result.sample_rms_m, result.sample_rms_zscore
     prior_chi2 = result.sample_prior_chi2
     z_prior = _robust_zscore(np.sqrt(prior_chi2))
-    chi2_limit = float(chi2.isf(config.outlier_prior_probability, N_LOCAL))
+    chi2_limit = float(chdtri(N_LOCAL, config.outlier_prior_probability))  # P(chi2 > limit)
     median_rms = float(np.median(rms))
     flagged = []
     for j in range(len(rms)):
@@ -927,8 +808,8 @@ def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[tuple[f
                 + ": the profile does not fit at its recorded flange pose (wrong pairing, motion "
                 "during the scan, or not the cylinder)"
             )
-            flagged.append((max(float(z_rms[j]), float(z_prior[j])), j, reason))
-    return sorted(flagged, reverse=True)
+            flagged.append(Flag(max(float(z_rms[j]), float(z_prior[j])), j, reason))
+    return flagged
 
 
 def point_residuals_m(
@@ -954,7 +835,7 @@ def point_residuals_m(
     c, d = result.cylinder.point, result.cylinder.direction
     out = []
     for p, T, delta in zip(samples_points, T_all, result.pose_corrections, strict=True):
-        R = T[:3, :3] @ _exp_so3(delta[None, :3])[0]
+        R = T[:3, :3] @ exp_so3(delta[None, :3])[0]
         w = (np.asarray(p) @ R_fs.T + t_fs) @ R.T + (T[:3, 3] + T[:3, :3] @ delta[3:] - c)
         radial = w - np.outer(w @ d, d)
         out.append(np.sqrt(np.sum(radial**2, axis=1)) - result.cylinder.radius)
@@ -993,19 +874,14 @@ def refine_with_outlier_rejection(
     tail probability below ``outlier_prior_probability``). All outliers of a round are dropped
     (most severe first, at most ``max_outlier_fraction`` of the samples over all rounds, and
     never below ``min_samples``) and the solve is repeated from the last solution until none
-    is left. Outliers left because of the cap are reported in the warnings.
+    is left (:func:`~linelaser_calib.core.solver.solve_with_rejection`). Outliers left because
+    of the cap are reported in the warnings.
 
     Parameters and exceptions are those of :func:`refine`. The result's ``used`` and
     ``dropped`` give indices into ``samples_points``.
     """
     cfg = RefineConfig() if config is None else config
     T_all = np.asarray(T_base_flange, dtype=np.float64)
-    keep = list(range(len(samples_points)))
-    dropped: list[DroppedSample] = []
-    budget = min(
-        int(np.floor(cfg.max_outlier_fraction * len(samples_points))),
-        len(samples_points) - cfg.min_samples,
-    )
     T0, start = T_flange_sensor0, cylinder0
     points = list(samples_points)
     if cfg.point_outlier_sigmas > 0.0:
@@ -1015,22 +891,26 @@ def refine_with_outlier_rejection(
         if removed and all(len(p) >= cfg.min_points_per_profile for p in trimmed):
             points = trimmed
         T0, start = first.T_flange_sensor, first.cylinder
-    while True:
-        result = refine([points[i] for i in keep], T_all[keep], T0, start, cfg, radius_m)
-        flagged = _outlier_samples(result, cfg)
-        room = budget - len(dropped)
-        if flagged and room <= 0:
-            result.warnings.append(
-                f"{len(flagged)} more sample(s) look like outliers but max_outlier_fraction "
-                f"{cfg.max_outlier_fraction:.2f} allows no more drops: "
-                + "; ".join(f"sample {keep[j]}: {reason}" for _, j, reason in flagged)
-            )
-        if not flagged or room <= 0:
-            break
-        drop = {j: reason for _, j, reason in flagged[:room]}
-        dropped.extend(DroppedSample(keep[j], reason) for j, reason in drop.items())
-        keep = [i for j, i in enumerate(keep) if j not in drop]
-        T0, start = result.T_flange_sensor, result.cylinder
-    result.used = keep
-    result.dropped = sorted(dropped)
+
+    def solve_subset(keep: list[int], previous: RefineResult | None) -> RefineResult:
+        T_start = T0 if previous is None else previous.T_flange_sensor
+        axis = start if previous is None else previous.cylinder
+        return refine([points[i] for i in keep], T_all[keep], T_start, axis, cfg, radius_m)
+
+    outcome = solve_with_rejection(
+        len(points),
+        solve_subset,
+        lambda result, _keep: _outlier_samples(result, cfg),
+        cfg.max_outlier_fraction,
+        cfg.min_samples,
+    )
+    result = outcome.outcome
+    if outcome.left_flagged:
+        result.warnings.append(
+            f"{len(outcome.left_flagged)} more sample(s) look like outliers but "
+            f"max_outlier_fraction {cfg.max_outlier_fraction:.2f} allows no more drops: "
+            + "; ".join(f"sample {i}: {reason}" for i, reason in outcome.left_flagged)
+        )
+    result.used = outcome.kept
+    result.dropped = [DroppedSample(i, reason) for i, reason in outcome.dropped]
     return result

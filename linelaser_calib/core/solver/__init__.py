@@ -1,0 +1,51 @@
+"""One block-sparse Levenberg–Marquardt solver and one outlier-rejection loop for every target.
+
+The solver knows no target. A target describes its least-squares problem through
+:class:`~linelaser_calib.core.solver.lm.BlockProblem`: a state (any object), its retraction, and
+at each state per-sample residual blocks with Jacobians on the G global parameters (hand-eye
+first, then the target's own) and on the sample's 6 local flange-pose corrections, plus
+Gaussian priors on the corrections and on the global parameters. :func:`solve` returns the
+estimate, the block normal equations at it (whose Schur complement is the information of the
+global parameters with every pose correction marginalised), the cost history and whether it
+converged. :func:`solve_with_rejection` drops the samples a target flags and solves again.
+"""
+
+from __future__ import annotations
+
+from .lm import (
+    LOSSES,
+    N_HAND_EYE,
+    N_LOCAL,
+    BlockNormal,
+    BlockProblem,
+    Linearisation,
+    Residuals,
+    Solution,
+    SolverConfig,
+    evaluate_loss,
+    normal_equations,
+    solve,
+    solve_damped,
+    variance_factors,
+)
+from .rejection import Flag, RejectionOutcome, solve_with_rejection
+
+__all__ = [
+    "LOSSES",
+    "N_HAND_EYE",
+    "N_LOCAL",
+    "BlockNormal",
+    "BlockProblem",
+    "Flag",
+    "Linearisation",
+    "RejectionOutcome",
+    "Residuals",
+    "Solution",
+    "SolverConfig",
+    "evaluate_loss",
+    "normal_equations",
+    "solve",
+    "solve_damped",
+    "solve_with_rejection",
+    "variance_factors",
+]

@@ -1,0 +1,418 @@
+"""Block-sparse Levenberg–Marquardt with per-sample flange-pose corrections.
+
+Problem
+-------
+Sample j (one profile at one recorded flange pose) contributes K residuals e_jk, already
+divided by their 1σ (K may be padded: a padded row has e = 0 and a zero Jacobian row). Each
+depends on the G global parameters (the hand-eye first, ``[θ (3, rad), ρ (3, m)]``, then the
+target's own: an axis, a radius, a point, ...) and on the sample's own pose correction
+δ_j = (ω_j, τ_j) (6 numbers: rad, m; flange frame). The corrections have the zero-mean
+Gaussian prior δ_j / σ (σ_r three times, σ_t three times); the global parameters may have
+Gaussian priors of any shape (rows r = J_p·x + r₀, already normalised). The cost is
+
+    ½ Σ_jk ρ(e_jk²) + ½ Σ_j |δ_j / σ|² + ½ |r|²,
+
+with ρ a robust loss (``huber``, ``soft_l1`` or ``linear``) of scale ``loss_scale``.
+
+A target states its problem through :class:`BlockProblem`: the residuals at a state, their
+Jacobians in local coordinates (:class:`Linearisation`), and the retraction that applies a
+step in those coordinates (e.g. R ← R·Exp(θ) for a rotation, normalisation for a direction).
+The state is the target's own object; the solver only passes it back.
+
+Solver
+------
+Gauss–Newton normal equations with iteratively re-weighted robust weights, in block form
+(A: G×G, B_j: G×6, C_j: 6×6): each sample's 6×6 block is inverted on its own and eliminated
+(Schur complement), leaving a G×G system, so cost and time grow linearly with the samples.
+Levenberg–Marquardt with Marquardt scaling (damping times the diagonal) and Nielsen's damping
+update from the gain ratio (actual over predicted decrease). It stops when an accepted step
+lowers the cost by less than ``tolerance`` of it, when no global parameter moves by more than
+``step_tolerance_m`` (a step times the problem's ``step_scale``: the lever for rotations, 1
+for lengths), or when no damping lowers the cost any more (a minimum to machine precision).
+
+Information and covariance
+--------------------------
+:attr:`Solution.normal` holds the normal equations at the estimate (robust weights at the
+solution). :meth:`BlockNormal.schur_information` is the information of the global parameters
+with every pose correction marginalised; its inverse is their covariance. With the noise
+levels re-estimated (:func:`variance_factors`, variance-component estimation) the point and
+prior information are divided by the sensor and robot variance factors first.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Generic, Protocol, TypeVar
+
+import numpy as np
+
+from ..errors import InputError
+from ..geometry import FloatArray
+
+#: Robust losses: ρ(s) of the squared normalised residual s = (e / scale)².
+LOSSES = ("huber", "soft_l1", "linear")
+#: Hand-eye parameters at the head of every global vector: θ (3, rad), ρ (3, m).
+N_HAND_EYE = 6
+#: Parameters of one pose correction (ω, τ).
+N_LOCAL = 6
+#: Initial damping, relative to the diagonal of the information.
+INITIAL_DAMPING = 1e-7
+#: Damping beyond which no step lowers the cost any more: a minimum to machine precision.
+MAX_DAMPING = 1e16
+#: Floor of the re-estimated variance factors: a σ is never taken as below 0.1 of the
+#: configured one (noise-free data would otherwise make the information singular).
+MIN_VARIANCE_FACTOR = 0.01
+
+State = TypeVar("State")
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Settings of :func:`solve`.
+
+    Attributes
+    ----------
+    loss : str
+        ``huber``, ``soft_l1`` or ``linear`` (least squares).
+    loss_scale : float
+        Where the robust loss turns from quadratic to linear, in units of the residuals' σ.
+    max_iterations : int
+        Linearisations.
+    tolerance : float
+        Stop when an accepted step lowers the cost by less than this fraction.
+    step_tolerance_m : float
+        Stop when no global parameter moves by more than this, m (after ``step_scale``).
+    """
+
+    loss: str = "linear"
+    loss_scale: float = 3.0
+    max_iterations: int = 50
+    tolerance: float = 1e-10
+    step_tolerance_m: float = 1e-12
+
+    def __post_init__(self) -> None:
+        if self.loss not in LOSSES:
+            raise InputError(f"the loss must be one of {LOSSES}, got {self.loss!r}")
+        for name in ("loss_scale", "tolerance", "step_tolerance_m"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0.0):
+                raise InputError(f"SolverConfig.{name} must be positive and finite, got {value}")
+        if self.max_iterations < 1:
+            raise InputError(f"max_iterations must be >= 1, got {self.max_iterations}")
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """Normalised residuals at one state.
+
+    Attributes
+    ----------
+    points : ndarray, shape (M, K)
+        Per-sample measurement residuals (zero on padding), in units of their σ.
+    pose_prior : ndarray, shape (M, 6)
+        ``[ω / σ_r, τ / σ_t]`` of each pose correction.
+    global_prior : ndarray, shape (R,)
+        Prior residuals on the global parameters (R may be 0).
+    """
+
+    points: FloatArray
+    pose_prior: FloatArray
+    global_prior: FloatArray = field(default_factory=lambda: np.zeros(0))
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """Residuals and their Jacobians in the local coordinates of the retraction.
+
+    Attributes
+    ----------
+    residuals : Residuals
+    J_global : ndarray, shape (M, K, G)
+        d points / d global step; zero rows on padding.
+    J_local : ndarray, shape (M, K, 6)
+        d points / d (ω, τ) of the row's own sample; zero rows on padding.
+    pose_prior_sqrt_information : ndarray, shape (6,)
+        ``[1/σ_r] * 3 + [1/σ_t] * 3``: d pose_prior / d (ω, τ) (diagonal).
+    global_prior_jacobian : ndarray, shape (R, G)
+        d global_prior / d global step.
+    """
+
+    residuals: Residuals
+    J_global: FloatArray
+    J_local: FloatArray
+    pose_prior_sqrt_information: FloatArray
+    global_prior_jacobian: FloatArray | None = None
+
+
+class BlockProblem(Protocol[State]):
+    """A least-squares problem in the solver's block form (see the module docstring)."""
+
+    @property
+    def n_global(self) -> int:
+        """G, the number of global parameters (hand-eye first)."""
+        ...
+
+    @property
+    def step_scale(self) -> FloatArray:
+        """(G,) factors that turn a global step into metres (lever for rotations)."""
+        ...
+
+    def residuals(self, state: State) -> Residuals:
+        """Normalised residuals at ``state``."""
+        ...
+
+    def linearise(self, state: State) -> Linearisation:
+        """Residuals and Jacobians at ``state``."""
+        ...
+
+    def retract(self, state: State, step_global: FloatArray, step_local: FloatArray) -> State:
+        """``state`` moved by a global step (G,) and per-sample steps (M, 6)."""
+        ...
+
+
+def evaluate_loss(e: FloatArray, config: SolverConfig) -> tuple[FloatArray, FloatArray]:
+    """Robust cost terms c²·ρ(s) (twice the cost) and IRLS weights ρ'(s), shaped like ``e``."""
+    c = config.loss_scale
+    if config.loss == "linear":
+        return e**2, np.ones_like(e)
+    s = (e / c) ** 2
+    if config.loss == "huber":
+        root = np.sqrt(s)
+        inside = s <= 1.0
+        rho = np.where(inside, s, 2.0 * root - 1.0)
+        weight = np.where(inside, 1.0, 1.0 / np.maximum(root, 1.0))
+        return c**2 * rho, weight
+    root = np.sqrt(1.0 + s)
+    return c**2 * 2.0 * (root - 1.0), 1.0 / root
+
+
+def cost(residuals: Residuals, config: SolverConfig) -> float:
+    """½ Σ robust point cost + ½ Σ pose prior² + ½ Σ global prior², dimensionless."""
+    rho, _ = evaluate_loss(residuals.points, config)
+    return 0.5 * float(
+        np.sum(rho) + np.sum(residuals.pose_prior**2) + np.sum(residuals.global_prior**2)
+    )
+
+
+@dataclass(frozen=True)
+class BlockNormal:
+    """Gauss–Newton normal equations H·δ = −g in block form (A, B_j, C_j).
+
+    Attributes
+    ----------
+    A : ndarray, shape (G, G)
+        Global-global information, global priors included.
+    B : ndarray, shape (M, G, 6)
+        Global-local information per sample.
+    C_data : ndarray, shape (M, 6, 6)
+        Local-local information per sample from the measurements only.
+    prior_precision : ndarray, shape (6,)
+        Diagonal prior information of a pose correction.
+    g_global : ndarray, shape (G,)
+    g_local : ndarray, shape (M, 6)
+        Pose priors included.
+    """
+
+    A: FloatArray
+    B: FloatArray
+    C_data: FloatArray
+    prior_precision: FloatArray
+    g_global: FloatArray
+    g_local: FloatArray
+
+    def C(self, sensor_factor: float = 1.0, robot_factor: float = 1.0) -> FloatArray:
+        """Local blocks (M, 6, 6) with the measurement and prior information divided by the
+        sensor and robot variance factors."""
+        return np.asarray(
+            self.C_data / sensor_factor + np.diag(self.prior_precision / robot_factor)
+        )
+
+    def schur_information(
+        self,
+        sensor_factor: float = 1.0,
+        robot_factor: float = 1.0,
+        remove: FloatArray | None = None,
+    ) -> FloatArray:
+        """Information (G, G) of the global parameters with the pose corrections marginalised.
+
+        Parameters
+        ----------
+        sensor_factor, robot_factor : float
+            Variance factors the measurement and pose-prior information are divided by.
+        remove : ndarray, shape (G, G), optional
+            Information taken out of A first (e.g. a global prior's, to get the data's own).
+        """
+        A = self.A if remove is None else self.A - remove
+        B = self.B / sensor_factor
+        BC = B @ np.linalg.inv(self.C(sensor_factor, robot_factor))
+        S = A / sensor_factor - np.einsum("mgk,mhk->gh", BC, B)
+        return np.asarray(0.5 * (S + S.T))
+
+
+def normal_equations(
+    linearisation: Linearisation, config: SolverConfig, weights: FloatArray | None = None
+) -> BlockNormal:
+    """Weighted normal equations; ``weights`` (M, K) None uses the robust IRLS weights."""
+    r = linearisation.residuals
+    if weights is None:
+        _, weights = evaluate_loss(r.points, config)
+    G = linearisation.J_global.shape[2]
+    J = np.concatenate([linearisation.J_global, linearisation.J_local], axis=2)
+    WJ = J * weights[..., None]
+    H = J.transpose(0, 2, 1) @ WJ
+    gradient = np.einsum("mkp,mk->mp", WJ, r.points)
+    A = H[:, :G, :G].sum(axis=0)
+    g_global = gradient[:, :G].sum(axis=0)
+    Jp = linearisation.global_prior_jacobian
+    if Jp is not None and len(Jp):
+        A = A + Jp.T @ Jp
+        g_global = g_global + Jp.T @ r.global_prior
+    sqrt_info = linearisation.pose_prior_sqrt_information
+    return BlockNormal(
+        A=A,
+        B=H[:, :G, G:],
+        C_data=H[:, G:, G:],
+        prior_precision=sqrt_info**2,
+        g_global=g_global,
+        g_local=gradient[:, G:] + r.pose_prior * sqrt_info,
+    )
+
+
+def solve_damped(normal: BlockNormal, damping: float) -> tuple[FloatArray, FloatArray]:
+    """Solve (H + damping·diag H)·δ = −g by eliminating each sample's block (Schur).
+
+    Returns
+    -------
+    step_global : ndarray, shape (G,)
+    step_local : ndarray, shape (M, 6)
+    """
+    A = normal.A + damping * np.diag(np.diag(normal.A))
+    C = normal.C()
+    C = C + damping * np.einsum("mii->mi", C)[:, :, None] * np.eye(N_LOCAL)
+    C_inv = np.linalg.inv(C)
+    BC = normal.B @ C_inv
+    S = A - np.einsum("mgk,mhk->gh", BC, normal.B)
+    rhs = -normal.g_global + np.einsum("mgk,mk->g", BC, normal.g_local)
+    step_global = np.linalg.solve(S, rhs)
+    step_local = -np.einsum(
+        "mkl,ml->mk", C_inv, normal.g_local + np.einsum("mgk,g->mk", normal.B, step_global)
+    )
+    return step_global, step_local
+
+
+def variance_factors(
+    normal: BlockNormal, point_cost: float, prior_cost: float, n_points: int, n_global: int
+) -> tuple[float, float]:
+    """Sensor and robot variance factors (s_s², s_r²) from the residuals and redundancies.
+
+    The pose corrections keep the redundancy r_prior = Σ_j (6 − tr(P·C_j⁻¹)) (P the prior
+    precision), the measurements r_points = n_points − n_global − r_prior; s_s² = point_cost /
+    r_points and s_r² = prior_cost / r_prior, each 1 where its group keeps less than one
+    degree of freedom and never below :data:`MIN_VARIANCE_FACTOR`.
+
+    Parameters
+    ----------
+    normal : BlockNormal
+        At the solution.
+    point_cost : float
+        Σ robust point cost terms c²·ρ (twice the cost).
+    prior_cost : float
+        Σ pose prior residual².
+    n_points, n_global : int
+        Measurement residuals (padding excluded) and global parameters.
+    """
+    C_inv = np.linalg.inv(normal.C())
+    r_prior = float(np.sum(N_LOCAL - np.einsum("mii,i->m", C_inv, normal.prior_precision)))
+    r_points = n_points - n_global - r_prior
+    sensor = point_cost / r_points if r_points >= 1.0 else 1.0
+    robot = prior_cost / r_prior if r_prior >= 1.0 else 1.0
+    return max(sensor, MIN_VARIANCE_FACTOR), max(robot, MIN_VARIANCE_FACTOR)
+
+
+@dataclass(frozen=True)
+class Solution(Generic[State]):
+    """Outcome of :func:`solve`.
+
+    Attributes
+    ----------
+    state : State
+        The estimate.
+    residuals : Residuals
+        At the estimate.
+    normal : BlockNormal
+        Normal equations at the estimate (robust weights there); see
+        :meth:`BlockNormal.schur_information`.
+    cost_history : list of float
+        Cost after each accepted step, starting with the initial cost.
+    iterations : int
+        Linearisations performed during the search.
+    converged : bool
+    """
+
+    state: State
+    residuals: Residuals
+    normal: BlockNormal
+    cost_history: list[float]
+    iterations: int
+    converged: bool
+
+    @property
+    def information(self) -> FloatArray:
+        """Information (G, G) of the global parameters, pose corrections marginalised."""
+        return self.normal.schur_information()
+
+
+def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> Solution[State]:
+    """Minimise the problem's cost from ``state`` (see the module docstring)."""
+    cost_now = cost(problem.residuals(state), config)
+    history = [cost_now]
+    damping, growth = INITIAL_DAMPING, 2.0
+    scale = problem.step_scale
+    converged = False
+    iterations = 0
+    normal: BlockNormal | None = None
+    while iterations < config.max_iterations:
+        if normal is None:
+            normal = normal_equations(problem.linearise(state), config)
+            iterations += 1
+        step_global, step_local = solve_damped(normal, damping)
+        if float(np.max(np.abs(step_global * scale))) < config.step_tolerance_m:
+            converged = True
+            break
+        candidate = problem.retract(state, step_global, step_local)
+        new_cost = cost(problem.residuals(candidate), config)
+        diag_step = np.concatenate(
+            [
+                np.diag(normal.A) * step_global,
+                np.einsum("mii->mi", normal.C()).ravel() * step_local.ravel(),
+            ]
+        )
+        step = np.concatenate([step_global, step_local.ravel()])
+        gradient = np.concatenate([normal.g_global, normal.g_local.ravel()])
+        predicted = 0.5 * float(damping * step @ diag_step - gradient @ step)
+        gain = (cost_now - new_cost) / predicted if predicted > 0.0 else -1.0
+        if gain > 0.0:
+            decrease = cost_now - new_cost
+            state, cost_now = candidate, new_cost
+            history.append(cost_now)
+            normal = None
+            damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
+            growth = 2.0
+            if decrease <= config.tolerance * max(cost_now, 1e-300):
+                converged = True
+                break
+        else:
+            damping *= growth
+            growth *= 2.0
+            if damping > MAX_DAMPING:
+                converged = True
+                break
+    linearisation = problem.linearise(state)
+    return Solution(
+        state=state,
+        residuals=linearisation.residuals,
+        normal=normal_equations(linearisation, config),
+        cost_history=history,
+        iterations=iterations,
+        converged=converged,
+    )

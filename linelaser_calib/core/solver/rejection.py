@@ -1,0 +1,97 @@
+"""Drop the samples a target flags as outliers and solve again, until none is left.
+
+One loop for every target: the target supplies the solve of a subset of its samples (started
+from the previous round's estimate) and the test that flags a sample; the loop owns the
+budget (at most ``max_fraction`` of the samples over all rounds, never below
+``min_samples``), the order (most severe first) and the bookkeeping of what was dropped.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Generic, NamedTuple, TypeVar
+
+import numpy as np
+
+Outcome = TypeVar("Outcome")
+
+
+class Flag(NamedTuple):
+    """A sample flagged as an outlier after a solve.
+
+    Attributes
+    ----------
+    severity : float
+        Larger is worse; the most severe are dropped first.
+    position : int
+        Position of the sample in the subset that was solved.
+    reason : str
+        Why, in plain words with units.
+    """
+
+    severity: float
+    position: int
+    reason: str
+
+
+@dataclass
+class RejectionOutcome(Generic[Outcome]):
+    """The last solve and what was dropped on the way.
+
+    Attributes
+    ----------
+    outcome : Outcome
+        The last solve (of the samples in ``kept``).
+    kept : list of int
+        Indices (into the caller's samples) of the last solve, in order.
+    dropped : list of (int, str)
+        Dropped sample indices with their reasons, sorted by index.
+    left_flagged : list of (int, str)
+        Samples flagged after the last solve that the budget did not allow to drop.
+    """
+
+    outcome: Outcome
+    kept: list[int]
+    dropped: list[tuple[int, str]]
+    left_flagged: list[tuple[int, str]]
+
+
+def solve_with_rejection(
+    n_samples: int,
+    solve: Callable[[list[int], Outcome | None], Outcome],
+    flag: Callable[[Outcome, list[int]], list[Flag]],
+    max_fraction: float,
+    min_samples: int,
+) -> RejectionOutcome[Outcome]:
+    """Solve, drop flagged samples (most severe first, within the budget), repeat.
+
+    Parameters
+    ----------
+    n_samples : int
+        Samples available.
+    solve : callable
+        ``solve(kept, previous)``: the solve of the samples ``kept`` (indices), started from
+        ``previous`` (None in the first round).
+    flag : callable
+        ``flag(outcome, kept)``: the outliers of a solve, positions into ``kept``.
+    max_fraction : float
+        Largest share of the samples dropped over all rounds.
+    min_samples : int
+        Never drop below this many samples.
+    """
+    budget = min(int(np.floor(max_fraction * n_samples)), n_samples - min_samples)
+    kept = list(range(n_samples))
+    dropped: list[tuple[int, str]] = []
+    previous: Outcome | None = None
+    while True:
+        outcome = solve(kept, previous)
+        flagged = sorted(flag(outcome, kept), key=lambda f: (f.severity, f.position), reverse=True)
+        room = budget - len(dropped)
+        if not flagged or room <= 0:
+            left = [(kept[f.position], f.reason) for f in flagged]
+            return RejectionOutcome(outcome, kept, sorted(dropped), left)
+        drop = {f.position: f.reason for f in flagged[:room]}
+        dropped.extend((kept[j], reason) for j, reason in drop.items())
+        kept = [i for j, i in enumerate(kept) if j not in drop]
+        previous = outcome

@@ -1,0 +1,461 @@
+"""The target protocol: what a scanned artefact provides to be calibrated against.
+
+The pipeline (:mod:`linelaser_calib.core.pipeline`), the result files, the summary, the
+report, the markers, the nodes and the CLI know targets only through this protocol and the
+registry (:mod:`linelaser_calib.core.targets`); none of them tests a target's name.
+
+Adding a target
+---------------
+A target is one folder ``core/targets/<name>/`` (config, feature extraction, paper solve,
+refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object satisfying
+:class:`Target`, plus one line in the registry ``core/targets/__init__.py``. It provides:
+
+1. ``name`` (the ``--target`` value, the nodes' ``target`` parameter), ``title`` (human
+   text), ``summary`` (one line of help), ``methods`` (``("paper", "default")`` or a subset).
+2. ``config_type``: a frozen dataclass of its own settings with defaults, and ``options``:
+   which of the shared user settings (:data:`SETTINGS`: ``--radius``, ``--point``, the noise
+   levels, ``min_samples``, the initial hand-eye) act on it, for which methods, through which
+   field of the config, and which methods need them (:class:`Option`). Any other setting is
+   refused by :func:`configure` with a message naming the flag.
+3. ``validate(sample, config, rng)``: one sample's :class:`~linelaser_calib.core.types.Rejection`
+   or None (the collector checks live profiles with it), and ``extract(samples, config, seed,
+   progress)``: the features of all samples (objects with ``index``, ``stamp_ns`` and
+   ``T_base_flange``, see :class:`Feature`) and the rejections.
+4. ``solve_paper`` and ``solve_default(features, config, context)``: a :class:`TargetSolution`.
+   The default method is maximum likelihood with the robot's per-pose error as nuisance,
+   through the shared solver :mod:`linelaser_calib.core.solver` (:func:`~linelaser_calib.core.
+   solver.solve` with :func:`~linelaser_calib.core.solver.solve_with_rejection`). The
+   solution carries the diagnosis: the hand-eye's 1σ (from the solver's information), what
+   the poses leave undetermined in plain words (``warnings``), outliers as rejections. Raise
+   DegenerateError with advice when too few features remain (:func:`rejection_digest`).
+5. The model-fit check: ``check_features(features, config)`` before the solve and
+   ``check_fit(solution, config)`` after it raise
+   :class:`~linelaser_calib.core.errors.ModelMismatch` when the model does not fit the data
+   (a feature shape the target cannot have; a residual orders of magnitude above the noise
+   the solution expects, ``TargetSolution.noise_m``), naming the likely cause
+   (:func:`mismatch_message`). No result is written then.
+6. ``offset_cost(features, config, context)``: None, or the cost of the features re-paired
+   with other flange poses (for the clock-offset search of continuous scans), and
+   ``estimates_clock_offset``, True when it gives one (the collector's live estimate asks).
+7. A result section class satisfying :class:`ResultSection` (its YAML key, its plain SI
+   mapping, its text, its markers) and ``read_section(mapping, quality)`` that rebuilds it
+   from a result file's section (raising ``ValueError`` naming the bad key).
+
+Everything is in SI units (m, rad); mm and degrees appear only in human text, labelled.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, fields, is_dataclass, replace
+from typing import Any, ClassVar, Protocol, TypeVar
+
+import numpy as np
+
+from ..errors import InputError
+from ..geometry import FloatArray
+from ..types import Rejection, Sample, SampleFit
+
+#: Progress callback: (stage name, done, total).
+Progress = Callable[[str, int, int], None]
+
+#: Shared user settings a target may take (the CLI flag / node parameter behind each):
+#: ``radius_m`` (--radius, m), ``point_m`` (--point, (3,) m, base frame), ``sensor_sigma_m``
+#: (--sensor-sigma, m), ``robot_sigma_t_m`` (--robot-sigma-t, m), ``robot_sigma_r_rad``
+#: (--robot-sigma-r, rad), ``min_samples`` (int), ``initial`` (--initial: the initial
+#: hand-eye, held by the pipeline configuration, not the target's), ``centre_side``
+#: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on).
+SETTINGS = (
+    "radius_m",
+    "point_m",
+    "centre_side",
+    "sensor_sigma_m",
+    "robot_sigma_t_m",
+    "robot_sigma_r_rad",
+    "min_samples",
+    "initial",
+)
+
+ConfigT = TypeVar("ConfigT")
+
+
+def _no_progress(stage: str, done: int, total: int) -> None:
+    """Default progress callback: silent."""
+
+
+@dataclass(frozen=True)
+class Option:
+    """How one shared setting acts on a target.
+
+    Attributes
+    ----------
+    field : str
+        Dotted path of the config field it sets (e.g. ``refine.sensor_sigma_m``); empty for
+        ``initial``, which the pipeline configuration holds.
+    methods : tuple of str
+        Methods in which it acts; given with another method it is refused.
+    required_by : tuple of str
+        Methods that cannot run without it.
+    why_required : str
+        What the value is, for the refusal when a method needs it and it is missing
+        ("set --point to <why_required>").
+    """
+
+    field: str
+    methods: tuple[str, ...] = ("paper", "default")
+    required_by: tuple[str, ...] = ()
+    why_required: str = ""
+
+
+class Feature(Protocol):
+    """What a target extracts from one sample: any object with these attributes."""
+
+    @property
+    def index(self) -> int:
+        """Profile index in the input stream."""
+        ...
+
+    @property
+    def stamp_ns(self) -> int:
+        """Profile stamp, ns."""
+        ...
+
+    @property
+    def T_base_flange(self) -> FloatArray:
+        """(4, 4) flange pose as paired (recorded)."""
+        ...
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A marker of a result section, for RViz and Foxglove (in the result's base frame).
+
+    Attributes
+    ----------
+    kind : str
+        ``cylinder`` (a piece of a cylinder: ``points`` the two ends of its axis, m),
+        ``sphere`` (``points`` its centre, (1, 3)), ``points`` (spheres of diameter
+        2·``radius`` at ``points`` (N, 3)) or ``line`` (segments, ``points`` their ends in
+        pairs).
+    points : ndarray, shape (N, 3)
+        m.
+    radius : float
+        m (line width / 2 for ``line``).
+    ns : str
+        Marker namespace.
+    color : tuple of 4 floats
+        RGBA in [0, 1].
+    """
+
+    KINDS: ClassVar[tuple[str, ...]] = ("cylinder", "sphere", "points", "line")
+
+    kind: str
+    points: FloatArray
+    radius: float
+    ns: str
+    color: tuple[float, float, float, float] = (0.2, 0.6, 1.0, 0.5)
+
+    def __post_init__(self) -> None:
+        if self.kind not in self.KINDS:
+            raise InputError(f"marker shape kind must be one of {self.KINDS}, got {self.kind!r}")
+
+
+class ResultSection(Protocol):
+    """The target's part of a result (e.g. the fitted cylinder, the known point).
+
+    ``key`` is the result file's section name; :meth:`to_mapping` its plain SI content
+    (lists and numbers, the base frame named); :meth:`quality_entries` further entries of the
+    file's ``quality`` section; :meth:`describe` one line of human text (mm); :meth:`shapes`
+    the markers drawn with the calibrated profile points; :meth:`given_settings` what a
+    result used as a starting point fixes. ``key`` equals the target's ``name``.
+    """
+
+    key: ClassVar[str]
+    title: ClassVar[str]
+
+    def to_mapping(self, base_frame: str) -> dict[str, Any]:
+        """Plain YAML/JSON content of the section (SI units)."""
+        ...
+
+    def quality_entries(self) -> dict[str, Any]:
+        """Entries added to the result's ``quality`` section (may be empty)."""
+        ...
+
+    def describe(self, base_frame: str) -> str:
+        """One line for the summary, lengths in mm."""
+        ...
+
+    def residual_kind(self, method: str) -> str:
+        """What a sample's residual measures with ``method``."""
+        ...
+
+    def shapes(self, points_base: FloatArray) -> list[Shape]:
+        """Markers of the section next to the calibrated points (N, 3), base frame, m."""
+        ...
+
+    def given_settings(self) -> dict[str, Any]:
+        """Shared settings (:data:`SETTINGS`) this section fixes when a result file is the
+        starting point of a calibration (e.g. a taught point); usually empty."""
+        ...
+
+
+@dataclass
+class TargetSolution:
+    """What a target's solve returns (indices are profile indices of the input stream).
+
+    Attributes
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+    section : ResultSection
+    method : str
+    samples_used : list of int
+    rejections : list of Rejection
+        Samples dropped by the solve (stage ``outlier``).
+    rms_residual_m : float
+    sample_residuals_m : dict of int to float
+    sigma_translation_m, sigma_rotation_rad : ndarray, shape (3,), or None
+        1σ of the hand-eye (flange axes, m; small angles about the sensor axes, rad).
+    warnings : list of str
+    history : dict of str to list of float
+    sample_fits : list of SampleFit
+        Of the samples used.
+    noise_m : float
+        The 1σ residual the model expects of a sample on clean data, m (for
+        :meth:`Target.check_fit`).
+    """
+
+    T_flange_sensor: FloatArray
+    section: ResultSection
+    method: str
+    samples_used: list[int]
+    rejections: list[Rejection]
+    rms_residual_m: float
+    sample_residuals_m: dict[int, float]
+    sigma_translation_m: FloatArray | None
+    sigma_rotation_rad: FloatArray | None
+    warnings: list[str]
+    history: dict[str, list[float]]
+    sample_fits: list[SampleFit]
+    noise_m: float
+
+
+@dataclass(frozen=True)
+class SolveContext:
+    """What every target's solve receives besides its features and config.
+
+    Attributes
+    ----------
+    initial_T_flange_sensor : ndarray, shape (4, 4), or None
+        The initial hand-eye (--initial), when given.
+    seed : int
+        Seed of the random stages.
+    rejections : list of Rejection
+        Earlier rejections (pairing, features), for error messages.
+    n_samples : int
+        Samples handed to the target (before feature extraction).
+    progress : callable
+    """
+
+    initial_T_flange_sensor: FloatArray | None = None
+    seed: int = 0
+    rejections: Sequence[Rejection] = ()
+    n_samples: int = 0
+    progress: Progress = field(default=_no_progress)
+
+
+class Target(Protocol[ConfigT]):
+    """A calibration target (see the module docstring for what each member must do)."""
+
+    name: str
+    title: str
+    summary: str
+    methods: tuple[str, ...]
+    config_type: type[ConfigT]
+    options: Mapping[str, Option]
+    estimates_clock_offset: bool
+
+    def validate(
+        self, sample: Sample, config: ConfigT, rng: np.random.Generator
+    ) -> Rejection | None:
+        """Whether one sample is usable; a rejection says why not."""
+        ...
+
+    def extract(
+        self, samples: list[Sample], config: ConfigT, seed: int, progress: Progress
+    ) -> tuple[list[Any], list[Rejection]]:
+        """Features of the usable samples and the rejections of the others."""
+        ...
+
+    def solve_paper(
+        self, features: list[Any], config: ConfigT, context: SolveContext
+    ) -> TargetSolution:
+        """The target's paper method as published."""
+        ...
+
+    def solve_default(
+        self, features: list[Any], config: ConfigT, context: SolveContext
+    ) -> TargetSolution:
+        """Maximum likelihood with the robot's per-pose error, via the shared solver."""
+        ...
+
+    def check_features(self, features: list[Any], config: ConfigT) -> None:
+        """Raise ModelMismatch when the features have a shape the target cannot produce."""
+        ...
+
+    def check_fit(self, solution: TargetSolution, config: ConfigT) -> None:
+        """Raise ModelMismatch when the solution's residual is far above the noise."""
+        ...
+
+    def offset_cost(
+        self, features: list[Any], config: ConfigT, context: SolveContext
+    ) -> Callable[[FloatArray], float] | None:
+        """Cost of the features at other flange poses (M, 4, 4), or None if not supported."""
+        ...
+
+    def read_section(self, mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> ResultSection:
+        """The result section from a result file's ``key`` section (ValueError if bad)."""
+        ...
+
+
+def _set_path(config: Any, path: str, value: Any) -> Any:
+    """``config`` (a frozen dataclass) with the dotted field ``path`` set to ``value``."""
+    head, _, rest = path.partition(".")
+    if not is_dataclass(config) or head not in {f.name for f in fields(config)}:
+        raise InputError(f"{type(config).__name__} has no field {head!r}")
+    inner = _set_path(getattr(config, head), rest, value) if rest else value
+    return replace(config, **{head: inner})  # type: ignore[type-var]
+
+
+def configure(
+    target: Target[ConfigT],
+    method: str,
+    settings: Mapping[str, Any],
+    labels: Mapping[str, str],
+    config: ConfigT | None = None,
+) -> ConfigT:
+    """The target's config with the shared settings the user gave; others are refused.
+
+    Parameters
+    ----------
+    target : Target
+    method : str
+    settings : mapping of str to value
+        Only the settings the user gave (names of :data:`SETTINGS`; SI units).
+    labels : mapping of str to str
+        How the user names each setting (``--radius`` on the command line, ``radius`` as a
+        node parameter), for the messages.
+    config : target config, optional
+        Start value; default the target's defaults.
+
+    Raises
+    ------
+    InputError
+        A setting that does not act on this target or with this method, or a method that
+        needs a setting the user did not give.
+    """
+    if method not in target.methods:
+        raise InputError(
+            f"the {target.title} target has no method {method!r}; its methods: "
+            + ", ".join(target.methods)
+        )
+    result = target.config_type() if config is None else config
+    for name, value in settings.items():
+        label = labels.get(name, name)
+        option = target.options.get(name)
+        if option is None:
+            takes = sorted(labels.get(n, n) for n in target.options)
+            raise InputError(
+                f"{label} does not apply to the {target.title} target and would be ignored; "
+                f"omit it (the {target.title} target takes {', '.join(takes) or 'none of them'})"
+            )
+        if method not in option.methods:
+            raise InputError(
+                f"{label} does not act in the {method} method of the {target.title} target "
+                f"and would be ignored; omit it (it acts with method {', '.join(option.methods)})"
+            )
+        if option.field:
+            result = _set_path(result, option.field, value)
+    required = {n: o for n, o in target.options.items() if method in o.required_by}
+    if any(name not in settings for name in required):
+        names = [labels.get(name, name) for name in required]
+        raise InputError(
+            f"the {method} method of the {target.title} target needs {' and '.join(names)}: "
+            "set "
+            + " and ".join(
+                f"{labels.get(name, name)} to {option.why_required}"
+                for name, option in required.items()
+            )
+            + " (missing: "
+            + ", ".join(labels.get(n, n) for n in required if n not in settings)
+            + ")"
+        )
+    return result
+
+
+def extract_each(
+    samples: list[Sample],
+    config: ConfigT,
+    rng: np.random.Generator,
+    extract_one: Callable[[Sample, ConfigT, np.random.Generator], Any],
+    progress: Progress,
+    stage: str,
+) -> tuple[list[Any], list[Rejection]]:
+    """Features of every sample by ``extract_one`` (feature or Rejection), in order."""
+    features: list[Any] = []
+    rejections: list[Rejection] = []
+    for k, sample in enumerate(samples):
+        outcome = extract_one(sample, config, rng)
+        if isinstance(outcome, Rejection):
+            rejections.append(outcome)
+        else:
+            features.append(outcome)
+        progress(stage, k + 1, len(samples))
+    return features, rejections
+
+
+def rejection_digest(rejections: Sequence[Rejection]) -> str:
+    """'Rejected: 3 x stage: reason; ...' (the four most common), for error messages."""
+    if not rejections:
+        return ""
+    counts: dict[str, int] = {}
+    for r in rejections:
+        key = f"{r.stage}: {r.reason.split(' (')[0].split(':')[0]}"
+        counts[key] = counts.get(key, 0) + 1
+    top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
+    return "Rejected: " + "; ".join(f"{n} x {k}" for k, n in top) + ". "
+
+
+def plain_floats(values: Any) -> list[float]:
+    """Plain Python floats of an array (for YAML/JSON sections)."""
+    return [float(v) for v in np.asarray(values, dtype=np.float64).reshape(-1)]
+
+
+def mm_text(values: Any) -> str:
+    """``[+1.000, ...] mm`` from lengths in m."""
+    return "[" + ", ".join(f"{v * 1e3:+.3f}" for v in np.ravel(values)) + "] mm"
+
+
+def read_vector(mapping: Mapping[str, Any], key: str) -> FloatArray:
+    """Three finite numbers at ``key`` of a result file's section (ValueError naming it)."""
+    if key not in mapping:
+        raise ValueError(f"key {key} is missing")
+    try:
+        value = np.asarray(mapping[key], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"key {key} must be 3 numbers, got {mapping[key]!r}") from None
+    if value.shape != (3,) or not np.all(np.isfinite(value)):
+        raise ValueError(f"key {key} must be 3 finite numbers, got {mapping[key]!r}")
+    return value
+
+
+def mismatch_message(title: str, rms_m: float, noise_m: float, detail: str = "") -> str:
+    """The refusal of a model that does not fit: what was seen and the likely causes."""
+    return (
+        f"the {title} model does not fit these data: the residual is {rms_m * 1e3:.3f} mm RMS, "
+        f"{rms_m / noise_m:.0f} times the {noise_m * 1e3:.4f} mm the noise explains"
+        + (f"; {detail}" if detail else "")
+        + ". Likely causes: the scans show another target (choose it with --target); the "
+        "profiles or poses are not in metres; the profile and pose clocks are not "
+        "synchronised (--clock-offset); or the robot moved during the scans. No result was "
+        "written."
+    )

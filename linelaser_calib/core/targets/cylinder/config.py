@@ -1,0 +1,60 @@
+"""Settings of the cylinder target."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...arc import ArcConfig
+from ...ellipse import EllipseConfig
+from ...errors import InputError
+from ...profile import CleaningConfig
+from ...pso_alm import HybridConfig
+from .refine import RefineConfig
+
+#: Fewest fitted samples the hand-eye plus axis can be solved from with any margin.
+MIN_SAMPLES = 8
+
+
+@dataclass(frozen=True)
+class CylinderConfig:
+    """Every setting of the cylinder target; each stage's defaults are documented in its module.
+
+    Attributes
+    ----------
+    radius_m : float or None
+        Cylinder radius, m; None estimates it.
+    min_samples : int
+        Fewest fitted samples accepted.
+    cleaning : CleaningConfig
+    ellipse : EllipseConfig
+    arc : ArcConfig
+        Finding the arc among the planes of the scene (:mod:`linelaser_calib.core.arc`).
+    hybrid : HybridConfig
+        The global solve of the ``paper`` method.
+    seed_hybrid : HybridConfig
+        The global solve that seeds the ``default`` method's refinement. It only has to
+        reach the refinement's basin, so by default it stops as soon as a polished solution
+        is accepted (``accept_early``): ~10-100 ms instead of 0.3-0.7 s, same result after
+        refinement (bench/accuracy.py).
+    refine : RefineConfig
+        The ``default`` method's maximum likelihood (noise levels, robust loss, outliers).
+    """
+
+    radius_m: float | None = None
+    min_samples: int = MIN_SAMPLES
+    cleaning: CleaningConfig = field(default_factory=CleaningConfig)
+    ellipse: EllipseConfig = field(default_factory=EllipseConfig)
+    arc: ArcConfig = field(default_factory=ArcConfig)
+    hybrid: HybridConfig = field(default_factory=HybridConfig)
+    seed_hybrid: HybridConfig = field(default_factory=lambda: HybridConfig(accept_early=True))
+    refine: RefineConfig = field(default_factory=RefineConfig)
+
+    def __post_init__(self) -> None:
+        if self.radius_m is not None and not (np.isfinite(self.radius_m) and self.radius_m > 0):
+            raise InputError(
+                f"the cylinder radius must be a positive length in m, got {self.radius_m}"
+            )
+        if self.min_samples < 3:
+            raise InputError(f"min_samples must be >= 3, got {self.min_samples}")

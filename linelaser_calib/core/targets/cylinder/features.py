@@ -1,0 +1,155 @@
+"""Per profile: the cleaned points and a RANSAC ellipse (the cylinder's cut by the laser plane),
+found among the planes of the scene (:mod:`linelaser_calib.core.arc`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...arc import (
+    ArcFit,
+    fit_arc_in_scene,
+    grazing_ends_biased,
+    radius_mismatch,
+    trimming_note,
+    without_grazing_ends,
+)
+from ...errors import InputError, ProfileRejected
+from ...geometry import FloatArray
+from ...profile import clean_profile
+from ...types import EllipseFit, Rejection, Sample, SampleFit
+from ..base import Progress, extract_each
+from .config import CylinderConfig
+
+
+@dataclass
+class FittedSample:
+    """A sample with the points of its arc and its fitted ellipse (the cylinder target's
+    feature); ``arc`` says how the arc was found, ``trimmed`` how many grazing-angle points
+    were trimmed from it."""
+
+    sample: Sample
+    points: FloatArray
+    ellipse: EllipseFit
+    arc: ArcFit | None = None
+    trimmed: int = 0
+
+    @property
+    def index(self) -> int:
+        """Profile index in the input stream."""
+        return self.sample.index
+
+    @property
+    def stamp_ns(self) -> int:
+        """Profile stamp, ns."""
+        return self.sample.stamp_ns
+
+    @property
+    def T_base_flange(self) -> FloatArray:
+        """Flange pose (4, 4) as paired."""
+        return self.sample.T_base_flange
+
+    @property
+    def inlier_points(self) -> FloatArray:
+        """Inlier points (K, 3) in the sensor frame, m."""
+        return self.points[self.ellipse.inliers]
+
+    def record(self) -> SampleFit:
+        """The plain record kept in the result."""
+        s = self.sample
+        return SampleFit(
+            s.index, s.stamp_ns, s.T_base_flange, self.inlier_points, self.ellipse.centre_xz
+        )
+
+
+def fit_sample(
+    sample: Sample,
+    config: CylinderConfig,
+    rng: np.random.Generator,
+    radius_m: float | None = None,
+) -> FittedSample | Rejection:
+    """Clean one sample's profile and fit its ellipse; a rejection says why it failed.
+
+    ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes.
+    """
+    try:
+        cleaned = clean_profile(sample.points, config.cleaning)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
+    try:
+        arc = fit_arc_in_scene(cleaned.points_xz, config.ellipse, rng, radius_m, config.arc)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
+    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc)
+
+
+def fit_samples(
+    samples: list[Sample], config: CylinderConfig, seed: int, progress: Progress
+) -> tuple[list[FittedSample], list[Rejection]]:
+    """Fit every sample's ellipse (semi-axes bounded by ``config.radius_m`` when given).
+
+    Raises
+    ------
+    InputError
+        When a configured radius disagrees with the profiles (:func:`settle_radius`).
+    """
+
+    def fit_bounded(
+        sample: Sample, cfg: CylinderConfig, rng: np.random.Generator
+    ) -> FittedSample | Rejection:
+        return fit_sample(sample, cfg, rng, cfg.radius_m)
+
+    fitted, rejections = extract_each(
+        samples, config, np.random.default_rng(seed), fit_bounded, progress, "ellipse"
+    )
+    if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):
+        # Most profiles failed with the given radius: fit freely to tell the user why.
+        free = [fit_sample(s, config, np.random.default_rng(seed)) for s in samples]
+        free_fitted = [f for f in free if isinstance(f, FittedSample)]
+        if len(free_fitted) > len(fitted):
+            settle_radius(free_fitted, config.radius_m)
+    _trim_biased_grazing_ends(fitted, config.radius_m)
+    return fitted, rejections
+
+
+def _trim_biased_grazing_ends(fitted: list[FittedSample], radius_m: float | None) -> None:
+    """Fit the arcs again without their grazing ends when those ends are biased."""
+    arcs = [f.arc for f in fitted if f.arc is not None]
+    if grazing_ends_biased([a.grazing_shift_sigmas for a in arcs]) is None:
+        return
+    for f in fitted:
+        trimmed = None if f.arc is None else without_grazing_ends(f.arc, radius_m)
+        if trimmed is not None:
+            f.trimmed = int(f.ellipse.inliers.sum() - trimmed.inliers.sum())
+            f.ellipse = trimmed
+
+
+def arc_notes(fitted: list[FittedSample], config: CylinderConfig) -> list[str]:
+    """Warnings on the arcs: a given radius the profiles contradict, trimmed grazing ends."""
+    notes = [radius_mismatch([f.ellipse.semi_axes[1] for f in fitted], config.radius_m)]
+    shift = grazing_ends_biased([f.arc.grazing_shift_sigmas for f in fitted if f.arc is not None])
+    if shift is not None:
+        notes.append(trimming_note([f.trimmed for f in fitted], shift, config.arc))
+    return [note for note in notes if note is not None]
+
+
+def settle_radius(fitted: list[FittedSample], radius_m: float | None) -> float:
+    """Radius from the ellipses' semi-minor axes (a cylinder cut's semi-minor axis is its
+    radius), checked against a given radius, m.
+
+    Raises
+    ------
+    InputError
+        When the given radius disagrees with the profiles.
+    """
+    measured = float(np.median([f.ellipse.semi_axes[1] for f in fitted]))
+    if radius_m is None:
+        return measured
+    if abs(measured - radius_m) > max(0.1 * radius_m, 0.002):
+        raise InputError(
+            f"the given radius {radius_m * 1e3:.2f} mm disagrees with the profiles, whose "
+            f"ellipses have a median semi-minor axis of {measured * 1e3:.2f} mm; check the "
+            "radius (metres, not the diameter) or omit it to estimate it."
+        )
+    return radius_m

@@ -1,0 +1,96 @@
+"""The cylinder target's part of a result: the fitted cylinder in the base frame."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ...geometry import FloatArray
+from ...residuals import axis_extent
+from ...types import Cylinder
+from ..base import Shape, mm_text, plain_floats, read_vector
+
+
+@dataclass(frozen=True)
+class CylinderSection:
+    """The ``cylinder`` section of a result.
+
+    Attributes
+    ----------
+    cylinder : Cylinder
+        Axis point, unit direction and radius in the base frame, m.
+    radius_estimated : bool
+        True if the radius was estimated rather than given.
+    """
+
+    key: ClassVar[str] = "cylinder"
+    title: ClassVar[str] = "cylinder"
+
+    cylinder: Cylinder
+    radius_estimated: bool = False
+
+    def to_mapping(self, base_frame: str) -> dict[str, Any]:
+        """``{frame, point, direction, radius}`` (m)."""
+        c = self.cylinder
+        return {
+            "frame": base_frame,
+            "point": plain_floats(c.point),
+            "direction": plain_floats(c.direction),
+            "radius": float(c.radius),
+        }
+
+    def quality_entries(self) -> dict[str, Any]:
+        """``radius_estimated``."""
+        return {"radius_estimated": bool(self.radius_estimated)}
+
+    def describe(self, base_frame: str) -> str:
+        """The axis point, direction and radius (mm)."""
+        c = self.cylinder
+        return (
+            f"Cylinder in {base_frame}: point {mm_text(c.point)}, direction "
+            + "["
+            + ", ".join(f"{v:+.5f}" for v in c.direction)
+            + f"], radius {c.radius * 1e3:.3f} mm"
+            + (" (estimated)" if self.radius_estimated else " (given)")
+        )
+
+    def residual_kind(self, method: str) -> str:
+        """Centre-to-axis for ``paper``, point-to-surface for ``default``."""
+        if method == "paper":
+            return "ellipse centre-to-axis distance"
+        return "point-to-surface distance, flange poses corrected for the estimated robot error"
+
+    def shapes(self, points_base: FloatArray) -> list[Shape]:
+        """The piece of the cylinder the points cover (its axis ends)."""
+        c = self.cylinder
+        centre, length = axis_extent(points_base, c)
+        half = 0.5 * length * c.direction / np.linalg.norm(c.direction)
+        return [Shape("cylinder", np.stack([centre - half, centre + half]), c.radius, "cylinder")]
+
+    def given_settings(self) -> dict[str, Any]:
+        """None: a cylinder result fixes no setting of a later calibration."""
+        return {}
+
+
+def read_cylinder_section(
+    mapping: Mapping[str, Any], quality: Mapping[str, Any]
+) -> CylinderSection:
+    """The section from a result file's ``cylinder`` mapping (ValueError naming the key)."""
+    point = read_vector(mapping, "point")
+    direction = read_vector(mapping, "direction")
+    radius = mapping.get("radius")
+    norm = float(np.linalg.norm(direction))
+    if isinstance(radius, bool) or not isinstance(radius, (int, float)):
+        raise ValueError(f"key radius must be a number, got {radius!r}")
+    if norm < 1e-12 or not radius > 0.0:
+        raise ValueError(
+            f"needs a non-zero direction and a radius > 0 m, got direction "
+            f"{direction.tolist()} and radius {radius} m"
+        )
+    estimated = quality.get("radius_estimated", False)
+    if not isinstance(estimated, bool):
+        raise ValueError(f"key quality.radius_estimated must be true or false, got {estimated!r}")
+    return CylinderSection(Cylinder(point, direction / norm, float(radius)), estimated)

@@ -1,0 +1,269 @@
+"""The cylinder target: profiles of a cylinder of known or unknown radius (the cylinder paper).
+
+Methods
+-------
+``paper``
+    The cylinder paper as published: RANSAC ellipse centres, centre-to-axis cost (eq. 12),
+    PSO + generalized-Lagrange-multiplier hybrid (Fig. 4).
+``default``
+    The paper's solve as a seed, then maximum likelihood on every inlier point with the
+    robot's per-sample pose error as nuisance parameters, outlier-sample rejection,
+    covariance and observability diagnostics (:mod:`.refine`).
+
+Model fit
+---------
+A cylinder's cut by the laser plane is an ellipse whose semi-minor axis is the radius, in
+every view; scans of a sphere (circles of varying radius) or of an edge fail that test. And
+the default method's point residual stays near the sensor noise on a cylinder; a residual
+orders of magnitude above it means the data are not a cylinder at the recorded poses.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ...cylinder_model import centre_distances
+from ...errors import CalibrationError, DegenerateError, ModelMismatch
+from ...geometry import FloatArray
+from ...pso_alm import PaperSolution, solve_pso_galm
+from ...types import Rejection, Sample
+from ..base import (
+    Option,
+    Progress,
+    ResultSection,
+    SolveContext,
+    TargetSolution,
+    mismatch_message,
+    rejection_digest,
+)
+from .config import CylinderConfig
+from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
+from .refine import refine, refine_with_outlier_rejection
+from .section import CylinderSection, read_cylinder_section
+
+#: Points per profile in the refinements of the clock-offset search.
+OFFSET_SEARCH_POINTS = 50
+#: A solution whose RMS residual exceeds this multiple of the expected noise does not fit.
+MISFIT_FACTOR = 100.0
+#: Robust relative spread of the ellipses' semi-minor axes beyond which the profiles are not
+#: cuts of one cylinder: at most 0.2 % on the committed bags and 25 random simulated scenes;
+#: cuts of a sphere near its equator, the closest look-alike, spread by 5-10 %.
+MAX_SEMI_MINOR_SPREAD = 0.05
+
+
+class CylinderTarget:
+    """The cylinder target (see the module docstring)."""
+
+    name = "cylinder"
+    title = "cylinder"
+    summary = "a cylinder of known or estimated radius (the cylinder paper)"
+    methods = ("paper", "default")
+    estimates_clock_offset = True
+    config_type = CylinderConfig
+    options: Mapping[str, Option] = {
+        "radius_m": Option("radius_m"),
+        "min_samples": Option("min_samples"),
+        "sensor_sigma_m": Option("refine.sensor_sigma_m", methods=("default",)),
+        "robot_sigma_t_m": Option("refine.robot_sigma_t_m", methods=("default",)),
+        "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad", methods=("default",)),
+        "initial": Option("", methods=("default",)),
+    }
+
+    def validate(
+        self, sample: Sample, config: CylinderConfig, rng: np.random.Generator
+    ) -> Rejection | None:
+        """The cleaning and ellipse fit of one sample (semi-axes bounded by the radius)."""
+        outcome = fit_sample(sample, config, rng, config.radius_m)
+        return outcome if isinstance(outcome, Rejection) else None
+
+    def extract(
+        self, samples: list[Sample], config: CylinderConfig, seed: int, progress: Progress
+    ) -> tuple[list[Any], list[Rejection]]:
+        """Every sample's ellipse (:func:`.features.fit_samples`)."""
+        fitted, rejections = fit_samples(samples, config, seed, progress)
+        return list(fitted), rejections
+
+    def _checked(
+        self, features: list[FittedSample], config: CylinderConfig, context: SolveContext
+    ) -> float:
+        """The radius (m), after checking there are enough ellipses."""
+        radius = settle_radius(features, config.radius_m) if features else config.radius_m
+        if len(features) < config.min_samples:
+            raise DegenerateError(
+                f"only {len(features)} of {context.n_samples} profiles gave a usable ellipse, "
+                f"and at least {config.min_samples} are needed. "
+                + rejection_digest(context.rejections)
+                + (
+                    "Scan the cylinder from more poses, with the laser line across the cylinder."
+                    if features
+                    else "None of the profiles shows the cylinder's arc: check that the laser "
+                    "line falls across the cylinder within the measuring range."
+                )
+            )
+        assert radius is not None  # features is not empty here
+        return radius
+
+    def _seed(
+        self,
+        features: list[FittedSample],
+        config: CylinderConfig,
+        context: SolveContext,
+        paper: bool,
+    ) -> PaperSolution:
+        """The paper's global solve on the ellipse centres."""
+        centres = np.array([f.ellipse.centre_xz for f in features])
+        T_base_flange = np.stack([f.T_base_flange for f in features])
+        context.progress("global solve", 0, 1)
+        hybrid = config.hybrid if paper else config.seed_hybrid
+        solution = solve_pso_galm(
+            centres, T_base_flange, hybrid, np.random.default_rng(context.seed + 1)
+        )
+        context.progress("global solve", 1, 1)
+        return solution
+
+    def solve_paper(
+        self, features: list[Any], config: CylinderConfig, context: SolveContext
+    ) -> TargetSolution:
+        """The paper's PSO + GALM hybrid on the ellipse centres."""
+        radius = self._checked(features, config, context)
+        solution = self._seed(features, config, context, paper=True)
+        T = solution.T_flange_sensor
+        cylinder = replace(solution.cylinder, radius=radius)
+        centres = np.array([f.ellipse.centre_xz for f in features])
+        T_base_flange = np.stack([f.T_base_flange for f in features])
+        distances = centre_distances(centres, T_base_flange, T, cylinder)
+        warnings = []
+        if not solution.accepted:
+            warnings.append(
+                f"the global solve did not reach its acceptance level: the RMS centre-to-axis "
+                f"distance is {solution.rms_m * 1e3:.3f} mm; check the rejected samples and "
+                "the poses"
+            )
+        warnings.extend(arc_notes(features, config))
+        return TargetSolution(
+            T_flange_sensor=T,
+            section=CylinderSection(cylinder, config.radius_m is None),
+            method="paper",
+            samples_used=[f.index for f in features],
+            rejections=[],
+            rms_residual_m=float(np.sqrt(np.mean(distances**2))),
+            sample_residuals_m={
+                f.index: float(d) for f, d in zip(features, distances, strict=True)
+            },
+            sigma_translation_m=None,
+            sigma_rotation_rad=None,
+            warnings=warnings,
+            history=dict(solution.history),
+            sample_fits=[f.record() for f in features],
+            noise_m=config.refine.robot_sigma_t_m,
+        )
+
+    def solve_default(
+        self, features: list[Any], config: CylinderConfig, context: SolveContext
+    ) -> TargetSolution:
+        """Maximum likelihood on every inlier point, seeded by the paper's solve."""
+        radius = self._checked(features, config, context)
+        seed = self._seed(features, config, context, paper=False)
+        T_init = (
+            seed.T_flange_sensor
+            if context.initial_T_flange_sensor is None
+            else np.asarray(context.initial_T_flange_sensor, dtype=np.float64)
+        )
+        context.progress("refine", 0, 1)
+        refined = refine_with_outlier_rejection(
+            [f.inlier_points for f in features],
+            np.stack([f.T_base_flange for f in features]),
+            T_init,
+            replace(seed.cylinder, radius=radius),
+            config.refine,
+            radius_m=config.radius_m,
+        )
+        context.progress("refine", 1, 1)
+        rejections = [
+            Rejection(features[j].index, features[j].stamp_ns, "outlier", reason)
+            for j, reason in refined.dropped
+        ]
+        return TargetSolution(
+            T_flange_sensor=refined.T_flange_sensor,
+            section=CylinderSection(refined.cylinder, refined.radius_estimated),
+            method="default",
+            samples_used=[features[j].index for j in refined.used],
+            rejections=rejections,
+            rms_residual_m=refined.rms_residual_m,
+            sample_residuals_m={
+                features[j].index: r for j, r in refined.sample_residuals_m.items()
+            },
+            sigma_translation_m=refined.sigma_translation_m,
+            sigma_rotation_rad=refined.sigma_rotation_rad,
+            warnings=[*refined.warnings, *arc_notes(features, config)],
+            history={**seed.history, "refine_cost": list(refined.cost_history)},
+            sample_fits=[features[j].record() for j in refined.used],
+            noise_m=config.refine.sensor_sigma_m,
+        )
+
+    def check_fit(self, solution: TargetSolution, config: CylinderConfig) -> None:
+        """Refuse a solution whose residual or ellipses a cylinder cannot explain."""
+        if solution.rms_residual_m > MISFIT_FACTOR * solution.noise_m:
+            raise ModelMismatch(
+                mismatch_message("cylinder", solution.rms_residual_m, solution.noise_m)
+            )
+
+    def check_features(self, features: list[Any], config: CylinderConfig) -> None:
+        """Refuse ellipses whose semi-minor axes differ as a cylinder's cuts cannot."""
+        minor = np.array([f.ellipse.semi_axes[1] for f in features])
+        if len(minor) < 3:
+            return
+        median = float(np.median(minor))
+        spread = 1.4826 * float(np.median(np.abs(minor - median))) / median
+        if spread > MAX_SEMI_MINOR_SPREAD:
+            raise ModelMismatch(
+                "the profiles are not cuts of one cylinder: a cylinder's cut by the laser "
+                "plane is an ellipse whose semi-minor axis is the radius in every view, but "
+                f"these ellipses' semi-minor axes range from {np.min(minor) * 1e3:.2f} to "
+                f"{np.max(minor) * 1e3:.2f} mm (robust spread {spread * 100:.0f} % of the "
+                f"median {median * 1e3:.2f} mm). Likely causes: the scans show another target "
+                "(a sphere's cuts are circles of varying radius; choose it with --target), or "
+                "the profiles are not in metres. No result was written."
+            )
+
+    def offset_cost(
+        self, features: list[Any], config: CylinderConfig, context: SolveContext
+    ) -> Callable[[FloatArray], float] | None:
+        """The refinement's final cost with the ellipses re-paired with other flange poses.
+
+        The ellipses and the seed solve do not depend on the poses' offset and are computed
+        once; a few dozen points per profile pin the offset as well as all of them.
+        """
+        if len(features) < config.min_samples:
+            raise DegenerateError(
+                f"only {len(features)} profiles gave a usable ellipse; at least "
+                f"{config.min_samples} are needed to estimate the clock offset. "
+                + rejection_digest(context.rejections)
+            )
+        radius = settle_radius(features, config.radius_m)
+        seed = self._seed(features, config, context, paper=False)
+        cylinder0 = replace(seed.cylinder, radius=radius)
+        points = [f.inlier_points for f in features]
+        light = replace(config.refine, max_points_per_profile=OFFSET_SEARCH_POINTS)
+
+        def cost(T_base_flange: FloatArray) -> float:
+            try:
+                refined = refine(
+                    points, T_base_flange, seed.T_flange_sensor, cylinder0, light, config.radius_m
+                )
+            except CalibrationError:
+                return float("inf")
+            return refined.cost_history[-1]
+
+        return cost
+
+    def read_section(self, mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> ResultSection:
+        """The ``cylinder`` section of a result file."""
+        return read_cylinder_section(mapping, quality)
+
+
+TARGET = CylinderTarget()

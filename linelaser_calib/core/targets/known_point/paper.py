@@ -1,0 +1,164 @@
+"""The weld-seam paper's correction: a two-step grid search on the hand-eye rotation vector
+that minimises the scatter ΔR of the point reconstructed through every view (eq. 11-16), then
+a translation shift by the mean offset. See :mod:`.target` for the reading of the equations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial.transform import Rotation
+
+from ...geometry import FloatArray, rotvec_from_matrix, transform_from_rotation_translation
+from .config import GridStep, KnownPointConfig
+
+#: Candidates evaluated at once in the grid search (memory: candidates × views × 3 floats).
+GRID_CHUNK = 20000
+
+
+def corners_3d(corners_xz: FloatArray) -> FloatArray:
+    """(M, 2) corners (x, z) to sensor-frame points (M, 3) with y = 0."""
+    return np.column_stack([corners_xz[:, 0], np.zeros(len(corners_xz)), corners_xz[:, 1]])
+
+
+def weld_points_base(
+    corners_xz: ArrayLike, T_base_flange: ArrayLike, T_flange_sensor: ArrayLike
+) -> FloatArray:
+    """The weld point reconstructed through each view, p_i = T_i · X · (x_i, 0, z_i).
+
+    Parameters
+    ----------
+    corners_xz : array-like, shape (M, 2)
+        Corners in the sensor x-z plane, m.
+    T_base_flange : array-like, shape (M, 4, 4)
+    T_flange_sensor : array-like, shape (4, 4)
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        Base frame, m.
+    """
+    s = corners_3d(np.asarray(corners_xz, dtype=np.float64))
+    T = np.asarray(T_base_flange, dtype=np.float64)
+    X = np.asarray(T_flange_sensor, dtype=np.float64)
+    flange = s @ X[:3, :3].T + X[:3, 3]
+    return np.asarray(np.einsum("mij,mj->mi", T[:, :3, :3], flange) + T[:, :3, 3])
+
+
+def scatter_delta_r(points_base: ArrayLike, point_base: ArrayLike) -> FloatArray:
+    """The paper's scatter ΔR (eq. 14-15) of reconstructed points, vectorised over candidates.
+
+    K_axis = sign(mean − taught) · Σ_n |X_n − mean| per axis (the |·| reading of eq. 14, see
+    the module docstring) and ΔR = |K|.
+
+    Parameters
+    ----------
+    points_base : array-like, shape (..., M, 3)
+        Reconstructed points of M views (per candidate), m.
+    point_base : array-like, shape (3,)
+        The taught point, m (it only sets the signs, which ΔR squares away).
+
+    Returns
+    -------
+    ndarray, shape (...)
+        ΔR, m (a sum over views, so it grows with M).
+    """
+    p = np.asarray(points_base, dtype=np.float64)
+    mean = p.mean(axis=-2)
+    K = np.sign(mean - np.asarray(point_base)) * np.abs(p - mean[..., None, :]).sum(axis=-2)
+    return np.asarray(np.linalg.norm(K, axis=-1))
+
+
+@dataclass(frozen=True)
+class PaperCorrection:
+    """Outcome of :func:`paper_correction`.
+
+    Attributes
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+    rotvec_rad : ndarray, shape (3,)
+        Final rotation vector of the hand-eye, rad.
+    delta_r_m : ndarray, shape (3,)
+        ΔR at the initial hand-eye, after the coarse and after the fine step, m.
+    offset_m : ndarray, shape (3,)
+        Mean offset d = mean(p_i) − p before the translation shift (eq. 16), base frame, m.
+    on_grid_edge : bool
+        The coarse optimum lies on the edge of the grid (the search range was too small).
+    """
+
+    T_flange_sensor: FloatArray
+    rotvec_rad: FloatArray
+    delta_r_m: FloatArray
+    offset_m: FloatArray
+    on_grid_edge: bool
+
+
+def _grid_best(
+    centre: FloatArray,
+    step: GridStep,
+    s: FloatArray,
+    T_base_flange: FloatArray,
+    t_fs: FloatArray,
+    point: FloatArray,
+) -> tuple[FloatArray, float, bool]:
+    """Best rotation vector of one grid step, its ΔR and whether it is on the grid's edge."""
+    offsets = step.offsets()
+    R_i, t_i = T_base_flange[:, :3, :3], T_base_flange[:, :3, 3]
+    base = np.einsum("mij,j->mi", R_i, t_fs) + t_i  # (M, 3): where the sensor origin is
+    scores = np.empty(len(offsets))
+    for start in range(0, len(offsets), GRID_CHUNK):
+        rotvecs = centre + offsets[start : start + GRID_CHUNK]
+        R = Rotation.from_rotvec(rotvecs).as_matrix()  # (K, 3, 3)
+        in_flange = np.einsum("kab,mb->kma", R, s)
+        points = np.einsum("mab,kmb->kma", R_i, in_flange) + base
+        scores[start : start + GRID_CHUNK] = scatter_delta_r(points, point)
+    best = int(np.argmin(scores))
+    edge = bool(np.any(np.abs(offsets[best]) >= step.half_width_rad * (1.0 - 1e-12)))
+    return np.asarray(centre + offsets[best]), float(scores[best]), edge
+
+
+def paper_correction(
+    corners_xz: ArrayLike,
+    T_base_flange: ArrayLike,
+    T_flange_sensor_initial: ArrayLike,
+    point_base: ArrayLike,
+    config: KnownPointConfig | None = None,
+) -> PaperCorrection:
+    """The weld-seam paper's two-step grid search and translation shift (eq. 11-16).
+
+    Parameters
+    ----------
+    corners_xz : array-like, shape (M, 2)
+        Corners in the sensor x-z plane, m.
+    T_base_flange : array-like, shape (M, 4, 4)
+        Reported flange poses.
+    T_flange_sensor_initial : array-like, shape (4, 4)
+        The old hand-eye to correct.
+    point_base : array-like, shape (3,)
+        The taught point (X_R, Y_R, Z_R), m.
+    config : KnownPointConfig, optional
+        Only the grid steps are used.
+    """
+    cfg = KnownPointConfig() if config is None else config
+    s = corners_3d(np.asarray(corners_xz, dtype=np.float64))
+    T = np.asarray(T_base_flange, dtype=np.float64)
+    X0 = np.asarray(T_flange_sensor_initial, dtype=np.float64)
+    p = np.asarray(point_base, dtype=np.float64)
+    t_fs = X0[:3, 3].copy()
+    r0 = rotvec_from_matrix(X0[:3, :3])
+    start = float(scatter_delta_r(weld_points_base(corners_xz, T, X0), p))
+    r1, score1, edge = _grid_best(r0, cfg.grid_coarse, s, T, t_fs, p)
+    r2, score2, _ = _grid_best(r1, cfg.grid_fine, s, T, t_fs, p)
+    R = Rotation.from_rotvec(r2).as_matrix()
+    rotated = transform_from_rotation_translation(R, t_fs)
+    offsets = weld_points_base(corners_xz, T, rotated) - p
+    shift = -np.mean(np.einsum("mji,mj->mi", T[:, :3, :3], offsets), axis=0)
+    return PaperCorrection(
+        T_flange_sensor=transform_from_rotation_translation(R, t_fs + shift),
+        rotvec_rad=r2,
+        delta_r_m=np.array([start, score1, score2]),
+        offset_m=offsets.mean(axis=0),
+        on_grid_edge=edge,
+    )

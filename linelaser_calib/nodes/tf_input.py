@@ -1,0 +1,105 @@
+# mypy: disallow-untyped-calls=False
+# rclpy is only partly annotated: calling its untyped functions is expected here.
+"""Live flange poses from ``/tf`` and ``/tf_static`` (the collector's ``pose_source: tf``).
+
+The transforms go into the same :class:`~linelaser_calib.core.tf.TransformTree` as offline;
+each ``/tf`` message that moves a dynamic link of the chain base frame -> flange frame
+gives one flange pose at its stamp, which then goes through the collector's ordinary
+pairing. ``tf2_msgs`` comes with every ROS 2 install that has ``tf2_ros`` but not with the
+PyPI wheels: without it, :class:`TfPoseInput` refuses to start with a clear message.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.tf import StampedTransform, TransformTree, live_flange_poses
+from linelaser_calib.core.types import FlangePose
+from linelaser_calib.nodes.common import latched_qos
+from msg_adapters import stamped_transforms_from_msgs
+
+try:  # a full ROS install has tf2_msgs; the PyPI wheels do not
+    from tf2_msgs.msg import TFMessage
+except ImportError as err:
+    _MISSING: ImportError | None = err
+else:
+    _MISSING = None
+
+#: Depth of the /tf_static subscription (publishers latch one message each).
+TF_STATIC_DEPTH = 100
+
+
+class TfPoseInput:
+    """Subscribes ``/tf`` and ``/tf_static`` and hands flange poses to ``on_pose``.
+
+    Parameters
+    ----------
+    node : rclpy Node
+    base_frame, flange_frame : str
+        The chain's ends.
+    tolerance_s : float
+        Largest gap to another dynamic transform interpolated at a stamp, s.
+    max_age_s : float
+        Dynamic transforms kept behind the newest of their link, s.
+    qos : QoSProfile
+        QoS of the ``/tf`` subscription.
+    on_pose : callable(FlangePose)
+    on_problem : callable(str)
+        Called with the reason when a message gives no pose (e.g. the chain is incomplete).
+
+    Raises
+    ------
+    InputError
+        Without ``tf2_msgs``.
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        base_frame: str,
+        flange_frame: str,
+        tolerance_s: float,
+        max_age_s: float,
+        qos: QoSProfile,
+        on_pose: Callable[[FlangePose], None],
+        on_problem: Callable[[str], None],
+    ) -> None:
+        if _MISSING is not None:
+            raise InputError(
+                f"pose_source 'tf' needs the tf2_msgs message package ({_MISSING}), part of "
+                "every ROS 2 install with tf2_ros; source that install, or publish the flange "
+                "pose as geometry_msgs/PoseStamped and use pose_source 'pose'"
+            )
+        self.tree = TransformTree(max_age_s)
+        self._base, self._flange, self._tolerance_s = base_frame, flange_frame, tolerance_s
+        self._on_pose, self._on_problem = on_pose, on_problem
+        node.create_subscription(TFMessage, "/tf", self._on_tf, qos)
+        node.create_subscription(
+            TFMessage, "/tf_static", self._on_tf_static, latched_qos(TF_STATIC_DEPTH)
+        )
+
+    def _transforms(self, msg: Any) -> list[StampedTransform]:
+        transforms = []
+        for item in stamped_transforms_from_msgs(msg.transforms):
+            if isinstance(item, str):
+                self._on_problem(item)
+            else:
+                transforms.append(item)
+        return transforms
+
+    def _on_tf_static(self, msg: Any) -> None:
+        self.tree.extend(self._transforms(msg), static=True)
+
+    def _on_tf(self, msg: Any) -> None:
+        poses, problems = live_flange_poses(
+            self.tree, self._transforms(msg), self._base, self._flange, self._tolerance_s
+        )
+        for problem in problems:
+            self._on_problem(problem)
+        for pose in poses:
+            self._on_pose(pose)

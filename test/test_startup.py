@@ -1,0 +1,52 @@
+"""Start-up: a command loads what it needs when it needs it.
+
+Checked by the modules loaded (deterministic), not by timing; ``bench/startup.py`` measures
+the time.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.special import chdtri
+from scipy.stats import chi2
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+#: Heavy modules no calibration of a cylinder recording needs: plotting, ROS, statistics,
+#: and every ROS distribution's message types (the recording carries its own definitions).
+NOT_NEEDED = ("matplotlib", "rclpy", "scipy.stats", "rosbags.typesys.stores.ros2_jazzy")
+
+PROBE = """
+import json, sys
+loaded = lambda: sorted(m for m in sys.modules if m.startswith(NOT_NEEDED))
+NOT_NEEDED = tuple(sys.argv[1:])
+import linelaser_calib.cli
+after_import = loaded()
+code = linelaser_calib.cli.main(["calibrate", "bags/paper", "--json"])
+print(json.dumps({"import": after_import, "calibrate": loaded(), "code": code}))
+"""
+
+
+def test_the_cli_and_a_calibration_load_no_plotting_ros_or_statistics() -> None:
+    run = subprocess.run(
+        [sys.executable, "-c", PROBE, *NOT_NEEDED],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    report = json.loads(run.stdout.splitlines()[-1])
+    assert report["code"] == 0
+    assert report["import"] == [], "imported by linelaser_calib.cli"
+    assert report["calibrate"] == [], "imported by calibrate bags/paper"
+
+
+def test_the_chi_square_quantile_equals_scipy_stats() -> None:
+    """The outlier limits use scipy.special.chdtri instead of scipy.stats.chi2.isf."""
+    for dof in (3, 6):
+        p = np.array([0.05, 1e-3, 1e-6, 1e-9])
+        np.testing.assert_allclose(chdtri(dof, p), chi2.isf(p, dof), rtol=1e-12)
