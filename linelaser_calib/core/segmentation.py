@@ -7,7 +7,7 @@ sphere's circle, a seam's V corner) among the rest, wherever it lies and however
 share of the profile. Pure numpy.
 
 Steps of :func:`segment_profile`, on points in scan-line order (sorted by ray angle,
-:func:`~linelaser_calib.core.profile.scan_angle`):
+:func:`~linelaser_calib.core.profile.scan_order`):
 
 1. **Noise.** :func:`estimate_noise` measures the sensor noise from the data: the
    distance of each point from the chord through its two neighbours is, on a smooth curve,
@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import InputError
-from .profile import MAD_TO_SIGMA, scan_angle
+from .profile import MAD_TO_SIGMA, scan_order
 from .types import FloatArray
 
 IntArray = NDArray[np.intp]
@@ -334,8 +334,8 @@ def segment_profile(
     Parameters
     ----------
     points_xz : array-like, shape (N, 2)
-        Profile points (x, z) in the sensor frame, m, any order (they are sorted by ray
-        angle).
+        Profile points (x, z) in the sensor frame, m, any order (they are put in scan
+        order).
     config : SegmentationConfig, optional
 
     Returns
@@ -345,7 +345,7 @@ def segment_profile(
     """
     config = config or SegmentationConfig()
     p_in = _check_xz(points_xz)
-    order = np.argsort(scan_angle(p_in), kind="stable")
+    order = scan_order(p_in)
     p = p_in[order]
     noise = estimate_noise(p)
     band = config.line_band_sigmas * noise.sigma_m
