@@ -2,9 +2,10 @@
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
 recordings into a bag), ``info`` (what a bag holds), ``calibrate`` (the offline
-calibration), ``export`` (a result as a URDF joint, a static TF command or a launch file)
-and ``demo`` (calibrate the committed bags and show the error against their truth). Exit
-code 0 means success; a user error prints one
+calibration), ``reconstruct`` (apply a calibration: a recording's profiles in the base
+frame), ``export`` (a result as a URDF joint, a static TF command or a launch file) and
+``demo`` (calibrate the committed bags and show the error against their truth). Exit code 0
+means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -22,6 +23,7 @@ import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.pose_source import PoseSource
@@ -29,7 +31,14 @@ from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_name
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
+from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
+from linelaser_calib.io.kinematics import (
+    SECTION,
+    kinematics_section,
+    load_model,
+    read_kinematics,
+)
 from linelaser_calib.io.results import (
     read_reference_yaml,
     read_result_yaml,
@@ -115,7 +124,8 @@ def simulate_to_bag(
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
-    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input; so do
+    straight-seam scenarios (line target), with the true line.
     With ``tf`` the flange poses are also written as a robot_state_publisher-style
     ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
     (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
@@ -124,7 +134,9 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.line import Line, LineSection
     from linelaser_calib.core.targets.sphere import SphereSection
+    from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
     from linelaser_calib.sim.sphere import (
@@ -141,11 +153,14 @@ def simulate_to_bag(
     )
 
     weld = scenario_name in WELD_PRESETS
+    arm, joint_states = None, None  # only the cylinder scenes simulate an arm's joints
+    initial_target: ResultSection | None = None
     if weld:
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+        initial_target = KnownPoint(np.asarray(weld_data.truth.taught_point_m), estimated=False)
     elif scenario_name in SPHERE_PRESETS:
         # --radius is the target's radius: the sphere's here.
         own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
@@ -159,11 +174,18 @@ def simulate_to_bag(
             radius_estimated=False,
             side_estimated=False,
         )
+    elif scenario_name in LINE_PRESETS:
+        line_data = simulate_line(line_scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = line_data.scenario, line_data.profiles, line_data.poses
+        intensities, T_true = line_data.intensities, line_data.truth.T_flange_sensor
+        target = LineSection(Line(line_data.truth.line_point, line_data.truth.line_direction))
+        initial_target = target
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
         target = CylinderSection(data.truth.cylinder)
+        arm, joint_states = data.truth.arm, data.joint_states
     tf_dynamic, tf_static = (
         ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
     )
@@ -179,6 +201,8 @@ def simulate_to_bag(
         intensities=intensities if scenario.intensity else None,
         tf=tf_dynamic,
         tf_static=tf_static,
+        joint_states=joint_states,
+        joint_state_topic=scenario.joint_state_topic,
     )
     simulation: dict[str, object] = {
         "scenario": scenario_name,
@@ -189,12 +213,12 @@ def simulate_to_bag(
         "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
-        taught = weld_data.truth.taught_point_m
-        simulation["taught_point"] = taught
+        simulation["taught_point"] = weld_data.truth.taught_point_m
+    if initial_target is not None:
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                target=KnownPoint(np.asarray(taught), estimated=False),
+                target=initial_target,
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
@@ -212,7 +236,10 @@ def simulate_to_bag(
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
-        extra={"simulation": simulation},
+        extra={
+            "simulation": simulation,
+            **({} if arm is None else {SECTION: kinematics_section(arm.errors, arm.nominal)}),
+        },
     )
     return out, truth
 
@@ -330,7 +357,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
-            clock_offset_s=0.0 if args.clock_offset == "auto" else float(args.clock_offset),
+            clock_offset_s=0.0 if args.clock_offset in (None, "auto") else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
@@ -401,6 +428,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     _check_outputs(args)
     config = _pipeline_config(args)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
+    source, model = _pose_source(args)
     try:
         run = calibrate_bag(
             args.bag,
@@ -410,9 +438,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             flange_frame=args.flange_frame,
             estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
-            pose_source=PoseSource(args.pose_source),
+            pose_source=source,
             base_frame=args.base_frame,
             invalid_values_m=tuple(args.invalid_value),
+            joint_state_topic=args.joint_state_topic,
+            model=model,
         )
     except PairingError as exc:
         raise PairingError(
@@ -440,6 +470,113 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print(format_summary(run.result, truth))
         for path in written:
             print(f"Wrote {path}")
+    return 0
+
+
+def _pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel | None]:
+    """The pose source and robot model of ``--pose-source`` and ``--kinematics``."""
+    source = PoseSource(args.pose_source)
+    if source is PoseSource.JOINT_STATES and args.kinematics is None:
+        raise InputError(
+            "--pose-source joint_states computes the flange poses from the joint states "
+            "through the robot's kinematic model: pass --kinematics ur5e, ur10e or a URDF file"
+        )
+    if source is not PoseSource.JOINT_STATES and args.kinematics is not None:
+        raise InputError(
+            f"--kinematics {args.kinematics} selects the robot model of the joint_states pose "
+            f"source and does not apply to --pose-source {source.value}; add --pose-source "
+            "joint_states or leave --kinematics out"
+        )
+    if args.kinematics is None:
+        return source, None
+    return source, load_model(
+        args.kinematics, base_frame=args.base_frame, flange_frame=args.flange_frame
+    )
+
+
+def _add_pairing_arguments(parser: argparse.ArgumentParser, clock_offset_help: str) -> None:
+    parser.add_argument(
+        "--sync-tolerance",
+        type=_positive_float,
+        default=PairingConfig.sync_tolerance_s,
+        help="largest profile-to-pose stamp gap, s",
+    )
+    parser.add_argument("--clock-offset", type=_offset, default=None, help=clock_offset_help)
+    for flag, parse, default, text in CALIBRATE_NUMBERS:
+        if flag in PAIRING_FLAGS:
+            parser.add_argument(flag, type=parse, default=default, help=text)
+
+
+# --- reconstruct ----------------------------------------------------------------------------
+
+
+def _cmd_reconstruct(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.ply import write_ply
+    from linelaser_calib.reconstruct import reconstruct_bag
+    from linelaser_calib.report import write_cloud_mcap
+
+    suffix = Path(args.output).suffix
+    if suffix not in (".ply", ".mcap"):
+        raise InputError(
+            f"--output {args.output}: give a .ply file (point-cloud tools) or an .mcap file "
+            "(PointCloud2 for Foxglove and RViz)"
+        )
+    _check_output(args.output, "point cloud (--output)")
+    try:
+        calibration = read_result_yaml(args.calibration)
+        corrections = read_kinematics(args.calibration)
+    except ResultFileError as exc:
+        raise ResultFileError(
+            f"cannot use the calibration (--calibration): {exc}; give a result YAML written "
+            "by linelaser-calib calibrate"
+        ) from exc
+    source, model = _pose_source(args)
+    if args.clock_offset == "auto":
+        raise InputError(
+            "reconstruct takes the clock offset from the calibration (quality.clock_offset_s) "
+            "or as --clock-offset SECONDS; 'auto' applies to calibrate only"
+        )
+    offset = calibration.clock_offset_s if args.clock_offset is None else args.clock_offset
+    pairing = PairingConfig(
+        sync_tolerance_s=args.sync_tolerance,
+        clock_offset_s=float(offset),
+        max_linear_speed_m_s=args.max_speed,
+        max_angular_speed_rad_s=args.max_angular_speed,
+    )
+    try:
+        done = reconstruct_bag(
+            args.bag,
+            calibration,
+            pairing,
+            kinematics=corrections,
+            pose_source=source,
+            model=model,
+            profile_topic=args.profile_topic,
+            pose_topic=args.pose_topic,
+            joint_state_topic=args.joint_state_topic,
+            base_frame=args.base_frame,
+            flange_frame=args.flange_frame,
+            invalid_values_m=tuple(args.invalid_value),
+        )
+    except PairingError as exc:
+        raise PairingError(
+            f"{exc} (Options of reconstruct: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
+        ) from exc
+    if suffix == ".ply":
+        written = write_ply(
+            args.output, done.points, frame_id=done.base_frame, intensity=done.intensity
+        )
+    else:
+        written = write_cloud_mcap(args.output, done.clouds, done.base_frame, done.intensities)
+    corrected = " (kinematic corrections applied)" if corrections else ""
+    print(
+        f"{done.bag.path}: {len(done.clouds)} of {len(done.bag.profiles)} profiles mapped into "
+        f"{done.base_frame} with {done.poses.description}{corrected}; {len(done.points)} points"
+    )
+    if done.rejected:
+        reasons = sorted({r.reason.split(" (")[0] for r in done.rejected})
+        print(f"  {len(done.rejected)} profiles not paired: {'; '.join(reasons[:3])}")
+    print(f"Wrote {written}")
     return 0
 
 
@@ -473,16 +610,35 @@ def _cmd_export(args: argparse.Namespace) -> int:
 # --- demo -----------------------------------------------------------------------------------
 
 
+def _preset_motion(name: object) -> str | None:
+    """The motion (``step``, ``continuous``) of a simulator preset; None for another name."""
+    from linelaser_calib.sim.line import LINE_PRESETS
+    from linelaser_calib.sim.scenario import PRESETS
+    from linelaser_calib.sim.sphere import SPHERE_PRESETS
+    from linelaser_calib.sim.weld import WELD_PRESETS
+
+    rigs = {
+        **PRESETS,
+        **{k: v.rig for k, v in WELD_PRESETS.items()},
+        **{k: v.rig for k, v in LINE_PRESETS.items()},
+        **{k: v.rig for k, v in SPHERE_PRESETS.items()},
+    }
+    rig = rigs.get(name) if isinstance(name, str) else None
+    return None if rig is None else rig.motion
+
+
 def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
     """Calibrate one committed bag with both methods, print the summaries, add table rows.
 
     A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
-    corrects that hand-eye); a converted real recording with its ``reference.yaml`` (another
-    tool's hand-eye, calibrated with the settings recorded there). A bag with neither is
-    skipped with a note.
+    corrects that hand-eye; a continuous scan is calibrated as one, at any flange speed with
+    the clock offset estimated); a converted real recording with its ``reference.yaml``
+    (another tool's hand-eye, calibrated with the settings recorded there). A bag with
+    neither is skipped with a note.
     """
     settings: dict[str, object] = {}
     initial = None
+    continuous = False
     truth, note = truth_beside(bag)
     if truth is None and not (bag / "reference.yaml").is_file():
         print(note or f"{bag} has no truth.yaml or reference.yaml; skipped", file=sys.stderr)
@@ -497,22 +653,31 @@ def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, fl
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+        continuous = _preset_motion(truth.raw.get("simulation", {}).get("scenario")) == "continuous"
+        if continuous:
+            label += ", continuous, clock offset estimated"
     else:
         compare, reference = read_reference_yaml(bag / "reference.yaml")
         target = get_target(str(reference["target"]))
         settings = dict(reference.get("settings") or {})
         against = "reference"
         label = f"{target.title}, real scans; reference.yaml is not ground truth"
+    pairing = (
+        PairingConfig(max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
+        if continuous
+        else PairingConfig()
+    )
     for method in (Method.PAPER, Method.DEFAULT):
         config = PipelineConfig(
             method=method,
             target=target.name,
             target_config=configure(target, method.value, settings, SETTING_FLAGS),
             seed=seed,
+            pairing=pairing,
             initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
         )
         started = time.perf_counter()
-        run = calibrate_bag(bag, config)
+        run = calibrate_bag(bag, config, estimate_offset=continuous)
         seconds = time.perf_counter() - started
         print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
         print(format_summary(run.result, truth))
@@ -604,6 +769,10 @@ TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
 )
 
 
+#: Flags of :data:`CALIBRATE_NUMBERS` that set the pairing gate (shared with reconstruct).
+PAIRING_FLAGS = ("--max-speed", "--max-angular-speed")
+
+
 def _sentinel(text: str) -> float:
     """Parse a sentinel depth, m (finite)."""
     try:
@@ -623,14 +792,25 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
         "--pose-source",
         choices=[s.value for s in PoseSource],
         default=PoseSource.POSE.value,
-        help="flange poses from a PoseStamped topic (pose, default) or from the /tf + "
-        "/tf_static chain --base-frame -> --flange-frame (tf)",
+        help="flange poses from a PoseStamped topic (pose, default), from the /tf + "
+        "/tf_static chain --base-frame -> --flange-frame (tf), or from sensor_msgs/JointState "
+        "through the robot model (joint_states, needs --kinematics)",
     )
     cal.add_argument(
         "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
     )
     cal.add_argument(
         "--flange-frame", default="tool0", help="frame id of the flange (end of the TF chain)"
+    )
+    cal.add_argument(
+        "--kinematics",
+        metavar="MODEL",
+        help="robot model of the joint_states pose source: ur5e, ur10e or a URDF file "
+        "(chain --base-frame to --flange-frame)",
+    )
+    cal.add_argument(
+        "--joint-state-topic",
+        help="JointState topic (default /joint_states, else the only JointState topic)",
     )
     cal.add_argument(
         "--invalid-value",
@@ -656,8 +836,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, cluttered_camera, weld_seam, "
-        "weld_seam_general, sphere",
+        help=(
+            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, cluttered_camera, "
+            "weld_seam, weld_seam_general, sphere, line, line_features"
+        ),
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
@@ -730,21 +912,14 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
     )
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
-    cal.add_argument(
-        "--sync-tolerance",
-        type=_positive_float,
-        default=PairingConfig.sync_tolerance_s,
-        help="largest profile-to-pose stamp gap, s",
-    )
-    cal.add_argument(
-        "--clock-offset",
-        type=_offset,
-        default=0.0,
-        help="added to profile stamps to reach the pose clock, s; 'auto' estimates it "
-        "(continuous scanning with latency)",
+    _add_pairing_arguments(
+        cal,
+        "added to profile stamps to reach the pose clock, s (default 0); 'auto' estimates "
+        "it (continuous scanning with latency)",
     )
     for flag, parse, default, text in CALIBRATE_NUMBERS:
-        cal.add_argument(flag, type=parse, default=default, help=text)
+        if flag not in PAIRING_FLAGS:
+            cal.add_argument(flag, type=parse, default=default, help=text)
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
     _add_pose_source_arguments(cal)
@@ -756,6 +931,28 @@ def build_parser() -> argparse.ArgumentParser:
         help="print progress on stderr (default: when stderr is a terminal)",
     )
     cal.set_defaults(func=_cmd_calibrate)
+
+    rec = sub.add_parser(
+        "reconstruct", help="map every profile of a bag into the base frame with a calibration"
+    )
+    rec.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
+    rec.add_argument(
+        "--calibration", required=True, metavar="RESULT.yaml", help="result of calibrate"
+    )
+    rec.add_argument(
+        "--output",
+        required=True,
+        metavar="OUT.ply|OUT.mcap",
+        help="PLY (x y z float, m, base frame) or MCAP (PointCloud2 in the base frame)",
+    )
+    rec.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
+    rec.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
+    _add_pairing_arguments(
+        rec,
+        "added to profile stamps to reach the pose clock, s (default: the calibration's)",
+    )
+    _add_pose_source_arguments(rec)
+    rec.set_defaults(func=_cmd_reconstruct)
 
     export = sub.add_parser(
         "export", help="print a result as a URDF joint, a static TF command or a launch file"

@@ -22,7 +22,8 @@ import yaml
 from _compare import assert_float32_close, assert_floats_close, assert_trees_close
 
 from linelaser_calib.cli import main
-from linelaser_calib.io.bags import BagContents, read_bag
+from linelaser_calib.core.kinematics import JointStates
+from linelaser_calib.io.bags import BagContents, read_bag, read_joint_states
 
 ROOT = Path(__file__).resolve().parent.parent
 BAGS = ROOT / "bags"
@@ -32,11 +33,13 @@ CONVERTED = [bag for bag in COMMITTED if (bag / "reference.yaml").is_file()]
 
 
 class Recording(NamedTuple):
-    """What a simulator command writes: the bag, truth.yaml and (weld seams) initial.yaml."""
+    """What a simulator command writes: the bag, truth.yaml, (weld seams) initial.yaml and
+    (arms with kinematics) the joint states."""
 
     bag: BagContents
     truth: dict[str, Any]
     initial: dict[str, Any] | None
+    joint_states: JointStates | None = None
 
 
 def load(directory: Path) -> Recording:
@@ -47,13 +50,21 @@ def load(directory: Path) -> Recording:
     truth = parsed("truth.yaml")
     assert truth is not None
     truth["simulation"].pop("command")  # names the output directory
-    return Recording(read_bag(directory), truth, parsed("initial.yaml"))
+    joints = read_joint_states(directory) if "kinematics" in truth else None
+    return Recording(read_bag(directory), truth, parsed("initial.yaml"), joints)
 
 
 def assert_same_recording(new: Recording, old: Recording) -> None:
     assert_trees_close(new.truth, old.truth)
     assert_trees_close(new.initial, old.initial)
     assert_same_bag(new.bag, old.bag)
+    assert (new.joint_states is None) == (old.joint_states is None)
+    if new.joint_states is not None and old.joint_states is not None:
+        assert new.joint_states.names == old.joint_states.names
+        np.testing.assert_array_equal(new.joint_states.stamps_ns, old.joint_states.stamps_ns)
+        assert_floats_close(
+            new.joint_states.positions, old.joint_states.positions, err_msg="joint states"
+        )
 
 
 def assert_same_bag(a: BagContents, b: BagContents) -> None:

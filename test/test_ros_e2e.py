@@ -93,15 +93,16 @@ def short_replay() -> Replay:
 
 @pytest.fixture(scope="module")
 def committed_replay() -> Replay:
-    """The shortest committed bag of a cylinder scan (its truth.yaml has a cylinder) from a
-    robot without a position-dependent error field, which sub-millimetre bounds suit."""
+    """The shortest committed bag of a cylinder scan (its truth.yaml has a cylinder) whose
+    robot error is independent per pose (no ``kinematics`` truth and no position-dependent
+    error field: systematic errors)."""
     truths = {
         p.parent: read_truth_yaml(p) for p in sorted((REPO_ROOT / "bags").glob("*/truth.yaml"))
     }
 
     def exact_robot(truth: Truth) -> bool:
         preset = PRESETS.get(str(truth.raw.get("simulation", {}).get("scenario")))
-        return preset is None or not any(preset.robot_field_m)
+        return "kinematics" not in truth.raw and (preset is None or not any(preset.robot_field_m))
 
     bags = [
         bag

@@ -9,7 +9,9 @@ from typing import Generic, Protocol, TypeVar
 import numpy as np
 
 from linelaser_calib.core.geometry import invert_transform
+from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
+from linelaser_calib.sim.arm import Arm, plan_arm
 from linelaser_calib.sim.clutter import (
     camera_effects,
     clustered_poses,
@@ -56,7 +58,7 @@ class SimulationTruth:
         True flange pose at each profile's acquisition time.
     T_base_flange_recorded : ndarray, shape (K, 4, 4)
         What the robot reports at the acquisition time, without per-message jitter
-        (true · E_sys · E).
+        (true · E_sys · E; with an arm, nominal forward kinematics).
     stamps_ns : ndarray of int64, shape (K,)
         Profile stamps as published (acquisition + latency).
     acquisition_stamps_ns : ndarray of int64, shape (K,)
@@ -74,6 +76,11 @@ class SimulationTruth:
     valid, spike, dropout : ndarray of bool, shape (K, N)
         Ray returned a point; that point is a reflection spike; the ray was dropped at
         random.
+    arm : Arm or None
+        With ``scenario.robot_model``: the nominal and true kinematics and the waypoint
+        joint vectors.
+    joint_positions : ndarray, shape (K, n), or None
+        With an arm: the joint vector at each profile's acquisition time (rad).
     sigma_factor : ndarray, shape (K,), or None
         Each profile's noise as a multiple of the scenario's sigmas (None: all 1).
     field_offset_sensor_m : ndarray, shape (M, 3), or None
@@ -97,6 +104,8 @@ class SimulationTruth:
     valid: BoolArray
     spike: BoolArray
     dropout: BoolArray
+    arm: Arm | None = None
+    joint_positions: FloatArray | None = None
     sigma_factor: FloatArray | None = None
     field_offset_sensor_m: FloatArray | None = None
 
@@ -114,12 +123,15 @@ class SimulatedData:
     poses : list of FlangePose
         The full reported flange-pose stream, sorted by stamp.
     truth : SimulationTruth
+    joint_states : JointStates or None
+        With an arm: the joint-state stream, at the stamps of the flange poses.
     """
 
     profiles: list[Profile]
     intensities: list[FloatArray | None]
     poses: list[FlangePose]
     truth: SimulationTruth
+    joint_states: JointStates | None = None
 
     @property
     def scenario(self) -> Scenario:
@@ -127,23 +139,52 @@ class SimulatedData:
         return self.truth.scenario
 
 
+def stream_times_ns(scenario: Scenario, motion: Motion) -> Int64Array:
+    """Times (ns from the first) of the robot's messages at ``robot_rate_hz``, shape (K,)."""
+    period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
+    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
+    return np.arange(n_stream, dtype=np.int64) * period_ns
+
+
 def recorded_pose_stream(
-    rng: np.random.Generator, scenario: Scenario, motion: Motion, errors: FloatArray
+    rng: np.random.Generator,
+    scenario: Scenario,
+    motion: Motion,
+    errors: FloatArray,
+    arm: Arm | None = None,
+    stamp_jitter_s: float = 0.0,
 ) -> list[FlangePose]:
     """The robot's flange-pose stream at ``robot_rate_hz`` over the whole motion.
 
-    Each message is the reported pose (true pose with the shot's error ``errors``) times a
-    per-message jitter, stamped on the pose clock from ``epoch_ns``.
+    Each message is the reported pose (without an arm: the true pose with the shot's error
+    ``errors``; with one: the nominal forward kinematics) times a per-message jitter,
+    stamped on the pose clock from ``epoch_ns``. With ``stamp_jitter_s`` (s, 1σ) each stamp
+    misses the instant the pose was taken by a Gaussian error, as when a driver stamps
+    messages on arrival (the stamps are kept in order).
     """
-    period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
-    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
-    stream_ns = np.arange(n_stream, dtype=np.int64) * period_ns
-    stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
-    stream = stream @ jitter_transforms(rng, scenario, n_stream)
+    stream_ns = stream_times_ns(scenario, motion)
+    if arm is None:
+        stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
+    else:
+        stream = arm.reported_flange(motion, stream_ns / 1e9)
+    stream = stream @ jitter_transforms(rng, scenario, len(stream_ns))
+    if stamp_jitter_s > 0.0:
+        late = np.round(rng.normal(size=len(stream_ns)) * stamp_jitter_s * 1e9).astype(np.int64)
+        stream_ns = np.sort(stream_ns + late)
     return [
         FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
         for s, T in zip(stream_ns, stream, strict=True)
     ]
+
+
+def joint_state_stream(scenario: Scenario, motion: Motion, arm: Arm) -> JointStates:
+    """The arm's joint states at the stamps of the flange-pose stream."""
+    stream_ns = stream_times_ns(scenario, motion)
+    return JointStates(
+        arm.nominal.joint_names,
+        scenario.epoch_ns + stream_ns,
+        arm.joint_positions(motion, stream_ns / 1e9),
+    )
 
 
 def published_profiles(
@@ -288,7 +329,10 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
     rng = np.random.default_rng(seed)
     extra = clutter_rng(seed)
     scene = scene_from_scenario(scenario)
-    if scenario.pose_clusters:
+    arm = plan_arm(rng, scenario, scene) if scenario.robot_model else None
+    if arm is not None:
+        sampled = arm.sampled
+    elif scenario.pose_clusters:
         centres = sample_sensor_poses(rng, replace(scenario, n_poses=scenario.pose_clusters), scene)
         sampled = clustered_poses(extra, scenario, centres)
     else:
@@ -302,7 +346,14 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
 
     acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
     t_shot = acq_ns / 1e9
-    T_sensor_shot = motion.T_base_sensor(t_shot)
+    if arm is None:
+        T_sensor_shot = motion.T_base_sensor(t_shot)
+        T_flange_true = true_flange(motion, scenario, t_shot)
+        T_flange_recorded = reported_flange(motion, scenario, errors, t_shot)
+    else:
+        T_flange_true = arm.true_flange(motion, scenario, errors, t_shot)
+        T_sensor_shot = T_flange_true @ scenario.T_flange_sensor
+        T_flange_recorded = arm.reported_flange(motion, t_shot)
     traced = trace(scene, scenario, T_sensor_shot)
     measured = measure(rng, scenario, traced)
     sigma_factor: FloatArray | None = None
@@ -311,15 +362,15 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         measured = camera_effects(
             scenario, traced, measured, sigma_factor, T_sensor_shot[:, :3, :3]
         )
-    poses = recorded_pose_stream(rng, scenario, motion, errors)
+    poses = recorded_pose_stream(rng, scenario, motion, errors, arm)
     stamps, profiles, intensities = published_profiles(scenario, acq_ns, measured)
     truth = SimulationTruth(
         scenario=scenario,
         seed=seed,
         T_flange_sensor=scenario.T_flange_sensor,
         cylinder=scenario.cylinder(),
-        T_base_flange_true=true_flange(motion, scenario, t_shot),
-        T_base_flange_recorded=reported_flange(motion, scenario, errors, t_shot),
+        T_base_flange_true=T_flange_true,
+        T_base_flange_recorded=T_flange_recorded,
         stamps_ns=stamps,
         acquisition_stamps_ns=scenario.epoch_ns + acq_ns,
         T_base_sensor_waypoints=sampled.T_base_sensor,
@@ -330,7 +381,10 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         valid=measured.valid,
         spike=measured.spike,
         dropout=measured.dropout,
+        arm=arm,
+        joint_positions=None if arm is None else arm.joint_positions(motion, t_shot),
         sigma_factor=sigma_factor,
         field_offset_sensor_m=offsets,
     )
-    return SimulatedData(profiles, intensities, poses, truth)
+    joints = None if arm is None else joint_state_stream(scenario, motion, arm)
+    return SimulatedData(profiles, intensities, poses, truth, joints)

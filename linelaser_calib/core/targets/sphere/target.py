@@ -256,6 +256,7 @@ class SphereTarget:
     title = "sphere"
     summary = "a sphere (tooling ball) scanned from many poses: each profile a circle"
     methods: tuple[str, ...] = ("paper", "default")
+    estimates_clock_offset = False
     config_type = SphereConfig
     options: Mapping[str, Option] = {
         "radius_m": Option("radius_m"),
