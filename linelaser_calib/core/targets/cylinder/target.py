@@ -41,7 +41,7 @@ from ..base import (
     rejection_digest,
 )
 from .config import CylinderConfig
-from .features import FittedSample, fit_sample, fit_samples, settle_radius
+from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
 from .plan import CylinderPlanner
 from .refine import refine, refine_with_outlier_rejection
 from .section import CylinderSection, read_cylinder_section
@@ -146,6 +146,7 @@ class CylinderTarget:
                 f"distance is {solution.rms_m * 1e3:.3f} mm; check the rejected samples and "
                 "the poses"
             )
+        warnings.extend(arc_notes(features, config))
         return TargetSolution(
             T_flange_sensor=T,
             section=CylinderSection(cylinder, config.radius_m is None),
@@ -201,7 +202,7 @@ class CylinderTarget:
             },
             sigma_translation_m=refined.sigma_translation_m,
             sigma_rotation_rad=refined.sigma_rotation_rad,
-            warnings=list(refined.warnings),
+            warnings=[*refined.warnings, *arc_notes(features, config)],
             history={**seed.history, "refine_cost": list(refined.cost_history)},
             sample_fits=[features[j].record() for j in refined.used],
             noise_m=config.refine.sensor_sigma_m,
