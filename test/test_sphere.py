@@ -332,22 +332,7 @@ def test_real_scans_fit_better_than_the_published_hand_eye() -> None:
     assert np.all((sigma_t > 1e-4) & (sigma_t < 1e-3))
 
 
-@pytest.mark.parametrize(
-    "bag",
-    [
-        SPHERE_BAG,
-        pytest.param(
-            REAL_BAG,
-            marks=pytest.mark.xfail(
-                strict=False,
-                reason="the cylinder's fit check passes the real sphere scans: its default "
-                "solve leaves 126 um RMS against ~7 um of profiler noise, below its limit of a "
-                "multiple of the configured 5 um",
-            ),
-        ),
-    ],
-    ids=["simulated", "real"],
-)
+@pytest.mark.parametrize("bag", [SPHERE_BAG, REAL_BAG], ids=["simulated", "real"])
 def test_the_cylinder_target_refuses_sphere_scans(
     bag: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
