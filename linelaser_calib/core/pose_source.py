@@ -18,7 +18,3 @@ class PoseSource(Enum):
     POSE = "pose"
     TF = "tf"
     JOINT_STATES = "joint_states"
-
-
-#: The sources the collector takes live (all of them).
-LIVE_POSE_SOURCES = (PoseSource.POSE, PoseSource.TF, PoseSource.JOINT_STATES)

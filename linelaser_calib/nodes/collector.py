@@ -56,7 +56,7 @@ from std_srvs.srv import Trigger
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
-from linelaser_calib.core.pose_source import LIVE_POSE_SOURCES, PoseSource
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.tf import base_frame_warning
@@ -144,14 +144,15 @@ PARAMETERS = (
         "Where flange poses come from: pose (geometry_msgs/PoseStamped on flange_pose), tf "
         "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs) or "
         "joint_states (sensor_msgs/JointState on joint_states through the kinematics model).",
-        choices=tuple(s.value for s in LIVE_POSE_SOURCES),
+        choices=tuple(s.value for s in PoseSource),
         read_only=True,
     ),
     ParamSpec(
         "base_frame",
         "base_link",
-        "Robot base frame: start of the TF chain (pose_source tf); with PoseStamped poses in "
-        "UR's 'base' instead, a warning says what that means.",
+        "Robot base frame: start of the TF chain (pose_source tf) or of a URDF's joint chain "
+        "(pose_source joint_states); with PoseStamped poses in UR's 'base' instead, a "
+        "warning says what that means.",
         read_only=True,
     ),
     ParamSpec(
