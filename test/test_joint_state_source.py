@@ -26,7 +26,7 @@ from linelaser_calib.io.results import read_result_yaml
 from linelaser_calib.nodes import collector
 from linelaser_calib.nodes.joint_state_input import JointStatePoseInput, live_kinematic_model
 from linelaser_calib.sim import scenario_from_preset, simulate
-from msg_adapters import joint_state_msg, rclpy_types
+from msg_adapters import joint_state_msg, pose_stamped_from_flange_pose, rclpy_types
 
 SEED = 4
 #: Host latency of the profile stamps in the ur5e_cell preset, ns.
@@ -178,3 +178,37 @@ def test_collector_refuses_joint_states_without_a_usable_model(
             ],
         )
     assert not list(tmp_path.iterdir())  # refused before a session was opened
+
+
+@pytest.mark.ros
+def test_collector_with_joint_states_takes_robot_description_and_ignores_pose_stamped(
+    context: Context, tmp_path: Path
+) -> None:
+    data = simulate(scenario_from_preset("ur5e_cell", n_poses=2), SEED)
+    states = data.joint_states
+    assert states is not None
+    node = collector.CollectorNode(
+        context=context,
+        parameter_overrides=[
+            Parameter("pose_source", value="joint_states"),
+            Parameter("kinematics", value=ur_urdf()),
+            Parameter("session_dir", value=str(tmp_path)),
+        ],
+        cli_args=["--ros-args", "-r", "joint_states:=/ur/joint_states"],
+    )
+    try:
+        live = node._pose_input
+        assert isinstance(live, JointStatePoseInput)
+        assert live.subscription.topic_name == "/ur/joint_states"
+        assert live.model.name == "ur5e_urdf"
+        types = rclpy_types()
+        node._on_pose(pose_stamped_from_flange_pose(data.poses[0], types=types), {})
+        assert node._collector.poses_received == 0  # PoseStamped is not the source
+        live._on_joint_state(
+            joint_state_msg(
+                int(states.stamps_ns[0]), states.names, states.positions[0], types=types
+            )
+        )
+        assert node._collector.poses_received == 1
+    finally:
+        node.destroy_node()
