@@ -35,8 +35,14 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 
 from linelaser_calib.core.geometry import transform_from_translation_quaternion
+from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.types import FlangePose, Profile
-from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
+from msg_adapters import (
+    joint_state_msg,
+    pointcloud2_from_points,
+    pose_stamped_from_flange_pose,
+    rclpy_types,
+)
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 VENV_BIN = Path(sys.executable).parent
@@ -265,7 +271,8 @@ def reliable_qos(depth: int, latched: bool = False) -> QoSProfile:
 
 @dataclass(frozen=True)
 class Recording:
-    """Profiles and flange poses to replay, as rclpy messages in stamp order."""
+    """Profiles and flange poses (PoseStamped, or JointState) to replay, as rclpy messages
+    in stamp order."""
 
     messages: list[tuple[int, bool, Any]]  # (stamp ns, is_profile, message)
 
@@ -276,7 +283,9 @@ class Recording:
         poses: list[FlangePose],
         sensor_frame: str = "laser",
         base_frame: str = "base_link",
+        joint_states: JointStates | None = None,
     ) -> Recording:
+        """With ``joint_states`` these are replayed instead of ``poses``."""
         types = rclpy_types()
         items = [
             (
@@ -285,16 +294,23 @@ class Recording:
                 pointcloud2_from_points(p.points, p.stamp_ns, sensor_frame, types=types),
             )
             for p in profiles
-        ] + [
-            (
-                q.stamp_ns,
-                False,
-                pose_stamped_from_flange_pose(
-                    FlangePose(q.stamp_ns, q.T_base_flange, base_frame), types=types
-                ),
-            )
-            for q in poses
         ]
+        if joint_states is None:
+            items += [
+                (
+                    q.stamp_ns,
+                    False,
+                    pose_stamped_from_flange_pose(
+                        FlangePose(q.stamp_ns, q.T_base_flange, base_frame), types=types
+                    ),
+                )
+                for q in poses
+            ]
+        else:
+            items += [
+                (int(t), False, joint_state_msg(int(t), joint_states.names, q, types=types))
+                for t, q in zip(joint_states.stamps_ns, joint_states.positions, strict=True)
+            ]
         items.sort(key=lambda item: (item[0], item[1]))
         return cls(items)
 
@@ -383,8 +399,14 @@ class RosProbe:
 
     # -- publishing ----------------------------------------------------------------------
 
-    def player(self, profile_topic: str = "profile", pose_topic: str = "flange_pose") -> Player:
-        return Player(self, profile_topic, pose_topic)
+    def player(
+        self,
+        profile_topic: str = "profile",
+        pose_topic: str = "flange_pose",
+        pose_type: type = PoseStamped,
+    ) -> Player:
+        """A player; ``pose_type`` JointState replays joint states on ``pose_topic``."""
+        return Player(self, profile_topic, pose_topic, pose_type)
 
     # -- services and latched topics -----------------------------------------------------
 
@@ -427,11 +449,13 @@ class RosProbe:
 class Player:
     """Replays a :class:`Recording` on the collector's input topics (reliable, deep)."""
 
-    def __init__(self, probe: RosProbe, profile_topic: str, pose_topic: str) -> None:
+    def __init__(
+        self, probe: RosProbe, profile_topic: str, pose_topic: str, pose_type: type = PoseStamped
+    ) -> None:
         self.probe = probe
         qos = reliable_qos(10000)
         self.profile_pub = probe.node.create_publisher(PointCloud2, profile_topic, qos)
-        self.pose_pub = probe.node.create_publisher(PoseStamped, pose_topic, qos)
+        self.pose_pub = probe.node.create_publisher(pose_type, pose_topic, qos)
 
     def wait_matched(self, timeout_s: float = 30.0, settle_s: float = 0.5) -> None:
         """Wait until the collector subscribes to both topics, then ``settle_s`` more (the

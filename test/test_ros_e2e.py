@@ -30,6 +30,7 @@ from ros_helpers import (
     processes,
     wait_for,
 )
+from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from linelaser_calib.core.geometry import transform_error, transform_from_rotvec_translation
@@ -40,7 +41,12 @@ from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
 from linelaser_calib.io.results import Truth
 from linelaser_calib.nodes.collection import SKIP_NOT_CAPTURED
 from linelaser_calib.sim import PRESETS, scenario_from_preset, simulate
-from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
+from msg_adapters import (
+    joint_state_msg,
+    pointcloud2_from_points,
+    pose_stamped_from_flange_pose,
+    rclpy_types,
+)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -434,4 +440,48 @@ def test_bad_messages_are_counted_and_logged_once_and_no_node_crashes(graph: Gra
     answer = probe.call("/calibrate")
     assert not answer.success and "at least 8" in answer.message
     assert collector.alive() and service.alive()
+    assert "Traceback" not in graph.procs.logs()
+
+
+def test_joint_states_source_live_with_the_ur5e_cell(graph: Graph) -> None:
+    """The ur5e_cell recording's profiles and /joint_states (no kinematic error, so that the
+    hand-eye is checkable tightly) into a collector with pose_source joint_states."""
+    data = simulate(
+        scenario_from_preset(
+            "ur5e_cell", kinematic_sigma_length_m=0.0, kinematic_sigma_angle_rad=0.0
+        ),
+        seed=4,
+    )
+    states = data.joint_states
+    assert states is not None
+    recording = Recording.from_data(data.profiles, [], joint_states=states)
+    collector = graph.collector(
+        *params(reliable_inputs=True, pose_source="joint_states", kinematics="ur5e")
+    )
+    graph.service()
+    probe = graph.probe
+    player = probe.player("profile", "/joint_states", JointState)
+    player.wait_matched()
+    types = rclpy_types()
+    # Twice a joint state without the wrist_3 joint: counted twice, logged once.
+    for _ in range(2):
+        player.publish_pose(
+            joint_state_msg(1, states.names[:5], states.positions[0, :5], types=types)
+        )
+    sent = player.play(recording, rate=1.0)
+    assert sent == 16
+    values = probe.wait_counts(
+        30.0,
+        profiles_received=sent,
+        profiles_pending=0,
+        poses_received=2 + len(states.stamps_ns),
+        poses_rejected=2,
+    )
+    assert settled(values) == sent, values
+    assert collector.log().count("['wrist_3_joint']") == 1
+    probe.wait_counts(10.0, node="calibration_service", samples=sent)
+    answer = probe.call("/calibrate")
+    assert answer.success, answer.message + graph.procs.logs()
+    assert samples_used(answer.message) == (sent, sent)
+    check_against_truth(probe.hand_eye(), data.truth.T_flange_sensor, "joint_states, live")
     assert "Traceback" not in graph.procs.logs()

@@ -12,13 +12,9 @@ class PoseSource(Enum):
     tcp_pose_broadcaster). ``tf``: the chain base frame -> flange frame from ``/tf`` and
     ``/tf_static`` (robot_state_publisher, MoveIt), each dynamic transform interpolated.
     ``joint_states``: forward kinematics of every ``sensor_msgs/JointState`` through the
-    robot's kinematic model (:mod:`linelaser_calib.core.kinematics`; offline only).
+    robot's kinematic model (:mod:`linelaser_calib.core.kinematics`).
     """
 
     POSE = "pose"
     TF = "tf"
     JOINT_STATES = "joint_states"
-
-
-#: The sources the collector takes live (``joint_states`` is offline only so far).
-LIVE_POSE_SOURCES = (PoseSource.POSE, PoseSource.TF)

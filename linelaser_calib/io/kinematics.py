@@ -119,10 +119,11 @@ def model_from_urdf(
 def load_model(
     spec: str, *, base_frame: str = "base_link", flange_frame: str = "tool0"
 ) -> KinematicModel:
-    """The robot model named by ``--kinematics``: a preset name or a URDF file.
+    """The robot model named by ``--kinematics``: a preset name, a URDF file or URDF text.
 
     A URDF model is named by its file path, so that a result's ``kinematics.model`` finds
-    it again.
+    it again. URDF text (``spec`` starting with ``<``, e.g. the value of a
+    ``robot_description`` parameter) gives a model named after its ``<robot>``.
 
     Raises
     ------
@@ -131,11 +132,16 @@ def load_model(
     """
     if spec in UR_DH:
         return model_from_preset(spec)
+    if spec.lstrip().startswith("<"):
+        try:
+            return model_from_urdf(spec, base_frame=base_frame, flange_frame=flange_frame)
+        except InputError as err:
+            raise InputError(f"the URDF text: {err}") from None
     path = Path(spec)
     if not path.is_file():
         raise InputError(
             f"--kinematics {spec!r} is neither a preset ({', '.join(sorted(UR_DH))}) nor a "
-            "URDF file; give one of them"
+            "URDF file nor URDF text; give one of them"
         )
     try:
         text = path.read_text(encoding="utf-8")

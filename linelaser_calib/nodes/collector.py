@@ -2,8 +2,10 @@
 # rclpy is only partly annotated: calling its untyped functions is expected here.
 """ROS 2 node ``collector``: pair live profiles with flange poses, choose samples, store, publish.
 
-Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and ``flange_pose``
-(``geometry_msgs/PoseStamped``); remap both to the driver's topics. The logic lives in
+Subscribes ``profile`` (``sensor_msgs/PointCloud2``) and, per ``pose_source``, ``flange_pose``
+(``geometry_msgs/PoseStamped``), ``/tf`` and ``/tf_static``, or ``joint_states``
+(``sensor_msgs/JointState``, through the ``kinematics`` model); remap them to the driver's
+topics. The logic lives in
 :class:`~linelaser_calib.nodes.collection.LiveCollector`; this node wires it:
 
 - receive callbacks decode messages and pair profiles (cheap), on a SingleThreadedExecutor:
@@ -54,7 +56,7 @@ from std_srvs.srv import Trigger
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
-from linelaser_calib.core.pose_source import LIVE_POSE_SOURCES, PoseSource
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.tf import base_frame_warning
@@ -81,6 +83,7 @@ from linelaser_calib.nodes.common import (
     latched_qos,
     run_node,
 )
+from linelaser_calib.nodes.joint_state_input import JointStatePoseInput, live_kinematic_model
 from linelaser_calib.nodes.tf_input import TfPoseInput
 from msg_adapters import (
     MessageError,
@@ -138,22 +141,33 @@ PARAMETERS = (
     ParamSpec(
         "pose_source",
         PoseSource.POSE.value,
-        "Where flange poses come from: pose (geometry_msgs/PoseStamped on flange_pose) or tf "
-        "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs).",
-        choices=tuple(s.value for s in LIVE_POSE_SOURCES),
+        "Where flange poses come from: pose (geometry_msgs/PoseStamped on flange_pose), tf "
+        "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs) or "
+        "joint_states (sensor_msgs/JointState on joint_states through the kinematics model).",
+        choices=tuple(s.value for s in PoseSource),
         read_only=True,
     ),
     ParamSpec(
         "base_frame",
         "base_link",
-        "Robot base frame: start of the TF chain (pose_source tf); with PoseStamped poses in "
-        "UR's 'base' instead, a warning says what that means.",
+        "Robot base frame: start of the TF chain (pose_source tf) or of a URDF's joint chain "
+        "(pose_source joint_states); with PoseStamped poses in UR's 'base' instead, a "
+        "warning says what that means.",
         read_only=True,
     ),
     ParamSpec(
         "flange_frame",
         "tool0",
-        "Flange frame: end of the TF chain (pose_source tf).",
+        "Flange frame: end of the TF chain (pose_source tf) or of a URDF's joint chain "
+        "(pose_source joint_states).",
+        read_only=True,
+    ),
+    ParamSpec(
+        "kinematics",
+        "",
+        "pose_source joint_states: the robot's kinematic model, a preset (ur5e, ur10e), a "
+        "URDF file, or URDF text such as the value of robot_description (its chain "
+        "base_frame -> flange_frame).",
         read_only=True,
     ),
     ParamSpec(
@@ -354,6 +368,13 @@ class CollectorNode(Node):
             )
         except ValueError as err:
             raise InputError(f"invalid collector parameters: {err}") from err
+        pose_source = PoseSource(p["pose_source"])
+        self._poses_from_pose_stamped = pose_source is PoseSource.POSE
+        robot = (
+            live_kinematic_model(str(p["kinematics"]), str(p["base_frame"]), str(p["flange_frame"]))
+            if pose_source is PoseSource.JOINT_STATES
+            else None
+        )
         target = get_target(p["target"])
         settings = {"radius_m": float(p["radius"])} if p["radius"] else {}
         self._pipeline = PipelineConfig(
@@ -404,14 +425,22 @@ class CollectorNode(Node):
             self._on_profile,  # type: ignore[arg-type]
             qos,
         )
-        self._tf_input = None
-        if PoseSource(p["pose_source"]) is PoseSource.TF:
-            self._tf_input = TfPoseInput(
+        self._pose_input: TfPoseInput | JointStatePoseInput | None = None
+        if pose_source is PoseSource.TF:
+            self._pose_input = TfPoseInput(
                 self,
                 self._base_frame,
                 str(p["flange_frame"]),
                 pairing.sync_tolerance_s,
                 config.pose_window_s,
+                qos,
+                self._add_pose,
+                self._reject_pose,
+            )
+        elif robot is not None:
+            self._pose_input = JointStatePoseInput(
+                self,
+                robot,
                 qos,
                 self._add_pose,
                 self._reject_pose,
@@ -529,7 +558,7 @@ class CollectorNode(Node):
             self._work.set()
 
     def _on_pose(self, msg: PoseStamped, info: dict[str, Any]) -> None:
-        if self._tf_input is not None:  # pose_source tf: the poses come from /tf only
+        if not self._poses_from_pose_stamped:  # the poses come from /tf or joint states
             return
         try:
             pose = flange_pose_from_pose_stamped(msg)

@@ -53,6 +53,12 @@ Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
     the nominal DH table: lengths off by 1σ 0.15 mm, joint offsets and twists by 1σ 0.02°;
     repeatability 0.02 mm and 0.001° per axis; 50 poses, 320 points; flange poses and
     joint states at 40 Hz, 0.2 s dwell and quick moves to keep the bag small.
+``ur5e_cell``
+    What a real UR5e cell publishes, short enough to replay live: ``ur5e_kinematic`` with
+    16 step-and-shoot poses in about 10 s (0.3 s stops, each profile half-way through its
+    stop), joint states and flange poses at 125 Hz, and profiles stamped 15 ms late, as a
+    profiler driver stamping with the host's receive time does. ``simulate --tf`` adds the
+    robot_state_publisher-style ``/tf`` chain and ``/tf_static``.
 
 Bag size: a streamed pose costs ~120 bytes and a point 12-16 bytes in a rosbag2 MCAP file,
 so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` and
@@ -702,6 +708,19 @@ def _ur5e_kinematic_scenario() -> Scenario:
     )
 
 
+def _ur5e_cell_scenario() -> Scenario:
+    return replace(
+        _ur5e_kinematic_scenario(),
+        name="ur5e_cell",
+        n_poses=16,
+        robot_rate_hz=125.0,
+        dwell_s=0.3,
+        min_move_s=0.15,
+        margin_s=0.1,
+        latency_s=0.015,
+    )
+
+
 #: Named scenarios; see the module docstring and :func:`scenario_from_preset`.
 PRESETS: dict[str, Scenario] = {
     "paper": _paper_scenario(),
@@ -709,6 +728,7 @@ PRESETS: dict[str, Scenario] = {
     "continuous": _continuous_scenario(),
     "cluttered_camera": _cluttered_camera_scenario(),
     "ur5e_kinematic": _ur5e_kinematic_scenario(),
+    "ur5e_cell": _ur5e_cell_scenario(),
 }
 
 
