@@ -56,8 +56,8 @@ def test_plan_service_publishes_feasible_poses_after_a_calibration(graph: Graph)
     fans: MarkerArray = probe.latched(MarkerArray, "linelaser_calib/planned_fans")
     lines = [m for m in fans.markers if m.ns == "planned_fans"]
     assert len(lines) == 1 and len(lines[0].points) == 6 * 8
-    values = probe.wait_counts(10.0, node="calibration_service", samples=accepted)
-    assert values["planned poses"] == "6"
+    # The diagnostics may still show the state before the plan: wait for the plan's count.
+    values = probe.wait_counts(10.0, node="calibration_service", samples=accepted, planned_poses=6)
     sigma_mm = [
         float(v) for v in values["predicted 1 sigma translation after the plan (mm)"].split()
     ]
