@@ -23,6 +23,7 @@ import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
@@ -417,6 +418,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     config = _pipeline_config(args)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     source, model = _pose_source(args)
+    if args.nominal_kinematics and model is None:
+        raise InputError(
+            "--nominal-kinematics keeps the robot model of --kinematics nominal; give "
+            "--kinematics MODEL or leave --nominal-kinematics out"
+        )
     try:
         run = calibrate_bag(
             args.bag,
@@ -431,6 +437,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             invalid_values_m=tuple(args.invalid_value),
             joint_state_topic=args.joint_state_topic,
             model=model,
+            kinematic_calibration=(
+                None if model is None or args.nominal_kinematics else JointCalibrationConfig()
+            ),
         )
     except PairingError as exc:
         raise PairingError(
@@ -462,7 +471,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel | None]:
-    """The pose source and robot model of ``--pose-source`` and ``--kinematics``."""
+    """The pose source and robot model of ``--pose-source`` and ``--kinematics``.
+
+    Without ``--pose-source``, ``--kinematics`` selects the joint states, else the
+    PoseStamped topic is the source.
+    """
+    if args.pose_source is None:
+        args.pose_source = (
+            PoseSource.POSE.value if args.kinematics is None else PoseSource.JOINT_STATES.value
+        )
     source = PoseSource(args.pose_source)
     if source is PoseSource.JOINT_STATES and args.kinematics is None:
         raise InputError(
@@ -751,10 +768,11 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
     cal.add_argument(
         "--pose-source",
         choices=[s.value for s in PoseSource],
-        default=PoseSource.POSE.value,
-        help="flange poses from a PoseStamped topic (pose, default), from the /tf + "
-        "/tf_static chain --base-frame -> --flange-frame (tf), or from sensor_msgs/JointState "
-        "through the robot model (joint_states, needs --kinematics)",
+        default=None,
+        help="flange poses from a PoseStamped topic (pose, the default without --kinematics), "
+        "from the /tf + /tf_static chain --base-frame -> --flange-frame (tf), or from "
+        "sensor_msgs/JointState through the robot model (joint_states, the default with "
+        "--kinematics)",
     )
     cal.add_argument(
         "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
@@ -766,7 +784,8 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
         "--kinematics",
         metavar="MODEL",
         help="robot model of the joint_states pose source: ur5e, ur10e or a URDF file "
-        "(chain --base-frame to --flange-frame)",
+        "(chain --base-frame to --flange-frame); calibrate estimates its identifiable "
+        "corrections with the hand-eye",
     )
     cal.add_argument(
         "--joint-state-topic",
@@ -880,6 +899,11 @@ def build_parser() -> argparse.ArgumentParser:
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
     _add_pose_source_arguments(cal)
+    cal.add_argument(
+        "--nominal-kinematics",
+        action="store_true",
+        help="with --kinematics: keep the robot model nominal (no kinematic corrections)",
+    )
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(
         "--progress",

@@ -77,6 +77,8 @@ from numpy.typing import ArrayLike
 from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, SolverError
+from ...joint_calibration import JointOutcome, KinematicSetup, solve_joint
+from ...kinematics import forward_kinematics
 from ...geometry import (
     FloatArray,
     check_transform,
@@ -407,6 +409,18 @@ class CylinderProblem:
         scale = np.ones(self.n_global)
         scale[:3] = _lever(self)
         return scale
+
+    def with_flange_poses(self, T_base_flange: FloatArray) -> CylinderProblem:
+        """The same problem at other flange poses (M, 4, 4)."""
+        return replace(
+            self,
+            R_bf=np.ascontiguousarray(T_base_flange[:, :3, :3]),
+            t_bf=np.ascontiguousarray(T_base_flange[:, :3, 3]),
+        )
+
+    def pose_corrections(self, state: CylinderState) -> FloatArray:
+        """``[ω (rad), τ (m)]`` (M, 6) of every sample."""
+        return np.hstack([state.omega, state.tau])
 
     def _prior_sqrt_information(self) -> FloatArray:
         cfg = self.config
@@ -914,3 +928,74 @@ def refine_with_outlier_rejection(
     result.used = outcome.kept
     result.dropped = [DroppedSample(i, reason) for i, reason in outcome.dropped]
     return result
+
+
+# --------------------------------------------------------------------------------------
+# Joint kinematic + hand-eye calibration
+
+
+def refine_kinematics(
+    samples_points: list[FloatArray],
+    stamps_ns: ArrayLike,
+    T_flange_sensor0: ArrayLike,
+    cylinder0: Cylinder,
+    setup: KinematicSetup,
+    config: RefineConfig | None = None,
+    radius_m: float | None = None,
+) -> tuple[RefineResult, JointOutcome[CylinderState]]:
+    """The refinement with the flange poses from joint states and a corrected robot model.
+
+    The same cylinder problem, its flange poses the forward kinematics of each sample's
+    joint vector with the identifiable kinematic corrections estimated
+    (:func:`~linelaser_calib.core.joint_calibration.solve_joint`); the per-sample pose
+    corrections have the arm's repeatability as prior (``setup.config``).
+
+    Parameters
+    ----------
+    samples_points : list of ndarray, shape (N_j, 3)
+        Inlier profile points of each sample in the sensor frame, m.
+    stamps_ns : array_like, shape (M,)
+        Profile stamps, ns (the joint states are interpolated there).
+    T_flange_sensor0, cylinder0
+        Start, e.g. :func:`refine_with_outlier_rejection` on the nominal poses.
+    setup : KinematicSetup
+    config : RefineConfig, optional
+    radius_m : float, optional
+        Known radius, m; None estimates it.
+
+    Returns
+    -------
+    RefineResult
+        At the corrected poses; its 1σ are marginal over the kinematic corrections.
+    JointOutcome
+    """
+    cfg = RefineConfig() if config is None else config
+    cfg = replace(
+        cfg,
+        robot_sigma_t_m=setup.config.repeatability_t_m,
+        robot_sigma_r_rad=setup.config.repeatability_r_rad,
+    )
+    estimate_radius = radius_m is None or cfg.estimate_radius
+    nominal = forward_kinematics(setup.model, setup.joint_positions(stamps_ns))
+    problem = build_problem(samples_points, nominal, cfg, estimate_radius)
+    state = initial_state(
+        problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
+    )
+    centroid = _data_centroid(problem, state)
+    problem = replace(problem, centroid=centroid)
+    outcome = solve_joint(problem, _recentred(state, centroid), setup, stamps_ns, cfg.solver)
+    joint = outcome.solution
+    linearisation = outcome.problem.linearise(outcome.state)
+    inner = Solution(
+        state=outcome.state,
+        residuals=linearisation.residuals,
+        normal=normal_equations(linearisation, cfg.solver),
+        cost_history=joint.cost_history,
+        iterations=joint.iterations,
+        converged=joint.converged,
+    )
+    result = _summarise(replace(outcome.problem, config=cfg), inner)
+    sigma = np.sqrt(np.diag(outcome.covariance)[:N_HAND_EYE])
+    result.sigma_rotation_rad, result.sigma_translation_m = sigma[:3], sigma[3:]
+    result.covariance_hand_eye = outcome.covariance[:N_HAND_EYE, :N_HAND_EYE]
+    return result, outcome
