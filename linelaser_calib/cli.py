@@ -606,9 +606,19 @@ def _input_line(run: OfflineRun) -> str:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from linelaser_calib.export import ExportFormat, export_text
+    from linelaser_calib.export import ExportFormat, export_text, ur_kinematics_yaml
 
-    print(export_text(read_result_yaml(args.result), ExportFormat(args.format)))
+    form = ExportFormat(args.format)
+    if form is ExportFormat.UR_KINEMATICS:
+        corrections = read_kinematics(args.result)
+        if corrections is None:
+            raise InputError(
+                f"{args.result} holds no kinematics section: calibrate with --kinematics "
+                "MODEL (and joint states in the recording) to estimate the robot's corrections"
+            )
+        print(ur_kinematics_yaml(corrections))
+        return 0
+    print(export_text(read_result_yaml(args.result), form))
     return 0
 
 
@@ -941,10 +951,11 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("result", help="result YAML written by calibrate")
     export.add_argument(
         "--format",
-        choices=["urdf", "static-tf", "launch"],
+        choices=["urdf", "static-tf", "launch", "ur-kinematics"],
         required=True,
         help="urdf: a fixed <joint>; static-tf: the static_transform_publisher command line; "
-        "launch: a Python launch file publishing it",
+        "launch: a Python launch file publishing it; ur-kinematics: the corrected robot "
+        "kinematics (result of calibrate --kinematics ur5e|ur10e) as UR's description YAML",
     )
     export.set_defaults(func=_cmd_export)
 
