@@ -15,12 +15,12 @@ from enum import Enum
 
 import numpy as np
 
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import (
     FloatArray,
     rpy_from_matrix,
     translation_quaternion_from_transform,
 )
-from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.kinematics import (
     UR_DH,
     UR_JOINT_NAMES,

@@ -121,9 +121,7 @@ def calibrate_bag(
             raise InputError(
                 "the kinematic calibration needs the joint states: use --pose-source joint_states"
             )
-        setup = KinematicSetup(
-            model, states, config.pairing.clock_offset_s, kinematic_calibration
-        )
+        setup = KinematicSetup(model, states, config.pairing.clock_offset_s, kinematic_calibration)
         config = replace(config, kinematics=setup)
     result = run_pipeline(bag.profiles, flange_poses.poses, config, progress)
     result.clock_offset_estimated = estimate_offset

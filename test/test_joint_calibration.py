@@ -60,7 +60,9 @@ def joint_solution() -> tuple[TargetSolution, SimulatedData]:
     return TARGET.solve_default(features, config, context), data
 
 
-def held_out_rms_m(data: SimulatedData, model: KinematicModel, T_flange_sensor: FloatArray) -> float:
+def held_out_rms_m(
+    data: SimulatedData, model: KinematicModel, T_flange_sensor: FloatArray
+) -> float:
     """RMS distance (m) of a recording's true cylinder points, mapped with ``model`` and
     ``T_flange_sensor`` from its joint vectors, from the true cylinder surface."""
     truth = data.truth
@@ -81,7 +83,10 @@ def test_kinematic_columns_match_finite_differences() -> None:
     truth = data.truth
     assert truth.arm is not None and truth.joint_positions is not None
     model = truth.arm.nominal
-    points = [p[s == Surface.SIDE][::20] for p, s in zip(truth.points_true_sensor, truth.surface)]
+    points = [
+        p[s == Surface.SIDE][::20]
+        for p, s in zip(truth.points_true_sensor, truth.surface, strict=True)
+    ]
     free = np.arange(len(model.parameter_names))
     sigma = np.full(len(free), 1e-3)
     pose_model = KinematicPoseModel(model, truth.joint_positions, free, sigma)
@@ -105,7 +110,7 @@ def test_kinematic_columns_match_finite_differences() -> None:
 
 
 def test_identifiability_names_what_the_base_and_the_flange_absorb() -> None:
-    solution, data = joint_solution()
+    solution, _ = joint_solution()
     report = solution.identifiability
     assert report is not None and solution.kinematics is not None
     names = set(report.names)
@@ -183,7 +188,9 @@ def _urdf_from_ur_kinematics(text: str) -> str:
 def test_ur_kinematics_export_gives_the_corrected_arm() -> None:
     nominal = model_from_preset("ur5e")
     rng = np.random.default_rng(3)
-    names = [n for n in nominal.parameter_names if n not in ("wrist_3_joint.a", "wrist_3_joint.alpha")]
+    names = [
+        n for n in nominal.parameter_names if n not in ("wrist_3_joint.a", "wrist_3_joint.alpha")
+    ]
     corrections = KinematicCorrections("ur5e", {n: float(rng.normal(0, 3e-4)) for n in names})
     exported = model_from_urdf(_urdf_from_ur_kinematics(ur_kinematics_yaml(corrections)))
     q = rng.uniform(-math.pi, math.pi, (20, 6))
@@ -225,5 +232,5 @@ def test_ur_kinematics_export_refuses_what_it_cannot_hold(
     )
     assert main(["export", str(result), "--format", "ur-kinematics"]) == 1
     assert "--kinematics" in capsys.readouterr().err
-    with pytest.raises(Exception, match="wrist_3_joint.a"):
+    with pytest.raises(Exception, match=r"wrist_3_joint\.a"):
         ur_kinematics_yaml(KinematicCorrections("ur5e", {"wrist_3_joint.a": 1e-4}))

@@ -327,7 +327,9 @@ class JointState(Generic[State]):
     delta: FloatArray
 
 
-def correction_change(T: FloatArray, omega: FloatArray, tau: FloatArray, twists: FloatArray) -> FloatArray:
+def correction_change(
+    T: FloatArray, omega: FloatArray, tau: FloatArray, twists: FloatArray
+) -> FloatArray:
     """d(ω, τ) (M, 6, F) of the corrections per unit base twist of the model pose.
 
     Parameters
@@ -371,7 +373,9 @@ class JointProblem(Generic[State]):
     @property
     def step_scale(self) -> FloatArray:
         """The target's, then 1 for lengths and the reach (mean flange distance, m) for angles."""
-        reach = float(np.mean(np.linalg.norm(self.pose_model.poses(np.zeros(self.n_free))[:, :3, 3], axis=1)))
+        reach = float(
+            np.mean(np.linalg.norm(self.pose_model.poses(np.zeros(self.n_free))[:, :3, 3], axis=1))
+        )
         lengths = self.pose_model.model.parameter_is_length[self.pose_model.free]
         return np.concatenate([self.target.step_scale, np.where(lengths, 1.0, reach)])
 
@@ -397,7 +401,11 @@ class JointProblem(Generic[State]):
         J_kin = lin.J_local @ change
         G, F = self.target.n_global, self.n_free
         inner_prior = lin.global_prior_jacobian
-        blocks = [] if inner_prior is None else [np.hstack([inner_prior, np.zeros((len(inner_prior), F))])]
+        blocks = (
+            []
+            if inner_prior is None
+            else [np.hstack([inner_prior, np.zeros((len(inner_prior), F))])]
+        )
         blocks.append(np.hstack([np.zeros((F, G)), np.diag(1.0 / self.pose_model.prior_sigma)]))
         return Linearisation(
             residuals=self._prior(lin.residuals, state.delta),
@@ -421,8 +429,6 @@ class JointOutcome(Generic[State]):
 
     Attributes
     ----------
-    problem : PoseDrivenProblem
-        The target problem at the corrected flange poses.
     solution : Solution
         Of the :class:`JointProblem` (state: :class:`JointState`); its information is that
         of the target's global parameters and Δ, pose corrections marginalised.
@@ -430,7 +436,6 @@ class JointOutcome(Generic[State]):
     identifiability : KinematicIdentifiability
     """
 
-    problem: PoseDrivenProblem[State]
     solution: Solution[JointState[State]]
     pose_model: KinematicPoseModel
     identifiability: KinematicIdentifiability
@@ -502,8 +507,6 @@ def solve_joint(
     pose_model = KinematicPoseModel(model, q, free, sigma[free])
     joint = JointProblem(start.target, pose_model)
     solution = solve(joint, JointState(state, np.zeros(len(free))), config)
-    if not (
-        np.all(np.isfinite(solution.state.delta)) and np.isfinite(solution.cost_history[-1])
-    ):
+    if not (np.all(np.isfinite(solution.state.delta)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError("the joint kinematic calibration produced non-finite values")
-    return JointOutcome(joint.at(solution.state.delta), solution, pose_model, identifiability)
+    return JointOutcome(solution, pose_model, identifiability)

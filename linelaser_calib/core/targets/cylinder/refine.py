@@ -77,8 +77,6 @@ from numpy.typing import ArrayLike
 from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, SolverError
-from ...joint_calibration import JointOutcome, KinematicSetup, solve_joint
-from ...kinematics import forward_kinematics
 from ...geometry import (
     FloatArray,
     check_transform,
@@ -87,6 +85,8 @@ from ...geometry import (
     right_jacobian_so3,
     transform_from_rotation_translation,
 )
+from ...joint_calibration import JointOutcome, KinematicSetup, solve_joint
+from ...kinematics import forward_kinematics
 from ...observability import (
     Observability,
     ObservabilityConfig,
@@ -985,7 +985,8 @@ def refine_kinematics(
     problem = replace(problem, centroid=centroid)
     outcome = solve_joint(problem, _recentred(state, centroid), setup, stamps_ns, cfg.solver)
     joint = outcome.solution
-    linearisation = outcome.problem.linearise(outcome.state)
+    corrected = problem.with_flange_poses(outcome.pose_model.poses(joint.state.delta))
+    linearisation = corrected.linearise(outcome.state)
     inner = Solution(
         state=outcome.state,
         residuals=linearisation.residuals,
@@ -994,7 +995,7 @@ def refine_kinematics(
         iterations=joint.iterations,
         converged=joint.converged,
     )
-    result = _summarise(replace(outcome.problem, config=cfg), inner)
+    result = _summarise(corrected, inner)
     sigma = np.sqrt(np.diag(outcome.covariance)[:N_HAND_EYE])
     result.sigma_rotation_rad, result.sigma_translation_m = sigma[:3], sigma[3:]
     result.covariance_hand_eye = outcome.covariance[:N_HAND_EYE, :N_HAND_EYE]
