@@ -9,23 +9,27 @@ calibration recording is calibrated twice with the default method: with the repo
 kinematic corrections estimated with the hand-eye). The held-out recording's true profile
 points are then mapped into the base frame with each calibration from its joint vectors.
 
+With ``--placements 2`` or ``3`` the arm also scans the cylinder at other placements
+(moved and tilted, :data:`PLACEMENTS`), 50 poses each, and all of them are calibrated
+together (:class:`~linelaser_calib.core.joint_calibration.MultiScanProblem`: one hand-eye,
+one set of kinematic corrections, a cylinder per placement); the held-out placement is none
+of them.
+
 Printed per seed:
 
 - ``arm mm``: the arm's absolute error on the held-out poses, mean |true - nominal| flange
   position;
 - ``ident``: kinematic parameters estimated (of 24);
 - ``abs`` (nominal, joint): RMS distance of the mapped points from the true surface, mm;
-- ``abs base`` (joint): ``abs`` with the first joint's zero offset and height (``d``) taken
-  from the true arm, the two base-side parameters no target of unknown placement
-  determines;
 - ``shape`` (nominal, joint): the same after refitting the cylinder's placement (axis point
   and direction, radius known) to the mapped points, mm: the error that remains when the
-  base frame's own placement is set aside. One cylinder cannot fix the robot's base frame
-  (its placement is unknown too): the first joint's zero offset and height are left
-  nominal, and their true error moves every point rigidly.
+  base frame's own placement is set aside: the cylinder's placement is unknown, so the scans
+  cannot fix how the base frame sits (the first joint's zero offset and height stay
+  nominal), and what the poses of one placement determine only weakly moves the points of
+  another placement almost rigidly.
 
-Run: ``.venv/bin/python bench/kinematic_calibration.py [--seeds N]`` (default 5; ~15 s per
-seed).
+Run: ``.venv/bin/python bench/kinematic_calibration.py [--seeds N] [--placements P]``
+(default 5 seeds, 1 placement; ~15 s per seed and placement).
 """
 
 from __future__ import annotations
@@ -35,21 +39,34 @@ import argparse
 import numpy as np
 from scipy.optimize import least_squares
 
-from linelaser_calib.core.geometry import apply_transform, orthonormal_basis
-from linelaser_calib.core.joint_calibration import KinematicSetup
+from linelaser_calib.core.geometry import (
+    apply_transform,
+    orthonormal_basis,
+    transform_from_rotation_translation,
+)
+from linelaser_calib.core.joint_calibration import KinematicSetup, MultiScanProblem, solve_joint
 from linelaser_calib.core.kinematics import (
     KinematicCorrections,
     KinematicModel,
     forward_kinematics,
 )
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.targets.base import SolveContext
+from linelaser_calib.core.targets.cylinder import TARGET, CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.cylinder.refine import kinematic_problem
 from linelaser_calib.core.types import FloatArray
 from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate
 
+#: Calibration placements of the cylinder: (base point m, axis direction); the first is the
+#: preset's.
+PLACEMENTS = (
+    ((0.45, 0.15, 0.0), (0.0, 0.0, 1.0)),
+    ((0.3, -0.35, 0.0), (0.0, 0.5, 1.0)),
+    ((0.55, -0.1, 0.0), (-0.5, 0.0, 1.0)),
+)
 HELD_OUT_BASE_M = (0.35, -0.25, 0.0)
 HELD_OUT_AXIS = (0.3, 0.0, 1.0)
-#: The base-side parameters one target of unknown placement leaves free.
-BASE_PARAMETERS = ("shoulder_pan_joint.offset", "shoulder_pan_joint.d")
 
 
 def mapped_points(
@@ -83,21 +100,76 @@ def surface_rms_m(data: SimulatedData, points: FloatArray) -> tuple[float, float
     return absolute, shape
 
 
+def joint_calibration(
+    scans: list[SimulatedData], seed: int
+) -> tuple[KinematicCorrections, FloatArray, int]:
+    """Corrections, hand-eye and the number of estimated parameters from several scans."""
+    config = CylinderConfig(radius_m=0.02)
+    problems, states, qs = [], [], []
+    T_start = None
+    setup = None
+    for data in scans:
+        assert data.truth.arm is not None and data.joint_states is not None
+        setup = KinematicSetup(data.truth.arm.nominal, data.joint_states)
+        paired = pair_profiles(data.profiles, data.poses, PairingConfig())
+        features, _ = TARGET.extract(paired.samples, config, seed, lambda *_: None)
+        plain = TARGET.solve_default(features, config, SolveContext(n_samples=len(features)))
+        assert isinstance(plain.section, CylinderSection)
+        T_start = plain.T_flange_sensor if T_start is None else T_start
+        q = setup.joint_positions([f.stamp_ns for f in features])
+        problem, state = kinematic_problem(
+            [f.inlier_points for f in features],
+            q,
+            setup,
+            T_start,
+            plain.section.cylinder,
+            config.refine,
+            0.02,
+        )
+        problems.append(problem)
+        states.append(state)
+        qs.append(q)
+    assert setup is not None
+    outcome = solve_joint(
+        MultiScanProblem(tuple(problems)),
+        tuple(states),
+        setup.model,
+        np.vstack(qs),
+        setup.config,
+        problems[0].config.solver,
+    )
+    first = outcome.state[0]
+    T = transform_from_rotation_translation(first.R_fs, first.t_fs)
+    return outcome.corrections, T, len(outcome.identifiability.identifiable)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
-    parser.add_argument("--poses", type=int, default=50, help="poses of the calibration scan")
+    parser.add_argument("--poses", type=int, default=50, help="poses of each calibration scan")
+    parser.add_argument("--placements", type=int, default=1, choices=(1, 2, 3))
     args = parser.parse_args()
     print(
         f"{'seed':>4} {'arm mm':>6} {'ident':>5} {'abs nominal':>11} {'abs joint':>9} "
-        f"{'abs base':>8} {'shape nominal':>13} {'shape joint':>11}"
+        f"{'shape nominal':>13} {'shape joint':>11}"
     )
     rows = []
     for seed in range(1, args.seeds + 1):
         arm = {"kinematic_seed": 100 + seed}
-        calibration = simulate(
-            scenario_from_preset("ur5e_kinematic", n_poses=args.poses, **arm), seed
-        )
+        scans = [
+            simulate(
+                scenario_from_preset(
+                    "ur5e_kinematic",
+                    n_poses=args.poses,
+                    cylinder_base_m=base,
+                    axis_direction=axis,
+                    **arm,
+                ),
+                seed + 100 * i,
+            )
+            for i, (base, axis) in enumerate(PLACEMENTS[: args.placements])
+        ]
+        calibration = scans[0]
         held_out = simulate(
             scenario_from_preset(
                 "ur5e_kinematic",
@@ -112,12 +184,16 @@ def main() -> None:
         assert truth.arm is not None and calibration.joint_states is not None
         nominal = truth.arm.nominal
         plain = run_pipeline(calibration.profiles, calibration.poses, PipelineConfig(seed=seed))
-        setup = KinematicSetup(nominal, calibration.joint_states)
-        joint = run_pipeline(
-            calibration.profiles, calibration.poses, PipelineConfig(seed=seed, kinematics=setup)
-        )
-        assert joint.kinematics is not None and joint.identifiability is not None
-        corrected = joint.kinematics.apply(nominal)
+        if len(scans) == 1:
+            setup = KinematicSetup(nominal, calibration.joint_states)
+            config = PipelineConfig(seed=seed, kinematics=setup)
+            joint = run_pipeline(calibration.profiles, calibration.poses, config)
+            assert joint.kinematics is not None and joint.identifiability is not None
+            corrections, T_joint = joint.kinematics, joint.T_flange_sensor
+            estimated = len(joint.identifiability.identifiable)
+        else:
+            corrections, T_joint, estimated = joint_calibration(scans, seed)
+        corrected = corrections.apply(nominal)
         ho = held_out.truth
         assert ho.joint_positions is not None
         arm_error = np.linalg.norm(
@@ -126,27 +202,18 @@ def main() -> None:
             axis=1,
         )
         before = surface_rms_m(held_out, mapped_points(held_out, nominal, plain.T_flange_sensor))
-        after = surface_rms_m(held_out, mapped_points(held_out, corrected, joint.T_flange_sensor))
-        base = {
-            **joint.kinematics.corrections,
-            **{n: truth.arm.errors.corrections[n] for n in BASE_PARAMETERS},
-        }
-        based = KinematicCorrections(nominal.name, base).apply(nominal)
-        with_base, _ = surface_rms_m(
-            held_out, mapped_points(held_out, based, joint.T_flange_sensor)
-        )
-        rows.append([*before, *after, with_base])
-        estimated = len(joint.identifiability.identifiable)
+        after = surface_rms_m(held_out, mapped_points(held_out, corrected, T_joint))
+        rows.append([*before, *after])
         print(
             f"{seed:>4} {arm_error.mean() * 1e3:>6.3f} {estimated:>5} "
-            f"{before[0] * 1e3:>11.3f} {after[0] * 1e3:>9.3f} {with_base * 1e3:>8.3f} "
+            f"{before[0] * 1e3:>11.3f} {after[0] * 1e3:>9.3f} "
             f"{before[1] * 1e3:>13.3f} "
             f"{after[1] * 1e3:>11.3f}"
         )
     median = np.median(np.array(rows), axis=0) * 1e3
     print(
-        f"median: abs {median[0]:.3f} -> {median[2]:.3f} mm ({median[4]:.3f} mm with the true "
-        f"base), shape {median[1]:.3f} -> {median[3]:.3f} mm"
+        f"median: abs {median[0]:.3f} -> {median[2]:.3f} mm, shape {median[1]:.3f} -> "
+        f"{median[3]:.3f} mm"
     )
 
 

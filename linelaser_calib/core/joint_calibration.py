@@ -59,7 +59,15 @@ from .kinematics import (
     forward_kinematics,
     parameter_jacobian,
 )
-from .solver import Linearisation, Residuals, Solution, SolverConfig, normal_equations, solve
+from .solver import (
+    N_HAND_EYE,
+    Linearisation,
+    Residuals,
+    Solution,
+    SolverConfig,
+    normal_equations,
+    solve,
+)
 
 State = TypeVar("State")
 
@@ -74,6 +82,9 @@ class PoseDrivenProblem(Protocol[State]):
 
     @property
     def n_global(self) -> int: ...
+
+    @property
+    def n_samples(self) -> int: ...
 
     @property
     def step_scale(self) -> FloatArray: ...
@@ -460,8 +471,9 @@ class JointOutcome(Generic[State]):
 def solve_joint(
     problem: PoseDrivenProblem[State],
     state: State,
-    setup: KinematicSetup,
-    stamps_ns: ArrayLike,
+    model: KinematicModel,
+    q: FloatArray,
+    joint_config: JointCalibrationConfig,
     config: SolverConfig,
 ) -> JointOutcome[State]:
     """Estimate the identifiable kinematic corrections with the target's parameters.
@@ -469,26 +481,25 @@ def solve_joint(
     Parameters
     ----------
     problem : PoseDrivenProblem
-        The target's problem; its flange poses are replaced by the nominal model's forward
-        kinematics of the joint states at ``stamps_ns``. Its per-sample pose prior should be
-        the arm's repeatability (:class:`JointCalibrationConfig`).
+        The target's problem (or several placements', :class:`MultiScanProblem`); its
+        flange poses are replaced by the nominal model's forward kinematics of ``q``. Its
+        per-sample pose prior should be the arm's repeatability
+        (:class:`JointCalibrationConfig`).
     state : State
         Start: the target's solution with the nominal (or recorded) poses.
-    setup : KinematicSetup
-    stamps_ns : array_like, shape (M,)
-        Stamp of each sample's profile, ns.
+    model : KinematicModel
+        Nominal.
+    q : ndarray, shape (M, n)
+        Joint vector of each sample (:meth:`KinematicSetup.joint_positions`).
+    joint_config : JointCalibrationConfig
     config : SolverConfig
 
     Raises
     ------
-    InputError
-        Joint states that do not cover the samples.
     SolverError
         Non-finite values.
     """
-    model = setup.model
-    q = setup.joint_positions(stamps_ns)
-    sigma = setup.config.prior_sigma(model)
+    sigma = joint_config.prior_sigma(model)
     every = KinematicPoseModel(model, q, np.arange(len(sigma)), sigma)
     start = JointProblem(problem.with_flange_poses(every.poses(np.zeros(len(sigma)))), every)
     zero = JointState(state, np.zeros(len(sigma)))
@@ -500,7 +511,7 @@ def solve_joint(
         problem.n_global,
         model.parameter_names,
         sigma,
-        setup.config.rtol,
+        joint_config.rtol,
     )
     names = model.parameter_names
     free = np.array(sorted(names.index(n) for n in identifiability.identifiable), dtype=int)
@@ -510,3 +521,110 @@ def solve_joint(
     if not (np.all(np.isfinite(solution.state.delta)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError("the joint kinematic calibration produced non-finite values")
     return JointOutcome(solution, pose_model, identifiability)
+
+
+@dataclass(frozen=True, eq=False)
+class MultiScanProblem(Generic[State]):
+    """Several target placements scanned by one arm with one sensor, as one problem.
+
+    The placements share the hand-eye (the first :data:`~.solver.N_HAND_EYE` global
+    parameters of each); each keeps its own other global parameters (its target), after the
+    hand-eye in placement order. Samples are stacked in placement order, point rows padded
+    to the longest. The state is the tuple of the placements' states (their hand-eyes move
+    together).
+    """
+
+    scans: tuple[PoseDrivenProblem[State], ...]
+
+    def _rows(self) -> list[int]:
+        return [int(p.step_scale.shape[0]) - N_HAND_EYE for p in self.scans]
+
+    def _offsets(self) -> list[int]:
+        return list(N_HAND_EYE + np.concatenate([[0], np.cumsum(self._rows())[:-1]]).astype(int))
+
+    @property
+    def n_global(self) -> int:
+        return N_HAND_EYE + sum(self._rows())
+
+    @property
+    def step_scale(self) -> FloatArray:
+        scales = [self.scans[0].step_scale[:N_HAND_EYE]]
+        scales += [p.step_scale[N_HAND_EYE:] for p in self.scans]
+        return np.concatenate(scales)
+
+    def _columns(self, i: int) -> FloatArray:
+        """Global columns (G_i,) of placement i in the joint global vector."""
+        start = self._offsets()[i]
+        own = np.arange(start, start + self._rows()[i])
+        return np.concatenate([np.arange(N_HAND_EYE), own])
+
+    @property
+    def n_samples(self) -> int:
+        return sum(p.n_samples for p in self.scans)
+
+    def _bounds(self) -> FloatArray:
+        """Sample index where each placement starts, and the total (len(scans) + 1,)."""
+        return np.cumsum([0, *(p.n_samples for p in self.scans)])
+
+    def _stack(self, blocks: list[FloatArray]) -> FloatArray:
+        """Per-placement (M_i, K_i, ...) arrays stacked into (M, K, ...), zero-padded."""
+        K = max(b.shape[1] for b in blocks)
+        padded = [
+            np.concatenate([b, np.zeros((b.shape[0], K - b.shape[1], *b.shape[2:]))], axis=1)
+            for b in blocks
+        ]
+        return np.concatenate(padded, axis=0)
+
+    def _join(self, parts: list[Residuals]) -> Residuals:
+        return Residuals(
+            self._stack([r.points for r in parts]),
+            np.concatenate([r.pose_prior for r in parts]),
+            np.concatenate([r.global_prior for r in parts]),
+        )
+
+    def residuals(self, state: tuple[State, ...]) -> Residuals:
+        return self._join([p.residuals(s) for p, s in zip(self.scans, state, strict=True)])
+
+    def linearise(self, state: tuple[State, ...]) -> Linearisation:
+        parts = [p.linearise(s) for p, s in zip(self.scans, state, strict=True)]
+        G = self.n_global
+        J_global, priors = [], []
+        for i, lin in enumerate(parts):
+            columns = self._columns(i)
+            J = np.zeros((*lin.J_global.shape[:2], G))
+            J[:, :, columns] = lin.J_global
+            J_global.append(J)
+            if lin.global_prior_jacobian is not None and len(lin.global_prior_jacobian):
+                rows = np.zeros((len(lin.global_prior_jacobian), G))
+                rows[:, columns] = lin.global_prior_jacobian
+                priors.append(rows)
+        return Linearisation(
+            residuals=self._join([lin.residuals for lin in parts]),
+            J_global=self._stack(J_global),
+            J_local=self._stack([lin.J_local for lin in parts]),
+            pose_prior_sqrt_information=parts[0].pose_prior_sqrt_information,
+            global_prior_jacobian=np.vstack(priors) if priors else None,
+        )
+
+    def retract(
+        self, state: tuple[State, ...], step_global: FloatArray, step_local: FloatArray
+    ) -> tuple[State, ...]:
+        bounds = self._bounds()
+        return tuple(
+            p.retract(s, step_global[self._columns(i)], step_local[bounds[i] : bounds[i + 1]])
+            for i, (p, s) in enumerate(zip(self.scans, state, strict=True))
+        )
+
+    def with_flange_poses(self, T_base_flange: FloatArray) -> MultiScanProblem[State]:
+        bounds = self._bounds()
+        return MultiScanProblem(
+            tuple(
+                p.with_flange_poses(T_base_flange[bounds[i] : bounds[i + 1]])
+                for i, p in enumerate(self.scans)
+            )
+        )
+
+    def pose_corrections(self, state: tuple[State, ...]) -> FloatArray:
+        return np.concatenate(
+            [p.pose_corrections(s) for p, s in zip(self.scans, state, strict=True)]
+        )

@@ -934,6 +934,34 @@ def refine_with_outlier_rejection(
 # Joint kinematic + hand-eye calibration
 
 
+def kinematic_problem(
+    samples_points: list[FloatArray],
+    q: FloatArray,
+    setup: KinematicSetup,
+    T_flange_sensor0: ArrayLike,
+    cylinder0: Cylinder,
+    config: RefineConfig | None = None,
+    radius_m: float | None = None,
+) -> tuple[CylinderProblem, CylinderState]:
+    """The cylinder problem at the nominal forward kinematics of joint vectors q (M, n), with
+    the arm's repeatability as the pose corrections' prior, and its start state."""
+    cfg = RefineConfig() if config is None else config
+    cfg = replace(
+        cfg,
+        robot_sigma_t_m=setup.config.repeatability_t_m,
+        robot_sigma_r_rad=setup.config.repeatability_r_rad,
+    )
+    estimate_radius = radius_m is None or cfg.estimate_radius
+    problem = build_problem(
+        samples_points, forward_kinematics(setup.model, q), cfg, estimate_radius
+    )
+    state = initial_state(
+        problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
+    )
+    centroid = _data_centroid(problem, state)
+    return replace(problem, centroid=centroid), _recentred(state, centroid)
+
+
 def refine_kinematics(
     samples_points: list[FloatArray],
     stamps_ns: ArrayLike,
@@ -969,21 +997,12 @@ def refine_kinematics(
         At the corrected poses; its 1σ are marginal over the kinematic corrections.
     JointOutcome
     """
-    cfg = RefineConfig() if config is None else config
-    cfg = replace(
-        cfg,
-        robot_sigma_t_m=setup.config.repeatability_t_m,
-        robot_sigma_r_rad=setup.config.repeatability_r_rad,
+    q = setup.joint_positions(stamps_ns)
+    problem, state = kinematic_problem(
+        samples_points, q, setup, T_flange_sensor0, cylinder0, config, radius_m
     )
-    estimate_radius = radius_m is None or cfg.estimate_radius
-    nominal = forward_kinematics(setup.model, setup.joint_positions(stamps_ns))
-    problem = build_problem(samples_points, nominal, cfg, estimate_radius)
-    state = initial_state(
-        problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
-    )
-    centroid = _data_centroid(problem, state)
-    problem = replace(problem, centroid=centroid)
-    outcome = solve_joint(problem, _recentred(state, centroid), setup, stamps_ns, cfg.solver)
+    cfg = problem.config
+    outcome = solve_joint(problem, state, setup.model, q, setup.config, cfg.solver)
     joint = outcome.solution
     corrected = problem.with_flange_poses(outcome.pose_model.poses(joint.state.delta))
     linearisation = corrected.linearise(outcome.state)
