@@ -18,6 +18,7 @@ from linelaser_calib.core.joint_calibration import (
     JointState,
     KinematicPoseModel,
     KinematicSetup,
+    MultiScanProblem,
 )
 from linelaser_calib.core.kinematics import (
     UR_JOINT_NAMES,
@@ -29,7 +30,11 @@ from linelaser_calib.core.kinematics import (
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.targets.base import SolveContext, TargetSolution
 from linelaser_calib.core.targets.cylinder import TARGET, CylinderConfig
-from linelaser_calib.core.targets.cylinder.refine import build_problem, initial_state
+from linelaser_calib.core.targets.cylinder.refine import (
+    build_problem,
+    initial_state,
+    kinematic_problem,
+)
 from linelaser_calib.core.types import FloatArray
 from linelaser_calib.export import UR_SEGMENTS, ur_kinematics_yaml
 from linelaser_calib.io.kinematics import model_from_urdf, read_kinematics
@@ -234,3 +239,43 @@ def test_ur_kinematics_export_refuses_what_it_cannot_hold(
     assert "--kinematics" in capsys.readouterr().err
     with pytest.raises(Exception, match=r"wrist_3_joint\.a"):
         ur_kinematics_yaml(KinematicCorrections("ur5e", {"wrist_3_joint.a": 1e-4}))
+
+
+def test_several_placements_share_the_hand_eye_and_keep_their_cylinders() -> None:
+    setup_scans = [recording(2, 6, (0.45, 0.15, 0.0)), recording(6, 6, (0.35, -0.2, 0.0))]
+    config = CylinderConfig(radius_m=0.02).refine
+    problems, states, qs = [], [], []
+    for data in setup_scans:
+        truth = data.truth
+        assert truth.arm is not None and data.joint_states is not None
+        assert truth.joint_positions is not None
+        setup = KinematicSetup(truth.arm.nominal, data.joint_states)
+        points = [
+            p[s == Surface.SIDE][:: 10 + len(problems)]
+            for p, s in zip(truth.points_true_sensor, truth.surface, strict=True)
+        ]
+        problem, state = kinematic_problem(
+            points, truth.joint_positions, setup, truth.T_flange_sensor, truth.cylinder, config
+        )
+        problems.append(problem)
+        states.append(state)
+        qs.append(truth.joint_positions)
+    multi = MultiScanProblem(tuple(problems))
+    both = multi.linearise(tuple(states))
+    G0 = problems[0].n_global
+    assert multi.n_global == G0 + problems[1].n_global - 6
+    first, second = (p.linearise(s) for p, s in zip(problems, states, strict=True))
+    K0, K1 = first.J_global.shape[1], second.J_global.shape[1]
+    np.testing.assert_allclose(both.J_global[:6, :K0, :G0], first.J_global)
+    np.testing.assert_allclose(both.J_global[:6, :, G0:], 0.0)
+    np.testing.assert_allclose(both.J_global[6:, :K1, :6], second.J_global[:, :, :6])
+    np.testing.assert_allclose(both.J_global[6:, :K1, G0:], second.J_global[:, :, 6:])
+    np.testing.assert_allclose(both.J_global[6:, :, 6:G0], 0.0)
+    np.testing.assert_allclose(both.residuals.points[6:, :K1], second.residuals.points)
+    step = np.arange(multi.n_global) * 1e-6
+    moved = multi.retract(tuple(states), step, np.zeros((12, 6)))
+    np.testing.assert_allclose(moved[0].t_fs, moved[1].t_fs)
+    assert not np.allclose(moved[0].point, moved[1].point)
+    nominal = model_from_preset("ur5e")
+    again = multi.with_flange_poses(forward_kinematics(nominal, np.vstack(qs)))
+    np.testing.assert_allclose(again.scans[1].t_bf, problems[1].t_bf)
