@@ -2,10 +2,10 @@
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
 recordings into a bag), ``info`` (what a bag holds), ``calibrate`` (the offline
-calibration), ``reconstruct`` (apply a calibration: a recording's profiles in the base
-frame), ``export`` (a result as a URDF joint, a static TF command or a launch file) and
-``demo`` (calibrate the committed bags and show the error against their truth). Exit code 0
-means success; a user error prints one
+calibration), ``plan`` (the next flange poses to scan from), ``reconstruct`` (apply a
+calibration: a recording's profiles in the base frame), ``export`` (a result as a URDF joint,
+a static TF command or a launch file) and ``demo`` (calibrate the committed bags and show the
+error against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -27,6 +27,14 @@ from linelaser_calib.core.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.planning import (
+    Plan,
+    PlanConstraints,
+    SigmaPoint,
+    plan_for_target,
+    plannable,
+    predicted_curve,
+)
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import configure
@@ -45,10 +53,11 @@ from linelaser_calib.io.results import (
     read_result_yaml,
     result_to_dict,
     truth_beside,
+    write_plan_yaml,
     write_result_yaml,
     write_truth_yaml,
 )
-from linelaser_calib.offline import OfflineRun, calibrate_bag
+from linelaser_calib.offline import OfflineRun, bag_samples, calibrate_bag
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
@@ -125,7 +134,8 @@ def simulate_to_bag(
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
-    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input; so do
+    straight-seam scenarios (line target), with the true line.
     With ``tf`` the flange poses are also written as a robot_state_publisher-style
     ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
     (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
@@ -134,7 +144,9 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.line import Line, LineSection
     from linelaser_calib.core.targets.sphere import SphereSection
+    from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
     from linelaser_calib.sim.sphere import (
@@ -151,11 +163,14 @@ def simulate_to_bag(
     )
 
     weld = scenario_name in WELD_PRESETS
+    arm, joint_states = None, None  # only the cylinder scenes simulate an arm's joints
+    initial_target: ResultSection | None = None
     if weld:
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+        initial_target = KnownPoint(np.asarray(weld_data.truth.taught_point_m), estimated=False)
     elif scenario_name in SPHERE_PRESETS:
         # --radius is the target's radius: the sphere's here.
         own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
@@ -169,15 +184,21 @@ def simulate_to_bag(
             radius_estimated=False,
             side_estimated=False,
         )
+    elif scenario_name in LINE_PRESETS:
+        line_data = simulate_line(line_scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = line_data.scenario, line_data.profiles, line_data.poses
+        intensities, T_true = line_data.intensities, line_data.truth.T_flange_sensor
+        target = LineSection(Line(line_data.truth.line_point, line_data.truth.line_direction))
+        initial_target = target
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
         target = CylinderSection(data.truth.cylinder)
+        arm, joint_states = data.truth.arm, data.joint_states
     tf_dynamic, tf_static = (
         ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
     )
-    arm = None if weld else data.truth.arm
     write_bag(
         out,
         profiles,
@@ -190,7 +211,7 @@ def simulate_to_bag(
         intensities=intensities if scenario.intensity else None,
         tf=tf_dynamic,
         tf_static=tf_static,
-        joint_states=None if weld else data.joint_states,
+        joint_states=joint_states,
         joint_state_topic=scenario.joint_state_topic,
     )
     simulation: dict[str, object] = {
@@ -202,12 +223,12 @@ def simulate_to_bag(
         "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
-        taught = weld_data.truth.taught_point_m
-        simulation["taught_point"] = taught
+        simulation["taught_point"] = weld_data.truth.taught_point_m
+    if initial_target is not None:
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                target=KnownPoint(np.asarray(taught), estimated=False),
+                target=initial_target,
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
@@ -317,16 +338,20 @@ SETTING_FLAGS = {
 }
 
 
+def _initial_hand_eye(text: str) -> np.ndarray:
+    """The hand-eye (4, 4) of ``--initial``; its warnings go to stderr."""
+    try:
+        initial, warnings = read_initial_hand_eye(text)
+    except CalibrationError as exc:
+        raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
+    for warning in warnings:
+        print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
+    return initial
+
+
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
-    initial = None
-    if args.initial is not None:
-        try:
-            initial, warnings = read_initial_hand_eye(args.initial)
-        except CalibrationError as exc:
-            raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
-        for warning in warnings:
-            print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
+    initial = None if args.initial is None else _initial_hand_eye(args.initial)
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
@@ -602,6 +627,182 @@ def _input_line(run: OfflineRun) -> str:
     )
 
 
+# --- plan -----------------------------------------------------------------------------------
+
+
+def _numbers(text: str) -> list[float]:
+    """Parse comma-separated finite numbers."""
+    try:
+        values = [float(p) for p in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers a,b,..., got {text!r}") from None
+    if not all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
+
+
+def _span(text: str) -> tuple[float, float]:
+    """Parse ``lo,hi`` (m)."""
+    values = _numbers(text)
+    if len(values) != 2 or not values[0] < values[1]:
+        raise argparse.ArgumentTypeError(f"expected LO,HI in metres with LO < HI, got {text!r}")
+    return values[0], values[1]
+
+
+#: The target settings ``plan`` takes (those that shape the information of a pose).
+PLAN_TARGET_OPTIONS = (
+    "--radius",
+    "--centre-side",
+    "--sensor-sigma",
+    "--robot-sigma-t",
+    "--robot-sigma-r",
+)
+
+
+def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
+    return PlanConstraints(
+        z_min_m=args.range[0],
+        z_max_m=args.range[1],
+        fan_half_angle_rad=float(np.deg2rad(args.fan_deg)),
+        reach_centre_m=args.reach_centre,
+        reach_half_extent_m=args.reach,
+        table_height_m=None if args.no_table else args.table_height,
+    )
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    if args.output is not None:
+        _check_output(args.output, "plan file (--output)")
+    if args.figure is not None:
+        from linelaser_calib.report import require_matplotlib
+
+        _check_output(args.figure, "figure (--figure)")
+        require_matplotlib()
+    target = get_target(args.target)
+    section = None
+    achieved: list[SigmaPoint] = []
+    planner = plannable(target)
+    placed = {"--cylinder": args.cylinder, "--sphere": args.sphere}
+    given_numbers = {flag: value for flag, value in placed.items() if value is not None}
+    for flag in given_numbers:
+        if flag != planner.numbers_flag:
+            raise InputError(
+                f"{flag} does not apply to the {target.title} target and would be ignored; "
+                f"give its placement with {planner.numbers_flag} ({planner.numbers_help})"
+            )
+    numbers = given_numbers.get(planner.numbers_flag)
+    if args.from_result is not None:
+        if args.initial is not None or numbers is not None:
+            raise InputError(
+                "--from gives the hand-eye and the target's placement; omit --initial and "
+                f"{planner.numbers_flag}"
+            )
+        result = read_result_yaml(args.from_result)
+        if result.target.key != target.name:
+            raise InputError(
+                f"{args.from_result} holds a {result.target.key} result, not a {target.name} "
+                f"one; choose --target {result.target.key}"
+            )
+        T_flange_sensor, section = result.T_flange_sensor, result.target
+        sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+        if sigma_t is not None and sigma_r is not None:
+            achieved = [(len(result.samples_used), sigma_t, sigma_r)]
+    elif args.initial is not None:
+        T_flange_sensor = _initial_hand_eye(args.initial)
+    else:
+        raise InputError(
+            "plan needs the current hand-eye: give --from RESULT.yaml (a calibration of this "
+            "set-up), or --initial (a file or 'x y z qx qy qz qw', e.g. from CAD, within ~5 mm "
+            "and ~5 deg) with "
+            "--cylinder or a bag of 3 or more exploratory scans; the planner does not yet "
+            "estimate the hand-eye from exploratory scans alone"
+        )
+    if section is None and numbers is None and args.bag is None:
+        raise InputError(
+            f"plan needs the target's placement: give --from RESULT.yaml, "
+            f"{planner.numbers_flag} {planner.numbers_help}, or a bag of 3 or more exploratory "
+            "scans"
+        )
+    given = {
+        "radius_m": args.radius,
+        "centre_side": args.centre_side,
+        "sensor_sigma_m": args.sensor_sigma,
+        "robot_sigma_t_m": args.robot_sigma_t,
+        "robot_sigma_r_rad": args.robot_sigma_r,
+    }
+    settings = {name: value for name, value in given.items() if value is not None}
+    config = configure(target, "default", settings, SETTING_FLAGS)
+    samples = (
+        []
+        if args.bag is None
+        else bag_samples(
+            args.bag,
+            PairingConfig(),
+            profile_topic=args.profile_topic,
+            pose_topic=args.pose_topic,
+        )
+    )
+    goal = None
+    if args.goal_mm is not None or args.goal_deg is not None:
+        goal = (
+            np.inf if args.goal_mm is None else args.goal_mm * 1e-3,
+            np.inf if args.goal_deg is None else float(np.deg2rad(args.goal_deg)),
+        )
+    started = time.monotonic()
+    plan = plan_for_target(
+        target,
+        config,
+        T_flange_sensor,
+        args.n,
+        samples=samples,
+        section=section,
+        numbers=numbers,
+        extent=args.axial_range,
+        constraints=_plan_constraints(args),
+        goal=goal,
+        seed=args.seed,
+    )
+    elapsed = time.monotonic() - started
+    print(format_plan(plan, elapsed))
+    if args.output is not None:
+        print(f"Wrote {write_plan_yaml(plan, args.output)}")
+    if args.figure is not None:
+        from linelaser_calib.report.figures import DPI, sigma_curve_figure
+
+        sigma_curve_figure(predicted_curve(plan), achieved).savefig(args.figure, dpi=DPI)
+        print(f"Wrote {args.figure}")
+    return 0
+
+
+def format_plan(plan: Plan, elapsed_s: float) -> str:
+    """The plan as a table: pose, flange position (mm), predicted 1 sigma after it."""
+    lines = [
+        f"{len(plan.poses)} poses chosen from {plan.candidates} feasible candidates in "
+        f"{elapsed_s:.2f} s (D-optimal on the hand-eye's information)."
+    ]
+    if plan.sigma_translation_m is not None and plan.sigma_rotation_rad is not None:
+        lines.append(
+            "Predicted 1 sigma from the scans taken: "
+            f"{np.array2string(plan.sigma_translation_m * 1e3, precision=4)} mm, "
+            f"{np.array2string(np.rad2deg(plan.sigma_rotation_rad), precision=4)} deg"
+        )
+    lines.append(
+        f"{'pose':>4}  {'flange position x, y, z (mm)':>30}  "
+        f"{'1 sigma translation (mm)':>26}  {'1 sigma rotation (deg)':>26}"
+    )
+    for k, pose in enumerate(plan.poses, 1):
+        p = pose.T_base_flange[:3, 3] * 1e3
+        t = pose.sigma_translation_m * 1e3
+        r = np.rad2deg(pose.sigma_rotation_rad)
+        lines.append(
+            f"{k:>4}  {p[0]:9.1f} {p[1]:9.1f} {p[2]:9.1f}   "
+            f"{t[0]:8.4f} {t[1]:8.4f} {t[2]:8.4f}  {r[0]:8.4f} {r[1]:8.4f} {r[2]:8.4f}"
+        )
+    if plan.goal_reached:
+        lines.append("The goal is reached: the predicted 1 sigma is within it.")
+    return "\n".join(lines)
+
+
 # --- export ---------------------------------------------------------------------------------
 
 
@@ -625,16 +826,35 @@ def _cmd_export(args: argparse.Namespace) -> int:
 # --- demo -----------------------------------------------------------------------------------
 
 
+def _preset_motion(name: object) -> str | None:
+    """The motion (``step``, ``continuous``) of a simulator preset; None for another name."""
+    from linelaser_calib.sim.line import LINE_PRESETS
+    from linelaser_calib.sim.scenario import PRESETS
+    from linelaser_calib.sim.sphere import SPHERE_PRESETS
+    from linelaser_calib.sim.weld import WELD_PRESETS
+
+    rigs = {
+        **PRESETS,
+        **{k: v.rig for k, v in WELD_PRESETS.items()},
+        **{k: v.rig for k, v in LINE_PRESETS.items()},
+        **{k: v.rig for k, v in SPHERE_PRESETS.items()},
+    }
+    rig = rigs.get(name) if isinstance(name, str) else None
+    return None if rig is None else rig.motion
+
+
 def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
     """Calibrate one committed bag with both methods, print the summaries, add table rows.
 
     A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
-    corrects that hand-eye); a converted real recording with its ``reference.yaml`` (another
-    tool's hand-eye, calibrated with the settings recorded there). A bag with neither is
-    skipped with a note.
+    corrects that hand-eye; a continuous scan is calibrated as one, at any flange speed with
+    the clock offset estimated); a converted real recording with its ``reference.yaml``
+    (another tool's hand-eye, calibrated with the settings recorded there). A bag with
+    neither is skipped with a note.
     """
     settings: dict[str, object] = {}
     initial = None
+    continuous = False
     truth, note = truth_beside(bag)
     if truth is None and not (bag / "reference.yaml").is_file():
         print(note or f"{bag} has no truth.yaml or reference.yaml; skipped", file=sys.stderr)
@@ -649,22 +869,31 @@ def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, fl
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
+        continuous = _preset_motion(truth.raw.get("simulation", {}).get("scenario")) == "continuous"
+        if continuous:
+            label += ", continuous, clock offset estimated"
     else:
         compare, reference = read_reference_yaml(bag / "reference.yaml")
         target = get_target(str(reference["target"]))
         settings = dict(reference.get("settings") or {})
         against = "reference"
         label = f"{target.title}, real scans; reference.yaml is not ground truth"
+    pairing = (
+        PairingConfig(max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
+        if continuous
+        else PairingConfig()
+    )
     for method in (Method.PAPER, Method.DEFAULT):
         config = PipelineConfig(
             method=method,
             target=target.name,
             target_config=configure(target, method.value, settings, SETTING_FLAGS),
             seed=seed,
+            pairing=pairing,
             initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
         )
         started = time.perf_counter()
-        run = calibrate_bag(bag, config)
+        run = calibrate_bag(bag, config, estimate_offset=continuous)
         seconds = time.perf_counter() - started
         print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
         print(format_summary(run.result, truth))
@@ -812,6 +1041,14 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_initial_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
@@ -825,7 +1062,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general, sphere",
+        help=(
+            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, weld_seam, "
+            "weld_seam_general, sphere, line, line_features"
+        ),
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
@@ -892,11 +1132,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument(
-        "--initial",
-        metavar="FILE|NUMBERS",
-        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
-    )
+    _add_initial_argument(cal)
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     _add_pairing_arguments(
         cal,
@@ -923,6 +1159,79 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal.set_defaults(func=_cmd_calibrate)
 
+    plan = sub.add_parser("plan", help="plan the next flange poses that most reduce the 1 sigma")
+    plan.add_argument(
+        "bag", nargs="?", help="rosbag2 directory, .mcap file or session of the scans so far"
+    )
+    plan.add_argument("--target", choices=target_names(), default=DEFAULT_TARGET)
+    plan.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
+    plan.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
+    plan.add_argument(
+        "--from",
+        dest="from_result",
+        metavar="RESULT.yaml",
+        help="a result of this set-up: the hand-eye and the target's placement",
+    )
+    _add_initial_argument(plan)
+    plan.add_argument(
+        "--cylinder",
+        type=_numbers,
+        help="px,py,pz,dx,dy,dz: a point on the cylinder axis and its direction (base frame, m)",
+    )
+    plan.add_argument(
+        "--sphere", type=_numbers, help="cx,cy,cz: the centre of the sphere (base frame, m)"
+    )
+    plan.add_argument(
+        "--axial-range",
+        type=_span,
+        help="LO,HI: the span of the shaft to scan, m along the axis (upwards) from its point "
+        "nearest the base origin (default: the span the scans cover)",
+    )
+    plan.add_argument("--n", type=int, default=10, help="poses to plan (default 10)")
+    plan.add_argument("--goal-mm", type=_positive_float, help="stop at this 1 sigma, mm")
+    plan.add_argument("--goal-deg", type=_positive_float, help="stop at this 1 sigma, deg")
+    plan.add_argument(
+        "--range",
+        type=_span,
+        default=(PlanConstraints.z_min_m, PlanConstraints.z_max_m),
+        help="measuring range of the profiler, m (default 0.07,0.15)",
+    )
+    plan.add_argument(
+        "--fan-deg",
+        type=_positive_float,
+        default=float(np.rad2deg(PlanConstraints.fan_half_angle_rad)),
+        help="half opening of the laser fan, deg (default 25)",
+    )
+    plan.add_argument(
+        "--reach-centre",
+        type=_xyz,
+        help="centre of the flange's reach box, x,y,z in m (default: the first scan's flange)",
+    )
+    plan.add_argument(
+        "--reach",
+        type=_positive_float,
+        default=PlanConstraints.reach_half_extent_m,
+        help="half side of the reach box, m (default 0.25)",
+    )
+    plan.add_argument(
+        "--table-height",
+        type=float,
+        default=PlanConstraints.table_height_m,
+        help="base z of the table; sensor and flange stay above it, m (default 0)",
+    )
+    plan.add_argument("--no-table", action="store_true", help="no table below the target")
+    for flag, parse_setting, text in TARGET_OPTIONS:
+        if flag in PLAN_TARGET_OPTIONS:
+            plan.add_argument(flag, type=parse_setting, default=None, help=text)
+    plan.add_argument("--seed", type=int, default=0, help="seed of the candidate poses")
+    plan.add_argument("--output", help="plan YAML to write (its directory must exist)")
+    plan.add_argument(
+        "--figure",
+        metavar="FILE.png",
+        help="plot the predicted 1 sigma against the number of poses, with the one --from's "
+        "result achieved (needs matplotlib)",
+    )
+    plan.set_defaults(func=_cmd_plan)
     rec = sub.add_parser(
         "reconstruct", help="map every profile of a bag into the base frame with a calibration"
     )

@@ -58,6 +58,13 @@ def assert_same_recording(new: Recording, old: Recording) -> None:
     assert_trees_close(new.truth, old.truth)
     assert_trees_close(new.initial, old.initial)
     assert_same_bag(new.bag, old.bag)
+    assert (new.joint_states is None) == (old.joint_states is None)
+    if new.joint_states is not None and old.joint_states is not None:
+        assert new.joint_states.names == old.joint_states.names
+        np.testing.assert_array_equal(new.joint_states.stamps_ns, old.joint_states.stamps_ns)
+        assert_floats_close(
+            new.joint_states.positions, old.joint_states.positions, err_msg="joint states"
+        )
 
 
 def assert_same_bag(a: BagContents, b: BagContents) -> None:
@@ -71,13 +78,6 @@ def assert_same_bag(a: BagContents, b: BagContents) -> None:
     for k, (fa, fb) in enumerate(zip(a.poses, b.poses, strict=True)):
         assert (fa.stamp_ns, fa.frame_id) == (fb.stamp_ns, fb.frame_id)
         assert_floats_close(fa.T_base_flange, fb.T_base_flange, err_msg=f"pose {k}")
-    assert (a.joint_states is None) == (b.joint_states is None)
-    if a.joint_states is not None and b.joint_states is not None:
-        assert a.joint_states.names == b.joint_states.names
-        np.testing.assert_array_equal(a.joint_states.stamps_ns, b.joint_states.stamps_ns)
-        assert_floats_close(
-            a.joint_states.positions, b.joint_states.positions, err_msg="joint states"
-        )
 
 
 def test_committed_bags_exist_and_are_small() -> None:

@@ -199,3 +199,18 @@ def test_a_model_that_does_not_fit_exits_1_and_writes_nothing(
     err = capsys.readouterr().err
     assert "does not fit" in err and "another target" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_every_registered_target_has_every_member_of_the_protocol() -> None:
+    """The registry loads targets by module path, so the type checker cannot see them."""
+    from linelaser_calib.core.targets import REGISTRY, get_target
+    from linelaser_calib.core.targets.base import Target
+
+    members = {
+        name for name in (*Target.__annotations__, *vars(Target)) if not name.startswith("_")
+    }
+    for name in REGISTRY:
+        target = get_target(name)
+        missing = sorted(m for m in members if not hasattr(target, m))
+        assert not missing, f"target {name} lacks {missing}"
+        assert target.name == name

@@ -136,12 +136,15 @@ def recorded_pose_stream(
     motion: Motion,
     errors: FloatArray,
     arm: Arm | None = None,
+    stamp_jitter_s: float = 0.0,
 ) -> list[FlangePose]:
     """The robot's flange-pose stream at ``robot_rate_hz`` over the whole motion.
 
     Each message is the reported pose (without an arm: the true pose with the shot's error
     ``errors``; with one: the nominal forward kinematics) times a per-message jitter,
-    stamped on the pose clock from ``epoch_ns``.
+    stamped on the pose clock from ``epoch_ns``. With ``stamp_jitter_s`` (s, 1σ) each stamp
+    misses the instant the pose was taken by a Gaussian error, as when a driver stamps
+    messages on arrival (the stamps are kept in order).
     """
     stream_ns = stream_times_ns(scenario, motion)
     if arm is None:
@@ -149,6 +152,9 @@ def recorded_pose_stream(
     else:
         stream = arm.reported_flange(motion, stream_ns / 1e9)
     stream = stream @ jitter_transforms(rng, scenario, len(stream_ns))
+    if stamp_jitter_s > 0.0:
+        late = np.round(rng.normal(size=len(stream_ns)) * stamp_jitter_s * 1e9).astype(np.int64)
+        stream_ns = np.sort(stream_ns + late)
     return [
         FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
         for s, T in zip(stream_ns, stream, strict=True)

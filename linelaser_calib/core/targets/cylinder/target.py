@@ -45,6 +45,7 @@ from ..base import (
 )
 from .config import CylinderConfig
 from .features import FittedSample, fit_sample, fit_samples, settle_radius
+from .plan import CylinderPlanner
 from .refine import refine, refine_kinematics, refine_with_outlier_rejection
 from .section import CylinderSection, read_cylinder_section
 
@@ -75,6 +76,8 @@ class CylinderTarget:
         "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad", methods=("default",)),
         "initial": Option("", methods=("default",)),
     }
+    #: Pose planning (:mod:`linelaser_calib.core.planning`).
+    planner = CylinderPlanner()
 
     def validate(
         self, sample: Sample, config: CylinderConfig, rng: np.random.Generator

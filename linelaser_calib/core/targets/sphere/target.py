@@ -63,6 +63,7 @@ from linelaser_calib.core.targets.sphere.model import (
     side_is_clear,
     solve_fixed_point,
 )
+from linelaser_calib.core.targets.sphere.plan import SpherePlanner
 from linelaser_calib.core.targets.sphere.refine import (
     N_LOCAL,
     SphereRefinement,
@@ -256,6 +257,7 @@ class SphereTarget:
     title = "sphere"
     summary = "a sphere (tooling ball) scanned from many poses: each profile a circle"
     methods: tuple[str, ...] = ("paper", "default")
+    estimates_clock_offset = False
     config_type = SphereConfig
     options: Mapping[str, Option] = {
         "radius_m": Option("radius_m"),
@@ -265,6 +267,8 @@ class SphereTarget:
         "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad"),
         "min_samples": Option("min_samples"),
     }
+    #: Pose planning (:mod:`linelaser_calib.core.planning`).
+    planner = SpherePlanner()
 
     def validate(
         self, sample: Sample, config: SphereConfig, rng: np.random.Generator
