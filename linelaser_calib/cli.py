@@ -263,6 +263,7 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--robot-sigma-t", "robot_sigma_translation_m", float),
     ("--robot-sigma-r", "robot_sigma_rotation_rad", float),
     ("--spikes", "spike_fraction", float),
+    ("--arm-seed", "kinematic_seed", int),  # the same arm's kinematic errors in other runs
     ("--profile-topic", "profile_topic", str),
     ("--pose-topic", "pose_topic", str),
     ("--sensor-frame", "sensor_frame", str),
