@@ -142,12 +142,15 @@ def test_joint_calibration_maps_a_held_out_recording_closer_to_the_truth() -> No
     assert after < 0.5 * before
 
 
-def test_kinematics_section_round_trips(tmp_path: Path) -> None:
+def test_kinematics_section_round_trips(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     bag = tmp_path / "arm"
     args = ["simulate", str(bag), "--scenario", "ur5e_kinematic", "--seed", "4", "--poses", "12"]
     assert main(args) == 0
     out = tmp_path / "result.yaml"
     assert main(["calibrate", str(bag), "--kinematics", "ur5e", "--output", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "Kinematic corrections of the ur5e model" in printed
+    assert "absorbs the flange-side kinematic errors" in printed
     raw = yaml.safe_load(out.read_text(encoding="utf-8"))["kinematics"]
     assert raw["model"] == "ur5e" and raw["base_frame"] == "base_link"
     read = read_kinematics(out)
