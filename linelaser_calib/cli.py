@@ -1064,8 +1064,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenario",
         default="paper",
         help=(
-            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, weld_seam, "
-            "weld_seam_general, sphere, line, line_features"
+            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, cluttered_camera, "
+            "weld_seam, weld_seam_general, sphere, line, line_features"
         ),
     )
     sim.add_argument("--seed", type=int, default=0)
