@@ -142,10 +142,19 @@ def test_joint_calibration_maps_a_held_out_recording_closer_to_the_truth() -> No
     assert after < 0.5 * before
 
 
-def test_kinematics_section_round_trips(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    bag = tmp_path / "arm"
+@pytest.fixture(scope="module")
+def arm_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small ur5e_kinematic recording (12 poses) with joint states."""
+    bag = tmp_path_factory.mktemp("joint") / "arm"
     args = ["simulate", str(bag), "--scenario", "ur5e_kinematic", "--seed", "4", "--poses", "12"]
     assert main(args) == 0
+    return bag
+
+
+def test_kinematics_section_round_trips(
+    arm_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = arm_bag
     out = tmp_path / "result.yaml"
     assert main(["calibrate", str(bag), "--kinematics", "ur5e", "--output", str(out)]) == 0
     printed = capsys.readouterr().out
@@ -165,6 +174,17 @@ def test_kinematics_section_round_trips(tmp_path: Path, capsys: pytest.CaptureFi
     args = ["reconstruct", str(bag), "--calibration", str(out), "--output", str(cloud)]
     assert main(args) == 0
     assert cloud.stat().st_size > 0
+
+
+def test_a_wrong_robot_model_is_refused(
+    arm_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "result.yaml"
+    assert main(["calibrate", str(arm_bag), "--kinematics", "ur10e", "--output", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "ur10e kinematic model does not explain the robot's error" in err
+    assert "Traceback" not in err
+    assert not out.exists()
 
 
 def _urdf_from_ur_kinematics(text: str) -> str:
