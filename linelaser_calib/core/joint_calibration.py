@@ -39,6 +39,12 @@ fixes the gauge: the base and flange frames stay the nominal ones, and the hand-
 the physical one up to the flange-side errors it absorbs); the others are estimated with a
 zero-mean Gaussian prior (global prior rows Δ / σ) that keeps weakly determined
 combinations near nominal.
+
+Several placements
+------------------
+:class:`MultiScanProblem` stacks the problems of several target placements scanned by the
+same arm and sensor into one (shared hand-eye, a target per placement); wrapped like a
+single problem, it estimates one set of corrections from all of them.
 """
 
 from __future__ import annotations
