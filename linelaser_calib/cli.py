@@ -23,6 +23,7 @@ import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
@@ -262,6 +263,7 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--robot-sigma-t", "robot_sigma_translation_m", float),
     ("--robot-sigma-r", "robot_sigma_rotation_rad", float),
     ("--spikes", "spike_fraction", float),
+    ("--arm-seed", "kinematic_seed", int),  # the same arm's kinematic errors in other runs
     ("--profile-topic", "profile_topic", str),
     ("--pose-topic", "pose_topic", str),
     ("--sensor-frame", "sensor_frame", str),
@@ -442,6 +444,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     config = _pipeline_config(args)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     source, model = _pose_source(args)
+    if args.nominal_kinematics and model is None:
+        raise InputError(
+            "--nominal-kinematics keeps the robot model of --kinematics nominal; give "
+            "--kinematics MODEL or leave --nominal-kinematics out"
+        )
     try:
         run = calibrate_bag(
             args.bag,
@@ -456,6 +463,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             invalid_values_m=tuple(args.invalid_value),
             joint_state_topic=args.joint_state_topic,
             model=model,
+            kinematic_calibration=(
+                None if model is None or args.nominal_kinematics else JointCalibrationConfig()
+            ),
         )
     except PairingError as exc:
         raise PairingError(
@@ -487,7 +497,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel | None]:
-    """The pose source and robot model of ``--pose-source`` and ``--kinematics``."""
+    """The pose source and robot model of ``--pose-source`` and ``--kinematics``.
+
+    Without ``--pose-source``, ``--kinematics`` selects the joint states, else the
+    PoseStamped topic is the source.
+    """
+    if args.pose_source is None:
+        args.pose_source = (
+            PoseSource.POSE.value if args.kinematics is None else PoseSource.JOINT_STATES.value
+        )
     source = PoseSource(args.pose_source)
     if source is PoseSource.JOINT_STATES and args.kinematics is None:
         raise InputError(
@@ -790,9 +808,19 @@ def format_plan(plan: Plan, elapsed_s: float) -> str:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from linelaser_calib.export import ExportFormat, export_text
+    from linelaser_calib.export import ExportFormat, export_text, ur_kinematics_yaml
 
-    print(export_text(read_result_yaml(args.result), ExportFormat(args.format)))
+    form = ExportFormat(args.format)
+    if form is ExportFormat.UR_KINEMATICS:
+        corrections = read_kinematics(args.result)
+        if corrections is None:
+            raise InputError(
+                f"{args.result} holds no kinematics section: calibrate with --kinematics "
+                "MODEL (and joint states in the recording) to estimate the robot's corrections"
+            )
+        print(ur_kinematics_yaml(corrections))
+        return 0
+    print(export_text(read_result_yaml(args.result), form))
     return 0
 
 
@@ -980,10 +1008,11 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
     cal.add_argument(
         "--pose-source",
         choices=[s.value for s in PoseSource],
-        default=PoseSource.POSE.value,
-        help="flange poses from a PoseStamped topic (pose, default), from the /tf + "
-        "/tf_static chain --base-frame -> --flange-frame (tf), or from sensor_msgs/JointState "
-        "through the robot model (joint_states, needs --kinematics)",
+        default=None,
+        help="flange poses from a PoseStamped topic (pose, the default without --kinematics), "
+        "from the /tf + /tf_static chain --base-frame -> --flange-frame (tf), or from "
+        "sensor_msgs/JointState through the robot model (joint_states, the default with "
+        "--kinematics)",
     )
     cal.add_argument(
         "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
@@ -995,7 +1024,8 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
         "--kinematics",
         metavar="MODEL",
         help="robot model of the joint_states pose source: ur5e, ur10e or a URDF file "
-        "(chain --base-frame to --flange-frame)",
+        "(chain --base-frame to --flange-frame); calibrate estimates its identifiable "
+        "corrections with the hand-eye",
     )
     cal.add_argument(
         "--joint-state-topic",
@@ -1116,6 +1146,11 @@ def build_parser() -> argparse.ArgumentParser:
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
     _add_pose_source_arguments(cal)
+    cal.add_argument(
+        "--nominal-kinematics",
+        action="store_true",
+        help="with --kinematics: keep the robot model nominal (no kinematic corrections)",
+    )
     cal.add_argument("--json", action="store_true", help="print the result as JSON")
     cal.add_argument(
         "--progress",
@@ -1226,10 +1261,11 @@ def build_parser() -> argparse.ArgumentParser:
     export.add_argument("result", help="result YAML written by calibrate")
     export.add_argument(
         "--format",
-        choices=["urdf", "static-tf", "launch"],
+        choices=["urdf", "static-tf", "launch", "ur-kinematics"],
         required=True,
         help="urdf: a fixed <joint>; static-tf: the static_transform_publisher command line; "
-        "launch: a Python launch file publishing it",
+        "launch: a Python launch file publishing it; ur-kinematics: the corrected robot "
+        "kinematics (result of calibrate --kinematics ur5e|ur10e) as UR's description YAML",
     )
     export.set_defaults(func=_cmd_export)
 

@@ -1,6 +1,8 @@
-"""A calibration result in the forms a ROS system loads: URDF joint, static TF, launch file.
+"""A calibration result in the forms a ROS system loads: URDF joint, static TF, launch file,
+and the robot's corrected kinematics as the UR description's kinematics YAML.
 
-``linelaser-calib export RESULT.yaml --format urdf|static-tf|launch`` prints one of them;
+``linelaser-calib export RESULT.yaml --format urdf|static-tf|launch|ur-kinematics`` prints
+one of them;
 ``launch/publish.launch.py`` publishes the result with :func:`static_transform_arguments`.
 Numbers are written with ``repr`` (the shortest text that reads back to the same float), so
 nothing is lost on the way: the URDF ``rpy`` gives the result's rotation back to 1e-15.
@@ -13,10 +15,17 @@ from enum import Enum
 
 import numpy as np
 
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import (
     FloatArray,
     rpy_from_matrix,
     translation_quaternion_from_transform,
+)
+from linelaser_calib.core.kinematics import (
+    UR_DH,
+    UR_JOINT_NAMES,
+    KinematicCorrections,
+    model_from_preset,
 )
 from linelaser_calib.core.types import CalibrationResult
 
@@ -27,6 +36,7 @@ class ExportFormat(Enum):
     URDF = "urdf"
     STATIC_TF = "static-tf"
     LAUNCH = "launch"
+    UR_KINEMATICS = "ur-kinematics"
 
 
 def _numbers(values: FloatArray) -> list[str]:
@@ -138,8 +148,83 @@ def launch_file(result: CalibrationResult) -> str:
     )
 
 
+#: Segment names of the UR description's kinematics YAML, one per joint (its origin).
+UR_SEGMENTS = ("shoulder", "upper_arm", "forearm", "wrist_1", "wrist_2", "wrist_3")
+
+
+def _elementary(axis: str, amount: float) -> FloatArray:
+    """(4, 4) translation along (``tx``...) or rotation about (``rx``, ``rz``) an axis."""
+    T = np.eye(4)
+    if axis.startswith("t"):
+        T["xyz".index(axis[1]), 3] = amount
+        return T
+    c, s = np.cos(amount), np.sin(amount)
+    i, j = {"rx": (1, 2), "rz": (0, 1)}[axis]
+    T[i, i], T[i, j], T[j, i], T[j, j] = c, -s, s, c
+    return T
+
+
+def ur_kinematics_yaml(corrections: KinematicCorrections) -> str:
+    """The corrected UR arm as the ``kinematics`` YAML that UR's ROS description loads.
+
+    Joint i's origin (its parent link to the joint frame, before the joint's rotation about
+    z) is ``Tx(a[i-1]) · Rx(alpha[i-1]) · Tz(d[i]) · Rz(offset[i])`` of the corrected DH
+    table (joint 0: ``Tz(d[0]) · Rz(offset[0])``, after the description's 180° turn of
+    ``base_link_inertia``), written as x, y, z (m) and roll, pitch, yaw (rad). With the
+    nominal table this gives the description's default kinematics.
+
+    Raises
+    ------
+    InputError
+        Corrections that are not for a UR preset, or that change the last link's a or alpha
+        (the description's wrist_3 -> tool0 transform is fixed and cannot hold them).
+    """
+    if corrections.model not in UR_DH:
+        raise InputError(
+            f"the kinematic corrections are for the model {corrections.model!r}; the "
+            f"ur-kinematics format takes a UR preset ({', '.join(sorted(UR_DH))})"
+        )
+    model = corrections.apply(model_from_preset(corrections.model))
+    value = dict(zip(model.parameter_names, model.parameters, strict=True))
+    last = UR_JOINT_NAMES[-1]
+    fixed = [
+        name
+        for name in (f"{last}.a", f"{last}.alpha")
+        if abs(corrections.corrections.get(name, 0.0)) > 0.0
+    ]
+    if fixed:
+        raise InputError(
+            f"the corrections change {', '.join(fixed)}, which the UR description's fixed "
+            "wrist_3 -> tool0 transform cannot hold; fold them into the hand-eye or export "
+            "another format"
+        )
+    lines = [
+        f"# Kinematics of a {corrections.model} corrected by linelaser_calib: joint origins,",
+        "# x y z in m and roll pitch yaw in rad (fixed axes), for UR's ROS description",
+        "# (kinematics_params:=FILE). Not from the robot's own calibration: its hash differs.",
+        "kinematics:",
+    ]
+    for i, (joint, segment) in enumerate(zip(UR_JOINT_NAMES, UR_SEGMENTS, strict=True)):
+        T = np.eye(4)
+        if i:
+            previous = UR_JOINT_NAMES[i - 1]
+            T = _elementary("tx", value[f"{previous}.a"]) @ _elementary(
+                "rx", value[f"{previous}.alpha"]
+            )
+        T = T @ _elementary("tz", value[f"{joint}.d"]) @ _elementary("rz", value[f"{joint}.offset"])
+        lines.append(f"  {segment}:")
+        for key, number in zip(
+            ("x", "y", "z", "roll", "pitch", "yaw"),
+            _numbers(np.concatenate([T[:3, 3], rpy_of(T)])),
+            strict=True,
+        ):
+            lines.append(f"    {key}: {number}")
+    lines.append("  hash: linelaser_calib")
+    return "\n".join(lines)
+
+
 def export_text(result: CalibrationResult, form: ExportFormat) -> str:
-    """The result as ``form``."""
+    """The result as ``form`` (not ``ur-kinematics``: see :func:`ur_kinematics_yaml`)."""
     if form is ExportFormat.URDF:
         return urdf_joint(result)
     if form is ExportFormat.STATIC_TF:

@@ -6,6 +6,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import DegenerateError, InputError
+from linelaser_calib.core.joint_calibration import JointCalibrationConfig, KinematicSetup
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
@@ -48,6 +49,7 @@ def calibrate_bag(
     invalid_values_m: tuple[float, ...] = (),
     joint_state_topic: str | None = None,
     model: KinematicModel | None = None,
+    kinematic_calibration: JointCalibrationConfig | None = None,
 ) -> OfflineRun:
     """Calibrate from a bag holding profiles (PointCloud2) and flange poses (any source).
 
@@ -76,6 +78,10 @@ def calibrate_bag(
     joint_state_topic : str, optional
     model : KinematicModel, optional
         The robot model of the ``joint_states`` source.
+    kinematic_calibration : JointCalibrationConfig, optional
+        With the ``joint_states`` source: estimate the identifiable kinematic corrections
+        together with the hand-eye (the result's ``kinematics``); None keeps the model
+        nominal.
 
     Raises
     ------
@@ -110,6 +116,14 @@ def calibrate_bag(
         offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config)
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
         progress("clock offset", 1, 1)
+    if kinematic_calibration is not None and model is not None:
+        states = flange_poses.joint_states
+        if states is None:
+            raise InputError(
+                "the kinematic calibration needs the joint states: use --pose-source joint_states"
+            )
+        setup = KinematicSetup(model, states, config.pairing.clock_offset_s, kinematic_calibration)
+        config = replace(config, kinematics=setup)
     result = run_pipeline(bag.profiles, flange_poses.poses, config, progress)
     result.clock_offset_estimated = estimate_offset
     result.parent_frame = flange_frame

@@ -232,8 +232,19 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
             f"Clock offset estimated live by the collector: {result.clock_offset_live_s * 1e3:+.2f}"
             f" ms{spread}"
         )
+    if result.kinematics is not None:
+        lines.append(
+            f"Kinematic corrections of the {result.kinematics.model} model: "
+            f"{len(result.kinematics.corrections)} estimated, "
+            f"{len(result.kinematics.kept_nominal)} kept nominal (the result's kinematics section)"
+        )
     lines += [f"WARNING: {warning}" for warning in result.warnings]
     if truth is not None:
         lines.append("Error against truth:")
+        if result.kinematics is not None:
+            lines.append(
+                "  (the hand-eye here absorbs the flange-side kinematic errors: it is right "
+                "together with the corrected kinematics, not alone)"
+            )
         lines += table(truth_rows(result, truth))
     return "\n".join(lines)

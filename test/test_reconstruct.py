@@ -126,7 +126,7 @@ def test_joint_states_pose_source_calibrates_like_the_pose_topic(
     urdf.write_text(ur_urdf("ur5e"), encoding="utf-8")
     out = tmp_path / "joint_states.yaml"
     args = ["calibrate", str(bag), "--pose-source", "joint_states", "--kinematics", str(urdf)]
-    assert main([*args, "--output", str(out)]) == 0
+    assert main([*args, "--nominal-kinematics", "--output", str(out)]) == 0
     from_joints = read_result_yaml(out)
     rot, trans = transform_error(
         read_result_yaml(calibrated).T_flange_sensor, from_joints.T_flange_sensor
@@ -175,7 +175,9 @@ def test_joint_states_need_a_model_and_a_model_needs_joint_states(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     _fails(["calibrate", str(bag), "--pose-source", "joint_states"], capsys, "--kinematics")
-    _fails(["calibrate", str(bag), "--kinematics", "ur5e"], capsys, "--pose-source joint_states")
+    args = ["calibrate", str(bag), "--pose-source", "pose", "--kinematics", "ur5e"]
+    _fails(args, capsys, "--pose-source joint_states")
+    _fails(["calibrate", str(bag), "--nominal-kinematics"], capsys, "--kinematics MODEL")
     args = ["calibrate", str(bag), "--pose-source", "joint_states", "--kinematics", "ur5e"]
     _fails([*args, "--pose-topic", "/flange_pose"], capsys, "drop --pose-topic")
 

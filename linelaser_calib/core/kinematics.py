@@ -532,10 +532,13 @@ class KinematicCorrections:
         Parameter name (``<joint>.<what>``, see :class:`KinematicModel`) to the value added
         to the nominal one: m for lengths, rad for angles. Parameters not listed keep their
         nominal value.
+    kept_nominal : tuple of str
+        Parameters a calibration could not determine and left nominal (for the record).
     """
 
     model: str
     corrections: dict[str, float]
+    kept_nominal: tuple[str, ...] = ()
 
     def apply(self, model: KinematicModel) -> KinematicModel:
         """``model`` with the corrections added to its parameters.

@@ -27,6 +27,7 @@ import numpy as np
 
 from .errors import DegenerateError, InputError, PairingError
 from .geometry import FloatArray, check_transform
+from .joint_calibration import KinematicSetup
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .targets import DEFAULT_TARGET, get_target
 from .targets.base import Progress, SolveContext, Target
@@ -64,6 +65,9 @@ class PipelineConfig:
     initial_T_flange_sensor : ndarray, shape (4, 4), or None
         Optional initial hand-eye (e.g. from CAD or an earlier result): the start of the
         solve where the target's method uses one.
+    kinematics : KinematicSetup or None
+        The robot model and the joint states of the recording: the default method then
+        estimates the identifiable kinematic corrections with the hand-eye.
     """
 
     method: Method = Method.DEFAULT
@@ -72,6 +76,7 @@ class PipelineConfig:
     seed: int = 0
     pairing: PairingConfig = field(default_factory=PairingConfig)
     initial_T_flange_sensor: FloatArray | None = None
+    kinematics: KinematicSetup | None = None
 
     def __post_init__(self) -> None:
         target = get_target(self.target)
@@ -169,10 +174,18 @@ def calibrate_samples(
         rejections=rejections,
         n_samples=len(samples),
         progress=progress,
+        kinematics=config.kinematics,
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
     solution = solve[config.method](features, target_config, context)
     target.check_fit(solution, target_config)
+    if config.kinematics is not None and solution.kinematics is None:
+        solution.warnings.append(
+            f"the {solution.method} method of the {target.title} target does not estimate "
+            "kinematic corrections: the flange poses are the nominal model's forward "
+            "kinematics of the joint states (the cylinder target's default method estimates "
+            "them)"
+        )
     return CalibrationResult(
         T_flange_sensor=solution.T_flange_sensor,
         target=solution.section,
@@ -186,6 +199,8 @@ def calibrate_samples(
         warnings=list(solution.warnings),
         history=dict(solution.history),
         sample_fits=list(solution.sample_fits),
+        kinematics=solution.kinematics,
+        identifiability=solution.identifiability,
     )
 
 

@@ -12,6 +12,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from .joint_calibration import KinematicIdentifiability
+    from .kinematics import KinematicCorrections
     from .targets.base import ResultSection
 
 FloatArray = NDArray[np.float64]
@@ -209,6 +211,10 @@ class CalibrationResult:
         scanning through the nodes); None when there is none.
     parent_frame, child_frame, base_frame : str
         Frame ids: flange, sensor and robot base.
+    kinematics : KinematicCorrections or None
+        The robot's kinematic corrections estimated with the hand-eye (joint calibration).
+    identifiability : KinematicIdentifiability or None
+        Which kinematic parameters the data determined (joint calibration).
     """
 
     T_flange_sensor: FloatArray
@@ -230,3 +236,5 @@ class CalibrationResult:
     parent_frame: str = "tool0"
     child_frame: str = "laser"
     base_frame: str = "base_link"
+    kinematics: KinematicCorrections | None = None
+    identifiability: KinematicIdentifiability | None = None

@@ -15,6 +15,7 @@ The ``kinematics`` section of a result (or truth) file::
       corrections:                 # added to the nominal parameter; m for lengths, rad for angles
         shoulder_pan_joint.offset: 1.2e-4
         elbow_joint.a: -3.0e-4
+      kept_nominal: [wrist_3_joint.d]  # optional: what a calibration could not determine
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from linelaser_calib.core.kinematics import (
     urdf_model,
 )
 from linelaser_calib.io.errors import ResultFileError
-from linelaser_calib.io.results import _load
+from linelaser_calib.io.results import _load, kinematics_to_dict
 
 SECTION = "kinematics"
 
@@ -155,12 +156,7 @@ def load_model(
 
 def kinematics_section(corrections: KinematicCorrections, model: KinematicModel) -> dict[str, Any]:
     """The ``kinematics`` section of a result or truth file (plain YAML data)."""
-    return {
-        "model": corrections.model,
-        "base_frame": model.base_frame,
-        "flange_frame": model.flange_frame,
-        "corrections": {str(k): float(v) for k, v in corrections.corrections.items()},
-    }
+    return kinematics_to_dict(corrections, model.base_frame, model.flange_frame)
 
 
 def read_kinematics(path: str | Path) -> KinematicCorrections | None:
@@ -183,4 +179,7 @@ def read_kinematics(path: str | Path) -> KinematicCorrections | None:
     corrections = {}
     for key in raw:
         corrections[str(key)] = section.section("corrections").number(key)
-    return KinematicCorrections(section.text("model"), corrections)
+    kept = section.get("kept_nominal") if section.has("kept_nominal") else []
+    if not isinstance(kept, list) or not all(isinstance(name, str) for name in kept):
+        raise ResultFileError(f"{file_path}: key {SECTION}.kept_nominal must list parameter names")
+    return KinematicCorrections(section.text("model"), corrections, tuple(kept))

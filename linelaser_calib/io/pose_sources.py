@@ -21,7 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.kinematics import KinematicModel, flange_poses_from_joint_states
+from linelaser_calib.core.kinematics import (
+    JointStates,
+    KinematicModel,
+    flange_poses_from_joint_states,
+)
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.tf import StampedTransform, TransformTree, base_frame_warning
 from linelaser_calib.core.types import FlangePose
@@ -79,12 +83,15 @@ class FlangePoses:
         Where they came from, for the printed input line (e.g. ``'1200 on /flange_pose'``).
     warnings : list of str
         Things the user should know (they join the result's warnings).
+    joint_states : JointStates or None
+        ``joint_states``: the stream the poses were computed from.
     """
 
     poses: list[FlangePose]
     base_frame: str
     description: str
     warnings: list[str] = field(default_factory=list)
+    joint_states: JointStates | None = None
 
 
 @dataclass(frozen=True)
@@ -230,6 +237,7 @@ def poses_from_joint_states(bag: BagContents, request: PoseRequest) -> FlangePos
         poses,
         model.base_frame,
         f"{len(poses)} poses from joint states ({model.name} model, frame {model.base_frame})",
+        joint_states=states,
     )
 
 

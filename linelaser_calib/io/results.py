@@ -49,6 +49,7 @@ from linelaser_calib.core.geometry import (
     transform_from_translation_quaternion,
     translation_quaternion_from_transform,
 )
+from linelaser_calib.core.kinematics import KinematicCorrections
 from linelaser_calib.core.planning import Plan
 from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
@@ -151,6 +152,21 @@ def _write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Pat
     return path
 
 
+def kinematics_to_dict(
+    corrections: KinematicCorrections, base_frame: str, flange_frame: str
+) -> dict[str, Any]:
+    """The ``kinematics`` section of a result or truth file (plain YAML data, m and rad)."""
+    section: dict[str, Any] = {
+        "model": corrections.model,
+        "base_frame": base_frame,
+        "flange_frame": flange_frame,
+        "corrections": {str(k): float(v) for k, v in corrections.corrections.items()},
+    }
+    if corrections.kept_nominal:
+        section["kept_nominal"] = [str(name) for name in corrections.kept_nominal]
+    return section
+
+
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     """The result in the contract layout (plain lists and numbers), for YAML and JSON."""
     unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
@@ -196,6 +212,15 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
             },
         },
+        **(
+            {}
+            if result.kinematics is None
+            else {
+                "kinematics": kinematics_to_dict(
+                    result.kinematics, result.base_frame, result.parent_frame
+                )
+            }
+        ),
     }
 
 

@@ -8,7 +8,8 @@ With ``scenario.robot_model`` set (``ur5e``, ``ur10e``), the robot is a serial a
   reachable ``n_poses`` are kept, in visiting order).
 - The true model is the nominal one with every parameter off by a Gaussian error: lengths
   (m) by ``kinematic_sigma_length_m``, angles (joint zero offsets and twists, rad) by
-  ``kinematic_sigma_angle_rad``.
+  ``kinematic_sigma_angle_rad``, drawn with the run's seed or with ``kinematic_seed`` (the
+  same arm in runs of other seeds).
 - The joints move linearly between the waypoints with the motion's blend weight (quintic
   in step-and-shoot), so they rest during each dwell.
 - The controller reports what its encoders and nominal model say: the flange pose
@@ -129,7 +130,8 @@ def plan_arm(rng: np.random.Generator, scenario: Scenario, scene: Scene) -> Arm:
         scenario.kinematic_sigma_length_m,
         scenario.kinematic_sigma_angle_rad,
     )
-    true = nominal.with_parameters(nominal.parameters + rng.normal(size=len(sigma)) * sigma)
+    draw = rng if scenario.kinematic_seed < 0 else np.random.default_rng(scenario.kinematic_seed)
+    true = nominal.with_parameters(nominal.parameters + draw.normal(size=len(sigma)) * sigma)
     kept = SensorPoses(
         sampled.T_base_sensor[reachable],
         tuple(sampled.kinds[i] for i in reachable),

@@ -295,6 +295,10 @@ class Scenario:
     kinematic_sigma_angle_rad : float
         1σ error of every angle parameter of the true arm (joint zero offsets and twists),
         rad.
+    kinematic_seed : int
+        -1: the true arm's errors are drawn with the run's seed. Otherwise they are drawn
+        from this seed alone, so that runs with other seeds (other poses, another target
+        placement) scan with the same arm.
 
     Topics and frames
     -----------------
@@ -382,6 +386,7 @@ class Scenario:
     robot_model: str = ""
     kinematic_sigma_length_m: float = 0.0
     kinematic_sigma_angle_rad: float = 0.0
+    kinematic_seed: int = -1
 
     profile_topic: str = "/profile"
     pose_topic: str = "/flange_pose"

@@ -54,6 +54,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..geometry import FloatArray
+from ..joint_calibration import KinematicIdentifiability, KinematicSetup
+from ..kinematics import KinematicCorrections
 from ..types import Rejection, Sample, SampleFit
 
 #: Progress callback: (stage name, done, total).
@@ -222,6 +224,11 @@ class TargetSolution:
     noise_m : float
         The 1σ residual the model expects of a sample on clean data, m (for
         :meth:`Target.check_fit`).
+    kinematics : KinematicCorrections or None
+        The kinematic corrections estimated with the hand-eye, when the context asked for
+        them (:attr:`SolveContext.kinematics`) and the target's default method gives them.
+    identifiability : KinematicIdentifiability or None
+        Which kinematic parameters the data determined (with ``kinematics``).
     """
 
     T_flange_sensor: FloatArray
@@ -237,6 +244,8 @@ class TargetSolution:
     history: dict[str, list[float]]
     sample_fits: list[SampleFit]
     noise_m: float
+    kinematics: KinematicCorrections | None = None
+    identifiability: KinematicIdentifiability | None = None
 
 
 @dataclass(frozen=True)
@@ -254,6 +263,11 @@ class SolveContext:
     n_samples : int
         Samples handed to the target (before feature extraction).
     progress : callable
+    kinematics : KinematicSetup or None
+        The robot model and joint states: the default method then estimates the
+        identifiable kinematic corrections with the hand-eye
+        (:mod:`~linelaser_calib.core.joint_calibration`), the flange pose of each feature
+        being the forward kinematics of its joint vector.
     """
 
     initial_T_flange_sensor: FloatArray | None = None
@@ -261,6 +275,7 @@ class SolveContext:
     rejections: Sequence[Rejection] = ()
     n_samples: int = 0
     progress: Progress = field(default=_no_progress)
+    kinematics: KinematicSetup | None = None
 
 
 class Target(Protocol[ConfigT]):

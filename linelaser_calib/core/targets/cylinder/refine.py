@@ -76,7 +76,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import chdtri
 
-from ...errors import DegenerateError, InputError, SolverError
+from ...errors import DegenerateError, InputError, ModelMismatch, SolverError
 from ...geometry import (
     FloatArray,
     check_transform,
@@ -85,6 +85,8 @@ from ...geometry import (
     right_jacobian_so3,
     transform_from_rotation_translation,
 )
+from ...joint_calibration import JointOutcome, KinematicSetup, solve_joint
+from ...kinematics import forward_kinematics
 from ...observability import (
     Observability,
     ObservabilityConfig,
@@ -407,6 +409,18 @@ class CylinderProblem:
         scale = np.ones(self.n_global)
         scale[:3] = _lever(self)
         return scale
+
+    def with_flange_poses(self, T_base_flange: FloatArray) -> CylinderProblem:
+        """The same problem at other flange poses (M, 4, 4)."""
+        return replace(
+            self,
+            R_bf=np.ascontiguousarray(T_base_flange[:, :3, :3]),
+            t_bf=np.ascontiguousarray(T_base_flange[:, :3, 3]),
+        )
+
+    def pose_corrections(self, state: CylinderState) -> FloatArray:
+        """``[ω (rad), τ (m)]`` (M, 6) of every sample."""
+        return np.hstack([state.omega, state.tau])
 
     def _prior_sqrt_information(self) -> FloatArray:
         cfg = self.config
@@ -914,3 +928,128 @@ def refine_with_outlier_rejection(
     result.used = outcome.kept
     result.dropped = [DroppedSample(i, reason) for i, reason in outcome.dropped]
     return result
+
+
+# --------------------------------------------------------------------------------------
+# Joint kinematic + hand-eye calibration
+
+
+#: The pose corrections of a joint solve may be at most this multiple of the repeatability
+#: (re-estimated robot σ): 0.6-0.7 on simulated UR5e arms with the right model, 7 with the
+#: UR10e model on a UR5e.
+MAX_REPEATABILITY_SCALE = 3.0
+#: A kinematic correction may be at most this multiple of its prior 1σ (m or rad).
+MAX_CORRECTION_PRIOR_SIGMAS = 10.0
+
+
+def _check_kinematic_fit(
+    result: RefineResult, outcome: JointOutcome[CylinderState], setup: KinematicSetup
+) -> None:
+    """Refuse a joint solve whose kinematic model does not explain the robot's error."""
+    delta = outcome.solution.state.delta
+    ratio = np.abs(delta) / outcome.pose_model.prior_sigma
+    scale = result.robot_sigma_scale
+    if scale <= MAX_REPEATABILITY_SCALE and float(np.max(ratio, initial=0.0)) <= (
+        MAX_CORRECTION_PRIOR_SIGMAS
+    ):
+        return
+    worst = setup.model.parameter_names[int(outcome.pose_model.free[int(np.argmax(ratio))])]
+    raise ModelMismatch(
+        f"the {setup.model.name} kinematic model does not explain the robot's error: the "
+        f"per-pose corrections are {scale:.1f} times the arm's repeatability of "
+        f"{setup.config.repeatability_t_m * 1e3:.3f} mm and "
+        f"{np.rad2deg(setup.config.repeatability_r_rad):.4f} deg, and the largest kinematic "
+        f"correction ({worst}) is {float(np.max(ratio)):.0f} times its prior 1 sigma. "
+        "Likely causes: the model is not the recorded robot's (--kinematics), the joint "
+        "states are not the robot's encoders, or the arm's error is not kinematic "
+        "(elasticity, heat). Calibrate with --nominal-kinematics to keep the model "
+        "nominal. No result was written."
+    )
+
+
+def kinematic_problem(
+    samples_points: list[FloatArray],
+    q: FloatArray,
+    setup: KinematicSetup,
+    T_flange_sensor0: ArrayLike,
+    cylinder0: Cylinder,
+    config: RefineConfig | None = None,
+    radius_m: float | None = None,
+) -> tuple[CylinderProblem, CylinderState]:
+    """The cylinder problem at the nominal forward kinematics of joint vectors q (M, n), with
+    the arm's repeatability as the pose corrections' prior, and its start state."""
+    cfg = RefineConfig() if config is None else config
+    cfg = replace(
+        cfg,
+        robot_sigma_t_m=setup.config.repeatability_t_m,
+        robot_sigma_r_rad=setup.config.repeatability_r_rad,
+    )
+    estimate_radius = radius_m is None or cfg.estimate_radius
+    problem = build_problem(
+        samples_points, forward_kinematics(setup.model, q), cfg, estimate_radius
+    )
+    state = initial_state(
+        problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
+    )
+    centroid = _data_centroid(problem, state)
+    return replace(problem, centroid=centroid), _recentred(state, centroid)
+
+
+def refine_kinematics(
+    samples_points: list[FloatArray],
+    stamps_ns: ArrayLike,
+    T_flange_sensor0: ArrayLike,
+    cylinder0: Cylinder,
+    setup: KinematicSetup,
+    config: RefineConfig | None = None,
+    radius_m: float | None = None,
+) -> tuple[RefineResult, JointOutcome[CylinderState]]:
+    """The refinement with the flange poses from joint states and a corrected robot model.
+
+    The same cylinder problem, its flange poses the forward kinematics of each sample's
+    joint vector with the identifiable kinematic corrections estimated
+    (:func:`~linelaser_calib.core.joint_calibration.solve_joint`); the per-sample pose
+    corrections have the arm's repeatability as prior (``setup.config``).
+
+    Parameters
+    ----------
+    samples_points : list of ndarray, shape (N_j, 3)
+        Inlier profile points of each sample in the sensor frame, m.
+    stamps_ns : array_like, shape (M,)
+        Profile stamps, ns (the joint states are interpolated there).
+    T_flange_sensor0, cylinder0
+        Start, e.g. :func:`refine_with_outlier_rejection` on the nominal poses.
+    setup : KinematicSetup
+    config : RefineConfig, optional
+    radius_m : float, optional
+        Known radius, m; None estimates it.
+
+    Returns
+    -------
+    RefineResult
+        At the corrected poses; its 1σ are marginal over the kinematic corrections.
+    JointOutcome
+    """
+    q = setup.joint_positions(stamps_ns)
+    problem, state = kinematic_problem(
+        samples_points, q, setup, T_flange_sensor0, cylinder0, config, radius_m
+    )
+    cfg = problem.config
+    outcome = solve_joint(problem, state, setup.model, q, setup.config, cfg.solver)
+    joint = outcome.solution
+    corrected = problem.with_flange_poses(outcome.pose_model.poses(joint.state.delta))
+    linearisation = corrected.linearise(outcome.state)
+    inner = Solution(
+        state=outcome.state,
+        residuals=linearisation.residuals,
+        normal=normal_equations(linearisation, cfg.solver),
+        cost_history=joint.cost_history,
+        iterations=joint.iterations,
+        converged=joint.converged,
+    )
+    result = _summarise(corrected, inner)
+    _check_kinematic_fit(result, outcome, setup)
+    sigma = np.sqrt(np.diag(outcome.covariance)[:N_HAND_EYE])
+    result.sigma_rotation_rad, result.sigma_translation_m = sigma[:3], sigma[3:]
+    result.covariance_hand_eye = outcome.covariance[:N_HAND_EYE, :N_HAND_EYE]
+    return result, outcome

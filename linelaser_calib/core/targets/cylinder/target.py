@@ -8,7 +8,10 @@ Methods
 ``default``
     The paper's solve as a seed, then maximum likelihood on every inlier point with the
     robot's per-sample pose error as nuisance parameters, outlier-sample rejection,
-    covariance and observability diagnostics (:mod:`.refine`).
+    covariance and observability diagnostics (:mod:`.refine`). With joint states and a
+    robot model (``SolveContext.kinematics``) it then estimates the identifiable kinematic
+    corrections together with the hand-eye and the cylinder
+    (:func:`.refine.refine_kinematics`).
 
 Model fit
 ---------
@@ -43,7 +46,7 @@ from ..base import (
 from .config import CylinderConfig
 from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
 from .plan import CylinderPlanner
-from .refine import refine, refine_with_outlier_rejection
+from .refine import refine, refine_kinematics, refine_with_outlier_rejection
 from .section import CylinderSection, read_cylinder_section
 
 #: Points per profile in the refinements of the clock-offset search.
@@ -206,6 +209,24 @@ class CylinderTarget:
             radius_m=config.radius_m,
         )
         context.progress("refine", 1, 1)
+        outcome = None
+        if context.kinematics is not None:
+            used = [features[j] for j in refined.used]
+            context.progress("kinematics", 0, 1)
+            joint, outcome = refine_kinematics(
+                [f.inlier_points for f in used],
+                [f.stamp_ns for f in used],
+                refined.T_flange_sensor,
+                refined.cylinder,
+                context.kinematics,
+                config.refine,
+                radius_m=config.radius_m,
+            )
+            context.progress("kinematics", 1, 1)
+            joint.used = refined.used
+            joint.dropped = refined.dropped
+            joint.warnings[:0] = [outcome.identifiability.describe()]
+            refined = joint
         rejections = [
             Rejection(features[j].index, features[j].stamp_ns, "outlier", reason)
             for j, reason in refined.dropped
@@ -226,6 +247,8 @@ class CylinderTarget:
             history={**seed.history, "refine_cost": list(refined.cost_history)},
             sample_fits=[features[j].record() for j in refined.used],
             noise_m=profile_noise_m(features, config.refine.sensor_sigma_m),
+            kinematics=None if outcome is None else outcome.corrections,
+            identifiability=None if outcome is None else outcome.identifiability,
         )
 
     def check_fit(self, solution: TargetSolution, config: CylinderConfig) -> None:
