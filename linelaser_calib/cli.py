@@ -1,8 +1,9 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration), ``export`` (a result as a URDF joint, a static TF
-command or a launch file) and ``demo`` (calibrate the committed bags and show the error
+``calibrate`` (the offline calibration), ``reconstruct`` (apply a calibration: a recording's
+profiles in the base frame), ``export`` (a result as a URDF joint, a static TF command or a
+launch file) and ``demo`` (calibrate the committed bags and show the error
 against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
@@ -21,6 +22,7 @@ import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.pose_source import PoseSource
@@ -28,7 +30,14 @@ from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_name
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
+from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
+from linelaser_calib.io.kinematics import (
+    SECTION,
+    kinematics_section,
+    load_model,
+    read_kinematics,
+)
 from linelaser_calib.io.results import (
     read_result_yaml,
     result_to_dict,
@@ -139,6 +148,7 @@ def simulate_to_bag(
     tf_dynamic, tf_static = (
         ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
     )
+    arm = None if weld else data.truth.arm
     write_bag(
         out,
         profiles,
@@ -151,6 +161,8 @@ def simulate_to_bag(
         intensities=intensities if scenario.intensity else None,
         tf=tf_dynamic,
         tf_static=tf_static,
+        joint_states=None if weld else data.joint_states,
+        joint_state_topic=scenario.joint_state_topic,
     )
     simulation: dict[str, object] = {
         "scenario": scenario_name,
@@ -184,7 +196,10 @@ def simulate_to_bag(
         parent_frame=scenario.flange_frame,
         child_frame=scenario.sensor_frame,
         base_frame=scenario.base_frame,
-        extra={"simulation": simulation},
+        extra={
+            "simulation": simulation,
+            **({} if arm is None else {SECTION: kinematics_section(arm.errors, arm.nominal)}),
+        },
     )
     return out, truth
 
@@ -287,7 +302,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
-            clock_offset_s=0.0 if args.clock_offset == "auto" else float(args.clock_offset),
+            clock_offset_s=0.0 if args.clock_offset in (None, "auto") else float(args.clock_offset),
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
@@ -358,6 +373,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
     _check_outputs(args)
     config = _pipeline_config(args)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
+    source, model = _pose_source(args)
     try:
         run = calibrate_bag(
             args.bag,
@@ -367,9 +383,11 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             flange_frame=args.flange_frame,
             estimate_offset=args.clock_offset == "auto",
             progress=_StderrProgress(progress),
-            pose_source=PoseSource(args.pose_source),
+            pose_source=source,
             base_frame=args.base_frame,
             invalid_values_m=tuple(args.invalid_value),
+            joint_state_topic=args.joint_state_topic,
+            model=model,
         )
     except PairingError as exc:
         raise PairingError(
@@ -397,6 +415,113 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print(format_summary(run.result, truth))
         for path in written:
             print(f"Wrote {path}")
+    return 0
+
+
+def _pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel | None]:
+    """The pose source and robot model of ``--pose-source`` and ``--kinematics``."""
+    source = PoseSource(args.pose_source)
+    if source is PoseSource.JOINT_STATES and args.kinematics is None:
+        raise InputError(
+            "--pose-source joint_states computes the flange poses from the joint states "
+            "through the robot's kinematic model: pass --kinematics ur5e, ur10e or a URDF file"
+        )
+    if source is not PoseSource.JOINT_STATES and args.kinematics is not None:
+        raise InputError(
+            f"--kinematics {args.kinematics} selects the robot model of the joint_states pose "
+            f"source and does not apply to --pose-source {source.value}; add --pose-source "
+            "joint_states or leave --kinematics out"
+        )
+    if args.kinematics is None:
+        return source, None
+    return source, load_model(
+        args.kinematics, base_frame=args.base_frame, flange_frame=args.flange_frame
+    )
+
+
+def _add_pairing_arguments(parser: argparse.ArgumentParser, clock_offset_help: str) -> None:
+    parser.add_argument(
+        "--sync-tolerance",
+        type=_positive_float,
+        default=PairingConfig.sync_tolerance_s,
+        help="largest profile-to-pose stamp gap, s",
+    )
+    parser.add_argument("--clock-offset", type=_offset, default=None, help=clock_offset_help)
+    for flag, parse, default, text in CALIBRATE_NUMBERS:
+        if flag in PAIRING_FLAGS:
+            parser.add_argument(flag, type=parse, default=default, help=text)
+
+
+# --- reconstruct ----------------------------------------------------------------------------
+
+
+def _cmd_reconstruct(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.ply import write_ply
+    from linelaser_calib.reconstruct import reconstruct_bag
+    from linelaser_calib.report import write_cloud_mcap
+
+    suffix = Path(args.output).suffix
+    if suffix not in (".ply", ".mcap"):
+        raise InputError(
+            f"--output {args.output}: give a .ply file (point-cloud tools) or an .mcap file "
+            "(PointCloud2 for Foxglove and RViz)"
+        )
+    _check_output(args.output, "point cloud (--output)")
+    try:
+        calibration = read_result_yaml(args.calibration)
+        corrections = read_kinematics(args.calibration)
+    except ResultFileError as exc:
+        raise ResultFileError(
+            f"cannot use the calibration (--calibration): {exc}; give a result YAML written "
+            "by linelaser-calib calibrate"
+        ) from exc
+    source, model = _pose_source(args)
+    if args.clock_offset == "auto":
+        raise InputError(
+            "reconstruct takes the clock offset from the calibration (quality.clock_offset_s) "
+            "or as --clock-offset SECONDS; 'auto' applies to calibrate only"
+        )
+    offset = calibration.clock_offset_s if args.clock_offset is None else args.clock_offset
+    pairing = PairingConfig(
+        sync_tolerance_s=args.sync_tolerance,
+        clock_offset_s=float(offset),
+        max_linear_speed_m_s=args.max_speed,
+        max_angular_speed_rad_s=args.max_angular_speed,
+    )
+    try:
+        done = reconstruct_bag(
+            args.bag,
+            calibration,
+            pairing,
+            kinematics=corrections,
+            pose_source=source,
+            model=model,
+            profile_topic=args.profile_topic,
+            pose_topic=args.pose_topic,
+            joint_state_topic=args.joint_state_topic,
+            base_frame=args.base_frame,
+            flange_frame=args.flange_frame,
+            invalid_values_m=tuple(args.invalid_value),
+        )
+    except PairingError as exc:
+        raise PairingError(
+            f"{exc} (Options of reconstruct: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
+        ) from exc
+    if suffix == ".ply":
+        written = write_ply(
+            args.output, done.points, frame_id=done.base_frame, intensity=done.intensity
+        )
+    else:
+        written = write_cloud_mcap(args.output, done.clouds, done.base_frame, done.intensities)
+    corrected = " (kinematic corrections applied)" if corrections else ""
+    print(
+        f"{done.bag.path}: {len(done.clouds)} of {len(done.bag.profiles)} profiles mapped into "
+        f"{done.base_frame} with {done.poses.description}{corrected}; {len(done.points)} points"
+    )
+    if done.rejected:
+        reasons = sorted({r.reason.split(" (")[0] for r in done.rejected})
+        print(f"  {len(done.rejected)} profiles not paired: {'; '.join(reasons[:3])}")
+    print(f"Wrote {written}")
     return 0
 
 
@@ -528,6 +653,10 @@ TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
 )
 
 
+#: Flags of :data:`CALIBRATE_NUMBERS` that set the pairing gate (shared with reconstruct).
+PAIRING_FLAGS = ("--max-speed", "--max-angular-speed")
+
+
 def _sentinel(text: str) -> float:
     """Parse a sentinel depth, m (finite)."""
     try:
@@ -547,14 +676,25 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
         "--pose-source",
         choices=[s.value for s in PoseSource],
         default=PoseSource.POSE.value,
-        help="flange poses from a PoseStamped topic (pose, default) or from the /tf + "
-        "/tf_static chain --base-frame -> --flange-frame (tf)",
+        help="flange poses from a PoseStamped topic (pose, default), from the /tf + "
+        "/tf_static chain --base-frame -> --flange-frame (tf), or from sensor_msgs/JointState "
+        "through the robot model (joint_states, needs --kinematics)",
     )
     cal.add_argument(
         "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
     )
     cal.add_argument(
         "--flange-frame", default="tool0", help="frame id of the flange (end of the TF chain)"
+    )
+    cal.add_argument(
+        "--kinematics",
+        metavar="MODEL",
+        help="robot model of the joint_states pose source: ur5e, ur10e or a URDF file "
+        "(chain --base-frame to --flange-frame)",
+    )
+    cal.add_argument(
+        "--joint-state-topic",
+        help="JointState topic (default /joint_states, else the only JointState topic)",
     )
     cal.add_argument(
         "--invalid-value",
@@ -640,21 +780,14 @@ def build_parser() -> argparse.ArgumentParser:
         help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
     )
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
-    cal.add_argument(
-        "--sync-tolerance",
-        type=_positive_float,
-        default=PairingConfig.sync_tolerance_s,
-        help="largest profile-to-pose stamp gap, s",
-    )
-    cal.add_argument(
-        "--clock-offset",
-        type=_offset,
-        default=0.0,
-        help="added to profile stamps to reach the pose clock, s; 'auto' estimates it "
-        "(continuous scanning with latency)",
+    _add_pairing_arguments(
+        cal,
+        "added to profile stamps to reach the pose clock, s (default 0); 'auto' estimates "
+        "it (continuous scanning with latency)",
     )
     for flag, parse, default, text in CALIBRATE_NUMBERS:
-        cal.add_argument(flag, type=parse, default=default, help=text)
+        if flag not in PAIRING_FLAGS:
+            cal.add_argument(flag, type=parse, default=default, help=text)
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
     _add_pose_source_arguments(cal)
@@ -666,6 +799,28 @@ def build_parser() -> argparse.ArgumentParser:
         help="print progress on stderr (default: when stderr is a terminal)",
     )
     cal.set_defaults(func=_cmd_calibrate)
+
+    rec = sub.add_parser(
+        "reconstruct", help="map every profile of a bag into the base frame with a calibration"
+    )
+    rec.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
+    rec.add_argument(
+        "--calibration", required=True, metavar="RESULT.yaml", help="result of calibrate"
+    )
+    rec.add_argument(
+        "--output",
+        required=True,
+        metavar="OUT.ply|OUT.mcap",
+        help="PLY (x y z float, m, base frame) or MCAP (PointCloud2 in the base frame)",
+    )
+    rec.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
+    rec.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
+    _add_pairing_arguments(
+        rec,
+        "added to profile stamps to reach the pose clock, s (default: the calibration's)",
+    )
+    _add_pose_source_arguments(rec)
+    rec.set_defaults(func=_cmd_reconstruct)
 
     export = sub.add_parser(
         "export", help="print a result as a URDF joint, a static TF command or a launch file"

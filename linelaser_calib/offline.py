@@ -6,12 +6,18 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets.base import Progress
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import BagContents, read_bag
-from linelaser_calib.io.pose_sources import POSE_SOURCES, FlangePoses, PoseRequest
+from linelaser_calib.io.pose_sources import (
+    POSE_SOURCES,
+    FlangePoses,
+    PoseRequest,
+    refuse_pose_topic,
+)
 
 
 @dataclass
@@ -39,6 +45,8 @@ def calibrate_bag(
     pose_source: PoseSource = PoseSource.POSE,
     base_frame: str = "base_link",
     invalid_values_m: tuple[float, ...] = (),
+    joint_state_topic: str | None = None,
+    model: KinematicModel | None = None,
 ) -> OfflineRun:
     """Calibrate from a bag holding profiles (PointCloud2) and flange poses (any source).
 
@@ -64,6 +72,9 @@ def calibrate_bag(
         frame (UR's ``base``) a warning says what that means.
     invalid_values_m : tuple of float
         Depths z, m, that the profiler sends for no return, besides NaN and +-Inf.
+    joint_state_topic : str, optional
+    model : KinematicModel, optional
+        The robot model of the ``joint_states`` source.
 
     Raises
     ------
@@ -71,11 +82,7 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
-    if pose_source is not PoseSource.POSE and pose_topic is not None:
-        raise InputError(
-            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
-            f"--pose-source {pose_source.value}: drop --pose-topic, or use --pose-source pose"
-        )
+    refuse_pose_topic(pose_source, pose_topic)
     bag = read_bag(
         path,
         profile_topic=profile_topic,
@@ -85,7 +92,10 @@ def calibrate_bag(
         invalid_values_m=invalid_values_m,
     )
     flange_poses = POSE_SOURCES[pose_source](
-        bag, PoseRequest(base_frame, flange_frame, config.pairing.sync_tolerance_s)
+        bag,
+        PoseRequest(
+            base_frame, flange_frame, config.pairing.sync_tolerance_s, model, joint_state_topic
+        ),
     )
     if all(len(p.points) == 0 for p in bag.profiles):
         raise InputError(

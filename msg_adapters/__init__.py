@@ -8,6 +8,7 @@ classes: pass ``types=rclpy_types()`` (live nodes) or ``types=rosbags_types(type
 from __future__ import annotations
 
 from msg_adapters.errors import MessageError
+from msg_adapters.joint_state import JointStateRecord, joint_state_from_msg, joint_state_msg
 from msg_adapters.markers import cylinder_marker, marker_array, points_marker, shape_markers
 from msg_adapters.message_types import (
     TypeResolver,
@@ -32,11 +33,14 @@ from msg_adapters.transform import (
 
 __all__ = [
     "DecodedCloud",
+    "JointStateRecord",
     "MessageError",
     "TypeResolver",
     "cloud_from_pointcloud2",
     "cylinder_marker",
     "flange_pose_from_pose_stamped",
+    "joint_state_from_msg",
+    "joint_state_msg",
     "marker_array",
     "pointcloud2_from_points",
     "points_from_pointcloud2",

@@ -18,18 +18,21 @@ import yaml
 from _compare import assert_float32_close, assert_floats_close, assert_trees_close
 
 from linelaser_calib.cli import main
-from linelaser_calib.io.bags import BagContents, read_bag
+from linelaser_calib.core.kinematics import JointStates
+from linelaser_calib.io.bags import BagContents, read_bag, read_joint_states
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"
 COMMITTED = sorted(p.parent for p in BAGS.glob("*/metadata.yaml"))
 
 
 class Recording(NamedTuple):
-    """What a simulator command writes: the bag, truth.yaml and (weld seams) initial.yaml."""
+    """What a simulator command writes: the bag, truth.yaml, (weld seams) initial.yaml and
+    (arms with kinematics) the joint states."""
 
     bag: BagContents
     truth: dict[str, Any]
     initial: dict[str, Any] | None
+    joint_states: JointStates | None = None
 
 
 def load(directory: Path) -> Recording:
@@ -40,7 +43,8 @@ def load(directory: Path) -> Recording:
     truth = parsed("truth.yaml")
     assert truth is not None
     truth["simulation"].pop("command")  # names the output directory
-    return Recording(read_bag(directory), truth, parsed("initial.yaml"))
+    joints = read_joint_states(directory) if "kinematics" in truth else None
+    return Recording(read_bag(directory), truth, parsed("initial.yaml"), joints)
 
 
 def assert_same_recording(new: Recording, old: Recording) -> None:
@@ -57,12 +61,19 @@ def assert_same_recording(new: Recording, old: Recording) -> None:
     for k, (fa, fb) in enumerate(zip(a.poses, b.poses, strict=True)):
         assert (fa.stamp_ns, fa.frame_id) == (fb.stamp_ns, fb.frame_id)
         assert_floats_close(fa.T_base_flange, fb.T_base_flange, err_msg=f"pose {k}")
+    assert (new.joint_states is None) == (old.joint_states is None)
+    if new.joint_states is not None and old.joint_states is not None:
+        assert new.joint_states.names == old.joint_states.names
+        np.testing.assert_array_equal(new.joint_states.stamps_ns, old.joint_states.stamps_ns)
+        assert_floats_close(
+            new.joint_states.positions, old.joint_states.positions, err_msg="joint states"
+        )
 
 
 def test_committed_bags_exist_and_are_small() -> None:
     assert len(COMMITTED) >= 2
     total = sum(f.stat().st_size for bag in COMMITTED for f in bag.iterdir())
-    assert total < 3_000_000, f"committed bags take {total} bytes"
+    assert total < 4_000_000, f"committed bags take {total} bytes"
 
 
 @pytest.mark.parametrize("bag", COMMITTED, ids=lambda p: p.name)

@@ -254,7 +254,11 @@ def test_whole_visible_arc_is_inside_range_and_fan(name: str) -> None:
         assert np.all((arc[:, 2] >= s.z_min_m) & (arc[:, 2] <= s.z_max_m))
         assert np.all(np.abs(arc[:, 0]) <= arc[:, 2] * math.tan(s.fan_half_angle_rad))
     if s.motion == "step":
-        np.testing.assert_allclose(sensor_poses(run(s, 2)), truth.T_base_sensor_waypoints)
+        # An arm with kinematic errors shoots from near its waypoints (sub-millimetre off).
+        atol = 3e-3 if s.robot_model else 0.0
+        np.testing.assert_allclose(
+            sensor_poses(run(s, 2)), truth.T_base_sensor_waypoints, atol=atol
+        )
 
 
 @pytest.mark.parametrize("name", PRESET_NAMES)

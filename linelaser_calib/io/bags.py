@@ -59,12 +59,16 @@ from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
+from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.tf import StampedTransform
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io.errors import BagError
 from msg_adapters import (
     MessageError,
+    cloud_from_pointcloud2,
     flange_pose_from_pose_stamped,
+    joint_state_from_msg,
+    joint_state_msg,
     pointcloud2_from_points,
     pose_stamped_from_flange_pose,
     profile_from_pointcloud2,
@@ -76,6 +80,7 @@ from msg_adapters.message_types import NS_PER_S
 
 PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
 POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
@@ -239,6 +244,7 @@ class _ProfilePoseWriter:
         self._types = rosbags_types(store)
         self._profiles = writer.add_connection(profile_topic, PROFILE_TYPE, typestore=store)
         self._poses = writer.add_connection(pose_topic, POSE_TYPE, typestore=store)
+        self._joint_states: dict[str, Any] = {}
         self._tf: dict[str, Any] = {}
 
     def write_transforms(
@@ -282,6 +288,19 @@ class _ProfilePoseWriter:
     def write_pose(self, pose: FlangePose) -> None:
         msg = pose_stamped_from_flange_pose(pose, types=self._types)
         self._writer.write(self._poses, pose.stamp_ns, _typestore().serialize_cdr(msg, POSE_TYPE))
+
+    def write_joint_state(
+        self, topic: str, stamp_ns: int, names: Sequence[str], positions: NDArray[np.float64]
+    ) -> None:
+        store = _typestore()
+        if topic not in self._joint_states:
+            self._joint_states[topic] = self._writer.add_connection(
+                topic, JOINT_STATE_TYPE, typestore=store
+            )
+        msg = joint_state_msg(stamp_ns, names, positions, types=self._types)
+        self._writer.write(
+            self._joint_states[topic], stamp_ns, store.serialize_cdr(msg, JOINT_STATE_TYPE)
+        )
 
 
 @contextmanager
@@ -328,6 +347,8 @@ def write_bag(
     organised: bool = True,
     intensities: Sequence[NDArray[np.float64] | None] | None = None,
     padding_bytes: int = 0,
+    joint_states: JointStates | None = None,
+    joint_state_topic: str = "/joint_states",
     tf: Sequence[StampedTransform] = (),
     tf_static: Sequence[StampedTransform] = (),
 ) -> Path:
@@ -353,6 +374,9 @@ def write_bag(
     tf, tf_static : sequence of StampedTransform
         Transforms for ``/tf`` (one ``TFMessage`` per stamp, as robot_state_publisher
         sends) and ``/tf_static`` (one message, logged with the first message of the bag).
+    joint_states : JointStates, optional
+        Joint states to write as ``sensor_msgs/msg/JointState`` on ``joint_state_topic``.
+    joint_state_topic : str
 
     Returns
     -------
@@ -374,10 +398,12 @@ def write_bag(
     tf_by_stamp: dict[int, list[StampedTransform]] = {}
     for transform in tf:
         tf_by_stamp.setdefault(transform.stamp_ns, []).append(transform)
+    joints = [] if joint_states is None else list(enumerate(joint_states.stamps_ns))
     events = sorted(
         [(pose.stamp_ns, 0, i) for i, pose in enumerate(poses)]
         + [(profile.stamp_ns, 1, i) for i, profile in enumerate(profiles)]
         + [(stamp, 2, 0) for stamp in tf_by_stamp]
+        + [(int(stamp), 3, i) for i, stamp in joints]
     )
     with _new_bag(path, profile_topic, pose_topic) as bag:
         if tf_static and events:
@@ -385,6 +411,10 @@ def write_bag(
         for stamp, kind, i in events:
             if kind == 2:
                 bag.write_transforms(TF_TOPIC, stamp, tf_by_stamp[stamp])
+            elif kind == 3 and joint_states is not None:
+                bag.write_joint_state(
+                    joint_state_topic, stamp, joint_states.names, joint_states.positions[i]
+                )
             elif kind == 0:
                 pose = poses[i]
                 bag.write_pose(FlangePose(pose.stamp_ns, pose.T_base_flange, base_frame))
@@ -891,7 +921,8 @@ def read_bag(
         Called after each message of the two topics.
     read_poses : bool
         False: read the profiles only (the flange poses come from another source, e.g.
-        ``/tf``); ``poses`` is then empty and ``pose_topic`` and ``base_frame`` are ''.
+        ``/tf`` or joint states); ``poses`` is then empty and ``pose_topic`` and
+        ``base_frame`` are ''.
     invalid_values_m : sequence of float
         Depths z, m, that mark a point as no return besides NaN and +-Inf (driver
         sentinels such as -0.999999 for Keyence's -999.999 mm, or 0).
@@ -982,6 +1013,107 @@ def read_bag(
         start_ns=summary.start_ns,
         end_ns=summary.end_ns,
         skipped=skipped,
+    )
+
+
+def read_profile_intensities(path: str | Path, topic: str) -> dict[int, NDArray[np.float64]]:
+    """Per profile stamp (ns), the ``intensity`` of its valid points, in the order of
+    :func:`read_bag`'s points; empty when the profiles have no intensity field.
+
+    Raises
+    ------
+    BagError
+        If the bag cannot be read.
+    """
+    bag = Path(path)
+    found: dict[int, NDArray[np.float64]] = {}
+    for msg in _decoded_messages(bag, _bag_parts(bag), topic, PROFILE_TYPE):
+        if not any(field.name == "intensity" for field in msg.fields):
+            return {}
+        try:
+            cloud = cloud_from_pointcloud2(msg, extra_fields=("intensity",))
+        except MessageError:
+            continue
+        found[stamp_ns_from_msg(msg.header.stamp)] = cloud.extras["intensity"]
+    return found
+
+
+def _decoded_messages(bag: Path, parts: Sequence[Path], topic: str, msgtype: str) -> Iterator[Any]:
+    """The decoded messages of one topic and type, part by part; undecodable ones left out."""
+    for part in parts:
+        with _open_part(part, bag) as reader:
+            connections = [
+                c for c in reader.connections if (c.topic, c.msgtype) == (topic, msgtype)
+            ]
+            store = _reading_store(connections)
+            for _, log_ns, raw in _raw_messages(reader, connections, bag, part):
+                msg = _decode(store, topic, msgtype, log_ns, raw)
+                if not isinstance(msg, SkippedMessage):
+                    yield msg
+
+
+def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointStates:
+    """Read the ``sensor_msgs/msg/JointState`` stream of a bag, sorted by stamp.
+
+    Parameters
+    ----------
+    path : str or Path
+        rosbag2 directory, its ``.mcap`` file, or a session directory.
+    topic : str, optional
+        Default: ``/joint_states`` if it holds JointState messages, else the only
+        JointState topic.
+
+    Returns
+    -------
+    JointStates
+        Positions (K, n) in the joint order of the first message; messages that name other
+        joints or are malformed are left out.
+
+    Raises
+    ------
+    BagError
+        No JointState topic (the bag's topics are listed), several without a choice, or
+        none readable.
+    """
+    bag = Path(path)
+    parts = _bag_parts(bag)
+    topics = _summarise(bag, parts).topics
+    found = [t for t in topics if t.msgtype == JOINT_STATE_TYPE and t.msgcount > 0]
+    if topic is None:
+        default = [t for t in found if t.topic == "/joint_states"]
+        chosen = default or found
+        if not chosen:
+            raise BagError(
+                f"bag {bag} holds no {JOINT_STATE_TYPE} messages, which the joint_states "
+                f"pose source needs; its topics are: {_listing(topics)}. Record /joint_states "
+                "with the profiles, or use another pose source"
+            )
+        if len(chosen) > 1:
+            raise BagError(
+                f"bag {bag} has several {JOINT_STATE_TYPE} topics: {_listing(chosen)}; "
+                "choose one with --joint-state-topic"
+            )
+        topic = chosen[0].topic
+    elif not any(t.topic == topic for t in found):
+        raise BagError(
+            f"bag {bag} has no {JOINT_STATE_TYPE} messages on {topic!r}; its topics are: "
+            f"{_listing(topics)}"
+        )
+    records = []
+    for msg in _decoded_messages(bag, parts, topic, JOINT_STATE_TYPE):
+        try:
+            records.append(joint_state_from_msg(msg))
+        except MessageError:
+            continue
+    if not records:
+        raise BagError(f"bag {bag}: no readable {JOINT_STATE_TYPE} message on {topic}")
+    records.sort(key=lambda r: r.stamp_ns)
+    names = records[0].names
+    kept = [r for r in records if r.names == names]
+    return JointStates(
+        names,
+        np.array([r.stamp_ns for r in kept], dtype=np.int64),
+        np.array([r.positions for r in kept]),
     )
 
 

@@ -7,6 +7,10 @@ the profiles always come from :func:`~linelaser_calib.io.bags.read_bag`.
 - ``tf``: ``/tf`` and ``/tf_static`` (``tf2_msgs/msg/TFMessage``) read into a
   :class:`~linelaser_calib.core.tf.TransformTree`, and the chain base frame -> flange frame
   evaluated at every stamp of its dynamic transforms.
+- ``joint_states``: the ``sensor_msgs/msg/JointState`` stream of the bag through the robot
+  model (:func:`~linelaser_calib.core.kinematics.flange_poses_from_joint_states`); each
+  flange pose keeps its joint state's stamp, so that pairing interpolates between them as
+  between recorded poses.
 """
 
 from __future__ import annotations
@@ -16,6 +20,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.kinematics import KinematicModel, flange_poses_from_joint_states
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.tf import StampedTransform, TransformTree, base_frame_warning
 from linelaser_calib.core.types import FlangePose
@@ -30,6 +36,7 @@ from linelaser_calib.io.bags import (
     _open_part,
     _raw_messages,
     _reading_store,
+    read_joint_states,
 )
 from linelaser_calib.io.errors import BagError
 from msg_adapters import stamp_ns_from_msg, stamped_transforms_from_msgs
@@ -45,11 +52,17 @@ class PoseRequest:
         The robot base and the flange (``tf``: the two ends of the chain).
     sync_tolerance_s : float
         Largest gap to a dynamic transform interpolated at a stamp, s.
+    model : KinematicModel or None
+        ``joint_states``: the robot's kinematic model (required).
+    joint_state_topic : str or None
+        ``joint_states``: the JointState topic (default ``/joint_states``, else the only one).
     """
 
     base_frame: str = "base_link"
     flange_frame: str = "tool0"
     sync_tolerance_s: float = 0.02
+    model: KinematicModel | None = None
+    joint_state_topic: str | None = None
 
 
 @dataclass(frozen=True)
@@ -191,8 +204,52 @@ def poses_from_tf(bag: BagContents, request: PoseRequest) -> FlangePoses:
     )
 
 
+def poses_from_joint_states(bag: BagContents, request: PoseRequest) -> FlangePoses:
+    """Forward kinematics of the bag's joint states through ``request.model``.
+
+    Raises
+    ------
+    InputError
+        Without a model, or when the joint states do not name the model's joints (both
+        lists are given).
+    BagError
+        When the bag holds no JointState messages (its topics are listed).
+    """
+    model = request.model
+    if model is None:
+        raise InputError(
+            "the joint_states pose source needs the robot's kinematic model: pass "
+            "--kinematics ur5e, ur10e or a URDF file"
+        )
+    states = read_joint_states(bag.path, topic=request.joint_state_topic)
+    try:
+        poses = flange_poses_from_joint_states(model, states)
+    except InputError as err:
+        raise InputError(f"bag {bag.path}: {err}") from None
+    return FlangePoses(
+        poses,
+        model.base_frame,
+        f"{len(poses)} poses from joint states ({model.name} model, frame {model.base_frame})",
+    )
+
+
+def refuse_pose_topic(source: PoseSource, pose_topic: str | None) -> None:
+    """Refuse a PoseStamped topic (``--pose-topic``) when the poses come from elsewhere.
+
+    Raises
+    ------
+    InputError
+    """
+    if source is not PoseSource.POSE and pose_topic is not None:
+        raise InputError(
+            f"--pose-topic names a PoseStamped topic, but the flange poses come from "
+            f"--pose-source {source.value}: drop --pose-topic, or use --pose-source pose"
+        )
+
+
 #: One function per pose source; a new source adds its member and its function here.
 POSE_SOURCES: dict[PoseSource, Callable[[BagContents, PoseRequest], FlangePoses]] = {
     PoseSource.POSE: poses_from_pose_topic,
     PoseSource.TF: poses_from_tf,
+    PoseSource.JOINT_STATES: poses_from_joint_states,
 }

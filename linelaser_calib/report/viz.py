@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import functools
 import os
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from linelaser_calib.core.residuals import sample_points_base
-from linelaser_calib.core.types import CalibrationResult
+from linelaser_calib.core.types import CalibrationResult, FloatArray
 from linelaser_calib.report.errors import ReportError
 from msg_adapters import (
     marker_array,
@@ -66,13 +67,14 @@ def _typestore() -> Typestore:
 
 
 class _Channels:
-    """One MCAP channel per topic, each with its ``ros2msg`` schema."""
+    """One MCAP channel per topic of the given kinds, each with its ``ros2msg`` schema."""
 
-    def __init__(self, writer: Writer) -> None:
+    def __init__(self, writer: Writer, kinds: Sequence[str] = tuple(_TYPES)) -> None:
         self.writer = writer
         self.ids: dict[str, int] = {}
         schemas: dict[str, int] = {}
-        for kind, msgtype in _TYPES.items():
+        for kind in kinds:
+            msgtype = _TYPES[kind]
             if msgtype not in schemas:
                 text, _ = _typestore().generate_msgdef(msgtype, ros_version=2)
                 schemas[msgtype] = writer.register_schema(
@@ -135,6 +137,11 @@ def write_viz_mcap(path: str | Path, result: CalibrationResult) -> Path:
     ReportError
         If the file cannot be written.
     """
+    return _write_atomically(path, lambda writer: _write(writer, result))
+
+
+def _write_atomically(path: str | Path, body: Callable[[Writer], None]) -> Path:
+    """Write an MCAP file with ``body`` into a hidden file, then rename it to ``path``."""
     target = Path(path)
     partial = target.with_name(f".{target.name}.partial")
     try:
@@ -142,7 +149,7 @@ def write_viz_mcap(path: str | Path, result: CalibrationResult) -> Path:
             with partial.open("wb") as stream:
                 writer = Writer(stream)
                 writer.start(profile="ros2", library="linelaser_calib")
-                _write(writer, result)
+                body(writer)
                 writer.finish()  # type: ignore[no-untyped-call]  # mcap has no annotation here
             os.replace(partial, target)
         finally:
@@ -150,3 +157,51 @@ def write_viz_mcap(path: str | Path, result: CalibrationResult) -> Path:
     except OSError as err:
         raise ReportError(f"cannot write {target}: {err.strerror or err}") from err
     return target
+
+
+def write_cloud_mcap(
+    path: str | Path,
+    clouds: Sequence[tuple[int, FloatArray]],
+    frame_id: str,
+    intensities: Sequence[FloatArray] | None = None,
+) -> Path:
+    """Write point clouds as PointCloud2 messages in one MCAP file (Foxglove, RViz).
+
+    Each cloud goes on ``/linelaser_calib/profiles`` at its stamp; all of them together on
+    ``/linelaser_calib/cloud`` once, at the first stamp.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.mcap`` file; replaced atomically if it exists.
+    clouds : sequence of (int, ndarray (N, 3))
+        Stamp (ns) and points (m) in ``frame_id``, in stamp order.
+    frame_id : str
+    intensities : sequence of ndarray (N,), optional
+        Per cloud, the points' intensities (an ``intensity`` field).
+
+    Raises
+    ------
+    ReportError
+        If the file cannot be written.
+    """
+
+    def body(writer: Writer) -> None:
+        types = rosbags_types(_typestore())
+        channels = _Channels(writer, ("profiles", "cloud"))
+        first = clouds[0][0] if clouds else 0
+        every = np.concatenate([c for _, c in clouds]) if clouds else np.zeros((0, 3))
+        values = None
+        if intensities is not None and len(intensities):
+            values = np.concatenate(list(intensities))
+        channels.write(
+            "cloud",
+            first,
+            pointcloud2_from_points(every, first, frame_id, types=types, intensity=values),
+        )
+        for k, (stamp_ns, points) in enumerate(clouds):
+            value = None if intensities is None else intensities[k]
+            msg = pointcloud2_from_points(points, stamp_ns, frame_id, types=types, intensity=value)
+            channels.write("profiles", stamp_ns, msg)
+
+    return _write_atomically(path, body)

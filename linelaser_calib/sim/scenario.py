@@ -35,6 +35,11 @@ Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
     ``ur_scancontrol`` scanned while the robot moves through 6 waypoints without stopping
     (spline path, 0.15 m/s and 1.5 rad/s on average, sensor roll not flipped), profiles at
     10 Hz with 320 points, a 500 Hz pose stream and profiles stamped 4 ms late.
+``ur5e_kinematic``
+    ``ur_scancontrol`` scanned by a UR5e (base at the origin) whose kinematics differ from
+    the nominal DH table: lengths off by 1σ 0.15 mm, joint offsets and twists by 1σ 0.02°;
+    repeatability 0.02 mm and 0.001° per axis; 50 poses, 320 points; flange poses and
+    joint states at 40 Hz, 0.2 s dwell and quick moves to keep the bag small.
 
 Bag size: a streamed pose costs ~120 bytes and a point 12-16 bytes in a rosbag2 MCAP file,
 so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` and
@@ -60,6 +65,7 @@ from linelaser_calib.core.geometry import (
     quaternion_xyzw_from_matrix,
     transform_from_rotation_translation,
 )
+from linelaser_calib.core.kinematics import UR_DH
 from linelaser_calib.core.types import Cylinder, FloatArray
 
 Vec3 = tuple[float, float, float]
@@ -226,9 +232,24 @@ class Scenario:
     epoch_ns : int
         Stamp of the first streamed pose, ns.
 
+    Arm kinematics
+    --------------
+    robot_model : str
+        Empty: the flange simply follows the sampled poses (errors as above). ``ur5e`` or
+        ``ur10e``: a serial arm (:mod:`~linelaser_calib.sim.arm`) whose controller reports
+        nominal forward kinematics of its joints, also published as joint states; the
+        robot errors above then act as repeatability on the true pose.
+    kinematic_sigma_length_m : float
+        1σ error of every length parameter of the true arm (DH d and a), m.
+    kinematic_sigma_angle_rad : float
+        1σ error of every angle parameter of the true arm (joint zero offsets and twists),
+        rad.
+
     Topics and frames
     -----------------
     profile_topic, pose_topic : str
+    joint_state_topic : str
+        Topic of the joint states (written only with a ``robot_model``).
     sensor_frame, flange_frame, base_frame : str
     """
 
@@ -295,8 +316,13 @@ class Scenario:
     latency_s: float = 0.0
     epoch_ns: int = 1_700_000_000_000_000_000
 
+    robot_model: str = ""
+    kinematic_sigma_length_m: float = 0.0
+    kinematic_sigma_angle_rad: float = 0.0
+
     profile_topic: str = "/profile"
     pose_topic: str = "/flange_pose"
+    joint_state_topic: str = "/joint_states"
     sensor_frame: str = "laser"
     flange_frame: str = "tool0"
     base_frame: str = "base_link"
@@ -367,6 +393,11 @@ class Scenario:
         non_negative("camera_baseline_m", "intensity_noise", "view_spread_rad", "aim_spread_rad")
         non_negative("clearance_m", "robot_sigma_translation_m", "robot_sigma_rotation_rad")
         non_negative("pose_jitter_translation_m", "pose_jitter_rotation_rad", "margin_s")
+        non_negative("kinematic_sigma_length_m", "kinematic_sigma_angle_rad")
+        require(
+            self.robot_model in ("", *UR_DH),
+            f"robot_model must be empty or one of {sorted(UR_DH)}, got {self.robot_model!r}",
+        )
         fraction("spike_fraction", "dropout_fraction", "cylinder_reflectance")
         fraction("background_reflectance", "long_axis_fraction", "standoff_spread")
         fraction("axial_spread", "min_arc_fraction")
@@ -428,7 +459,9 @@ class Scenario:
             isinstance(self.epoch_ns, int) and self.epoch_ns >= 0,
             f"epoch_ns must be a non-negative integer, got {self.epoch_ns}",
         )
-        for name in ("profile_topic", "pose_topic", "sensor_frame", "flange_frame", "base_frame"):
+        for name in ("profile_topic", "pose_topic", "joint_state_topic", "sensor_frame"):
+            require(bool(getattr(self, name)), f"{name} must not be empty")
+        for name in ("flange_frame", "base_frame"):
             require(bool(getattr(self, name)), f"{name} must not be empty")
 
 
@@ -528,11 +561,31 @@ def _continuous_scenario() -> Scenario:
     )
 
 
+def _ur5e_kinematic_scenario() -> Scenario:
+    return replace(
+        _ur_scancontrol_scenario(),
+        name="ur5e_kinematic",
+        n_poses=50,
+        resolution=320,
+        robot_model="ur5e",
+        kinematic_sigma_length_m=1.5e-4,
+        kinematic_sigma_angle_rad=_deg(0.02),
+        robot_sigma_translation_m=2e-5,
+        robot_sigma_rotation_rad=_deg(0.001),
+        robot_rate_hz=40.0,
+        dwell_s=0.2,
+        min_move_s=0.3,
+        move_speed_m_s=0.5,
+        move_angular_speed_rad_s=3.0,
+    )
+
+
 #: Named scenarios; see the module docstring and :func:`scenario_from_preset`.
 PRESETS: dict[str, Scenario] = {
     "paper": _paper_scenario(),
     "ur_scancontrol": _ur_scancontrol_scenario(),
     "continuous": _continuous_scenario(),
+    "ur5e_kinematic": _ur5e_kinematic_scenario(),
 }
 
 

@@ -6,7 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
+from linelaser_calib.sim.arm import Arm, plan_arm
 from linelaser_calib.sim.poses import sample_sensor_poses
 from linelaser_calib.sim.profiler import Measurement, measure, trace
 from linelaser_calib.sim.robot import (
@@ -43,7 +45,7 @@ class SimulationTruth:
         True flange pose at each profile's acquisition time.
     T_base_flange_recorded : ndarray, shape (K, 4, 4)
         What the robot reports at the acquisition time, without per-message jitter
-        (true · E_sys · E).
+        (true · E_sys · E; with an arm, nominal forward kinematics).
     stamps_ns : ndarray of int64, shape (K,)
         Profile stamps as published (acquisition + latency).
     acquisition_stamps_ns : ndarray of int64, shape (K,)
@@ -61,6 +63,11 @@ class SimulationTruth:
     valid, spike, dropout : ndarray of bool, shape (K, N)
         Ray returned a point; that point is a reflection spike; the ray was dropped at
         random.
+    arm : Arm or None
+        With ``scenario.robot_model``: the nominal and true kinematics and the waypoint
+        joint vectors.
+    joint_positions : ndarray, shape (K, n), or None
+        With an arm: the joint vector at each profile's acquisition time (rad).
     """
 
     scenario: Scenario
@@ -79,6 +86,8 @@ class SimulationTruth:
     valid: BoolArray
     spike: BoolArray
     dropout: BoolArray
+    arm: Arm | None = None
+    joint_positions: FloatArray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,12 +103,15 @@ class SimulatedData:
     poses : list of FlangePose
         The full reported flange-pose stream, sorted by stamp.
     truth : SimulationTruth
+    joint_states : JointStates or None
+        With an arm: the joint-state stream, at the stamps of the flange poses.
     """
 
     profiles: list[Profile]
     intensities: list[FloatArray | None]
     poses: list[FlangePose]
     truth: SimulationTruth
+    joint_states: JointStates | None = None
 
     @property
     def scenario(self) -> Scenario:
@@ -107,23 +119,46 @@ class SimulatedData:
         return self.truth.scenario
 
 
+def stream_times_ns(scenario: Scenario, motion: Motion) -> Int64Array:
+    """Times (ns from the first) of the robot's messages at ``robot_rate_hz``, shape (K,)."""
+    period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
+    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
+    return np.arange(n_stream, dtype=np.int64) * period_ns
+
+
 def recorded_pose_stream(
-    rng: np.random.Generator, scenario: Scenario, motion: Motion, errors: FloatArray
+    rng: np.random.Generator,
+    scenario: Scenario,
+    motion: Motion,
+    errors: FloatArray,
+    arm: Arm | None = None,
 ) -> list[FlangePose]:
     """The robot's flange-pose stream at ``robot_rate_hz`` over the whole motion.
 
-    Each message is the reported pose (true pose with the shot's error ``errors``) times a
-    per-message jitter, stamped on the pose clock from ``epoch_ns``.
+    Each message is the reported pose (without an arm: the true pose with the shot's error
+    ``errors``; with one: the nominal forward kinematics) times a per-message jitter,
+    stamped on the pose clock from ``epoch_ns``.
     """
-    period_ns = max(1, round(1e9 / scenario.robot_rate_hz))
-    n_stream = int(np.floor(motion.duration_s * 1e9 / period_ns)) + 1
-    stream_ns = np.arange(n_stream, dtype=np.int64) * period_ns
-    stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
-    stream = stream @ jitter_transforms(rng, scenario, n_stream)
+    stream_ns = stream_times_ns(scenario, motion)
+    if arm is None:
+        stream = reported_flange(motion, scenario, errors, stream_ns / 1e9)
+    else:
+        stream = arm.reported_flange(motion, stream_ns / 1e9)
+    stream = stream @ jitter_transforms(rng, scenario, len(stream_ns))
     return [
         FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
         for s, T in zip(stream_ns, stream, strict=True)
     ]
+
+
+def joint_state_stream(scenario: Scenario, motion: Motion, arm: Arm) -> JointStates:
+    """The arm's joint states at the stamps of the flange-pose stream."""
+    stream_ns = stream_times_ns(scenario, motion)
+    return JointStates(
+        arm.nominal.joint_names,
+        scenario.epoch_ns + stream_ns,
+        arm.joint_positions(motion, stream_ns / 1e9),
+    )
 
 
 def published_profiles(
@@ -160,24 +195,32 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
     """
     rng = np.random.default_rng(seed)
     scene = Scene.from_scenario(scenario)
-    sampled = sample_sensor_poses(rng, scenario, scene)
+    arm = plan_arm(rng, scenario, scene) if scenario.robot_model else None
+    sampled = sample_sensor_poses(rng, scenario, scene) if arm is None else arm.sampled
     motion = plan_motion(sampled.T_base_sensor, scenario)
     errors = draw_errors(rng, scenario, len(sampled.T_base_sensor))
 
     acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
     t_shot = acq_ns / 1e9
-    T_sensor_shot = motion.T_base_sensor(t_shot)
+    if arm is None:
+        T_sensor_shot = motion.T_base_sensor(t_shot)
+        T_flange_true = true_flange(motion, scenario, t_shot)
+        T_flange_recorded = reported_flange(motion, scenario, errors, t_shot)
+    else:
+        T_flange_true = arm.true_flange(motion, scenario, errors, t_shot)
+        T_sensor_shot = T_flange_true @ scenario.T_flange_sensor
+        T_flange_recorded = arm.reported_flange(motion, t_shot)
     traced = trace(scene, scenario, T_sensor_shot)
     measured = measure(rng, scenario, traced)
-    poses = recorded_pose_stream(rng, scenario, motion, errors)
+    poses = recorded_pose_stream(rng, scenario, motion, errors, arm)
     stamps, profiles, intensities = published_profiles(scenario, acq_ns, measured)
     truth = SimulationTruth(
         scenario=scenario,
         seed=seed,
         T_flange_sensor=scenario.T_flange_sensor,
         cylinder=scenario.cylinder(),
-        T_base_flange_true=true_flange(motion, scenario, t_shot),
-        T_base_flange_recorded=reported_flange(motion, scenario, errors, t_shot),
+        T_base_flange_true=T_flange_true,
+        T_base_flange_recorded=T_flange_recorded,
         stamps_ns=stamps,
         acquisition_stamps_ns=scenario.epoch_ns + acq_ns,
         T_base_sensor_waypoints=sampled.T_base_sensor,
@@ -188,5 +231,8 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         valid=measured.valid,
         spike=measured.spike,
         dropout=measured.dropout,
+        arm=arm,
+        joint_positions=None if arm is None else arm.joint_positions(motion, t_shot),
     )
-    return SimulatedData(profiles, intensities, poses, truth)
+    joints = None if arm is None else joint_state_stream(scenario, motion, arm)
+    return SimulatedData(profiles, intensities, poses, truth, joints)
