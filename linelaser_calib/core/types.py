@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
+    from .selfcheck import SelfCheck
     from .targets.base import ResultSection
 
 FloatArray = NDArray[np.float64]
@@ -209,6 +210,9 @@ class CalibrationResult:
         scanning through the nodes); None when there is none.
     parent_frame, child_frame, base_frame : str
         Frame ids: flange, sensor and robot base.
+    self_check : SelfCheck or None
+        The default method's self-check (:mod:`linelaser_calib.core.selfcheck`): accuracy in
+        use, halves, the model's and the widened 1σ; the uncertainty above is its widened one.
     """
 
     T_flange_sensor: FloatArray
@@ -230,3 +234,4 @@ class CalibrationResult:
     parent_frame: str = "tool0"
     child_frame: str = "laser"
     base_frame: str = "base_link"
+    self_check: SelfCheck | None = None
