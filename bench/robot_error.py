@@ -64,6 +64,12 @@ def run(preset: str, seed: int) -> dict[str, float]:
     }
 
 
+def cell(rows: list[dict[str, float]], key: str) -> str:
+    """``median [max]`` of one column over the seeds."""
+    values = np.array([r[key] for r in rows])
+    return f"{np.median(values):>7.3f} [{values.max():>5.2f}]"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
@@ -78,14 +84,9 @@ def main() -> None:
     )
     for preset in args.presets.split(","):
         rows = [run(preset, seed) for seed in range(1, args.seeds + 1)]
-
-        def cell(key: str) -> str:
-            values = np.array([r[key] for r in rows])
-            return f"{np.median(values):>7.3f} [{values.max():>5.2f}]"
-
         print(
             f"{preset:<15} {len(rows):>3} "
-            + " ".join(f"{cell(c):>15}" for c in columns)
+            + " ".join(f"{cell(rows, c):>15}" for c in columns)
             + f" {np.mean([r['in1'] for r in rows]):>6.0%}"
             + f" {np.mean([r['in2'] for r in rows]):>6.0%}"
             + f" {int(sum(r['warned'] for r in rows)):>6}",

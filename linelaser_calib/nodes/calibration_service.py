@@ -71,7 +71,7 @@ from linelaser_calib.nodes.common import (
     run_node,
 )
 from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
-from linelaser_calib.summary import one_line_summary
+from linelaser_calib.summary import one_line_summary, self_check_rows
 from msg_adapters import (
     MessageError,
     flange_pose_from_pose_stamped,
@@ -302,6 +302,7 @@ class CalibrationServiceNode(Node):
             String, SESSION_TOPIC, self._on_session, latched_qos(1), callback_group=receive
         )
         self._clock_offset: list[float] = []
+        self._self_check: list[tuple[str, str]] = []
         self.create_subscription(
             Float64MultiArray,
             CLOCK_OFFSET_TOPIC,
@@ -389,7 +390,8 @@ class CalibrationServiceNode(Node):
             ),
             hardware_id="",
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]
-            + [KeyValue(key="session", value=store.session or "")],
+            + [KeyValue(key="session", value=store.session or "")]
+            + [KeyValue(key=k, value=v) for k, v in self._self_check],
         )
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
@@ -444,6 +446,7 @@ class CalibrationServiceNode(Node):
         if len(self._clock_offset) == 4:
             add_live_clock_offset(result, *self._clock_offset[:3])
         summary = one_line_summary(result, len(samples))
+        self._self_check = self_check_rows(result)
         self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")
         self._publish(result)
         output = Path(p["output_path"]).expanduser()
