@@ -34,7 +34,7 @@ parameters that differ from the nominal ones). The held-out samples can: each he
 profile's mean signed offset from the fitted target is the robot's error at that pose as the
 target sees it. With independent errors the offsets of neighbouring poses (nearest in
 position and flange direction) are uncorrelated; with a systematic error neighbours are
-offset alike. Their correlation above :data:`NEIGHBOUR_LIMIT` marks the error as systematic
+offset alike. Their correlation above :func:`neighbour_limit` marks the error as systematic
 (independent-noise recordings give -0.2 to 0.25, kinematic-error ones 0.45 to 0.95 in
 bench/robot_error.py). A systematic error common to the poses is not averaged away by more
 poses: its part that the hand-eye absorbs is of the order of the held-out offsets, so the 1σ
@@ -65,6 +65,8 @@ DEFAULT_FOLDS = 5
 #: Dispersion ratio (jackknife σ over model σ, RMS over the axes) above which the robot's
 #: error is taken as systematic. Independent-noise recordings stay below (bench/robot_error.py).
 SYSTEMATIC_RATIO = 2.5
+#: Nearest poses whose mean held-out offset a sample's is correlated with.
+NEIGHBOURS = 3
 #: Neighbour correlation of the held-out offsets above which the robot's error is systematic.
 NEIGHBOUR_LIMIT = 0.35
 #: Multiple of the held-out offsets' RMS the 1σ is widened to when the error is systematic
@@ -205,17 +207,27 @@ def pose_distances(T_base_flange: FloatArray) -> FloatArray:
 
 
 def neighbour_correlation(offsets: FloatArray, T_base_flange: FloatArray) -> float:
-    """Correlation of each held-out sample's mean offset (M,) with its nearest pose's.
+    """Correlation of each held-out sample's mean offset (M,) with the mean offset of its
+    :data:`NEIGHBOURS` nearest poses (:func:`pose_distances`).
 
-    Independent per-pose errors give offsets uncorrelated between neighbours (≈ 0); a
-    systematic, pose-dependent error gives neighbours alike offsets (→ 1).
+    Independent per-pose errors give offsets uncorrelated between neighbours (≈ 0, spread
+    about 1/√M); a systematic, pose-dependent error gives neighbours alike offsets (→ 1).
     """
     D = pose_distances(T_base_flange)
     np.fill_diagonal(D, np.inf)
-    nearest = np.argmin(D, axis=1)
-    a, b = offsets - offsets.mean(), offsets[nearest] - offsets.mean()
+    k = min(NEIGHBOURS, len(offsets) - 1)
+    nearest = np.argsort(D, axis=1)[:, :k]
+    centred = offsets - offsets.mean()
+    a, b = centred, centred[nearest].mean(axis=1)
     denominator = float(np.sqrt(np.sum(a**2) * np.sum(b**2)))
     return float(np.sum(a * b)) / denominator if denominator > 0.0 else 0.0
+
+
+def neighbour_limit(n: int) -> float:
+    """Neighbour correlation above which the error is systematic for n held-out samples:
+    :data:`NEIGHBOUR_LIMIT`, or 3 standard deviations of the correlation of independent
+    offsets (3/√n) when that is larger."""
+    return max(NEIGHBOUR_LIMIT, 3.0 / np.sqrt(max(n, 1)))
 
 
 def self_check(
@@ -280,7 +292,7 @@ def self_check(
     T_poses = np.stack([f.T_base_flange for f in kept])
     clusters = pose_clusters(T_poses)
     disagree = halves is not None and float(np.max(halves)) > HALVES_LIMIT_SIGMAS
-    systematic = correlation > NEIGHBOUR_LIMIT or ratio > SYSTEMATIC_RATIO or disagree
+    systematic = correlation > neighbour_limit(len(offsets)) or ratio > SYSTEMATIC_RATIO or disagree
     offset_rms = float(np.sqrt(np.mean(np.square(offsets))))
     lever = float(np.median(levers))
     sigma = sigma_model.copy()
