@@ -11,6 +11,7 @@ import pytest
 
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.selfcheck import (
+    DEFAULT_FOLDS,
     neighbour_correlation,
     pose_clusters,
     self_check,
@@ -186,9 +187,12 @@ def test_clustered_poses_warn() -> None:
     assert any("only 3 clusters" in w for w in check.warnings)
 
 
-def calibrated(preset: str, seed: int, **overrides: Any) -> tuple[Any, Any]:
+def calibrated(
+    preset: str, seed: int, folds: int = DEFAULT_FOLDS, **overrides: Any
+) -> tuple[Any, Any]:
     data = simulate(scenario_from_preset(preset, **overrides), seed)
-    return data, run_pipeline(data.profiles, data.poses, PipelineConfig(seed=seed))
+    config = PipelineConfig(seed=seed, self_check_folds=folds)
+    return data, run_pipeline(data.profiles, data.poses, config)
 
 
 def axis_ratios(result: Any, data: Any) -> FloatArray:
@@ -212,18 +216,16 @@ def test_kinematic_robot_error_is_detected_and_its_sigma_honest() -> None:
 
 def test_independent_robot_noise_is_not_flagged() -> None:
     """The paper preset (independent per-pose noise): no warning, the model's 1σ is kept."""
-    data, result = calibrated("paper", 2)
+    _, result = calibrated("paper", 2)
     check = result.self_check
     assert check is not None and not check.systematic
     assert not any("looks systematic" in w for w in result.warnings)
-    np.testing.assert_allclose(
-        result.uncertainty_translation_m, check.sigma_model[3:], rtol=1e-12
-    )
+    np.testing.assert_allclose(result.uncertainty_translation_m, check.sigma_model[3:], rtol=1e-12)
     assert 5e-5 < check.accuracy_in_use_m < 3e-4
 
 
 def test_robot_less_accurate_than_the_prior_is_named() -> None:
     """Robot noise 0.5 mm against the default 0.1 mm prior: the warning gives the number."""
-    data, result = calibrated("paper", 1, robot_sigma_translation_m=5e-4, n_poses=40)
+    _, result = calibrated("paper", 1, 0, robot_sigma_translation_m=5e-4, n_poses=30)
     warning = next(w for w in result.warnings if "times the prior assumed" in w)
     assert "mm and" in warning and "--robot-sigma-t" in warning

@@ -227,7 +227,7 @@ def neighbour_limit(n: int) -> float:
     """Neighbour correlation above which the error is systematic for n held-out samples:
     :data:`NEIGHBOUR_LIMIT`, or 3 standard deviations of the correlation of independent
     offsets (3/√n) when that is larger."""
-    return max(NEIGHBOUR_LIMIT, 3.0 / np.sqrt(max(n, 1)))
+    return max(NEIGHBOUR_LIMIT, 3.0 / float(np.sqrt(max(n, 1))))
 
 
 def self_check(
