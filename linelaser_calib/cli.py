@@ -1,10 +1,11 @@
 """``linelaser-calib``: a thin command-line wrapper around the library.
 
-Subcommands: ``simulate`` (write a synthetic bag and its truth), ``info`` (what a bag holds),
-``calibrate`` (the offline calibration), ``reconstruct`` (apply a calibration: a recording's
-profiles in the base frame), ``export`` (a result as a URDF joint, a static TF command or a
-launch file) and ``demo`` (calibrate the committed bags and show the error
-against their truth). Exit code 0 means success; a user error prints one
+Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
+recordings into a bag), ``info`` (what a bag holds), ``calibrate`` (the offline
+calibration), ``reconstruct`` (apply a calibration: a recording's profiles in the base
+frame), ``export`` (a result as a URDF joint, a static TF command or a launch file) and
+``demo`` (calibrate the committed bags and show the error against their truth). Exit code 0
+means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -39,6 +40,7 @@ from linelaser_calib.io.kinematics import (
     read_kinematics,
 )
 from linelaser_calib.io.results import (
+    read_reference_yaml,
     read_result_yaml,
     result_to_dict,
     truth_beside,
@@ -95,6 +97,13 @@ def _offset(text: str) -> float | str:
     return value
 
 
+def _centre_side(text: str) -> str:
+    """Parse ``+y`` or ``-y``."""
+    if text not in ("+y", "-y"):
+        raise argparse.ArgumentTypeError(f"expected +y or -y, got {text!r}")
+    return text
+
+
 def _xyz(text: str) -> tuple[float, float, float]:
     """Parse ``x,y,z`` (m)."""
     try:
@@ -115,7 +124,8 @@ def simulate_to_bag(
     """Simulate a scenario, write its bag directory and ``truth.yaml`` beside the .mcap.
 
     Weld-seam scenarios (known-point target) also get ``initial.yaml``: an old hand-eye, the
-    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input.
+    truth bumped by 1-2 deg and 1-3 mm, with the taught point, as ``--initial`` input; so do
+    straight-seam scenarios (line target), with the true line.
     With ``tf`` the flange poses are also written as a robot_state_publisher-style
     ``/tf`` chain base frame -> flange frame, with its fixed links on ``/tf_static``
     (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
@@ -124,8 +134,16 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
+    from linelaser_calib.core.targets.line import Line, LineSection
+    from linelaser_calib.core.targets.sphere import SphereSection
+    from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
+    from linelaser_calib.sim.sphere import (
+        SPHERE_PRESETS,
+        simulate_sphere,
+        sphere_scenario_from_preset,
+    )
     from linelaser_calib.sim.tf_chain import ur_tf_tree
     from linelaser_calib.sim.weld import (
         WELD_PRESETS,
@@ -135,20 +153,42 @@ def simulate_to_bag(
     )
 
     weld = scenario_name in WELD_PRESETS
+    arm, joint_states = None, None  # only the cylinder scenes simulate an arm's joints
+    initial_target: ResultSection | None = None
     if weld:
         weld_data = simulate_weld(weld_scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = weld_data.scenario, weld_data.profiles, weld_data.poses
         intensities, T_true = weld_data.intensities, weld_data.truth.T_flange_sensor
         target: ResultSection = KnownPoint(weld_data.truth.weld_point_m, estimated=False)
+        initial_target = KnownPoint(np.asarray(weld_data.truth.taught_point_m), estimated=False)
+    elif scenario_name in SPHERE_PRESETS:
+        # --radius is the target's radius: the sphere's here.
+        own = {"radius_m" if k == "cylinder_radius_m" else k: v for k, v in overrides.items()}
+        ball = simulate_sphere(sphere_scenario_from_preset(scenario_name, **own), seed)
+        scenario, profiles, poses = ball.scenario, ball.profiles, ball.poses
+        intensities, T_true = ball.intensities, ball.truth.T_flange_sensor
+        target = SphereSection(
+            ball.truth.centre_m,
+            ball.truth.radius_m,
+            ball.truth.centre_side,
+            radius_estimated=False,
+            side_estimated=False,
+        )
+    elif scenario_name in LINE_PRESETS:
+        line_data = simulate_line(line_scenario_from_preset(scenario_name, **overrides), seed)
+        scenario, profiles, poses = line_data.scenario, line_data.profiles, line_data.poses
+        intensities, T_true = line_data.intensities, line_data.truth.T_flange_sensor
+        target = LineSection(Line(line_data.truth.line_point, line_data.truth.line_direction))
+        initial_target = target
     else:
         data = simulate(scenario_from_preset(scenario_name, **overrides), seed)
         scenario, profiles, poses = data.scenario, data.profiles, data.poses
         intensities, T_true = data.intensities, data.truth.T_flange_sensor
         target = CylinderSection(data.truth.cylinder)
+        arm, joint_states = data.truth.arm, data.joint_states
     tf_dynamic, tf_static = (
         ur_tf_tree(poses, scenario.base_frame, scenario.flange_frame) if tf else ([], [])
     )
-    arm = None if weld else data.truth.arm
     write_bag(
         out,
         profiles,
@@ -161,7 +201,7 @@ def simulate_to_bag(
         intensities=intensities if scenario.intensity else None,
         tf=tf_dynamic,
         tf_static=tf_static,
-        joint_states=None if weld else data.joint_states,
+        joint_states=joint_states,
         joint_state_topic=scenario.joint_state_topic,
     )
     simulation: dict[str, object] = {
@@ -173,12 +213,12 @@ def simulate_to_bag(
         "command": simulate_command(out, scenario_name, seed, overrides, tf=tf),
     }
     if weld:
-        taught = weld_data.truth.taught_point_m
-        simulation["taught_point"] = taught
+        simulation["taught_point"] = weld_data.truth.taught_point_m
+    if initial_target is not None:
         write_result_yaml(
             CalibrationResult(
                 T_flange_sensor=bumped_hand_eye(T_true, np.random.default_rng(seed)),
-                target=KnownPoint(np.asarray(taught), estimated=False),
+                target=initial_target,
                 method="initial",
                 samples_used=[],
                 samples_rejected=[],
@@ -207,7 +247,7 @@ def simulate_to_bag(
 #: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
 SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--poses", "n_poses", int),
-    ("--radius", "cylinder_radius_m", float),
+    ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
     ("--points", "resolution", int),
     ("--sensor-sigma", "sigma_depth_m", float),
     ("--robot-sigma-t", "robot_sigma_translation_m", float),
@@ -259,6 +299,19 @@ def _cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+# --- convert --------------------------------------------------------------------------------
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from linelaser_calib.io.robcalibrator import convert_robcalibrator
+
+    command = f"{PROG} convert {args.format} {args.folder} --output {args.output}"
+    bag = convert_robcalibrator(args.folder, args.output, command)
+    print(f"wrote {bag} (with reference.yaml, LICENSE and README.md)")
+    print(format_bag_info(bag_info(bag)))
+    return 0
+
+
 # --- calibrate ------------------------------------------------------------------------------
 
 
@@ -266,6 +319,7 @@ def _cmd_info(args: argparse.Namespace) -> int:
 SETTING_FLAGS = {
     "radius_m": "--radius",
     "point_m": "--point x,y,z",
+    "centre_side": "--centre-side",
     "sensor_sigma_m": "--sensor-sigma",
     "robot_sigma_t_m": "--robot-sigma-t",
     "robot_sigma_r_rad": "--robot-sigma-r",
@@ -287,6 +341,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
+        "centre_side": args.centre_side,
         "sensor_sigma_m": args.sensor_sigma,
         "robot_sigma_t_m": args.robot_sigma_t,
         "robot_sigma_r_rad": args.robot_sigma_r,
@@ -555,20 +610,42 @@ def _cmd_export(args: argparse.Namespace) -> int:
 # --- demo -----------------------------------------------------------------------------------
 
 
-def _cmd_demo(args: argparse.Namespace) -> int:
-    root = Path(args.bags)
-    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
-    if not bags:
-        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
-    rows = []
-    for bag in bags:
-        truth, note = truth_beside(bag)
-        if truth is None:
-            print(note or f"{bag} has no truth.yaml; skipped", file=sys.stderr)
-            continue
+def _preset_motion(name: object) -> str | None:
+    """The motion (``step``, ``continuous``) of a simulator preset; None for another name."""
+    from linelaser_calib.sim.line import LINE_PRESETS
+    from linelaser_calib.sim.scenario import PRESETS
+    from linelaser_calib.sim.sphere import SPHERE_PRESETS
+    from linelaser_calib.sim.weld import WELD_PRESETS
+
+    rigs = {
+        **PRESETS,
+        **{k: v.rig for k, v in WELD_PRESETS.items()},
+        **{k: v.rig for k, v in LINE_PRESETS.items()},
+        **{k: v.rig for k, v in SPHERE_PRESETS.items()},
+    }
+    rig = rigs.get(name) if isinstance(name, str) else None
+    return None if rig is None else rig.motion
+
+
+def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
+    """Calibrate one committed bag with both methods, print the summaries, add table rows.
+
+    A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
+    corrects that hand-eye; a continuous scan is calibrated as one, at any flange speed with
+    the clock offset estimated); a converted real recording with its ``reference.yaml``
+    (another tool's hand-eye, calibrated with the settings recorded there). A bag with
+    neither is skipped with a note.
+    """
+    settings: dict[str, object] = {}
+    initial = None
+    continuous = False
+    truth, note = truth_beside(bag)
+    if truth is None and not (bag / "reference.yaml").is_file():
+        print(note or f"{bag} has no truth.yaml or reference.yaml; skipped", file=sys.stderr)
+        return
+    if truth is not None:
         target = get_target(truth.target.key)
-        settings: dict[str, object] = {}
-        initial = None
+        compare, against = truth.T_flange_sensor, "truth"
         label = target.title
         if (bag / "initial.yaml").is_file():
             initial = read_result_yaml(bag / "initial.yaml")
@@ -576,26 +653,59 @@ def _cmd_demo(args: argparse.Namespace) -> int:
             label += ", from initial.yaml"
             rot, trans = transform_error(initial.T_flange_sensor, truth.T_flange_sensor)
             rows.append((bag.name, "initial", np.degrees(rot), trans * 1e3, 0.0))
-        for method in (Method.PAPER, Method.DEFAULT):
-            config = PipelineConfig(
-                method=method,
-                target=target.name,
-                target_config=configure(target, method.value, settings, SETTING_FLAGS),
-                seed=args.seed,
-                initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+        continuous = _preset_motion(truth.raw.get("simulation", {}).get("scenario")) == "continuous"
+        if continuous:
+            label += ", continuous, clock offset estimated"
+    else:
+        compare, reference = read_reference_yaml(bag / "reference.yaml")
+        target = get_target(str(reference["target"]))
+        settings = dict(reference.get("settings") or {})
+        against = "reference"
+        label = f"{target.title}, real scans; reference.yaml is not ground truth"
+    pairing = (
+        PairingConfig(max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
+        if continuous
+        else PairingConfig()
+    )
+    for method in (Method.PAPER, Method.DEFAULT):
+        config = PipelineConfig(
+            method=method,
+            target=target.name,
+            target_config=configure(target, method.value, settings, SETTING_FLAGS),
+            seed=seed,
+            pairing=pairing,
+            initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+        )
+        started = time.perf_counter()
+        run = calibrate_bag(bag, config, estimate_offset=continuous)
+        seconds = time.perf_counter() - started
+        print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
+        print(format_summary(run.result, truth))
+        rot, trans = transform_error(run.result.T_flange_sensor, compare)
+        if truth is None:
+            print(
+                f"Difference to the reference hand-eye: rotation {np.degrees(rot):.4f} deg, "
+                f"translation {trans * 1e3:.4f} mm (not ground truth)"
             )
-            started = time.perf_counter()
-            run = calibrate_bag(bag, config)
-            seconds = time.perf_counter() - started
-            print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
-            print(format_summary(run.result, truth))
-            print()
-            rot, trans = transform_error(run.result.T_flange_sensor, truth.T_flange_sensor)
-            rows.append((bag.name, method.value, np.degrees(rot), trans * 1e3, seconds))
-    print("Error against truth (hand-eye T_flange_sensor):")
-    print(f"  {'bag':<28}{'method':<9}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
+        print()
+        rows.append(
+            (bag.name, f"{method.value} vs {against}", np.degrees(rot), trans * 1e3, seconds)
+        )
+
+
+def _cmd_demo(args: argparse.Namespace) -> int:
+    root = Path(args.bags)
+    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
+    if not bags:
+        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
+    rows: list[tuple[str, str, float, float, float]] = []
+    for bag in bags:
+        _demo_runs(bag, args.seed, rows)
+    print("Difference of the hand-eye T_flange_sensor to the truth (simulated bags) or to the")
+    print("reference (real scans: another tool's published hand-eye, not ground truth):")
+    print(f"  {'bag':<24}{'method':<22}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}")
     for name, label, rot_deg, trans_mm, seconds in rows:
-        print(f"  {name:<28}{label:<9}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+        print(f"  {name:<24}{label:<22}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
     return 0
 
 
@@ -621,11 +731,17 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
 #: Options of ``calibrate`` that set the chosen target's settings (default: the target's own;
 #: one the target or method does not use is refused): (flag, parser, help).
 TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
-    ("--radius", _positive_float, "cylinder radius, m (default: estimate)"),
+    ("--radius", _positive_float, "cylinder or sphere radius, m (default: estimate)"),
     (
         "--point",
         _xyz,
         "known_point target: the taught point x,y,z in m, base frame (default: estimate)",
+    ),
+    (
+        "--centre-side",
+        _centre_side,
+        "sphere target: the side of the laser plane the sphere centre lies on, +y or -y "
+        "(sensor frame; default: resolved from the data)",
     ),
     (
         "--sensor-sigma",
@@ -720,7 +836,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument(
         "--scenario",
         default="paper",
-        help="preset: paper, ur_scancontrol, continuous, weld_seam, weld_seam_general",
+        help=(
+            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, weld_seam, "
+            "weld_seam_general, sphere, line, line_features"
+        ),
     )
     sim.add_argument("--seed", type=int, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
@@ -745,6 +864,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write the flange poses as a /tf chain (UR-like links) with /tf_static",
     )
     sim.set_defaults(func=_cmd_simulate)
+
+    convert = sub.add_parser(
+        "convert", help="convert another tool's recordings into a rosbag2 bag (SI units)"
+    )
+    convert.add_argument(
+        "format",
+        choices=["robcalibrator"],
+        help="robcalibrator: a RobCalibrator scan folder (p1.yml..., RobPoses.rob, "
+        "calibration.sec, LICENSE)",
+    )
+    convert.add_argument("folder", help="the folder to convert")
+    convert.add_argument("--output", required=True, help="bag directory to create (must not exist)")
+    convert.set_defaults(func=_cmd_convert)
 
     info = sub.add_parser("info", help="print what a bag holds")
     info.add_argument("bag")

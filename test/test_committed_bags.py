@@ -1,4 +1,8 @@
-"""The committed bags are what their recorded simulator command regenerates.
+"""The committed bags are what their recorded command regenerates.
+
+Simulated bags hold ``truth.yaml`` with the simulator command; bags converted from real
+recordings hold ``reference.yaml`` with the convert command (run when the source folder is
+present, which lies outside the repository).
 
 Regenerated on another machine, computed floats may differ from the committed ones in their
 last bits, so floats are compared with tolerances (``_compare``); stamps, counts, topics,
@@ -21,8 +25,11 @@ from linelaser_calib.cli import main
 from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.io.bags import BagContents, read_bag, read_joint_states
 
-BAGS = Path(__file__).resolve().parent.parent / "bags"
+ROOT = Path(__file__).resolve().parent.parent
+BAGS = ROOT / "bags"
 COMMITTED = sorted(p.parent for p in BAGS.glob("*/metadata.yaml"))
+SIMULATED = [bag for bag in COMMITTED if (bag / "truth.yaml").is_file()]
+CONVERTED = [bag for bag in COMMITTED if (bag / "reference.yaml").is_file()]
 
 
 class Recording(NamedTuple):
@@ -50,7 +57,17 @@ def load(directory: Path) -> Recording:
 def assert_same_recording(new: Recording, old: Recording) -> None:
     assert_trees_close(new.truth, old.truth)
     assert_trees_close(new.initial, old.initial)
-    a, b = new.bag, old.bag
+    assert_same_bag(new.bag, old.bag)
+    assert (new.joint_states is None) == (old.joint_states is None)
+    if new.joint_states is not None and old.joint_states is not None:
+        assert new.joint_states.names == old.joint_states.names
+        np.testing.assert_array_equal(new.joint_states.stamps_ns, old.joint_states.stamps_ns)
+        assert_floats_close(
+            new.joint_states.positions, old.joint_states.positions, err_msg="joint states"
+        )
+
+
+def assert_same_bag(a: BagContents, b: BagContents) -> None:
     assert (a.profile_topic, a.pose_topic) == (b.profile_topic, b.pose_topic)
     assert (a.sensor_frame, a.base_frame) == (b.sensor_frame, b.base_frame)
     assert len(a.profiles) == len(b.profiles), f"{len(a.profiles)} profiles, not {len(b.profiles)}"
@@ -61,22 +78,31 @@ def assert_same_recording(new: Recording, old: Recording) -> None:
     for k, (fa, fb) in enumerate(zip(a.poses, b.poses, strict=True)):
         assert (fa.stamp_ns, fa.frame_id) == (fb.stamp_ns, fb.frame_id)
         assert_floats_close(fa.T_base_flange, fb.T_base_flange, err_msg=f"pose {k}")
-    assert (new.joint_states is None) == (old.joint_states is None)
-    if new.joint_states is not None and old.joint_states is not None:
-        assert new.joint_states.names == old.joint_states.names
-        np.testing.assert_array_equal(new.joint_states.stamps_ns, old.joint_states.stamps_ns)
-        assert_floats_close(
-            new.joint_states.positions, old.joint_states.positions, err_msg="joint states"
-        )
 
 
 def test_committed_bags_exist_and_are_small() -> None:
-    assert len(COMMITTED) >= 2
+    assert len(SIMULATED) >= 2 and len(CONVERTED) >= 1
+    assert sorted(SIMULATED + CONVERTED) == COMMITTED
     total = sum(f.stat().st_size for bag in COMMITTED for f in bag.iterdir())
-    assert total < 4_000_000, f"committed bags take {total} bytes"
+    assert total < 6_000_000, f"committed bags take {total} bytes"
 
 
-@pytest.mark.parametrize("bag", COMMITTED, ids=lambda p: p.name)
+@pytest.mark.parametrize("bag", CONVERTED, ids=lambda p: p.name)
+def test_converted_bag_regenerates_from_its_command(bag: Path, tmp_path: Path) -> None:
+    reference = yaml.safe_load((bag / "reference.yaml").read_text(encoding="utf-8"))
+    words = shlex.split(reference["conversion"]["command"])
+    assert words[:2] == ["linelaser-calib", "convert"]
+    assert words[-2:] == ["--output", f"bags/{bag.name}"]
+    source = ROOT / words[3]
+    if not source.is_dir():
+        pytest.skip(f"the source recordings {source} are not on this machine")
+    assert (bag / "LICENSE").read_bytes() == (source / "LICENSE").read_bytes()
+    out = tmp_path / bag.name
+    assert main(["convert", words[2], str(source), "--output", str(out)]) == 0
+    assert_same_bag(read_bag(out), read_bag(bag))
+
+
+@pytest.mark.parametrize("bag", SIMULATED, ids=lambda p: p.name)
 def test_bag_regenerates_from_its_command(bag: Path, tmp_path: Path) -> None:
     words = shlex.split(yaml.safe_load((bag / "truth.yaml").read_text())["simulation"]["command"])
     assert words[:3] == ["linelaser-calib", "simulate", f"bags/{bag.name}"]

@@ -18,3 +18,7 @@ class PoseSource(Enum):
     POSE = "pose"
     TF = "tf"
     JOINT_STATES = "joint_states"
+
+
+#: The sources the collector takes live (``joint_states`` is offline only so far).
+LIVE_POSE_SOURCES = (PoseSource.POSE, PoseSource.TF)

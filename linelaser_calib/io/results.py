@@ -508,3 +508,55 @@ def truth_beside(bag: str | Path) -> tuple[Truth | None, str]:
         return read_truth_yaml(path), ""
     except ResultFileError as err:
         return None, f"{err}; the truth file is not compared"
+
+
+_REFERENCE_HEADER = (
+    "# A hand-eye from elsewhere (not ground truth), for comparison. hand_eye is\n"
+    "# T_flange_sensor; lengths in m, quaternions xyzw.\n"
+)
+
+
+def write_reference_yaml(
+    path: str | Path,
+    T_flange_sensor: ArrayLike,
+    *,
+    parent_frame: str = "tool0",
+    child_frame: str = "laser",
+    extra: Mapping[str, Any] | None = None,
+) -> Path:
+    """Write another tool's hand-eye in the result's ``hand_eye`` keys (SI), atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    T_flange_sensor : array-like, shape (4, 4)
+        Translation in m.
+    parent_frame, child_frame : str
+    extra : mapping, optional
+        Further top-level keys (where the hand-eye comes from); not ``hand_eye``.
+
+    Raises
+    ------
+    InputError
+        If ``extra`` holds ``hand_eye`` or values YAML cannot store.
+    ResultFileError
+        If the file cannot be written.
+    """
+    extra = dict(extra or {})
+    if "hand_eye" in extra:
+        raise InputError("extra must not hold hand_eye, the reference itself")
+    data = {"hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame)}
+    return _write_yaml_atomically(Path(path), _REFERENCE_HEADER, {**data, **_plain(extra)})
+
+
+def read_reference_yaml(path: str | Path) -> tuple[FloatArray, dict[str, Any]]:
+    """The hand-eye (4, 4) of a file with a ``hand_eye`` section, and the whole file as read.
+
+    Raises
+    ------
+    ResultFileError
+        Missing file, invalid YAML, or a missing or malformed ``hand_eye`` key.
+    """
+    _, fields = _load(path)
+    T, _, _ = _read_hand_eye(fields)
+    return T, fields.data

@@ -54,7 +54,7 @@ from std_srvs.srv import Trigger
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
-from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.pose_source import LIVE_POSE_SOURCES, PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.tf import base_frame_warning
@@ -140,7 +140,7 @@ PARAMETERS = (
         PoseSource.POSE.value,
         "Where flange poses come from: pose (geometry_msgs/PoseStamped on flange_pose) or tf "
         "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs).",
-        choices=tuple(s.value for s in PoseSource),
+        choices=tuple(s.value for s in LIVE_POSE_SOURCES),
         read_only=True,
     ),
     ParamSpec(

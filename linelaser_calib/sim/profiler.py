@@ -24,6 +24,7 @@ The model, in the sensor frame (laser plane x-z, z = depth):
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,18 +93,63 @@ def trace(scene: Scene, scenario: Scenario, T_base_sensor: FloatArray) -> Trace:
     t_hit = np.where(hit, t, 0.0)
     points_base = origin + t_hit[..., None] * rays
     normals = scene.normals(points_base, surface)
+    cos_inc, seen = returns_seen(
+        scenario,
+        T_base_sensor,
+        rays,
+        points_base,
+        normals,
+        hit,
+        lambda o, r: scene.cast(o, r, _CAMERA_T_MIN)[0],
+    )
+    points_sensor = np.where(hit[..., None], t_hit[..., None] * dirs, np.nan)
+    side_occluded = np.isfinite(t_side) & (surface != Surface.SIDE)
+    return Trace(surface, points_sensor, normals, cos_inc, seen, side_occluded)
+
+
+def returns_seen(
+    scenario: Scenario,
+    T_base_sensor: FloatArray,
+    rays: FloatArray,
+    points_base: FloatArray,
+    normals: FloatArray,
+    hit: BoolArray,
+    cast: Callable[[FloatArray, FloatArray], FloatArray],
+) -> tuple[FloatArray, BoolArray]:
+    """Incidence and whether each hit returns light (steps 2-3 of the module docstring).
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Incidence gate and camera baseline.
+    T_base_sensor : ndarray, shape (K, 4, 4)
+    rays : ndarray, shape (K, N, 3)
+        Ray directions in the base frame.
+    points_base, normals : ndarray, shape (K, N, 3)
+        Hit points and outward unit normals (NaN where nothing was hit).
+    hit : ndarray of bool, shape (K, N)
+    cast : callable
+        ``cast(origins, directions)``: the scene's nearest-hit ray parameter (inf: none) for
+        rays from the points towards the camera, ignoring hits closer than a tiny fraction.
+
+    Returns
+    -------
+    cos_incidence : ndarray, shape (K, N)
+        Cosine of the angle between the reversed ray and the normal (NaN: no hit).
+    seen : ndarray of bool, shape (K, N)
+        Front-facing, within the incidence gate and (with a baseline) visible to the camera
+        at sensor (0, ``camera_baseline_m``, 0).
+    """
     cos_inc = np.where(hit, -np.sum(rays * np.nan_to_num(normals), axis=-1), np.nan)
     with np.errstate(invalid="ignore"):
         seen = hit & (cos_inc > 0.0) & (cos_inc >= math.cos(scenario.max_incidence_rad) - 1e-12)
     if scenario.camera_baseline_m > 0.0:
-        camera = origin + scenario.camera_baseline_m * R[:, None, :, 1]
+        origin = T_base_sensor[:, None, :3, 3]
+        camera = origin + scenario.camera_baseline_m * T_base_sensor[:, None, :3, 1]
         to_camera = camera - points_base
         faces = np.sum(np.nan_to_num(normals) * to_camera, axis=-1) > 0.0
-        t_block, _, _ = scene.cast(points_base, to_camera, _CAMERA_T_MIN)
-        seen &= faces & (t_block >= 1.0 - _CAMERA_T_MIN)
-    points_sensor = np.where(hit[..., None], t_hit[..., None] * dirs, np.nan)
-    side_occluded = np.isfinite(t_side) & (surface != Surface.SIDE)
-    return Trace(surface, points_sensor, normals, cos_inc, seen, side_occluded)
+        seen &= faces & (cast(points_base, to_camera) >= 1.0 - _CAMERA_T_MIN)
+    return np.asarray(cos_inc), np.asarray(seen)
 
 
 @dataclass(frozen=True, eq=False)

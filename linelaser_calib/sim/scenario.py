@@ -51,8 +51,9 @@ so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -614,6 +615,51 @@ def scenario_from_preset(name: str, **overrides: Any) -> Scenario:
             "list of fields"
         )
     return replace(PRESETS[name], **overrides)
+
+
+class _HasRig(Protocol):
+    @property
+    def rig(self) -> Scenario: ...
+
+
+RigScene = TypeVar("RigScene", bound=_HasRig)
+
+
+def rig_scene_from_preset(
+    presets: Mapping[str, RigScene], name: str, what: str, overrides: Mapping[str, Any]
+) -> RigScene:
+    """A preset of a scene dataclass with a ``rig`` (:class:`Scenario`) field, fields replaced.
+
+    Parameters
+    ----------
+    presets : mapping of str to scene
+    name : str
+        A key of ``presets``.
+    what : str
+        The scene's name in messages (``weld``, ``sphere``).
+    overrides : mapping
+        The scene's own fields, or :class:`Scenario` fields (applied to the rig), SI.
+
+    Raises
+    ------
+    InputError
+        For an unknown preset or field, or an invalid value.
+    """
+    if name not in presets:
+        raise InputError(f"unknown {what} preset {name!r}; choose one of {sorted(presets)}")
+    preset = presets[name]
+    own = {f.name for f in fields(preset)} - {"rig"}  # type: ignore[arg-type]
+    rig_fields = {f.name for f in fields(Scenario)} - {"name"}
+    unknown = sorted(set(overrides) - own - rig_fields)
+    if unknown:
+        raise InputError(
+            f"unknown {what} scenario field(s) {unknown}; see the {type(preset).__name__} "
+            "class and linelaser_calib.sim.Scenario"
+        )
+    rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
+    own_overrides = {k: v for k, v in overrides.items() if k in own}
+    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
+    return replace(preset, rig=rig, **own_overrides)  # type: ignore[type-var]
 
 
 def random_scenario(

@@ -2,17 +2,21 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
 
 import numpy as np
 
+from linelaser_calib.core.geometry import invert_transform
 from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.arm import Arm, plan_arm
 from linelaser_calib.sim.poses import sample_sensor_poses
-from linelaser_calib.sim.profiler import Measurement, measure, trace
+from linelaser_calib.sim.profiler import Measurement, Trace, measure, trace
 from linelaser_calib.sim.robot import (
     Motion,
+    StepMotion,
     draw_errors,
     jitter_transforms,
     plan_motion,
@@ -132,12 +136,15 @@ def recorded_pose_stream(
     motion: Motion,
     errors: FloatArray,
     arm: Arm | None = None,
+    stamp_jitter_s: float = 0.0,
 ) -> list[FlangePose]:
     """The robot's flange-pose stream at ``robot_rate_hz`` over the whole motion.
 
     Each message is the reported pose (without an arm: the true pose with the shot's error
     ``errors``; with one: the nominal forward kinematics) times a per-message jitter,
-    stamped on the pose clock from ``epoch_ns``.
+    stamped on the pose clock from ``epoch_ns``. With ``stamp_jitter_s`` (s, 1σ) each stamp
+    misses the instant the pose was taken by a Gaussian error, as when a driver stamps
+    messages on arrival (the stamps are kept in order).
     """
     stream_ns = stream_times_ns(scenario, motion)
     if arm is None:
@@ -145,6 +152,9 @@ def recorded_pose_stream(
     else:
         stream = arm.reported_flange(motion, stream_ns / 1e9)
     stream = stream @ jitter_transforms(rng, scenario, len(stream_ns))
+    if stamp_jitter_s > 0.0:
+        late = np.round(rng.normal(size=len(stream_ns)) * stamp_jitter_s * 1e9).astype(np.int64)
+        stream_ns = np.sort(stream_ns + late)
     return [
         FlangePose(int(scenario.epoch_ns + s), T, frame_id=scenario.base_frame)
         for s, T in zip(stream_ns, stream, strict=True)
@@ -177,6 +187,113 @@ def published_profiles(
         )
         intensities.append(None if measured.intensity is None else measured.intensity[k][keep])
     return stamps, profiles, intensities
+
+
+class _RigScene(Protocol):
+    @property
+    def rig(self) -> Scenario: ...
+
+
+class _RigTruth(Protocol):
+    @property
+    def scenario(self) -> _RigScene: ...
+
+
+TruthT = TypeVar("TruthT", bound=_RigTruth)
+
+
+@dataclass(frozen=True, eq=False)
+class RigSimulatedData(Generic[TruthT]):
+    """Everything a run of a scene with a rig produces (weld seam, sphere); the same layout
+    as :class:`SimulatedData`.
+
+    Attributes
+    ----------
+    profiles : list of Profile
+    intensities : list of (ndarray or None)
+    poses : list of FlangePose
+        The full reported flange-pose stream, sorted by stamp.
+    truth : the scene's truth record
+        Its ``scenario.rig`` is the :class:`Scenario` of profiler, robot, topics and frames.
+    """
+
+    profiles: list[Profile]
+    intensities: list[FloatArray | None]
+    poses: list[FlangePose]
+    truth: TruthT
+
+    @property
+    def scenario(self) -> Scenario:
+        """The rig (topics, frame names, output format), as ``SimulatedData.scenario``."""
+        return self.truth.scenario.rig
+
+
+@dataclass(frozen=True, eq=False)
+class ShotRun:
+    """A step-and-shoot run through given sensor poses (K shots of N rays).
+
+    Attributes
+    ----------
+    acquisition_ns : ndarray of int64, shape (K,)
+        Acquisition times from the start of the stream, ns.
+    T_base_sensor : ndarray, shape (K, 4, 4)
+        True sensor poses at the shots.
+    T_base_flange_true, T_base_flange_recorded : ndarray, shape (K, 4, 4)
+        True and reported (without jitter) flange poses at the shots.
+    traced : Trace
+    measured : Measurement
+    poses : list of FlangePose
+        The reported flange-pose stream.
+    stamps_ns : ndarray of int64, shape (K,)
+        Profile stamps as published.
+    profiles : list of Profile
+    intensities : list of (ndarray or None)
+    """
+
+    acquisition_ns: Int64Array
+    T_base_sensor: FloatArray
+    T_base_flange_true: FloatArray
+    T_base_flange_recorded: FloatArray
+    traced: Trace
+    measured: Measurement
+    poses: list[FlangePose]
+    stamps_ns: Int64Array
+    profiles: list[Profile]
+    intensities: list[FloatArray | None]
+
+
+def step_and_shoot(
+    rng: np.random.Generator,
+    rig: Scenario,
+    views: FloatArray,
+    trace_views: Callable[[FloatArray], Trace],
+) -> ShotRun:
+    """Move step-and-shoot through sensor poses (M, 4, 4), scan with ``trace_views`` (sensor
+    poses (K, 4, 4) to noise-free returns), add the rig's noise and robot errors, publish.
+
+    Draws from ``rng`` in a fixed order: robot errors, measurement noise, pose stream.
+    """
+    motion = StepMotion.plan(views, rig)
+    errors = draw_errors(rng, rig, len(views))
+    acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
+    t_shot = acq_ns / 1e9
+    T_sensor_shot = motion.T_base_sensor(t_shot)
+    traced = trace_views(T_sensor_shot)
+    measured = measure(rng, rig, traced)
+    poses = recorded_pose_stream(rng, rig, motion, errors)
+    stamps, profiles, intensities = published_profiles(rig, acq_ns, measured)
+    return ShotRun(
+        acquisition_ns=acq_ns,
+        T_base_sensor=T_sensor_shot,
+        T_base_flange_true=T_sensor_shot @ invert_transform(rig.T_flange_sensor),
+        T_base_flange_recorded=reported_flange(motion, rig, errors, t_shot),
+        traced=traced,
+        measured=measured,
+        poses=poses,
+        stamps_ns=stamps,
+        profiles=profiles,
+        intensities=intensities,
+    )
 
 
 def simulate(scenario: Scenario, seed: int) -> SimulatedData:

@@ -52,8 +52,8 @@ the safe side) and 0.002 deg per axis.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from dataclasses import dataclass, field, fields
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -66,12 +66,11 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_rotvec_translation,
 )
-from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
-from linelaser_calib.sim.profiler import Trace, measure, ray_directions
-from linelaser_calib.sim.robot import StepMotion, draw_errors, reported_flange
-from linelaser_calib.sim.scenario import Scenario
+from linelaser_calib.core.types import BoolArray, FloatArray
+from linelaser_calib.sim.profiler import Trace, ray_directions
+from linelaser_calib.sim.scenario import Scenario, rig_scene_from_preset
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
-from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
+from linelaser_calib.sim.simulate import RigSimulatedData, step_and_shoot
 
 Vec3 = tuple[float, float, float]
 
@@ -90,8 +89,62 @@ def _unit(v: Any) -> FloatArray:
     return np.asarray(a / np.linalg.norm(a))
 
 
+class GrooveScene:
+    """Checks shared by the groove scenes (:class:`WeldScenario`, the line scenes).
+
+    A scene dataclass derives from this class, names its 3-vector fields in ``vectors`` and
+    the ones that must not be zero in ``directions``, and extends :meth:`__post_init__` with
+    its own checks through :meth:`require`. Lists given for tuple fields (as YAML readers
+    produce them) become tuples of floats.
+    """
+
+    kind: ClassVar[str]
+    vectors: ClassVar[tuple[str, ...]]
+    directions: ClassVar[tuple[str, ...]]
+    name: str
+    seam_direction: Vec3
+    groove_bisector: Vec3
+    opening_angle_rad: float
+    flank_width_m: float
+    seam_half_length_m: float
+    min_flank_points: int
+
+    def require(self, ok: bool, what: str) -> None:
+        """Raise InputError naming the scene when ``ok`` is false."""
+        if not ok:
+            raise InputError(f"{self.kind} scenario {self.name!r}: {what}")
+
+    def __post_init__(self) -> None:
+        for f in fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if isinstance(value, list):
+                object.__setattr__(self, f.name, tuple(float(v) for v in value))
+        for name in self.vectors:
+            v = np.asarray(getattr(self, name), dtype=np.float64)
+            self.require(
+                v.shape == (3,) and bool(np.all(np.isfinite(v))), f"{name} must be 3 numbers"
+            )
+        for name in self.directions:
+            self.require(
+                float(np.linalg.norm(getattr(self, name))) > 1e-12, f"{name} must not be zero"
+            )
+        s, b = _unit(self.seam_direction), _unit(self.groove_bisector)
+        self.require(
+            abs(float(s @ b)) < math.cos(math.radians(10.0)),
+            "groove_bisector must not be (nearly) parallel to seam_direction",
+        )
+        self.require(
+            0.0 < self.opening_angle_rad < math.pi, "opening_angle_rad must be in (0, pi) rad"
+        )
+        for name in ("flank_width_m", "seam_half_length_m"):
+            self.require(
+                getattr(self, name) > 0.0, f"{name} must be > 0, got {getattr(self, name)}"
+            )
+        self.require(self.min_flank_points >= 2, "min_flank_points must be >= 2")
+
+
 @dataclass(frozen=True)
-class WeldScenario:
+class WeldScenario(GrooveScene):
     """Every parameter of one simulated weld-seam run (see the module docstring).
 
     Attributes
@@ -160,31 +213,19 @@ class WeldScenario:
     teach_sigma_m: float = 0.0
     min_flank_points: int = 40
 
+    kind: ClassVar[str] = "weld"
+    vectors: ClassVar[tuple[str, ...]] = (
+        "weld_point_m",
+        "seam_direction",
+        "groove_bisector",
+        "view_rotvec_rad",
+    )
+    directions: ClassVar[tuple[str, ...]] = ("seam_direction", "groove_bisector", "step_direction")
+
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, list):
-                object.__setattr__(self, f.name, tuple(float(v) for v in value))
-        self._validate()
-
-    def _validate(self) -> None:
-        def require(ok: bool, what: str) -> None:
-            if not ok:
-                raise InputError(f"weld scenario {self.name!r}: {what}")
-
-        for name in ("weld_point_m", "seam_direction", "groove_bisector", "view_rotvec_rad"):
-            v = np.asarray(getattr(self, name), dtype=np.float64)
-            require(v.shape == (3,) and bool(np.all(np.isfinite(v))), f"{name} must be 3 numbers")
-        for name in ("seam_direction", "groove_bisector", "step_direction"):
-            require(float(np.linalg.norm(getattr(self, name))) > 1e-12, f"{name} must not be zero")
-        s, b = _unit(self.seam_direction), _unit(self.groove_bisector)
-        require(
-            abs(float(s @ b)) < math.cos(math.radians(10.0)),
-            "groove_bisector must not be (nearly) parallel to seam_direction",
-        )
-        require(0.0 < self.opening_angle_rad < math.pi, "opening_angle_rad must be in (0, pi) rad")
-        for name in ("flank_width_m", "seam_half_length_m", "first_depth_m"):
-            require(getattr(self, name) > 0.0, f"{name} must be > 0, got {getattr(self, name)}")
+        super().__post_init__()
+        require = self.require
+        require(self.first_depth_m > 0.0, f"first_depth_m must be > 0, got {self.first_depth_m}")
         for name in ("step_m", "lateral_spread_m", "aim_sigma_m", "teach_sigma_m"):
             require(getattr(self, name) >= 0.0, f"{name} must be >= 0, got {getattr(self, name)}")
         require(self.pose_pattern in POSE_PATTERNS, f"pose_pattern must be one of {POSE_PATTERNS}")
@@ -199,7 +240,6 @@ class WeldScenario:
             0.0 <= self.general_lateral_fraction < 1.0,
             "general_lateral_fraction must be in [0, 1)",
         )
-        require(self.min_flank_points >= 2, "min_flank_points must be >= 2")
         require(self.rig.motion == "step", "the rig's motion must be 'step' (step-and-shoot)")
 
     @property
@@ -236,23 +276,44 @@ class Groove:
     half_length_m: float
 
     @classmethod
-    def from_scenario(cls, scenario: WeldScenario) -> Groove:
-        """The groove of a weld scenario."""
-        s = _unit(scenario.seam_direction)
-        b = _unit(np.asarray(scenario.groove_bisector) - (s @ scenario.groove_bisector) * s)
+    def build(
+        cls,
+        point: Any,
+        seam_direction: Any,
+        groove_bisector: Any,
+        opening_angle_rad: float,
+        flank_width_m: float,
+        seam_half_length_m: float,
+    ) -> Groove:
+        """A groove through ``point`` (m) along ``seam_direction``, opening towards
+        ``groove_bisector`` (made perpendicular to the seam) by ``opening_angle_rad``."""
+        s = _unit(seam_direction)
+        b = _unit(np.asarray(groove_bisector) - (s @ np.asarray(groove_bisector)) * s)
         m = np.cross(s, b)
-        half = 0.5 * scenario.opening_angle_rad
+        half = 0.5 * opening_angle_rad
         flanks = np.array([math.cos(half) * b + sign * math.sin(half) * m for sign in (1.0, -1.0)])
         normals = np.cross(s, flanks)
         # Face the free side: the bisector's part perpendicular to each flank.
         inward = b - np.einsum("ki,i->k", flanks, b)[:, None] * flanks
         normals *= np.sign(np.einsum("ki,ki->k", normals, inward))[:, None]
         return cls(
-            scenario.weld_point.copy(),
+            np.asarray(point, dtype=np.float64).copy(),
             s,
             b,
             flanks,
             normals / np.linalg.norm(normals, axis=1, keepdims=True),
+            flank_width_m,
+            seam_half_length_m,
+        )
+
+    @classmethod
+    def from_scenario(cls, scenario: WeldScenario) -> Groove:
+        """The groove of a weld scenario."""
+        return cls.build(
+            scenario.weld_point,
+            scenario.seam_direction,
+            scenario.groove_bisector,
+            scenario.opening_angle_rad,
             scenario.flank_width_m,
             scenario.seam_half_length_m,
         )
@@ -345,7 +406,7 @@ def trace_groove(
     return traced, flank
 
 
-def _flank_counts(groove: Groove, rig: Scenario, T_base_sensor: FloatArray) -> Int64Array:
+def flank_counts(groove: Groove, rig: Scenario, T_base_sensor: FloatArray) -> Int64Array:
     """Seen returns within the range on each flank per pose, shape (K, 2), noise-free."""
     traced, flank = trace_groove(groove, rig, T_base_sensor)
     z = traced.points_sensor[..., 2]
@@ -354,14 +415,18 @@ def _flank_counts(groove: Groove, rig: Scenario, T_base_sensor: FloatArray) -> I
     return np.stack([np.sum(usable & (flank == k), axis=1) for k in (1, 2)], axis=1)
 
 
-def nominal_orientation(scenario: WeldScenario, groove: Groove) -> FloatArray:
-    """Sensor orientation (3, 3) of the nominal view turned by ``view_rotvec_rad``.
+def nominal_view(groove: Groove) -> FloatArray:
+    """Sensor orientation (3, 3) looking into the groove across the seam.
 
-    Nominal: sensor z = −b (looking into the groove), y = s (laser plane across the seam).
+    Sensor z = −b (looking into the groove), y = s (laser plane across the seam).
     """
     z, y = -groove.bisector, groove.seam
-    R = np.column_stack([np.cross(y, z), y, z])
-    return np.asarray(R @ matrix_from_rotvec(scenario.view_rotvec_rad))
+    return np.column_stack([np.cross(y, z), y, z])
+
+
+def nominal_orientation(scenario: WeldScenario, groove: Groove) -> FloatArray:
+    """Sensor orientation (3, 3) of the :func:`nominal_view` turned by ``view_rotvec_rad``."""
+    return np.asarray(nominal_view(groove) @ matrix_from_rotvec(scenario.view_rotvec_rad))
 
 
 def _pose(R: FloatArray, point_in_sensor: FloatArray, point: FloatArray) -> FloatArray:
@@ -374,7 +439,7 @@ def _views_ok(
 ) -> tuple[BoolArray, list[str]]:
     """Which views show both flanks and keep sensor and flange clear of the plates."""
     rig = scenario.rig
-    counts = _flank_counts(groove, rig, T_base_sensor)
+    counts = flank_counts(groove, rig, T_base_sensor)
     T_base_flange = T_base_sensor @ invert_transform(rig.T_flange_sensor)
     clear_sensor = groove.free_clearance(T_base_sensor[:, :3, 3]) >= rig.clearance_m
     clear_flange = groove.free_clearance(T_base_flange[:, :3, 3]) >= rig.clearance_m
@@ -520,28 +585,8 @@ class WeldTruth:
     dropout: BoolArray
 
 
-@dataclass(frozen=True, eq=False)
-class WeldSimulatedData:
-    """Everything a weld-seam run produces; the same layout as ``SimulatedData``.
-
-    Attributes
-    ----------
-    profiles : list of Profile
-    intensities : list of (ndarray or None)
-    poses : list of FlangePose
-        The full reported flange-pose stream, sorted by stamp.
-    truth : WeldTruth
-    """
-
-    profiles: list[Profile]
-    intensities: list[FloatArray | None]
-    poses: list[FlangePose]
-    truth: WeldTruth
-
-    @property
-    def scenario(self) -> Scenario:
-        """The rig (topics, frame names, output format), as ``SimulatedData.scenario``."""
-        return self.truth.scenario.rig
+#: Everything a weld-seam run produces.
+WeldSimulatedData = RigSimulatedData[WeldTruth]
 
 
 def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
@@ -561,16 +606,9 @@ def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
     )
     views[:, :3, 3] += rng.normal(size=(len(views), 1)) * scenario.aim_sigma_m * views[:, :3, 1]
     taught = groove.point + rng.normal(size=3) * scenario.teach_sigma_m
-    motion = StepMotion.plan(views, rig)
-    errors = draw_errors(rng, rig, len(views))
-
-    acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
-    t_shot = acq_ns / 1e9
-    T_sensor_shot = motion.T_base_sensor(t_shot)
-    traced, flank = trace_groove(groove, rig, T_sensor_shot)
-    measured = measure(rng, rig, traced)
-    poses = recorded_pose_stream(rng, rig, motion, errors)
-    stamps, profiles, intensities = published_profiles(rig, acq_ns, measured)
+    run = step_and_shoot(rng, rig, views, lambda T: trace_groove(groove, rig, T)[0])
+    T_sensor_shot = run.T_base_sensor
+    _, flank = trace_groove(groove, rig, T_sensor_shot)
     corner_base = groove.seam_point_in_plane(T_sensor_shot)
     corner_sensor = np.einsum(
         "kji,kj->ki", T_sensor_shot[:, :3, :3], corner_base - T_sensor_shot[:, :3, 3]
@@ -582,20 +620,20 @@ def simulate_weld(scenario: WeldScenario, seed: int) -> WeldSimulatedData:
         weld_point_m=groove.point.copy(),
         taught_point_m=taught,
         seam_direction=groove.seam.copy(),
-        T_base_flange_true=T_sensor_shot @ invert_transform(rig.T_flange_sensor),
-        T_base_flange_recorded=reported_flange(motion, rig, errors, t_shot),
-        stamps_ns=stamps,
-        acquisition_stamps_ns=rig.epoch_ns + acq_ns,
+        T_base_flange_true=run.T_base_flange_true,
+        T_base_flange_recorded=run.T_base_flange_recorded,
+        stamps_ns=run.stamps_ns,
+        acquisition_stamps_ns=rig.epoch_ns + run.acquisition_ns,
         T_base_sensor_waypoints=views,
         corner_true_sensor=corner_sensor,
         corner_true_base=corner_base,
         flank=flank,
-        points_true_sensor=traced.points_sensor,
-        valid=measured.valid,
-        spike=measured.spike,
-        dropout=measured.dropout,
+        points_true_sensor=run.traced.points_sensor,
+        valid=run.measured.valid,
+        spike=run.measured.spike,
+        dropout=run.measured.dropout,
     )
-    return WeldSimulatedData(profiles, intensities, poses, truth)
+    return WeldSimulatedData(run.profiles, run.intensities, run.poses, truth)
 
 
 def _weld_rig() -> Scenario:
@@ -650,21 +688,7 @@ def weld_scenario_from_preset(name: str, **overrides: Any) -> WeldScenario:
     InputError
         For an unknown preset or field, or an invalid value.
     """
-    if name not in WELD_PRESETS:
-        raise InputError(f"unknown weld preset {name!r}; choose one of {sorted(WELD_PRESETS)}")
-    own = {f.name for f in fields(WeldScenario)} - {"rig"}
-    rig_fields = {f.name for f in fields(Scenario)} - {"name"}
-    unknown = sorted(set(overrides) - own - rig_fields)
-    if unknown:
-        raise InputError(
-            f"unknown weld scenario field(s) {unknown}; see linelaser_calib.sim.weld.WeldScenario "
-            "and linelaser_calib.sim.Scenario"
-        )
-    preset = WELD_PRESETS[name]
-    rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
-    own_overrides = {k: v for k, v in overrides.items() if k in own}
-    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
-    return replace(preset, rig=rig, **own_overrides)
+    return rig_scene_from_preset(WELD_PRESETS, name, "weld", overrides)
 
 
 def bumped_hand_eye(

@@ -16,6 +16,8 @@ from .base import Target
 REGISTRY: dict[str, str] = {
     "cylinder": "linelaser_calib.core.targets.cylinder",
     "known_point": "linelaser_calib.core.targets.known_point",
+    "sphere": "linelaser_calib.core.targets.sphere",
+    "line": "linelaser_calib.core.targets.line",
 }
 
 #: The target used when none is chosen.

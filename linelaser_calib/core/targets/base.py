@@ -63,10 +63,12 @@ Progress = Callable[[str, int, int], None]
 #: ``radius_m`` (--radius, m), ``point_m`` (--point, (3,) m, base frame), ``sensor_sigma_m``
 #: (--sensor-sigma, m), ``robot_sigma_t_m`` (--robot-sigma-t, m), ``robot_sigma_r_rad``
 #: (--robot-sigma-r, rad), ``min_samples`` (int), ``initial`` (--initial: the initial
-#: hand-eye, held by the pipeline configuration, not the target's).
+#: hand-eye, held by the pipeline configuration, not the target's), ``centre_side``
+#: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on).
 SETTINGS = (
     "radius_m",
     "point_m",
+    "centre_side",
     "sensor_sigma_m",
     "robot_sigma_t_m",
     "robot_sigma_r_rad",

@@ -102,8 +102,12 @@ def _grid_best(
     T_base_flange: FloatArray,
     t_fs: FloatArray,
     point: FloatArray,
+    across: FloatArray,
 ) -> tuple[FloatArray, float, bool]:
-    """Best rotation vector of one grid step, its ΔR and whether it is on the grid's edge."""
+    """Best rotation vector of one grid step, its ΔR and whether it is on the grid's edge.
+
+    ``across`` (3, 3) projects the reconstructed points before the scatter (the identity for
+    a point; see :func:`paper_correction`)."""
     offsets = step.offsets()
     R_i, t_i = T_base_flange[:, :3, :3], T_base_flange[:, :3, 3]
     base = np.einsum("mij,j->mi", R_i, t_fs) + t_i  # (M, 3): where the sensor origin is
@@ -113,7 +117,7 @@ def _grid_best(
         R = Rotation.from_rotvec(rotvecs).as_matrix()  # (K, 3, 3)
         in_flange = np.einsum("kab,mb->kma", R, s)
         points = np.einsum("mab,kmb->kma", R_i, in_flange) + base
-        scores[start : start + GRID_CHUNK] = scatter_delta_r(points, point)
+        scores[start : start + GRID_CHUNK] = scatter_delta_r(points @ across, point @ across)
     best = int(np.argmin(scores))
     edge = bool(np.any(np.abs(offsets[best]) >= step.half_width_rad * (1.0 - 1e-12)))
     return np.asarray(centre + offsets[best]), float(scores[best]), edge
@@ -125,8 +129,13 @@ def paper_correction(
     T_flange_sensor_initial: ArrayLike,
     point_base: ArrayLike,
     config: KnownPointConfig | None = None,
+    free_direction: ArrayLike | None = None,
 ) -> PaperCorrection:
     """The weld-seam paper's two-step grid search and translation shift (eq. 11-16).
+
+    With ``free_direction`` the reference is a line (a straight seam, no point taught)
+    through ``point_base`` along it: the reconstructed points may slide along the line, so
+    only their parts across it enter the scatter and the mean offset.
 
     Parameters
     ----------
@@ -140,20 +149,26 @@ def paper_correction(
         The taught point (X_R, Y_R, Z_R), m.
     config : KnownPointConfig, optional
         Only the grid steps are used.
+    free_direction : array-like, shape (3,), optional
+        Unit direction of the reference line, base frame; None for a point.
     """
     cfg = KnownPointConfig() if config is None else config
+    across = np.eye(3)
+    if free_direction is not None:
+        d = np.asarray(free_direction, dtype=np.float64)
+        across = across - np.outer(d, d) / float(d @ d)
     s = corners_3d(np.asarray(corners_xz, dtype=np.float64))
     T = np.asarray(T_base_flange, dtype=np.float64)
     X0 = np.asarray(T_flange_sensor_initial, dtype=np.float64)
     p = np.asarray(point_base, dtype=np.float64)
     t_fs = X0[:3, 3].copy()
     r0 = rotvec_from_matrix(X0[:3, :3])
-    start = float(scatter_delta_r(weld_points_base(corners_xz, T, X0), p))
-    r1, score1, edge = _grid_best(r0, cfg.grid_coarse, s, T, t_fs, p)
-    r2, score2, _ = _grid_best(r1, cfg.grid_fine, s, T, t_fs, p)
+    start = float(scatter_delta_r(weld_points_base(corners_xz, T, X0) @ across, p @ across))
+    r1, score1, edge = _grid_best(r0, cfg.grid_coarse, s, T, t_fs, p, across)
+    r2, score2, _ = _grid_best(r1, cfg.grid_fine, s, T, t_fs, p, across)
     R = Rotation.from_rotvec(r2).as_matrix()
     rotated = transform_from_rotation_translation(R, t_fs)
-    offsets = weld_points_base(corners_xz, T, rotated) - p
+    offsets = (weld_points_base(corners_xz, T, rotated) - p) @ across
     shift = -np.mean(np.einsum("mji,mj->mi", T[:, :3, :3], offsets), axis=0)
     return PaperCorrection(
         T_flange_sensor=transform_from_rotation_translation(R, t_fs + shift),

@@ -1,0 +1,382 @@
+"""The straight-line target (a seam or edge, no point taught) as a plug-in.
+
+Methods
+-------
+``default``
+    The closed form of :mod:`.model` (or the initial hand-eye with the line through its
+    reconstructed corners), then maximum likelihood (:mod:`.refine`) with views whose
+    residual is implausible (χ², 2 dof) dropped and the solve repeated; the observability
+    diagnosis (:mod:`.observability`) names what the views fail to determine.
+``paper``
+    The weld-seam paper's correction of an existing hand-eye (two-step grid search on the
+    rotation vector, then the shift by the mean offset; :func:`~linelaser_calib.core.
+    known_point.paper_correction`) with the line's closest point as the taught point: the line
+    is fitted through the corners reconstructed with the initial hand-eye, and the corners
+    may slide along it.
+
+The model check (:meth:`LineTarget.check_fit`) refuses a result whose corners lie far
+further from the line than the sensor and robot noise explain.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy.stats import chi2
+
+from ...errors import DegenerateError, ModelMismatch
+from ...solver import Flag, solve_with_rejection
+from ...types import FloatArray, Rejection, Sample, SampleFit
+from ..base import (
+    Option,
+    Progress,
+    Shape,
+    SolveContext,
+    TargetSolution,
+    extract_each,
+    mismatch_message,
+    plain_floats,
+    read_vector,
+    rejection_digest,
+)
+from ..known_point import CornerSample, KnownPointConfig, paper_correction, weld_points_base
+from .features import extract_line_feature
+from .model import Line, line_from_points, solve_line_linear
+from .observability import analyse_line
+from .refine import LineConfig, LineRefinement, refine_line
+
+#: A default-method fit whose RMS residual exceeds this many times the noise the model
+#: expects is refused.
+MISMATCH_FACTOR = 3.0
+#: The same for the paper method, whose grid correction leaves residuals of several tenths of
+#: a mm on data the line fits to the noise: only gross misfits (another target, units).
+PAPER_MISMATCH_FACTOR = 30.0
+#: Typical distance from the flange to a corner, m: turns a flange rotation error into a
+#: corner displacement for the expected noise.
+FLANGE_LEVER_M = 0.2
+
+
+@dataclass(frozen=True)
+class LineSection:
+    """The ``line`` section of a result: the seam in the base frame.
+
+    Attributes
+    ----------
+    line : Line
+        Point nearest the base origin (m) and unit direction.
+    """
+
+    key: ClassVar[str] = "line"
+    title: ClassVar[str] = "straight line"
+
+    line: Line
+
+    def to_mapping(self, base_frame: str) -> dict[str, Any]:
+        """``{frame, point: [x, y, z] (m), direction: [x, y, z]}``."""
+        return {
+            "frame": base_frame,
+            "point": plain_floats(self.line.point),
+            "direction": plain_floats(self.line.direction),
+        }
+
+    def quality_entries(self) -> dict[str, Any]:
+        """No further quality entries."""
+        return {}
+
+    def given_settings(self) -> dict[str, Any]:
+        """Nothing: a line fixes no setting of a later calibration."""
+        return {}
+
+    def describe(self, base_frame: str) -> str:
+        """One line, mm."""
+        p, d = self.line.point * 1e3, self.line.direction
+        return (
+            f"seam line ({base_frame}): through ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm "
+            f"along ({d[0]:+.4f}, {d[1]:+.4f}, {d[2]:+.4f})"
+        )
+
+    def residual_kind(self, method: str) -> str:
+        """What a sample's residual measures."""
+        return "distance of the corner (recorded pose) from the seam line"
+
+    def shapes(self, points_base: FloatArray) -> list[Shape]:
+        """The seam as a segment spanning the points' extent along it."""
+        along = (np.asarray(points_base) - self.line.point) @ self.line.direction
+        lo, hi = (float(np.min(along)), float(np.max(along))) if along.size else (-0.05, 0.05)
+        ends = self.line.point + np.outer([lo, hi], self.line.direction)
+        return [Shape("line", ends, 5e-4, "line", (1.0, 0.5, 0.1, 0.8))]
+
+
+def _stack(features: list[CornerSample]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    return (
+        np.array([f.corner_xz for f in features]),
+        np.array([f.covariance_xz for f in features]),
+        np.array([f.T_base_flange for f in features]),
+    )
+
+
+def _noise_m(config: LineConfig) -> float:
+    """RMS distance of a clean corner from the line (two directions across it): corner noise
+    and the robot's position and orientation error."""
+    per_axis = np.linalg.norm(
+        [
+            config.corner_sigma_floor_m,
+            config.robot_sigma_t_m,
+            config.robot_sigma_r_rad * FLANGE_LEVER_M,
+        ]
+    )
+    return float(np.sqrt(2.0) * per_axis)
+
+
+def _solution(
+    features: list[CornerSample],
+    T_flange_sensor: FloatArray,
+    line: Line,
+    method: str,
+    config: LineConfig,
+    **extra: Any,
+) -> TargetSolution:
+    """The solution record: residuals of the used features, their records."""
+    c, _, T = _stack(features)
+    distances = line.distances(weld_points_base(c, T, T_flange_sensor))
+    return TargetSolution(
+        T_flange_sensor=T_flange_sensor,
+        section=LineSection(line),
+        method=method,
+        samples_used=[f.index for f in features],
+        rejections=extra.pop("rejections", []),
+        rms_residual_m=float(np.sqrt(np.mean(distances**2))),
+        sample_residuals_m={f.index: float(d) for f, d in zip(features, distances, strict=True)},
+        sigma_translation_m=extra.pop("sigma_translation_m", None),
+        sigma_rotation_rad=extra.pop("sigma_rotation_rad", None),
+        warnings=extra.pop("warnings", []),
+        history=extra.pop("history", {}),
+        sample_fits=[
+            SampleFit(f.index, f.stamp_ns, f.T_base_flange, f.points, f.corner_xz) for f in features
+        ],
+        noise_m=_noise_m(config),
+    )
+
+
+def _require(features: list[CornerSample], config: LineConfig, context: SolveContext) -> None:
+    if len(features) < config.min_samples:
+        raise DegenerateError(
+            f"only {len(features)} of {context.n_samples} profiles show a seam corner, and at "
+            f"least {config.min_samples} are needed. "
+            + rejection_digest(context.rejections)
+            + "Sweep the laser line across the seam along its length, both flanks in view."
+        )
+
+
+def _start(features: list[CornerSample], X0: FloatArray | None) -> tuple[FloatArray, Line]:
+    """Start hand-eye and line: the closed form, or the initial hand-eye and its line."""
+    c, _, T = _stack(features)
+    if X0 is None:
+        return solve_line_linear(c, T)
+    return X0, line_from_points(weld_points_base(c, T, X0))
+
+
+class LineTarget:
+    """The straight-line target (see the module docstring)."""
+
+    name: str = "line"
+    title: str = "straight line"
+    summary: str = "a straight seam or edge seen from many poses; no point taught (teach-free)"
+    methods: tuple[str, ...] = ("paper", "default")
+    estimates_clock_offset = True
+    config_type: type[LineConfig] = LineConfig
+    options: Mapping[str, Option] = {
+        "sensor_sigma_m": Option("corner_sigma_floor_m", methods=("default",)),
+        "robot_sigma_t_m": Option("robot_sigma_t_m", methods=("default",)),
+        "robot_sigma_r_rad": Option("robot_sigma_r_rad", methods=("default",)),
+        "min_samples": Option("min_samples"),
+        "initial": Option(
+            "",
+            required_by=("paper",),
+            why_required="the paper's grid search corrects an existing hand-eye",
+        ),
+    }
+
+    def validate(
+        self, sample: Sample, config: LineConfig, rng: np.random.Generator
+    ) -> Rejection | None:
+        """The sample's rejection, or None when it shows a seam corner."""
+        outcome = extract_line_feature(sample, config.features, rng)
+        return outcome if isinstance(outcome, Rejection) else None
+
+    def extract(
+        self, samples: list[Sample], config: LineConfig, seed: int, progress: Progress
+    ) -> tuple[list[Any], list[Rejection]]:
+        """The seam corner of every sample (:mod:`.features`)."""
+        return extract_each(
+            samples,
+            config,
+            np.random.default_rng(seed),
+            lambda s, cfg, rng: extract_line_feature(s, cfg.features, rng),
+            progress,
+            "corner",
+        )
+
+    def solve_paper(
+        self, features: list[Any], config: LineConfig, context: SolveContext
+    ) -> TargetSolution:
+        """The weld-seam paper's correction against the line (see the module docstring)."""
+        _require(features, config, context)
+        X0 = context.initial_T_flange_sensor
+        if X0 is None:
+            raise DegenerateError("the paper's method corrects an initial hand-eye: give one")
+        c, _, T = _stack(features)
+        reference = line_from_points(weld_points_base(c, T, X0))
+        corrected = paper_correction(
+            c, T, X0, reference.point, KnownPointConfig(), free_direction=reference.direction
+        )
+        X = corrected.T_flange_sensor
+        warnings = []
+        if corrected.on_grid_edge:
+            warnings.append(
+                "the coarse grid's best rotation lies on its edge: the initial hand-eye may be "
+                "further off than the search range"
+            )
+        return _solution(
+            features,
+            X,
+            line_from_points(weld_points_base(c, T, X)),
+            "paper",
+            config,
+            warnings=warnings,
+            history={"paper_delta_r_m": [float(v) for v in corrected.delta_r_m]},
+        )
+
+    def solve_default(
+        self, features: list[Any], config: LineConfig, context: SolveContext
+    ) -> TargetSolution:
+        """Closed form, maximum likelihood with outlier views dropped, diagnosis."""
+        _require(features, config, context)
+        X0 = context.initial_T_flange_sensor
+        c, cov, T = _stack(features)
+        X_start, line_start = _start(features, X0)
+        limit = float(chi2.isf(config.outlier_probability, 2))
+
+        def solve_subset(kept: list[int], previous: LineRefinement | None) -> LineRefinement:
+            X, line = (
+                (X_start, line_start)
+                if previous is None
+                else (
+                    previous.T_flange_sensor,
+                    previous.line,
+                )
+            )
+            return refine_line(c[kept], cov[kept], T[kept], X, line, X0, config)
+
+        def flag(outcome: LineRefinement, kept: list[int]) -> list[Flag]:
+            return [
+                Flag(
+                    float(value),
+                    j,
+                    f"the corner lies {np.linalg.norm(outcome.offsets_xz[j]) * 1e3:.3f} mm from "
+                    f"the seam line in its laser plane (normalised chi2 {value:.1f} > "
+                    f"{limit:.1f} for 2 dof): a wrong corner, spatter, or motion during the scan",
+                )
+                for j, value in enumerate(outcome.view_chi2)
+                if value > limit
+            ]
+
+        context.progress("refine", 0, 1)
+        outcome = solve_with_rejection(
+            len(features), solve_subset, flag, config.max_outlier_fraction, config.min_samples
+        )
+        context.progress("refine", 1, 1)
+        refined = outcome.outcome
+        used = [features[i] for i in outcome.kept]
+        c_used, _, T_used = _stack(used)
+        X = refined.T_flange_sensor
+        observability = analyse_line(
+            refined.information_data,
+            c_used,
+            T_used,
+            X,
+            refined.line,
+            config.weak_sigma_m,
+            config.unobservable_sigma_m,
+        )
+        if observability.unobservable and X0 is None:
+            # A misfit makes the information meaningless: say so rather than blame the poses.
+            self.check_fit(_solution(used, X, refined.line, "default", config), config)
+            raise DegenerateError(
+                "the views do not determine the hand-eye against a straight seam. "
+                + observability.statement()
+                + " Add such views, or give an initial hand-eye."
+            )
+        warnings = observability.warnings()
+        if not refined.converged:
+            warnings.append(
+                f"the refinement stopped after {refined.iterations} iterations without "
+                "converging; the result may be inaccurate"
+            )
+        sigma = np.sqrt(np.diag(refined.covariance))
+        rejections = [
+            Rejection(features[i].index, features[i].stamp_ns, "outlier", reason)
+            for i, reason in outcome.dropped
+        ]
+        return _solution(
+            used,
+            X,
+            refined.line,
+            "default",
+            config,
+            rejections=rejections,
+            sigma_translation_m=sigma[3:6],
+            sigma_rotation_rad=sigma[:3],
+            warnings=warnings,
+            history={"refine_cost": list(refined.cost_history)},
+        )
+
+    def check_features(self, features: list[Any], config: LineConfig) -> None:
+        """The corner extraction already refuses profiles that are not a V; nothing more."""
+
+    def check_fit(self, solution: TargetSolution, config: LineConfig) -> None:
+        """Refuse corners that lie far off one line (another target, units, clocks)."""
+        factor = PAPER_MISMATCH_FACTOR if solution.method == "paper" else MISMATCH_FACTOR
+        if solution.rms_residual_m > factor * solution.noise_m:
+            raise ModelMismatch(
+                mismatch_message(
+                    self.title,
+                    solution.rms_residual_m,
+                    solution.noise_m,
+                    "the profiles' corners do not lie on one straight line",
+                )
+            )
+
+    def offset_cost(
+        self, features: list[Any], config: LineConfig, context: SolveContext
+    ) -> Callable[[FloatArray], float] | None:
+        """The maximum-likelihood cost of the corners with other flange poses (M, 4, 4).
+
+        Each evaluation starts afresh from the closed form at those poses (or the initial
+        hand-eye), so a poor start at one offset does not carry over to the others.
+        """
+        _require(features, config, context)
+        X0 = context.initial_T_flange_sensor
+
+        def cost(T_base_flange: FloatArray) -> float:
+            moved = [
+                replace(f, T_base_flange=T) for f, T in zip(features, T_base_flange, strict=True)
+            ]
+            c, cov, T = _stack(moved)
+            X_start, line_start = _start(moved, X0)
+            return refine_line(c, cov, T, X_start, line_start, X0, config).cost_history[-1]
+
+        return cost
+
+    def read_section(self, mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> LineSection:
+        """The ``line`` section of a result file (ValueError naming a bad key)."""
+        point, direction = read_vector(mapping, "point"), read_vector(mapping, "direction")
+        if not float(np.linalg.norm(direction)) > 0.0:
+            raise ValueError("key direction must not be zero")
+        return LineSection(Line.through(point, direction))
+
+
+TARGET = LineTarget()

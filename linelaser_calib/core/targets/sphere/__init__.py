@@ -1,0 +1,17 @@
+"""The sphere target: a tooling ball scanned from many flange poses (see :mod:`.target`).
+
+Modules: :mod:`.circle` (per-profile RANSAC circle and the profile's own noise),
+:mod:`.model` (sphere centres from circles, side, fixed-point linear solve and polish),
+:mod:`.refine` (point-to-sphere maximum likelihood on the shared solver), :mod:`.config`,
+:mod:`.target` (the protocol implementation, the result section).
+"""
+
+from __future__ import annotations
+
+from linelaser_calib.core.targets.sphere.config import SphereConfig
+from linelaser_calib.core.targets.sphere.target import SphereFeature, SphereSection, SphereTarget
+
+#: The registered sphere target.
+TARGET = SphereTarget()
+
+__all__ = ["TARGET", "SphereConfig", "SphereFeature", "SphereSection", "SphereTarget"]

@@ -1,0 +1,77 @@
+"""Settings of the sphere target."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.observability import ObservabilityConfig
+from linelaser_calib.core.profile import CleaningConfig
+from linelaser_calib.core.targets.sphere.circle import CircleConfig
+from linelaser_calib.core.targets.sphere.model import SIDE_LABELS
+from linelaser_calib.core.targets.sphere.refine import SphereRefineConfig
+
+
+@dataclass(frozen=True)
+class SphereConfig:
+    """Everything the sphere target can be told.
+
+    Attributes
+    ----------
+    radius_m : float or None
+        The sphere radius, m (``--radius``); None estimates it.
+    centre_side : str or None
+        ``+y`` or ``-y``: the side of the laser plane (sensor y) the sphere centre lies on,
+        when the user knows it; None resolves it from the data.
+    min_samples : int
+        Fewest usable profiles. Default 6 (the linear solve needs 5).
+    cleaning : CleaningConfig
+    circle : CircleConfig
+        Its ``max_noise_ratio`` also bounds the calibration's point residual against the
+        profiles' noise.
+    refine : SphereRefineConfig
+        The default method's noise levels and solver settings.
+    observability : ObservabilityConfig
+    max_robot_ratio : float
+        A calibration whose pose corrections are this many times the robot's stated σ is
+        refused (clocks, motion during the scans, or a wrong robot σ). Default 10.
+    max_scatter_ratio : float
+        ``--method paper``: a centre scatter this many times what the robot's σ explains is
+        refused. Default 10.
+    outlier_sigmas : float
+        A sample whose RMS residual lies this many robust σ (1.4826 · MAD) above the median,
+        and above 3 sensor σ, is dropped and the solve repeated. Default 6.
+    max_outlier_fraction : float
+        Largest share of samples dropped as outliers. Default 0.2.
+    """
+
+    radius_m: float | None = None
+    centre_side: str | None = None
+    min_samples: int = 6
+    cleaning: CleaningConfig = field(default_factory=CleaningConfig)
+    circle: CircleConfig = field(default_factory=CircleConfig)
+    refine: SphereRefineConfig = field(default_factory=SphereRefineConfig)
+    observability: ObservabilityConfig = field(default_factory=ObservabilityConfig)
+    max_robot_ratio: float = 10.0
+    max_scatter_ratio: float = 10.0
+    outlier_sigmas: float = 6.0
+    max_outlier_fraction: float = 0.2
+
+    def __post_init__(self) -> None:
+        if self.radius_m is not None and not (np.isfinite(self.radius_m) and self.radius_m > 0):
+            raise InputError(
+                f"the sphere radius must be a positive length in m, got {self.radius_m}"
+            )
+        if self.centre_side is not None and self.centre_side not in SIDE_LABELS.values():
+            raise InputError(
+                f"the sphere centre side must be '+y' or '-y', got {self.centre_side!r}"
+            )
+        if self.min_samples < 5:
+            raise InputError(f"the sphere target needs min_samples >= 5, got {self.min_samples}")
+        for name in ("max_robot_ratio", "max_scatter_ratio", "outlier_sigmas"):
+            if not getattr(self, name) > 1.0:
+                raise InputError(f"SphereConfig.{name} must be > 1, got {getattr(self, name)}")
+        if not 0.0 <= self.max_outlier_fraction < 1.0:
+            raise InputError("SphereConfig.max_outlier_fraction must be in [0, 1)")

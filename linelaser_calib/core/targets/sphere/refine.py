@@ -1,0 +1,395 @@
+"""Maximum likelihood on every profile point of a sphere, with the robot's pose error.
+
+Model
+-----
+Sample j has profile points q_jk (sensor frame, m) and a reported flange pose T_j =
+(R_j, t_j). The robot's pose error is a per-sample nuisance δ_j = (ω_j, τ_j) in the flange
+frame (right perturbation, as for the cylinder): the true flange pose is T_j · D(δ_j),
+D(δ) = [[Exp(ω), τ], [0, 1]]. A point maps into the base frame as
+
+    x_jk = R_j (Exp(ω_j) s_jk + τ_j) + t_j,   s_jk = R_X q_jk + t_X,
+
+and its residual is its distance from the sphere (centre c, radius R):
+
+    e_jk = (‖x_jk − c‖ − R) / σ_s,
+
+under the Huber loss (quadratic within ``loss_scale``, linear beyond) against spikes, plus
+the Gaussian priors ω_j / σ_r and τ_j / σ_t per sample. Minimising ½ Σ loss is the joint
+maximum a-posteriori estimate of the hand-eye, the sphere and the pose corrections.
+
+Parameters and Jacobians
+------------------------
+The hand-eye is R_X = R̂·Exp(θ) (θ about the sensor axes), t_X = t̂ + ρ (ρ in the flange
+frame); the centre and the radius are additive; so are ω_j and τ_j. With n = (x − c)/‖x − c‖
+and J_r the right Jacobian of Exp:
+
+- ∂e/∂θ = nᵀ R_j Exp(ω_j) (−R_X [q]ₓ J_r(θ)),  ∂e/∂ρ = nᵀ R_j Exp(ω_j);
+- ∂e/∂c = −nᵀ,  ∂e/∂R = −1;
+- ∂e/∂ω_j = nᵀ R_j (−Exp(ω_j) [s]ₓ J_r(ω_j)),  ∂e/∂τ_j = nᵀ R_j
+
+(all divided by σ_s). A point depends on the 9 or 10 global numbers and its sample's 6:
+:func:`point_residuals` returns the residuals with these two Jacobian blocks.
+
+Solver and covariance
+---------------------
+:class:`SphereProblem` states the problem in the shared solver's block form and
+:func:`~linelaser_calib.core.solver.solve` minimises it (block-sparse Levenberg-Marquardt,
+Schur complement over the samples). The covariance of the global numbers is the inverse of
+their information with every pose correction marginalised, formed with the sensor's and the
+robot's noise levels re-estimated from the residuals
+(:func:`~linelaser_calib.core.solver.variance_factors`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from linelaser_calib.core.errors import InputError, SolverError
+from linelaser_calib.core.geometry import (
+    matrix_from_rotvec,
+    right_jacobian_so3,
+    skews,
+    transform_from_rotation_translation,
+)
+from linelaser_calib.core.solver import (
+    Linearisation,
+    SolverConfig,
+    evaluate_loss,
+    solve,
+    variance_factors,
+)
+from linelaser_calib.core.solver.lm import Residuals
+from linelaser_calib.core.types import FloatArray
+
+IntArray = NDArray[np.int64]
+
+#: Numbers per sample: the pose correction ω (3), τ (3).
+N_LOCAL = 6
+
+
+@dataclass(frozen=True)
+class SphereState:
+    """The unknowns of the refinement.
+
+    Attributes
+    ----------
+    T_flange_sensor : ndarray, shape (4, 4)
+    centre_m : ndarray, shape (3,)
+        Sphere centre, base frame, m.
+    radius_m : float
+    corrections : ndarray, shape (K, 6)
+        Per-sample pose corrections [ω (rad), τ (m)], flange frame.
+    """
+
+    T_flange_sensor: FloatArray
+    centre_m: FloatArray
+    radius_m: float
+    corrections: FloatArray
+
+
+def point_residuals(
+    state: SphereState,
+    T_base_flange: FloatArray,
+    points: FloatArray,
+    sample: ArrayLike,
+    sensor_sigma_m: float,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Point-to-sphere residuals and their Jacobian blocks, at ``state`` (θ = 0).
+
+    Parameters
+    ----------
+    state : SphereState
+    T_base_flange : ndarray, shape (K, 4, 4)
+    points : ndarray, shape (N, 3)
+        Sensor-frame points of every sample, m.
+    sample : array-like of int, shape (N,)
+        The sample each point belongs to.
+    sensor_sigma_m : float
+
+    Returns
+    -------
+    residuals : ndarray, shape (N,)
+        (‖x − c‖ − R) / σ_s.
+    J_global : ndarray, shape (N, 10)
+        Against [θ (3), ρ (3), c (3), R].
+    J_local : ndarray, shape (N, 6)
+        Against the own sample's [ω (3), τ (3)].
+    """
+    j = np.asarray(sample, dtype=np.int64)
+    X = state.T_flange_sensor
+    omega, tau = state.corrections[:, :3], state.corrections[:, 3:]
+    E = np.stack([matrix_from_rotvec(w) for w in omega]) if len(omega) else np.zeros((0, 3, 3))
+    Rj = T_base_flange[:, :3, :3]
+    s = points @ X[:3, :3].T + X[:3, 3]
+    x = np.einsum("nij,nj->ni", (Rj @ E)[j], s) + np.einsum("nij,nj->ni", Rj, tau)[j]
+    x += T_base_flange[j, :3, 3]
+    d = x - state.centre_m
+    dist = np.linalg.norm(d, axis=1)
+    n = d / np.maximum(dist, 1e-300)[:, None]
+    residuals = (dist - state.radius_m) / sensor_sigma_m
+    nR = np.einsum("ni,nij->nj", n, Rj[j])
+    nRE = np.einsum("nj,njk->nk", nR, E[j])
+    J_global = np.empty((len(points), 10))
+    # θ at 0: J_r = I; -R_X [q]x.
+    J_global[:, :3] = -np.einsum("nk,kl,nlm->nm", nRE, X[:3, :3], skews(points))
+    J_global[:, 3:6] = nRE
+    J_global[:, 6:9] = -n
+    J_global[:, 9] = -1.0
+    Jr = right_jacobian_so3(omega)
+    J_local = np.empty((len(points), N_LOCAL))
+    J_local[:, :3] = -np.einsum("nk,nkl,nlm->nm", nRE, skews(s), Jr[j])
+    J_local[:, 3:] = nR
+    return residuals, J_global / sensor_sigma_m, J_local / sensor_sigma_m
+
+
+@dataclass(frozen=True)
+class SphereRefineConfig:
+    """Settings of the sphere refinement.
+
+    Attributes
+    ----------
+    sensor_sigma_m, robot_sigma_t_m, robot_sigma_r_rad : float
+        Prior noise levels (1σ): the profiler's point noise (m), and the robot's pose error
+        per axis (m, rad).
+    loss_scale : float
+        Where the Huber loss turns linear, in σ. Default 3.
+    estimate_radius : bool
+        Estimate the sphere radius (otherwise it is held at the start value).
+    max_points_per_profile : int
+        Profiles with more points are subsampled evenly (0 keeps all). Default 300.
+    max_iterations : int
+        Linearisations. Default 50.
+    estimate_variance_factors : bool
+        Re-estimate both noise levels from the residuals for the covariance. Default True.
+    variance_rounds : int
+        With ``estimate_variance_factors``, solve again this many times with the noise
+        levels re-estimated (so that stated levels far from the real ones weight the points
+        and the pose priors as the data say); the robot's are only ever lowered. Default 2.
+    """
+
+    sensor_sigma_m: float = 5e-6
+    robot_sigma_t_m: float = 1e-4
+    robot_sigma_r_rad: float = float(np.deg2rad(0.01))
+    loss_scale: float = 3.0
+    estimate_radius: bool = True
+    max_points_per_profile: int = 300
+    max_iterations: int = 50
+    estimate_variance_factors: bool = True
+    variance_rounds: int = 2
+
+    def __post_init__(self) -> None:
+        for name in ("sensor_sigma_m", "robot_sigma_t_m", "robot_sigma_r_rad", "loss_scale"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0.0):
+                raise InputError(f"SphereRefineConfig.{name} must be positive, got {value}")
+        if self.max_points_per_profile < 0 or self.max_iterations < 1:
+            raise InputError(
+                "SphereRefineConfig.max_points_per_profile must be >= 0 and max_iterations >= 1"
+            )
+
+
+def subsample(points: FloatArray, most: int) -> FloatArray:
+    """At most ``most`` points (0: all), evenly spaced in scan order."""
+    if most <= 0 or len(points) <= most:
+        return points
+    return points[np.round(np.linspace(0, len(points) - 1, most)).astype(np.int64)]
+
+
+class SphereProblem:
+    """The refinement in the shared solver's block form (a ``BlockProblem``).
+
+    Global parameters [θ (3), ρ (3), c (3)] and R when estimated; the points of sample j
+    are row j of a (M, K) array, padded with zeros.
+    """
+
+    def __init__(
+        self,
+        T_base_flange: FloatArray,
+        points: list[FloatArray],
+        config: SphereRefineConfig,
+        lever_m: float,
+    ) -> None:
+        self.T_base_flange = T_base_flange
+        self.config = config
+        used = [subsample(p, config.max_points_per_profile) for p in points]
+        self.counts = np.array([len(p) for p in used])
+        self.points = np.concatenate(used)
+        self.sample = np.repeat(np.arange(len(used)), self.counts)
+        width = int(self.counts.max())
+        self.slot = np.concatenate([np.arange(n) for n in self.counts])
+        self.shape = (len(used), width)
+        self._G = 10 if config.estimate_radius else 9
+        self._scale = np.array([lever_m] * 3 + [1.0] * (self._G - 3))
+        self.sqrt_prior = np.array(
+            [1.0 / config.robot_sigma_r_rad] * 3 + [1.0 / config.robot_sigma_t_m] * 3
+        )
+
+    @property
+    def n_global(self) -> int:
+        """9, or 10 with the radius."""
+        return self._G
+
+    @property
+    def step_scale(self) -> FloatArray:
+        """Lever for the rotation, 1 for lengths."""
+        return self._scale
+
+    @property
+    def n_points(self) -> int:
+        """Point residuals (padding excluded)."""
+        return len(self.points)
+
+    def _pad(self, values: FloatArray) -> FloatArray:
+        out = np.zeros(self.shape + values.shape[1:])
+        out[self.sample, self.slot] = values
+        return out
+
+    def residuals(self, state: SphereState) -> Residuals:
+        """Normalised point-to-sphere residuals and pose priors."""
+        r, _, _ = point_residuals(
+            state, self.T_base_flange, self.points, self.sample, self.config.sensor_sigma_m
+        )
+        return Residuals(self._pad(r), state.corrections * self.sqrt_prior)
+
+    def linearise(self, state: SphereState) -> Linearisation:
+        """Residuals and Jacobians (see the module docstring)."""
+        r, Jg, Jl = point_residuals(
+            state, self.T_base_flange, self.points, self.sample, self.config.sensor_sigma_m
+        )
+        return Linearisation(
+            residuals=Residuals(self._pad(r), state.corrections * self.sqrt_prior),
+            J_global=self._pad(Jg[:, : self._G]),
+            J_local=self._pad(Jl),
+            pose_prior_sqrt_information=self.sqrt_prior,
+        )
+
+    def retract(
+        self, state: SphereState, step_global: FloatArray, step_local: FloatArray
+    ) -> SphereState:
+        """R_X ← R_X·Exp(θ), t_X ← t_X + ρ; c, R and the corrections additively."""
+        X = state.T_flange_sensor
+        return SphereState(
+            transform_from_rotation_translation(
+                X[:3, :3] @ matrix_from_rotvec(step_global[:3]), X[:3, 3] + step_global[3:6]
+            ),
+            state.centre_m + step_global[6:9],
+            state.radius_m + (float(step_global[9]) if self._G == 10 else 0.0),
+            state.corrections + step_local,
+        )
+
+
+@dataclass(frozen=True)
+class SphereRefinement:
+    """Outcome of :func:`refine_sphere`.
+
+    Attributes
+    ----------
+    state : SphereState
+        The estimate.
+    covariance : ndarray, shape (G, G)
+        Of the global numbers [θ (rad, sensor axes), ρ (m, flange axes), c (m), R (m, when
+        estimated)], pose corrections marginalised, with the re-estimated noise levels.
+    residuals_m : ndarray, shape (N,)
+        Point-to-sphere distances of the points used, m.
+    sample : ndarray of int, shape (N,)
+        Sample of each point.
+    sensor_sigma_m, robot_sigma_t_m, robot_sigma_r_rad : float
+        The noise levels the covariance was formed with (re-estimated when configured).
+    cost_history : list of float
+    converged : bool
+    """
+
+    state: SphereState
+    covariance: FloatArray
+    residuals_m: FloatArray
+    sample: IntArray
+    sensor_sigma_m: float
+    robot_sigma_t_m: float
+    robot_sigma_r_rad: float
+    cost_history: list[float]
+    converged: bool
+
+    @property
+    def rms_m(self) -> float:
+        """RMS point-to-sphere distance, m."""
+        return float(np.sqrt(np.mean(self.residuals_m**2)))
+
+    def sample_rms_m(self) -> FloatArray:
+        """RMS point-to-sphere distance of each sample (K,), m."""
+        sums = np.bincount(self.sample, weights=self.residuals_m**2)
+        return np.asarray(np.sqrt(sums / np.bincount(self.sample)))
+
+
+def refine_sphere(
+    T_base_flange: ArrayLike,
+    points: list[FloatArray],
+    start: SphereState,
+    config: SphereRefineConfig,
+) -> SphereRefinement:
+    """Maximum-likelihood hand-eye, sphere and pose corrections from every point.
+
+    Parameters
+    ----------
+    T_base_flange : array-like, shape (K, 4, 4)
+        Reported flange poses.
+    points : list of ndarray, shape (N_j, 3)
+        Each sample's inlier points, sensor frame, m, in scan order.
+    start : SphereState
+        Start (e.g. the fixed-point solve, no corrections); its radius is held when the
+        config does not estimate it.
+    config : SphereRefineConfig
+
+    Raises
+    ------
+    SolverError
+        When the solve produces non-finite numbers.
+    """
+    T = np.asarray(T_base_flange, dtype=np.float64)
+    lever = float(np.linalg.norm(start.T_flange_sensor[:3, 3])) + start.radius_m
+    clouds = [np.asarray(p, dtype=np.float64) for p in points]
+    solver_config = SolverConfig(
+        loss="huber", loss_scale=config.loss_scale, max_iterations=config.max_iterations
+    )
+    state, sensor, robot = start, 1.0, 1.0
+    for round_ in range(config.variance_rounds + 1):
+        if round_:
+            # Tighten, never loosen, the robot's prior: a weakly determined radius would
+            # otherwise trade against ever larger pose corrections.
+            config = replace(
+                config,
+                sensor_sigma_m=config.sensor_sigma_m * math.sqrt(sensor),
+                robot_sigma_t_m=config.robot_sigma_t_m * math.sqrt(min(robot, 1.0)),
+                robot_sigma_r_rad=config.robot_sigma_r_rad * math.sqrt(min(robot, 1.0)),
+            )
+        problem = SphereProblem(T, clouds, config, lever)
+        solution = solve(problem, state, solver_config)
+        state = solution.state
+        if not (np.all(np.isfinite(state.T_flange_sensor)) and np.isfinite(state.radius_m)):
+            raise SolverError("the sphere refinement diverged (non-finite estimate)")
+        if not config.estimate_variance_factors:
+            break
+        rho, _ = evaluate_loss(solution.residuals.points, solver_config)
+        sensor, robot = variance_factors(
+            solution.normal,
+            float(np.sum(rho)),
+            float(np.sum(solution.residuals.pose_prior**2)),
+            problem.n_points,
+            problem.n_global,
+        )
+    information = solution.normal.schur_information(sensor, robot)
+    residuals = solution.residuals.points[problem.sample, problem.slot] * config.sensor_sigma_m
+    return SphereRefinement(
+        state=state,
+        covariance=np.linalg.pinv(information),
+        residuals_m=np.asarray(residuals),
+        sample=problem.sample,
+        sensor_sigma_m=config.sensor_sigma_m * math.sqrt(sensor),
+        robot_sigma_t_m=config.robot_sigma_t_m * math.sqrt(robot),
+        robot_sigma_r_rad=config.robot_sigma_r_rad * math.sqrt(robot),
+        cost_history=solution.cost_history,
+        converged=solution.converged,
+    )
