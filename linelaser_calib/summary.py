@@ -248,13 +248,13 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
         "Residual:",
         *table(residual_rows(result)),
     ]
-    if result.self_check is not None:
-        lines += ["Self-check:", *table(self_check_rows(result))]
     cells = [f"#{i}:{v * 1e6:.1f}" for i, v in sorted(result.sample_residuals_m.items())]
     if cells:
         lines.append("  per-sample residual by profile index, um:")
     for k in range(0, len(cells), 10):
         lines.append("    " + " ".join(cells[k : k + 10]))
+    if result.self_check is not None:
+        lines += ["Self-check:", *table(self_check_rows(result))]
     lines.append(
         f"Samples: {len(result.samples_used)} used, {len(result.samples_rejected)} rejected"
     )

@@ -341,20 +341,26 @@ def _warnings(check: SelfCheck, solution: TargetSolution) -> list[str]:
     if check.systematic:
         factor_t = float(np.max(check.sigma_honest[3:] / check.sigma_model[3:]))
         factor_r = float(np.max(check.sigma_honest[:3] / check.sigma_model[:3]))
+        evidence = [f"the held-out profiles are off by {check.offset_rms_m * 1e3:.3f} mm RMS"]
+        if check.neighbour_correlation > neighbour_limit(len(check.indices)):
+            evidence.append(
+                "neighbouring poses are off alike (correlation "
+                f"{check.neighbour_correlation:.2f} of their held-out offsets)"
+            )
+        if check.dispersion_ratio > SYSTEMATIC_RATIO:
+            evidence.append(
+                f"the hand-eye moves {check.dispersion_ratio:.1f} times more between subsets "
+                "of the poses than the noise model predicts"
+            )
+        if check.halves_sigmas is not None and np.max(check.halves_sigmas) > HALVES_LIMIT_SIGMAS:
+            evidence.append(
+                "the even and odd halves differ by up to "
+                f"{float(np.max(check.halves_sigmas)):.1f} combined sigma"
+            )
         out.append(
             "the robot's pose error looks systematic (pose-dependent, e.g. kinematic "
-            "parameters that differ from the nominal ones), not independent per pose: the "
-            f"held-out profiles are off by {check.offset_rms_m * 1e3:.3f} mm RMS, the "
-            f"hand-eye moves {check.dispersion_ratio:.1f} times more between subsets of the "
-            "poses than the noise model predicts, and neighbouring poses are off alike "
-            f"(correlation {check.neighbour_correlation:.2f} of their held-out offsets)"
-            + (
-                f", and the even and odd halves differ by up to "
-                f"{float(np.max(check.halves_sigmas)):.1f} combined sigma"
-                if check.halves_sigmas is not None
-                and float(np.max(check.halves_sigmas)) > HALVES_LIMIT_SIGMAS
-                else ""
-            )
+            "parameters that differ from the nominal ones), not independent per pose: "
+            + ", ".join(evidence)
             + ". The per-pose corrections absorb part of that error and part of it goes into "
             "the hand-eye, so the hand-eye is off by about the robot's absolute error, not by "
             "its repeatability; the 1 sigma was widened "
