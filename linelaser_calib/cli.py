@@ -2,10 +2,10 @@
 
 Subcommands: ``simulate`` (write a synthetic bag and its truth), ``convert`` (another tool's
 recordings into a bag), ``info`` (what a bag holds), ``calibrate`` (the offline
-calibration), ``reconstruct`` (apply a calibration: a recording's profiles in the base
-frame), ``export`` (a result as a URDF joint, a static TF command or a launch file) and
-``demo`` (calibrate the committed bags and show the error against their truth). Exit code 0
-means success; a user error prints one
+calibration), ``plan`` (the next flange poses to scan from), ``reconstruct`` (apply a
+calibration: a recording's profiles in the base frame), ``export`` (a result as a URDF joint,
+a static TF command or a launch file) and ``demo`` (calibrate the committed bags and show the
+error against their truth). Exit code 0 means success; a user error prints one
 paragraph on stderr and exits with 1; a usage error exits with 2.
 """
 
@@ -26,6 +26,14 @@ from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.planning import (
+    Plan,
+    PlanConstraints,
+    SigmaPoint,
+    plan_for_target,
+    plannable,
+    predicted_curve,
+)
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import configure
@@ -44,10 +52,11 @@ from linelaser_calib.io.results import (
     read_result_yaml,
     result_to_dict,
     truth_beside,
+    write_plan_yaml,
     write_result_yaml,
     write_truth_yaml,
 )
-from linelaser_calib.offline import OfflineRun, calibrate_bag
+from linelaser_calib.offline import OfflineRun, bag_samples, calibrate_bag
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
@@ -328,16 +337,20 @@ SETTING_FLAGS = {
 }
 
 
+def _initial_hand_eye(text: str) -> np.ndarray:
+    """The hand-eye (4, 4) of ``--initial``; its warnings go to stderr."""
+    try:
+        initial, warnings = read_initial_hand_eye(text)
+    except CalibrationError as exc:
+        raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
+    for warning in warnings:
+        print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
+    return initial
+
+
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
-    initial = None
-    if args.initial is not None:
-        try:
-            initial, warnings = read_initial_hand_eye(args.initial)
-        except CalibrationError as exc:
-            raise type(exc)(f"cannot use the initial hand-eye (--initial): {exc}") from exc
-        for warning in warnings:
-            print(f"{PROG}: warning: --initial: {warning}", file=sys.stderr)
+    initial = None if args.initial is None else _initial_hand_eye(args.initial)
     given = {
         "radius_m": args.radius,
         "point_m": None if args.point is None else np.array(args.point),
@@ -597,6 +610,182 @@ def _input_line(run: OfflineRun) -> str:
     )
 
 
+# --- plan -----------------------------------------------------------------------------------
+
+
+def _numbers(text: str) -> list[float]:
+    """Parse comma-separated finite numbers."""
+    try:
+        values = [float(p) for p in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers a,b,..., got {text!r}") from None
+    if not all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"expected finite numbers, got {text!r}")
+    return values
+
+
+def _span(text: str) -> tuple[float, float]:
+    """Parse ``lo,hi`` (m)."""
+    values = _numbers(text)
+    if len(values) != 2 or not values[0] < values[1]:
+        raise argparse.ArgumentTypeError(f"expected LO,HI in metres with LO < HI, got {text!r}")
+    return values[0], values[1]
+
+
+#: The target settings ``plan`` takes (those that shape the information of a pose).
+PLAN_TARGET_OPTIONS = (
+    "--radius",
+    "--centre-side",
+    "--sensor-sigma",
+    "--robot-sigma-t",
+    "--robot-sigma-r",
+)
+
+
+def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
+    return PlanConstraints(
+        z_min_m=args.range[0],
+        z_max_m=args.range[1],
+        fan_half_angle_rad=float(np.deg2rad(args.fan_deg)),
+        reach_centre_m=args.reach_centre,
+        reach_half_extent_m=args.reach,
+        table_height_m=None if args.no_table else args.table_height,
+    )
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    if args.output is not None:
+        _check_output(args.output, "plan file (--output)")
+    if args.figure is not None:
+        from linelaser_calib.report import require_matplotlib
+
+        _check_output(args.figure, "figure (--figure)")
+        require_matplotlib()
+    target = get_target(args.target)
+    section = None
+    achieved: list[SigmaPoint] = []
+    planner = plannable(target)
+    placed = {"--cylinder": args.cylinder, "--sphere": args.sphere}
+    given_numbers = {flag: value for flag, value in placed.items() if value is not None}
+    for flag in given_numbers:
+        if flag != planner.numbers_flag:
+            raise InputError(
+                f"{flag} does not apply to the {target.title} target and would be ignored; "
+                f"give its placement with {planner.numbers_flag} ({planner.numbers_help})"
+            )
+    numbers = given_numbers.get(planner.numbers_flag)
+    if args.from_result is not None:
+        if args.initial is not None or numbers is not None:
+            raise InputError(
+                "--from gives the hand-eye and the target's placement; omit --initial and "
+                f"{planner.numbers_flag}"
+            )
+        result = read_result_yaml(args.from_result)
+        if result.target.key != target.name:
+            raise InputError(
+                f"{args.from_result} holds a {result.target.key} result, not a {target.name} "
+                f"one; choose --target {result.target.key}"
+            )
+        T_flange_sensor, section = result.T_flange_sensor, result.target
+        sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+        if sigma_t is not None and sigma_r is not None:
+            achieved = [(len(result.samples_used), sigma_t, sigma_r)]
+    elif args.initial is not None:
+        T_flange_sensor = _initial_hand_eye(args.initial)
+    else:
+        raise InputError(
+            "plan needs the current hand-eye: give --from RESULT.yaml (a calibration of this "
+            "set-up), or --initial (a file or 'x y z qx qy qz qw', e.g. from CAD, within ~5 mm "
+            "and ~5 deg) with "
+            "--cylinder or a bag of 3 or more exploratory scans; the planner does not yet "
+            "estimate the hand-eye from exploratory scans alone"
+        )
+    if section is None and numbers is None and args.bag is None:
+        raise InputError(
+            f"plan needs the target's placement: give --from RESULT.yaml, "
+            f"{planner.numbers_flag} {planner.numbers_help}, or a bag of 3 or more exploratory "
+            "scans"
+        )
+    given = {
+        "radius_m": args.radius,
+        "centre_side": args.centre_side,
+        "sensor_sigma_m": args.sensor_sigma,
+        "robot_sigma_t_m": args.robot_sigma_t,
+        "robot_sigma_r_rad": args.robot_sigma_r,
+    }
+    settings = {name: value for name, value in given.items() if value is not None}
+    config = configure(target, "default", settings, SETTING_FLAGS)
+    samples = (
+        []
+        if args.bag is None
+        else bag_samples(
+            args.bag,
+            PairingConfig(),
+            profile_topic=args.profile_topic,
+            pose_topic=args.pose_topic,
+        )
+    )
+    goal = None
+    if args.goal_mm is not None or args.goal_deg is not None:
+        goal = (
+            np.inf if args.goal_mm is None else args.goal_mm * 1e-3,
+            np.inf if args.goal_deg is None else float(np.deg2rad(args.goal_deg)),
+        )
+    started = time.monotonic()
+    plan = plan_for_target(
+        target,
+        config,
+        T_flange_sensor,
+        args.n,
+        samples=samples,
+        section=section,
+        numbers=numbers,
+        extent=args.axial_range,
+        constraints=_plan_constraints(args),
+        goal=goal,
+        seed=args.seed,
+    )
+    elapsed = time.monotonic() - started
+    print(format_plan(plan, elapsed))
+    if args.output is not None:
+        print(f"Wrote {write_plan_yaml(plan, args.output)}")
+    if args.figure is not None:
+        from linelaser_calib.report.figures import DPI, sigma_curve_figure
+
+        sigma_curve_figure(predicted_curve(plan), achieved).savefig(args.figure, dpi=DPI)
+        print(f"Wrote {args.figure}")
+    return 0
+
+
+def format_plan(plan: Plan, elapsed_s: float) -> str:
+    """The plan as a table: pose, flange position (mm), predicted 1 sigma after it."""
+    lines = [
+        f"{len(plan.poses)} poses chosen from {plan.candidates} feasible candidates in "
+        f"{elapsed_s:.2f} s (D-optimal on the hand-eye's information)."
+    ]
+    if plan.sigma_translation_m is not None and plan.sigma_rotation_rad is not None:
+        lines.append(
+            "Predicted 1 sigma from the scans taken: "
+            f"{np.array2string(plan.sigma_translation_m * 1e3, precision=4)} mm, "
+            f"{np.array2string(np.rad2deg(plan.sigma_rotation_rad), precision=4)} deg"
+        )
+    lines.append(
+        f"{'pose':>4}  {'flange position x, y, z (mm)':>30}  "
+        f"{'1 sigma translation (mm)':>26}  {'1 sigma rotation (deg)':>26}"
+    )
+    for k, pose in enumerate(plan.poses, 1):
+        p = pose.T_base_flange[:3, 3] * 1e3
+        t = pose.sigma_translation_m * 1e3
+        r = np.rad2deg(pose.sigma_rotation_rad)
+        lines.append(
+            f"{k:>4}  {p[0]:9.1f} {p[1]:9.1f} {p[2]:9.1f}   "
+            f"{t[0]:8.4f} {t[1]:8.4f} {t[2]:8.4f}  {r[0]:8.4f} {r[1]:8.4f} {r[2]:8.4f}"
+        )
+    if plan.goal_reached:
+        lines.append("The goal is reached: the predicted 1 sigma is within it.")
+    return "\n".join(lines)
+
+
 # --- export ---------------------------------------------------------------------------------
 
 
@@ -823,6 +1012,14 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_initial_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--initial",
+        metavar="FILE|NUMBERS",
+        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
     parser = argparse.ArgumentParser(
@@ -837,8 +1034,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenario",
         default="paper",
         help=(
-            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, weld_seam, "
-            "weld_seam_general, sphere, line, line_features"
+            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, cluttered_camera, "
+            "weld_seam, weld_seam_general, sphere, line, line_features"
         ),
     )
     sim.add_argument("--seed", type=int, default=0)
@@ -906,11 +1103,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="OUT.mcap",
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
-    cal.add_argument(
-        "--initial",
-        metavar="FILE|NUMBERS",
-        help=f"initial hand-eye T_flange_sensor (e.g. from CAD or an earlier result): {FORMS}",
-    )
+    _add_initial_argument(cal)
     cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
     _add_pairing_arguments(
         cal,
@@ -932,6 +1125,79 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal.set_defaults(func=_cmd_calibrate)
 
+    plan = sub.add_parser("plan", help="plan the next flange poses that most reduce the 1 sigma")
+    plan.add_argument(
+        "bag", nargs="?", help="rosbag2 directory, .mcap file or session of the scans so far"
+    )
+    plan.add_argument("--target", choices=target_names(), default=DEFAULT_TARGET)
+    plan.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
+    plan.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
+    plan.add_argument(
+        "--from",
+        dest="from_result",
+        metavar="RESULT.yaml",
+        help="a result of this set-up: the hand-eye and the target's placement",
+    )
+    _add_initial_argument(plan)
+    plan.add_argument(
+        "--cylinder",
+        type=_numbers,
+        help="px,py,pz,dx,dy,dz: a point on the cylinder axis and its direction (base frame, m)",
+    )
+    plan.add_argument(
+        "--sphere", type=_numbers, help="cx,cy,cz: the centre of the sphere (base frame, m)"
+    )
+    plan.add_argument(
+        "--axial-range",
+        type=_span,
+        help="LO,HI: the span of the shaft to scan, m along the axis (upwards) from its point "
+        "nearest the base origin (default: the span the scans cover)",
+    )
+    plan.add_argument("--n", type=int, default=10, help="poses to plan (default 10)")
+    plan.add_argument("--goal-mm", type=_positive_float, help="stop at this 1 sigma, mm")
+    plan.add_argument("--goal-deg", type=_positive_float, help="stop at this 1 sigma, deg")
+    plan.add_argument(
+        "--range",
+        type=_span,
+        default=(PlanConstraints.z_min_m, PlanConstraints.z_max_m),
+        help="measuring range of the profiler, m (default 0.07,0.15)",
+    )
+    plan.add_argument(
+        "--fan-deg",
+        type=_positive_float,
+        default=float(np.rad2deg(PlanConstraints.fan_half_angle_rad)),
+        help="half opening of the laser fan, deg (default 25)",
+    )
+    plan.add_argument(
+        "--reach-centre",
+        type=_xyz,
+        help="centre of the flange's reach box, x,y,z in m (default: the first scan's flange)",
+    )
+    plan.add_argument(
+        "--reach",
+        type=_positive_float,
+        default=PlanConstraints.reach_half_extent_m,
+        help="half side of the reach box, m (default 0.25)",
+    )
+    plan.add_argument(
+        "--table-height",
+        type=float,
+        default=PlanConstraints.table_height_m,
+        help="base z of the table; sensor and flange stay above it, m (default 0)",
+    )
+    plan.add_argument("--no-table", action="store_true", help="no table below the target")
+    for flag, parse_setting, text in TARGET_OPTIONS:
+        if flag in PLAN_TARGET_OPTIONS:
+            plan.add_argument(flag, type=parse_setting, default=None, help=text)
+    plan.add_argument("--seed", type=int, default=0, help="seed of the candidate poses")
+    plan.add_argument("--output", help="plan YAML to write (its directory must exist)")
+    plan.add_argument(
+        "--figure",
+        metavar="FILE.png",
+        help="plot the predicted 1 sigma against the number of poses, with the one --from's "
+        "result achieved (needs matplotlib)",
+    )
+    plan.set_defaults(func=_cmd_plan)
     rec = sub.add_parser(
         "reconstruct", help="map every profile of a bag into the base frame with a calibration"
     )

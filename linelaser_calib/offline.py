@@ -5,12 +5,13 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.kinematics import KinematicModel
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets.base import Progress
-from linelaser_calib.core.types import CalibrationResult
+from linelaser_calib.core.types import CalibrationResult, Sample
 from linelaser_calib.io.bags import BagContents, read_bag
 from linelaser_calib.io.pose_sources import (
     POSE_SOURCES,
@@ -121,3 +122,27 @@ def calibrate_bag(
             f"{len(bag.skipped)} malformed messages were skipped: {'; '.join(reasons[:3])}"
         )
     return OfflineRun(result, bag, flange_poses)
+
+
+def bag_samples(
+    path: str | Path,
+    pairing: PairingConfig,
+    *,
+    profile_topic: str | None = None,
+    pose_topic: str | None = None,
+) -> list[Sample]:
+    """The paired samples of a bag or session (e.g. exploratory scans to plan from).
+
+    Raises
+    ------
+    CalibrationError
+        Bag problems, or no profile pairs with a pose.
+    """
+    bag = read_bag(path, profile_topic=profile_topic, pose_topic=pose_topic)
+    paired = pair_profiles(bag.profiles, bag.poses, pairing)
+    if not paired.samples:
+        raise DegenerateError(
+            f"no profile of {bag.path} pairs with a flange pose: "
+            + paired.explain_nothing_paired(pairing)
+        )
+    return paired.samples

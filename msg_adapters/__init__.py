@@ -24,7 +24,11 @@ from msg_adapters.pointcloud2 import (
     points_from_pointcloud2,
     profile_from_pointcloud2,
 )
-from msg_adapters.pose import flange_pose_from_pose_stamped, pose_stamped_from_flange_pose
+from msg_adapters.pose import (
+    flange_pose_from_pose_stamped,
+    pose_array_from_transforms,
+    pose_stamped_from_flange_pose,
+)
 from msg_adapters.transform import (
     stamped_transform_from_msg,
     stamped_transforms_from_msgs,
@@ -45,6 +49,7 @@ __all__ = [
     "pointcloud2_from_points",
     "points_from_pointcloud2",
     "points_marker",
+    "pose_array_from_transforms",
     "pose_stamped_from_flange_pose",
     "profile_from_pointcloud2",
     "rclpy_types",

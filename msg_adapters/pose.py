@@ -117,3 +117,13 @@ def pose_stamped_from_flange_pose(pose: FlangePose, *, types: TypeResolver) -> A
         header=header_msg(pose.stamp_ns, pose.frame_id, types),
         pose=pose_msg_from_transform(pose.T_base_flange, types),
     )
+
+
+def pose_array_from_transforms(
+    T: ArrayLike, frame_id: str, stamp_ns: int, *, types: TypeResolver
+) -> Any:
+    """``geometry_msgs/msg/PoseArray`` of rigid transforms (K, 4, 4) (m) in ``frame_id``."""
+    return types("geometry_msgs/msg/PoseArray")(
+        header=header_msg(stamp_ns, frame_id, types),
+        poses=[pose_msg_from_transform(one, types) for one in np.asarray(T, dtype=np.float64)],
+    )

@@ -37,8 +37,9 @@ from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.targets.known_point import KnownPoint
 from linelaser_calib.core.types import Cylinder, FlangePose
 from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
+from linelaser_calib.io.results import Truth
 from linelaser_calib.nodes.collection import SKIP_NOT_CAPTURED
-from linelaser_calib.sim import scenario_from_preset, simulate
+from linelaser_calib.sim import PRESETS, scenario_from_preset, simulate
 from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
@@ -93,14 +94,20 @@ def short_replay() -> Replay:
 @pytest.fixture(scope="module")
 def committed_replay() -> Replay:
     """The shortest committed bag of a cylinder scan (its truth.yaml has a cylinder) whose
-    robot error is independent per pose (no ``kinematics`` truth: a systematic error)."""
+    robot error is independent per pose (no ``kinematics`` truth and no position-dependent
+    error field: systematic errors)."""
     truths = {
         p.parent: read_truth_yaml(p) for p in sorted((REPO_ROOT / "bags").glob("*/truth.yaml"))
     }
+
+    def exact_robot(truth: Truth) -> bool:
+        preset = PRESETS.get(str(truth.raw.get("simulation", {}).get("scenario")))
+        return "kinematics" not in truth.raw and (preset is None or not any(preset.robot_field_m))
+
     bags = [
         bag
         for bag, truth in truths.items()
-        if isinstance(truth.target, CylinderSection) and "kinematics" not in truth.raw
+        if isinstance(truth.target, CylinderSection) and exact_robot(truth)
     ]
     assert bags, "no committed cylinder bag with truth.yaml under bags/"
 

@@ -16,7 +16,12 @@ import pytest
 from _compare import assert_floats_close
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.geometry import apply_transform, invert_transform, rotvec_from_matrix
+from linelaser_calib.core.geometry import (
+    apply_transform,
+    invert_transform,
+    rotation_angle,
+    rotvec_from_matrix,
+)
 from linelaser_calib.sim import (
     PRESETS,
     Scenario,
@@ -28,6 +33,23 @@ from linelaser_calib.sim import (
 )
 
 PRESET_NAMES = sorted(PRESETS)
+
+
+def plain(scenario: Scenario) -> Scenario:
+    """The scenario without the clutter pieces (sim.clutter: fixture, camera effects,
+    clusters), whose own tests are below; the checks of the plain scene apply to the rest."""
+    return replace(
+        scenario,
+        fixture_length_m=0.0,
+        sigma_spread=0.0,
+        edge_bias_m=0.0,
+        lateral_scale_error=0.0,
+        depth_quantum_m=0.0,
+        pose_clusters=0,
+    )
+
+
+PLAIN_PRESETS = [plain(s) for s in PRESETS.values()]
 
 
 @lru_cache(maxsize=64)
@@ -117,7 +139,7 @@ TILTED_FLOOR = scenario_from_preset(
 )
 
 
-@pytest.mark.parametrize("scenario", [*PRESETS.values(), TILTED_FLOOR], ids=lambda s: s.name)
+@pytest.mark.parametrize("scenario", [*PLAIN_PRESETS, TILTED_FLOOR], ids=lambda s: s.name)
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_points_lie_on_true_surfaces_within_noise(scenario: Scenario, seed: int) -> None:
     data = run(scenario, seed)
@@ -135,7 +157,7 @@ def test_surface_check_detects_a_wrong_hand_eye() -> None:
 
 @pytest.mark.parametrize("name", PRESET_NAMES)
 def test_points_lie_exactly_on_true_surfaces_without_noise(name: str) -> None:
-    data = run(quiet(PRESETS[name]), 4)
+    data = run(quiet(plain(PRESETS[name])), 4)
     assert check_on_surfaces(data, 1e-9) > 1000
     for k in range(len(data.profiles)):
         np.testing.assert_allclose(
@@ -172,7 +194,7 @@ def test_spikes_are_displaced_along_their_ray() -> None:
         assert np.all(np.linalg.norm(cross, axis=1) < tol * np.linalg.norm(true, axis=1))
 
 
-@pytest.mark.parametrize("scenario", [*PRESETS.values(), TILTED_FLOOR], ids=lambda s: s.name)
+@pytest.mark.parametrize("scenario", [*PLAIN_PRESETS, TILTED_FLOOR], ids=lambda s: s.name)
 def test_only_the_near_side_is_seen(scenario: Scenario) -> None:
     data = run(scenario, 1)
     s = data.scenario
@@ -204,7 +226,7 @@ def cut_angles(scenario: Scenario, T_base_sensor: np.ndarray) -> np.ndarray:
 @pytest.mark.parametrize(
     "scenario",
     [
-        *PRESETS.values(),
+        *PLAIN_PRESETS,
         scenario_from_preset("paper", pose_mode="general", n_poses=40),
         scenario_from_preset("paper", long_axis_cut_range_rad=(0.9, 1.0), long_axis_fraction=1.0),
     ],
@@ -501,3 +523,82 @@ def test_unknown_preset_and_infeasible_geometry_are_reported() -> None:
     too_narrow = scenario_from_preset("paper", fan_half_angle_rad=math.radians(3.0))
     with pytest.raises(InputError, match="feasible sensor poses"):
         simulate(too_narrow, 0)
+
+
+# ------------------------------------------------------------------- clutter (sim.clutter)
+
+SMALL_CLUTTERED = scenario_from_preset(
+    "cluttered_camera", n_poses=18, robot_sigma_translation_m=0.0, robot_sigma_rotation_rad=0.0
+)
+
+
+def test_camera_profiler_scales_x_and_quantises_depth() -> None:
+    s = replace(quiet(SMALL_CLUTTERED), edge_bias_m=0.0)
+    data = run(s, 1)
+    truth = data.truth
+    for k, profile in enumerate(data.profiles):
+        true = truth.points_true_sensor[k][truth.valid[k]]
+        measured = profile.points
+        np.testing.assert_allclose(measured[:, 0], (1.0 + s.lateral_scale_error) * true[:, 0])
+        steps = measured[:, 2] / s.depth_quantum_m
+        np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)
+        assert np.all(np.abs(measured[:, 2] - true[:, 2]) <= 0.5 * s.depth_quantum_m + 1e-12)
+
+
+def test_grazing_bias_moves_steep_returns_out_of_the_surface() -> None:
+    s = replace(quiet(plain(SMALL_CLUTTERED)), edge_bias_m=3e-5)
+    data = run(s, 1)
+    truth = data.truth
+    for k, T in enumerate(sensor_poses(data)):
+        side = truth.surface[k][truth.valid[k]] == Surface.SIDE
+        p = apply_transform(T, data.profiles[k].points[side])
+        dist, _ = surface_distance_and_normal(s, p, np.full(len(p), Surface.SIDE))
+        assert np.all(dist >= -1e-9) and np.all(dist <= 10 * s.edge_bias_m + 1e-9)
+        assert dist.max() > s.edge_bias_m  # the steep ends move most
+
+
+def test_robot_error_field_shifts_each_profile_by_its_offset() -> None:
+    data = run(SMALL_CLUTTERED, 2)
+    truth = data.truth
+    offsets = truth.field_offset_sensor_m
+    assert offsets is not None
+    T_fs = truth.T_flange_sensor
+    for k in range(len(data.profiles)):
+        true = truth.points_true_sensor[k][truth.valid[k]][:5]
+        recorded = apply_transform(truth.T_base_flange_recorded[k] @ T_fs, true)
+        shifted = apply_transform(truth.T_base_flange_true[k] @ T_fs, true + offsets[k])
+        np.testing.assert_allclose(recorded, shifted, atol=1e-9)
+    amplitude = np.array(SMALL_CLUTTERED.robot_field_m)
+    assert np.all(np.abs(offsets) <= 2.5 * amplitude + 1e-12)
+    assert np.all(np.abs(offsets).max(axis=0) >= 0.2 * amplitude)
+
+
+def test_poses_come_in_clusters() -> None:
+    s = SMALL_CLUTTERED
+    T = run(s, 3).truth.T_base_sensor_waypoints
+    owner = np.arange(s.n_poses) * s.pose_clusters // s.n_poses
+    for c in range(s.pose_clusters):
+        members = T[owner == c]
+        spread = np.linalg.norm(members[:, :3, 3] - members[0, :3, 3], axis=1)
+        angles = [rotation_angle(members[0, :3, :3].T @ R) for R in members[:, :3, :3]]
+        assert spread.max() <= 2.0 * math.sqrt(3.0) * s.cluster_spread_m + 1e-9
+        assert max(angles) <= 2.0 * math.sqrt(3.0) * s.cluster_spread_rad + 1e-9
+
+
+def test_fixture_fin_is_seen_on_its_plane() -> None:
+    data = run(quiet(SMALL_CLUTTERED), 2)
+    s, truth = data.scenario, data.truth
+    axis = s.axis_unit
+    direction = np.array(s.fixture_direction)
+    normal = np.cross(axis, direction - (direction @ axis) * axis)
+    seen = 0
+    for k, T in enumerate(sensor_poses(data)):
+        fin = truth.surface[k] == Surface.FIXTURE
+        p = apply_transform(T, truth.points_true_sensor[k][fin & truth.valid[k]])
+        h, r = axial_radial(s, p)
+        w = p - np.array(s.cylinder_base_m)
+        np.testing.assert_allclose(w @ normal, 0.0, atol=1e-9)
+        assert np.all((h >= s.fixture_band_m[0] - 1e-9) & (h <= s.fixture_band_m[1] + 1e-9))
+        assert np.all(r <= s.cylinder_radius_m + s.fixture_length_m + 1e-9)
+        seen += len(p)
+    assert seen > 0

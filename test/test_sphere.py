@@ -332,22 +332,7 @@ def test_real_scans_fit_better_than_the_published_hand_eye() -> None:
     assert np.all((sigma_t > 1e-4) & (sigma_t < 1e-3))
 
 
-@pytest.mark.parametrize(
-    "bag",
-    [
-        SPHERE_BAG,
-        pytest.param(
-            REAL_BAG,
-            marks=pytest.mark.xfail(
-                strict=False,
-                reason="the cylinder's fit check passes the real sphere scans: its default "
-                "solve leaves 126 um RMS against ~7 um of profiler noise, below its limit of a "
-                "multiple of the configured 5 um",
-            ),
-        ),
-    ],
-    ids=["simulated", "real"],
-)
+@pytest.mark.parametrize("bag", [SPHERE_BAG, REAL_BAG], ids=["simulated", "real"])
 def test_the_cylinder_target_refuses_sphere_scans(
     bag: Path, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
@@ -381,3 +366,15 @@ def test_poses_that_only_turn_about_the_vertical_are_named(method: Method) -> No
     with pytest.raises(DegenerateError, match="cannot be told from a shift of the sphere") as err:
         run_pipeline(data.profiles, data.poses, _config(method))
     assert "rotate the flange" in str(err.value)
+
+
+def test_the_known_point_target_refuses_sphere_scans(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """V corners found on a ball's arcs do not meet in one point: refused, nothing written."""
+    out = tmp_path / "result.yaml"
+    assert (
+        main(["calibrate", str(SPHERE_BAG), "--target", "known_point", "--output", str(out)]) == 1
+    )
+    err = capsys.readouterr().err
+    assert not out.exists() and "does not fit" in err and "No result was written" in err

@@ -579,6 +579,33 @@ def _refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
     return conic if ellipse_geometry(conic).valid else conic_u
 
 
+def refine_conic(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
+    """Sampson-distance least squares ellipse through points, from a start conic.
+
+    The geometric polish of :func:`fit_ellipse_ransac` on its own: for a subset of a
+    fitted arc's inliers, without a new RANSAC.
+
+    Parameters
+    ----------
+    conic : array-like, shape (6,)
+        Start conic (A, B, C, D, E, F) in metres.
+    points_xz : array-like, shape (N, 2), N >= 6
+        Points in the sensor x-z plane, m.
+
+    Returns
+    -------
+    conic : ndarray, shape (6,)
+        Normalised by :func:`normalise_conic`; the start if the optimum is no ellipse.
+    """
+    p = _check_points(points_xz, SAMPLE_SIZE + 1)
+    norm = _Normalisation.of(p)
+    (mx, mz), s = norm.mean, norm.scale
+    to_metres = np.array([[s, 0.0, mx], [0.0, s, mz], [0.0, 0.0, 1.0]])
+    start = conic_from_matrix(to_metres.T @ conic_matrix(conic) @ to_metres)
+    refined = _refine_geometric(start, norm.apply(p))
+    return normalise_conic(norm.conic_to_metres(refined), _length_scale(p))
+
+
 # --------------------------------------------------------------------------------- RANSAC
 
 

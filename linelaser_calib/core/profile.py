@@ -8,7 +8,8 @@ cleaning is, in order:
    ``max_abs_y_m`` means the cloud is probably not in the sensor frame; this is reported
    (or the profile rejected, if so configured), never silently fixed.
 3. Range gate: keep ``min_depth_m <= z <= max_depth_m`` and ``|x| <= max_abs_x_m``.
-4. Sort the points by x (the scan direction) and split them into segments: points up to
+4. Sort the points in scan order (:func:`scan_order`: by ray angle, or by x when the
+   frame's origin is not at the emitter) and split them into segments: points up to
    ``MAX_BRIDGED_POINTS + 1`` apart in this order are linked when they are at most
    ``max_gap_m`` apart in the x-z plane, so a few stray points do not split the arc.
    Segments of fewer than ``min_segment_points`` points are dropped: this removes isolated
@@ -72,7 +73,7 @@ class CleaningConfig:
     max_abs_x_m : float
         Largest |x| kept (half the line width), m. The default inf disables it.
     max_gap_m : float
-        Distance between consecutive points (sorted by x) that splits the scan line into
+        Distance between consecutive points (in scan order) that splits the scan line into
         segments, m. The default 2 mm is well above the point spacing of a profiler on a
         cylinder's steep flanks and below the size of a typical reflection spike or of the
         step from the arc to a table behind it. inf disables the split.
@@ -170,6 +171,20 @@ class CleanedProfile:
         return np.asarray(self.points[:, [0, 2]], dtype=np.float64)
 
 
+def scan_order(xz: ArrayLike) -> IntArray:
+    """The scan-line order of a profile's points, shape (N,): indices that sort them.
+
+    A profiler's columns are rays from its origin, so the points are sorted by their ray
+    angle atan2(x, z) when every depth is positive (the sensor frame at the emitter, z the
+    depth); sorting by x alone would interleave a near arc with a far background whose
+    rays differ but whose x overlap. A frame whose origin is not at the emitter (some z
+    <= 0) is sorted by x.
+    """
+    p = np.asarray(xz, dtype=np.float64)
+    key = np.arctan2(p[:, 0], p[:, 1]) if np.all(p[:, 1] > 0.0) else p[:, 0]
+    return np.asarray(np.argsort(key, kind="stable"), dtype=np.intp)
+
+
 def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
     """Connected pieces of a scan line, bridging up to ``MAX_BRIDGED_POINTS`` stray points.
 
@@ -181,7 +196,7 @@ def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
     Parameters
     ----------
     xz : array-like, shape (N, 2)
-        Points in scan-line order (sorted by x), m.
+        Points in scan-line order (:func:`scan_order`), m.
     max_gap_m : float
 
     Returns
@@ -219,7 +234,7 @@ def spike_residuals(
     Parameters
     ----------
     xz : array-like, shape (N, 2)
-        Points in scan-line order (sorted by x), m.
+        Points in scan-line order (:func:`scan_order`), m.
     labels : array-like of int, shape (N,)
         Segment of each point, non-decreasing; every segment has at least
         ``2 * half_window + 1`` points.
@@ -330,7 +345,7 @@ def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
     counts["range_gate"] = int(keep.sum() - gate.sum())
 
     idx = np.flatnonzero(gate)
-    idx = idx[np.argsort(p[idx, 0], kind="stable")]
+    idx = idx[scan_order(p[idx][:, [0, 2]])]
     labels = segment_labels(p[idx][:, [0, 2]], config.max_gap_m)
     big = np.bincount(labels, minlength=1)[labels] >= config.min_segment_points
     # Without the stray pieces, each segment is a run of the scan line; a run can still be

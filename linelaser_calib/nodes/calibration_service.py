@@ -24,6 +24,13 @@
   clock offset and live estimate (``linelaser_calib/clock_offset``) in the result, broadcasts
   ``/tf_static`` where ``tf2_ros`` is importable, and writes the result YAML to
   ``output_path`` atomically. A failed calibration leaves the last good file.
+- ``~/plan`` (std_srvs/Trigger) plans the next ``plan_poses`` flange poses that most reduce
+  the hand-eye's predicted uncertainty (:func:`~linelaser_calib.core.planning.plan_for_target`),
+  from the last calibration (or, before one, from ``initial_hand_eye_path`` with the samples
+  held as exploratory scans), and publishes them on ``linelaser_calib/planned_poses``
+  (PoseArray in ``base_frame``, transient_local), the laser fan at each of them on
+  ``linelaser_calib/planned_fans`` (MarkerArray) and the predicted 1σ after them in
+  /diagnostics. The user's motion stack drives the robot through them.
 """
 
 from __future__ import annotations
@@ -39,7 +46,7 @@ from typing import Any
 import numpy as np
 import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped, TransformStamped
+from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
@@ -50,6 +57,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
+from linelaser_calib.core.planning import Plan, PlanConstraints, fan_shape, plan_for_target
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import CalibrationResult
@@ -77,6 +85,7 @@ from msg_adapters import (
     flange_pose_from_pose_stamped,
     marker_array,
     points_marker,
+    pose_array_from_transforms,
     profile_from_pointcloud2,
     rclpy_types,
     shape_markers,
@@ -91,6 +100,10 @@ except ImportError:
 NODE_NAME = "calibration_service"
 #: Diagnostic value: complete samples held.
 KEY_SAMPLES = "samples"
+#: The planning service (relative to the node: ``/calibration_service/plan``) and its topics.
+PLAN_SERVICE = "~/plan"
+PLANNED_POSES_TOPIC = "linelaser_calib/planned_poses"
+PLANNED_FANS_TOPIC = "linelaser_calib/planned_fans"
 #: Most profile points drawn in the markers (evenly subsampled over the used samples).
 MAX_MARKER_POINTS = 5000
 _PIPELINE = PipelineConfig()
@@ -173,6 +186,45 @@ PARAMETERS = (
         "Period of the /diagnostics status (samples held), s.",
         bounds=(0.01, 60.0),
         read_only=True,
+    ),
+    ParamSpec(
+        "plan_poses",
+        10,
+        "Flange poses ~/plan proposes.",
+        bounds=(1, 1000),
+    ),
+    ParamSpec(
+        "plan_axial_range",
+        (),
+        "Span of the cylinder ~/plan may scan, [lo, hi] in m along the axis (upwards) from "
+        "its point nearest the base origin; [] takes the span the samples cover.",
+        sizes=(0, 2),
+    ),
+    ParamSpec(
+        "plan_measuring_range",
+        (PlanConstraints.z_min_m, PlanConstraints.z_max_m),
+        "The profiler's measuring range [near, far] along its z axis, m (for ~/plan).",
+        sizes=(2,),
+    ),
+    ParamSpec(
+        "plan_fan_half_angle",
+        PlanConstraints.fan_half_angle_rad,
+        "Half opening of the laser fan, rad (for ~/plan).",
+        bounds=(0.01, 1.5),
+    ),
+    ParamSpec(
+        "plan_reach_half_extent",
+        PlanConstraints.reach_half_extent_m,
+        "Half side of the box around the first sample's flange position that planned flange "
+        "poses stay in, m.",
+        bounds=(0.01, 5.0),
+    ),
+    ParamSpec(
+        "plan_table_height",
+        0.0,
+        "Height (base z) of the table under the target, m: planned sensor and flange poses "
+        "stay above it and the laser never points up.",
+        bounds=(-5.0, 5.0),
     ),
     ParamSpec("base_frame", "base_link", "Robot base frame: frame of the cylinder and markers."),
     ParamSpec("flange_frame", "tool0", "Flange frame: parent frame of the hand-eye."),
@@ -326,6 +378,13 @@ class CalibrationServiceNode(Node):
         self._service = self.create_service(
             Trigger, CALIBRATE_SERVICE, self._on_calibrate, callback_group=ReentrantCallbackGroup()
         )
+        self._last_result: CalibrationResult | None = None
+        self._plan: Plan | None = None
+        self._planned_pub = self.create_publisher(PoseArray, PLANNED_POSES_TOPIC, latched_qos(1))
+        self._fans_pub = self.create_publisher(MarkerArray, PLANNED_FANS_TOPIC, latched_qos(1))
+        self._plan_service = self.create_service(
+            Trigger, PLAN_SERVICE, self._on_plan, callback_group=ReentrantCallbackGroup()
+        )
         self.get_logger().info(
             f"collecting samples from {self._profile_sub.topic_name} and "
             f"{self._pose_sub.topic_name}; call {self._service.service_name} to calibrate"
@@ -391,24 +450,52 @@ class CalibrationServiceNode(Node):
             hardware_id="",
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]
             + [KeyValue(key="session", value=store.session or "")]
-            + [KeyValue(key=k, value=v) for k, v in self._self_check],
+            + [KeyValue(key=k, value=v) for k, v in self._self_check]
+            + self._plan_diagnostics(),
         )
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics_pub.publish(array)
 
+    def _plan_diagnostics(self) -> list[KeyValue]:
+        """The last plan's size and predicted 1σ after it (mm, deg)."""
+        plan = self._plan
+        if plan is None or not plan.poses:
+            return []
+        last = plan.poses[-1]
+        return [
+            KeyValue(key="planned poses", value=str(len(plan.poses))),
+            KeyValue(
+                key="predicted 1 sigma translation after the plan (mm)",
+                value=" ".join(f"{v * 1e3:.4f}" for v in last.sigma_translation_m),
+            ),
+            KeyValue(
+                key="predicted 1 sigma rotation after the plan (deg)",
+                value=" ".join(f"{np.rad2deg(v):.4f}" for v in last.sigma_rotation_rad),
+            ),
+        ]
+
     # -- calibration ---------------------------------------------------------------------
 
     def _on_calibrate(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        return self._run("calibration", "calibrated", self._calibrate, response)
+
+    def _on_plan(self, request: Trigger.Request, response: Trigger.Response) -> Any:
+        return self._run("planning", "planned", self._plan_poses, response)
+
+    def _run(self, what: str, done: str, work: Any, response: Trigger.Response) -> Trigger.Response:
+        """Answer a Trigger call with ``work()`` (one at a time; a bug is logged, not fatal)."""
         if not self._busy.acquire(blocking=False):
             response.success = False
-            response.message = "a calibration is already running; call again when it has finished"
+            response.message = (
+                "a calibration or planning is already running; call again when it has finished"
+            )
             return response
         try:
-            response.success, response.message = self._calibrate()
+            response.success, response.message = work()
         # The service must outlive a bug in the pipeline: log it in full and say so.
         except Exception as err:
-            self.get_logger().error(f"calibration crashed (a bug):\n{traceback.format_exc()}")
+            self.get_logger().error(f"{what} crashed (a bug):\n{traceback.format_exc()}")
             response.success = False
             response.message = (
                 f"internal error, please report it (traceback in the node log): "
@@ -417,9 +504,9 @@ class CalibrationServiceNode(Node):
         finally:
             self._busy.release()
         if response.success:  # (rclpy wants one severity per logging call site)
-            self.get_logger().info(f"calibrated: {response.message}")
+            self.get_logger().info(f"{done}: {response.message}")
         else:
-            self.get_logger().warning(f"calibration failed: {response.message}")
+            self.get_logger().warning(f"{what} failed: {response.message}")
         return response
 
     def _calibrate(self) -> tuple[bool, str]:
@@ -447,6 +534,7 @@ class CalibrationServiceNode(Node):
             add_live_clock_offset(result, *self._clock_offset[:3])
         summary = one_line_summary(result, len(samples))
         self._self_check = self_check_rows(result)
+        self._last_result = result
         self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")
         self._publish(result)
         output = Path(p["output_path"]).expanduser()
@@ -458,6 +546,68 @@ class CalibrationServiceNode(Node):
                 f"{self._hand_eye_pub.topic_name}: {summary}"
             )
         return True, f"{summary}; written to {output}"
+
+    def _plan_poses(self) -> tuple[bool, str]:
+        """Plan from the last result (or the initial hand-eye and the samples as exploratory
+        scans); (success, one-line message)."""
+        p = parameter_values(self, PARAMETERS)
+        samples = self._store.samples()
+        try:
+            config = pipeline_config(p)
+        except CalibrationError as err:
+            return False, str(err)
+        result = self._last_result
+        if result is not None and result.target.key == config.target:
+            T_flange_sensor, section = result.T_flange_sensor, result.target
+        elif config.initial_T_flange_sensor is not None:
+            T_flange_sensor, section = config.initial_T_flange_sensor, None
+        else:
+            return False, (
+                "planning needs a hand-eye: call calibrate first, or set "
+                "initial_hand_eye_path (e.g. from CAD) and scan the target from 3 or more poses"
+            )
+        near, far = p["plan_measuring_range"]
+        constraints = PlanConstraints(
+            z_min_m=float(near),
+            z_max_m=float(far),
+            fan_half_angle_rad=float(p["plan_fan_half_angle"]),
+            reach_half_extent_m=float(p["plan_reach_half_extent"]),
+            table_height_m=float(p["plan_table_height"]),
+        )
+        axial = p["plan_axial_range"]
+        try:
+            plan = plan_for_target(
+                config.target_impl,
+                config.target_config,
+                T_flange_sensor,
+                int(p["plan_poses"]),
+                samples=samples,
+                section=section,
+                extent=(float(axial[0]), float(axial[1])) if len(axial) else None,
+                constraints=constraints,
+                seed=int(p["seed"]),
+            )
+        except CalibrationError as err:
+            return False, str(err)
+        self._plan = plan
+        stamp_ns = self.get_clock().now().nanoseconds
+        T = np.stack([pose.T_base_flange for pose in plan.poses])
+        self._planned_pub.publish(
+            pose_array_from_transforms(T, p["base_frame"], stamp_ns, types=self._types)
+        )
+        fans = shape_markers(
+            [fan_shape(plan, constraints)], p["base_frame"], types=self._types, stamp_ns=stamp_ns
+        )
+        self._fans_pub.publish(
+            marker_array([Marker(action=Marker.DELETEALL), *fans], types=self._types)
+        )
+        last = plan.poses[-1]
+        return True, (
+            f"planned {len(plan.poses)} flange poses on {self._planned_pub.topic_name}; "
+            f"predicted 1 sigma after them: translation "
+            f"{np.array2string(last.sigma_translation_m * 1e3, precision=4)} mm, rotation "
+            f"{np.array2string(np.rad2deg(last.sigma_rotation_rad), precision=4)} deg"
+        )
 
     def _publish(self, result: CalibrationResult) -> None:
         """Publish the hand-eye (topic and /tf_static) and the RViz markers."""

@@ -21,6 +21,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
 from linelaser_calib.core.geometry import FloatArray, orthonormal_basis
+from linelaser_calib.core.planning import SigmaPoint
 from linelaser_calib.core.residuals import (
     CylinderCoordinates,
     axis_extent,
@@ -335,3 +336,25 @@ FIGURES: tuple[FigureSpec, ...] = (
         convergence_figure,
     ),
 )
+
+
+def sigma_curve_figure(predicted: list[SigmaPoint], achieved: list[SigmaPoint]) -> Figure:
+    """The hand-eye's largest per-axis 1σ against the number of poses: predicted by the
+    planner (line) and achieved by calibrations (markers); translation in mm, rotation in
+    deg, log scales."""
+    fig = _figure(3.6)
+    panels = fig.subplots(1, 2)
+    for column, (ax, scale, unit) in enumerate(
+        zip(panels, (1e3, float(np.degrees(1.0))), ("mm", "deg"), strict=True)
+    ):
+        for series, style, label in ((predicted, "-o", "predicted"), (achieved, "s", "achieved")):
+            if series:
+                poses = [n for n, *_ in series]
+                values = [float(np.max(sigmas[column])) * scale for _, *sigmas in series]
+                ax.plot(poses, values, style, ms=4, label=label)
+        ax.set_yscale("log")
+        ax.set_xlabel("poses")
+        ax.set_ylabel(f"largest 1 sigma of the {('translation', 'rotation')[column]}, {unit}")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(loc="upper right")
+    return fig

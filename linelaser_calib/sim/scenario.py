@@ -35,6 +35,19 @@ Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
     ``ur_scancontrol`` scanned while the robot moves through 6 waypoints without stopping
     (spline path, 0.15 m/s and 1.5 rad/s on average, sensor roll not flipped), profiles at
     10 Hz with 320 points, a 500 Hz pose stream and profiles stamped 4 ms late.
+``cluttered_camera``
+    A real cell as a coarse camera-based profiler sees it (:mod:`~linelaser_calib.sim.clutter`):
+    an upright Ø25 x 400 mm bar at (0.95, 0, -0.2) m about 1 m from the sensor, a wall
+    300 mm behind it turned 45° to the view, and a fixture fin 80 mm long on one side over
+    20 mm of the bar's height (a profile crossing it runs from the arc into the fin with no
+    gap); range 0.7-1.4 m, 3200 columns over a fan of ±16.7° (0.18-0.22 mm pitch at the
+    bar), depth quantised in 16 µm steps, depth noise 50 µm ± 40 % per profile and 10 µm
+    along the line, a 0.5 % along-line scale error, a grazing-angle bias of 30 µm ·
+    (1 / cos(incidence) - 1) out of the surface, a 150 mm camera baseline; 120 poses in 6
+    clusters (±3°, ±30 mm within), cut angles 10°-35° so that each arc is about 25 mm wide
+    (110-140 points, 5-10 % of a profile); a smooth robot error field of about ±0.7 mm
+    along the line, ±0.2 mm across and ±0.35 mm in depth over 0.4 m of the workspace, on top
+    of robot σ 0.05 mm and 0.005°; 25 Hz pose stream, 0.2 s dwell.
 ``ur5e_kinematic``
     ``ur_scancontrol`` scanned by a UR5e (base at the origin) whose kinematics differ from
     the nominal DH table: lengths off by 1σ 0.15 mm, joint offsets and twists by 1σ 0.02°;
@@ -111,6 +124,14 @@ class Scenario:
     background_normal : (3,) floats
         Normal of the ``plane`` background (normalised on use).
 
+    fixture_length_m : float
+        Length of a fixture fin beyond the cylinder surface, m; 0 means no fin (see
+        :mod:`~linelaser_calib.sim.clutter`).
+    fixture_direction : (3,) floats
+        Radial direction of the fin (projected perpendicular to the axis on use).
+    fixture_band_m : (2,) floats
+        Axial band of the fin, measured from ``cylinder_base_m`` along the axis, m.
+
     Hand-eye (truth)
     ----------------
     hand_eye_translation_m : (3,) floats
@@ -156,6 +177,16 @@ class Scenario:
     organised : bool
         True: every profile has ``resolution`` rows, NaN rows for invalid rays (REP 117).
         False: dense, invalid rays dropped.
+    sigma_spread : float
+        0..1: each profile's noise is the sigmas above times a factor uniform in
+        1 ± ``sigma_spread``.
+    edge_bias_m : float
+        Grazing-angle bias: each return moves out along the surface normal by
+        ``edge_bias_m * (1 / cos(incidence) - 1)`` (capped at 10 ``edge_bias_m``), m.
+    lateral_scale_error : float
+        Relative error of the sensor's along-line scale: measured x = (1 + this) x.
+    depth_quantum_m : float
+        Depth resolution: measured z is rounded to multiples of this, m; 0 disables it.
 
     Pose sampler
     ------------
@@ -200,6 +231,13 @@ class Scenario:
     min_arc_fraction : float
         A pose is used only if at least this fraction of the rays return a cylinder point
         (noise-free).
+    pose_clusters : int
+        0: every pose is drawn on its own. C > 0: C poses are drawn and the ``n_poses``
+        poses are spread over C clusters around them, each member turned by up to
+        ± ``cluster_spread_rad`` (rotation vector, per axis, about the sensor origin) and
+        shifted by up to ± ``cluster_spread_m`` (per base axis).
+    cluster_spread_m, cluster_spread_rad : float
+        Half-widths of the uniform spread within a cluster, m and rad.
 
     Robot
     -----
@@ -208,6 +246,12 @@ class Scenario:
         translation (m) and a Gaussian rotation vector (rad), in the flange frame.
     robot_systematic_translation_m, robot_systematic_rotvec_rad : (3,) floats
         The fixed error E_sys (translation m, rotation vector rad), in the flange frame.
+    robot_field_m : (3,) floats
+        Amplitude (about 2σ) of a smooth, position-dependent error of the recorded flange
+        pose, expressed as the offset of the profile in the sensor frame (x along the
+        line, y, z depth), m; zeros disable it (see :mod:`~linelaser_calib.sim.clutter`).
+    robot_field_length_m : float
+        Length scale of that field over the flange position, m.
     pose_jitter_translation_m, pose_jitter_rotation_rad : float
         Per-message 1σ jitter on every streamed pose (m, rad).
     robot_rate_hz : float
@@ -262,6 +306,9 @@ class Scenario:
     background: str = "none"
     background_point_m: Vec3 = (0.0, 0.0, 0.0)
     background_normal: Vec3 = (0.0, 0.0, 1.0)
+    fixture_length_m: float = 0.0
+    fixture_direction: Vec3 = (1.0, 0.0, 0.0)
+    fixture_band_m: Range = (0.0, 0.0)
 
     hand_eye_translation_m: Vec3 = (0.0, -0.06, 0.09)
     hand_eye_rotation_xyzw: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
@@ -284,6 +331,10 @@ class Scenario:
     background_reflectance: float = 0.5
     intensity_noise: float = 0.02
     organised: bool = False
+    sigma_spread: float = 0.0
+    edge_bias_m: float = 0.0
+    lateral_scale_error: float = 0.0
+    depth_quantum_m: float = 0.0
 
     n_poses: int = 30
     pose_mode: str = "paper"
@@ -299,11 +350,16 @@ class Scenario:
     azimuth_range_rad: Range = (-math.pi, math.pi)
     clearance_m: float = 0.03
     min_arc_fraction: float = 0.15
+    pose_clusters: int = 0
+    cluster_spread_m: float = 0.0
+    cluster_spread_rad: float = 0.0
 
     robot_sigma_translation_m: float = 0.0
     robot_sigma_rotation_rad: float = 0.0
     robot_systematic_translation_m: Vec3 = (0.0, 0.0, 0.0)
     robot_systematic_rotvec_rad: Vec3 = (0.0, 0.0, 0.0)
+    robot_field_m: Vec3 = (0.0, 0.0, 0.0)
+    robot_field_length_m: float = 0.5
     pose_jitter_translation_m: float = 0.0
     pose_jitter_rotation_rad: float = 0.0
     robot_rate_hz: float = 125.0
@@ -394,6 +450,20 @@ class Scenario:
         non_negative("camera_baseline_m", "intensity_noise", "view_spread_rad", "aim_spread_rad")
         non_negative("clearance_m", "robot_sigma_translation_m", "robot_sigma_rotation_rad")
         non_negative("pose_jitter_translation_m", "pose_jitter_rotation_rad", "margin_s")
+        non_negative("edge_bias_m", "depth_quantum_m", "fixture_length_m")
+        non_negative("cluster_spread_m", "cluster_spread_rad")
+        positive("robot_field_length_m")
+        fraction("sigma_spread")
+        require(
+            abs(self.lateral_scale_error) < 0.5,
+            f"lateral_scale_error must be within +-0.5, got {self.lateral_scale_error}",
+        )
+        require(
+            isinstance(self.pose_clusters, int) and 0 <= self.pose_clusters <= self.n_poses,
+            f"pose_clusters must be an integer in [0, n_poses], got {self.pose_clusters}",
+        )
+        vector("robot_field_m", 3, nonzero=False)
+        vector("fixture_direction", 3, nonzero=True)
         non_negative("kinematic_sigma_length_m", "kinematic_sigma_angle_rad")
         require(
             self.robot_model in ("", *UR_DH),
@@ -562,6 +632,57 @@ def _continuous_scenario() -> Scenario:
     )
 
 
+def _cluttered_camera_scenario() -> Scenario:
+    # The sensor looks along the base x axis (roll, pitch, yaw, fixed x-y-z axes).
+    R_flange_sensor = Rotation.from_euler("xyz", [_deg(90.0), _deg(0.0), _deg(-90.0)])
+    q = quaternion_xyzw_from_matrix(R_flange_sensor.as_matrix())
+    return Scenario(
+        name="cluttered_camera",
+        cylinder_radius_m=0.0125,
+        cylinder_length_m=0.4,
+        cylinder_base_m=(0.95, 0.0, -0.2),
+        axis_direction=(0.0, 0.0, 1.0),
+        background="plane",
+        background_point_m=(1.25, 0.0, 0.0),
+        background_normal=(-0.7, 0.7, 0.0),
+        fixture_length_m=0.08,
+        fixture_direction=(0.0, 1.0, 0.0),
+        fixture_band_m=(0.17, 0.19),
+        hand_eye_translation_m=(0.03, -0.12, 0.16),
+        hand_eye_rotation_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+        z_min_m=0.7,
+        z_max_m=1.4,
+        fan_half_angle_rad=math.atan(0.3),
+        resolution=3200,
+        sigma_depth_m=5e-5,
+        sigma_lateral_m=1e-5,
+        sigma_spread=0.4,
+        edge_bias_m=3e-5,
+        lateral_scale_error=0.005,
+        depth_quantum_m=1.6e-5,
+        max_incidence_rad=_deg(85.0),
+        camera_baseline_m=0.15,
+        pose_mode="general",
+        general_cut_range_rad=(_deg(10.0), _deg(35.0)),
+        view_spread_rad=_deg(20.0),
+        azimuth_range_rad=(_deg(-35.0), _deg(35.0)),
+        standoff_spread=0.2,
+        axial_spread=0.3,
+        min_arc_fraction=0.02,
+        n_poses=120,
+        pose_clusters=6,
+        cluster_spread_m=0.03,
+        cluster_spread_rad=_deg(3.0),
+        robot_sigma_translation_m=5e-5,
+        robot_sigma_rotation_rad=_deg(0.005),
+        robot_field_m=(7e-4, 2e-4, 3.5e-4),
+        robot_field_length_m=0.4,
+        robot_rate_hz=25.0,
+        dwell_s=0.2,
+        margin_s=0.1,
+    )
+
+
 def _ur5e_kinematic_scenario() -> Scenario:
     return replace(
         _ur_scancontrol_scenario(),
@@ -586,6 +707,7 @@ PRESETS: dict[str, Scenario] = {
     "paper": _paper_scenario(),
     "ur_scancontrol": _ur_scancontrol_scenario(),
     "continuous": _continuous_scenario(),
+    "cluttered_camera": _cluttered_camera_scenario(),
     "ur5e_kinematic": _ur5e_kinematic_scenario(),
 }
 

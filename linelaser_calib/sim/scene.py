@@ -31,6 +31,7 @@ class Surface(IntEnum):
     SIDE = 1
     CAP = 2
     BACKGROUND = 3
+    FIXTURE = 4
 
 
 def _dot(a: FloatArray, b: FloatArray) -> FloatArray:

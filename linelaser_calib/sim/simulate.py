@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Generic, Protocol, TypeVar
 
 import numpy as np
@@ -12,6 +12,15 @@ from linelaser_calib.core.geometry import invert_transform
 from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.arm import Arm, plan_arm
+from linelaser_calib.sim.clutter import (
+    camera_effects,
+    clustered_poses,
+    clutter_rng,
+    field_errors,
+    has_camera_effects,
+    profile_sigma_factors,
+    scene_from_scenario,
+)
 from linelaser_calib.sim.poses import sample_sensor_poses
 from linelaser_calib.sim.profiler import Measurement, Trace, measure, trace
 from linelaser_calib.sim.robot import (
@@ -24,7 +33,7 @@ from linelaser_calib.sim.robot import (
     true_flange,
 )
 from linelaser_calib.sim.scenario import Scenario
-from linelaser_calib.sim.scene import Int8Array, Int64Array, Scene
+from linelaser_calib.sim.scene import Int8Array, Int64Array
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,6 +81,11 @@ class SimulationTruth:
         joint vectors.
     joint_positions : ndarray, shape (K, n), or None
         With an arm: the joint vector at each profile's acquisition time (rad).
+    sigma_factor : ndarray, shape (K,), or None
+        Each profile's noise as a multiple of the scenario's sigmas (None: all 1).
+    field_offset_sensor_m : ndarray, shape (M, 3), or None
+        The robot error field's offset at each waypoint (each shot in step-and-shoot), in
+        the sensor frame, m (None: no field). See :mod:`~linelaser_calib.sim.clutter`.
     """
 
     scenario: Scenario
@@ -92,6 +106,8 @@ class SimulationTruth:
     dropout: BoolArray
     arm: Arm | None = None
     joint_positions: FloatArray | None = None
+    sigma_factor: FloatArray | None = None
+    field_offset_sensor_m: FloatArray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -311,11 +327,22 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         If the scenario admits too few feasible sensor poses.
     """
     rng = np.random.default_rng(seed)
-    scene = Scene.from_scenario(scenario)
+    extra = clutter_rng(seed)
+    scene = scene_from_scenario(scenario)
     arm = plan_arm(rng, scenario, scene) if scenario.robot_model else None
-    sampled = sample_sensor_poses(rng, scenario, scene) if arm is None else arm.sampled
+    if arm is not None:
+        sampled = arm.sampled
+    elif scenario.pose_clusters:
+        centres = sample_sensor_poses(rng, replace(scenario, n_poses=scenario.pose_clusters), scene)
+        sampled = clustered_poses(extra, scenario, centres)
+    else:
+        sampled = sample_sensor_poses(rng, scenario, scene)
     motion = plan_motion(sampled.T_base_sensor, scenario)
     errors = draw_errors(rng, scenario, len(sampled.T_base_sensor))
+    offsets: FloatArray | None = None
+    if any(scenario.robot_field_m):
+        translation, offsets = field_errors(extra, scenario, sampled.T_base_sensor)
+        errors[:, :3] += translation
 
     acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
     t_shot = acq_ns / 1e9
@@ -329,6 +356,12 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         T_flange_recorded = arm.reported_flange(motion, t_shot)
     traced = trace(scene, scenario, T_sensor_shot)
     measured = measure(rng, scenario, traced)
+    sigma_factor: FloatArray | None = None
+    if has_camera_effects(scenario):
+        sigma_factor = profile_sigma_factors(extra, scenario, len(t_shot))
+        measured = camera_effects(
+            scenario, traced, measured, sigma_factor, T_sensor_shot[:, :3, :3]
+        )
     poses = recorded_pose_stream(rng, scenario, motion, errors, arm)
     stamps, profiles, intensities = published_profiles(scenario, acq_ns, measured)
     truth = SimulationTruth(
@@ -350,6 +383,8 @@ def simulate(scenario: Scenario, seed: int) -> SimulatedData:
         dropout=measured.dropout,
         arm=arm,
         joint_positions=None if arm is None else arm.joint_positions(motion, t_shot),
+        sigma_factor=sigma_factor,
+        field_offset_sensor_m=offsets,
     )
     joints = None if arm is None else joint_state_stream(scenario, motion, arm)
     return SimulatedData(profiles, intensities, poses, truth, joints)

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...arc import ArcConfig
 from ...ellipse import EllipseConfig
 from ...errors import InputError
 from ...profile import CleaningConfig
@@ -28,6 +29,8 @@ class CylinderConfig:
         Fewest fitted samples accepted.
     cleaning : CleaningConfig
     ellipse : EllipseConfig
+    arc : ArcConfig
+        Finding the arc among the planes of the scene (:mod:`linelaser_calib.core.arc`).
     hybrid : HybridConfig
         The global solve of the ``paper`` method.
     seed_hybrid : HybridConfig
@@ -43,6 +46,7 @@ class CylinderConfig:
     min_samples: int = MIN_SAMPLES
     cleaning: CleaningConfig = field(default_factory=CleaningConfig)
     ellipse: EllipseConfig = field(default_factory=EllipseConfig)
+    arc: ArcConfig = field(default_factory=ArcConfig)
     hybrid: HybridConfig = field(default_factory=HybridConfig)
     seed_hybrid: HybridConfig = field(default_factory=lambda: HybridConfig(accept_early=True))
     refine: RefineConfig = field(default_factory=RefineConfig)

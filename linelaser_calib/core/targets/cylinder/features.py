@@ -1,4 +1,5 @@
-"""Per profile: the cleaned points and a RANSAC ellipse (the cylinder's cut by the laser plane)."""
+"""Per profile: the cleaned points and a RANSAC ellipse (the cylinder's cut by the laser plane),
+found among the planes of the scene (:mod:`linelaser_calib.core.arc`)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...ellipse import fit_ellipse_ransac
+from ...arc import (
+    ArcFit,
+    fit_arc_in_scene,
+    grazing_ends_biased,
+    radius_mismatch,
+    trimming_note,
+    without_grazing_ends,
+)
 from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...profile import clean_profile
@@ -17,11 +25,15 @@ from .config import CylinderConfig
 
 @dataclass
 class FittedSample:
-    """A sample with its cleaned points and fitted ellipse (the cylinder target's feature)."""
+    """A sample with the points of its arc and its fitted ellipse (the cylinder target's
+    feature); ``arc`` says how the arc was found, ``trimmed`` how many grazing-angle points
+    were trimmed from it."""
 
     sample: Sample
     points: FloatArray
     ellipse: EllipseFit
+    arc: ArcFit | None = None
+    trimmed: int = 0
 
     @property
     def index(self) -> int:
@@ -66,10 +78,10 @@ def fit_sample(
     except ProfileRejected as exc:
         return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
     try:
-        ellipse = fit_ellipse_ransac(cleaned.points_xz, config.ellipse, rng, radius_m)
+        arc = fit_arc_in_scene(cleaned.points_xz, config.ellipse, rng, radius_m, config.arc)
     except ProfileRejected as exc:
         return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
-    return FittedSample(sample, cleaned.points, ellipse)
+    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc)
 
 
 def fit_samples(
@@ -97,7 +109,29 @@ def fit_samples(
         free_fitted = [f for f in free if isinstance(f, FittedSample)]
         if len(free_fitted) > len(fitted):
             settle_radius(free_fitted, config.radius_m)
+    _trim_biased_grazing_ends(fitted, config.radius_m)
     return fitted, rejections
+
+
+def _trim_biased_grazing_ends(fitted: list[FittedSample], radius_m: float | None) -> None:
+    """Fit the arcs again without their grazing ends when those ends are biased."""
+    arcs = [f.arc for f in fitted if f.arc is not None]
+    if grazing_ends_biased([a.grazing_shift_sigmas for a in arcs]) is None:
+        return
+    for f in fitted:
+        trimmed = None if f.arc is None else without_grazing_ends(f.arc, radius_m)
+        if trimmed is not None:
+            f.trimmed = int(f.ellipse.inliers.sum() - trimmed.inliers.sum())
+            f.ellipse = trimmed
+
+
+def arc_notes(fitted: list[FittedSample], config: CylinderConfig) -> list[str]:
+    """Warnings on the arcs: a given radius the profiles contradict, trimmed grazing ends."""
+    notes = [radius_mismatch([f.ellipse.semi_axes[1] for f in fitted], config.radius_m)]
+    shift = grazing_ends_biased([f.arc.grazing_shift_sigmas for f in fitted if f.arc is not None])
+    if shift is not None:
+        notes.append(trimming_note([f.trimmed for f in fitted], shift, config.arc))
+    return [note for note in notes if note is not None]
 
 
 def settle_radius(fitted: list[FittedSample], radius_m: float | None) -> float:

@@ -82,8 +82,9 @@ Without an initial hand-eye they raise DegenerateError.
 Model fit
 ---------
 The views' corners, mapped into the base frame, must meet in one point up to the robot's
-pose error and the corner noise (about 0.05-0.1 mm). A residual orders of magnitude above
-that (a moving seam: the line target's S-sweep gives ~100 mm) is refused.
+pose error and the corner noise (about 0.05-0.1 mm: 1-2 times the robot's σ_t on the weld
+presets). A residual over ten times σ_t is refused: a moving seam (the line target's
+S-sweep gives ~100 mm) or V-corners found on other shapes (a sphere's profiles: ~4 mm).
 """
 
 from __future__ import annotations
@@ -120,7 +121,7 @@ from .section import KnownPoint, read_known_point_section
 #: Accepted values of the ``method`` argument.
 METHODS = ("paper", "default")
 #: A solution whose RMS residual exceeds this multiple of the expected noise does not fit.
-MISFIT_FACTOR = 100.0
+MISFIT_FACTOR = 10.0
 
 
 @dataclass

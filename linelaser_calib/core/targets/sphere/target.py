@@ -63,6 +63,7 @@ from linelaser_calib.core.targets.sphere.model import (
     side_is_clear,
     solve_fixed_point,
 )
+from linelaser_calib.core.targets.sphere.plan import SpherePlanner
 from linelaser_calib.core.targets.sphere.refine import (
     N_LOCAL,
     SphereRefinement,
@@ -271,6 +272,8 @@ class SphereTarget:
         "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad"),
         "min_samples": Option("min_samples"),
     }
+    #: Pose planning (:mod:`linelaser_calib.core.planning`).
+    planner = SpherePlanner()
 
     def validate(
         self, sample: Sample, config: SphereConfig, rng: np.random.Generator
