@@ -1,9 +1,9 @@
 """Hand-eye error against the reported 1σ, on independent and on systematic robot error.
 
 Over ``--seeds`` seeds of each preset (independent per-pose robot noise: ``paper``,
-``ur_scancontrol``; systematic, from kinematic errors: ``ur5e_kinematic``; region-dependent, with a coarse
-sensor and clutter: ``cluttered_camera``), each recording is
-simulated and calibrated with the default method (its self-check included). Per preset the
+``ur_scancontrol``; systematic, from kinematic errors: ``ur5e_kinematic``; region-dependent,
+with a coarse sensor and clutter: ``cluttered_camera``), each recording is simulated and
+calibrated with the default method (its self-check included). Per preset the
 table gives, as median [max] over the seeds:
 
 - the hand-eye error (mm, deg) against the simulator's truth;
