@@ -1,8 +1,9 @@
 """Human-readable text for a calibration result: mm and degrees, each number labelled.
 
 The pieces (:func:`hand_eye_rows`, :func:`target_text`, :func:`residual_rows`,
-:func:`rejection_lines`, :func:`truth_rows`) are shared by the text summary of the CLI
-(:func:`format_summary`) and the HTML report, so both say the same thing the same way.
+:func:`self_check_rows`, :func:`rejection_lines`, :func:`truth_rows`) are shared by the text
+summary of the CLI (:func:`format_summary`), the HTML report and the calibration service's
+/diagnostics, so all say the same thing the same way.
 """
 
 from __future__ import annotations
@@ -129,6 +130,42 @@ def residual_rows(result: CalibrationResult) -> Rows:
     return rows
 
 
+def self_check_rows(result: CalibrationResult) -> Rows:
+    """The self-check: cross-validated accuracy in use, halves, and the 1σ before widening."""
+    check = result.self_check
+    if check is None:
+        return []
+    rows = [
+        (
+            "accuracy in use",
+            f"{check.accuracy_in_use_m * 1e3:.4f} mm RMS (held-out profiles, {check.folds}-fold "
+            "cross-validation over poses, recorded poses)",
+        ),
+        (
+            "halves agreement",
+            "not solved apart"
+            if check.halves_sigmas is None
+            else f"{float(np.max(check.halves_sigmas)):.1f} combined sigma (largest axis, even "
+            "vs odd poses)",
+        ),
+        (
+            "robot error",
+            ("systematic" if check.systematic else "independent per pose")
+            + f" (held-out offsets {check.offset_rms_m * 1e3:.4f} mm RMS, neighbour "
+            f"correlation {check.neighbour_correlation:.2f})",
+        ),
+    ]
+    if check.systematic:
+        rows.append(
+            (
+                "1 sigma noise model",
+                f"{mm_text(check.sigma_model[3:])}, {deg_text(check.sigma_model[:3])} (widened "
+                "above for the systematic error)",
+            )
+        )
+    return rows
+
+
 def rejection_lines(result: CalibrationResult) -> list[str]:
     """One line per distinct rejection reason: count, stage, reason and profile indices."""
     lines = []
@@ -216,6 +253,8 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
         lines.append("  per-sample residual by profile index, um:")
     for k in range(0, len(cells), 10):
         lines.append("    " + " ".join(cells[k : k + 10]))
+    if result.self_check is not None:
+        lines += ["Self-check:", *table(self_check_rows(result))]
     lines.append(
         f"Samples: {len(result.samples_used)} used, {len(result.samples_rejected)} rejected"
     )

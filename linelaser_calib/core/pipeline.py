@@ -29,6 +29,7 @@ from .errors import DegenerateError, InputError, PairingError
 from .geometry import FloatArray, check_transform
 from .joint_calibration import KinematicSetup
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
+from .selfcheck import DEFAULT_FOLDS, self_check
 from .targets import DEFAULT_TARGET, get_target
 from .targets.base import Progress, SolveContext, Target
 from .types import CalibrationResult, FlangePose, Profile, Rejection, Sample
@@ -68,6 +69,9 @@ class PipelineConfig:
     kinematics : KinematicSetup or None
         The robot model and the joint states of the recording: the default method then
         estimates the identifiable kinematic corrections with the hand-eye.
+    self_check_folds : int
+        Folds of the default method's self-check (:mod:`.selfcheck`: cross-validated
+        accuracy in use, halves, a 1σ widened for systematic robot error); 0 skips it.
     """
 
     method: Method = Method.DEFAULT
@@ -77,8 +81,11 @@ class PipelineConfig:
     pairing: PairingConfig = field(default_factory=PairingConfig)
     initial_T_flange_sensor: FloatArray | None = None
     kinematics: KinematicSetup | None = None
+    self_check_folds: int = DEFAULT_FOLDS
 
     def __post_init__(self) -> None:
+        if self.self_check_folds < 0 or self.self_check_folds == 1:
+            raise InputError(f"self_check_folds must be 0 or >= 2, got {self.self_check_folds}")
         target = get_target(self.target)
         if self.target_config is None:
             object.__setattr__(self, "target_config", target.config_type())
@@ -186,6 +193,20 @@ def calibrate_samples(
             "kinematics of the joint states (the cylinder target's default method estimates "
             "them)"
         )
+    check = None
+    if config.method is Method.DEFAULT and config.self_check_folds:
+        quiet = replace(context, progress=_no_progress)
+        progress("self-check", 0, 1)
+        check = self_check(
+            features,
+            solution,
+            lambda subset: target.solve_default(subset, target_config, quiet),
+            config.self_check_folds,
+        )
+        progress("self-check", 1, 1)
+    sigma_t, sigma_r = solution.sigma_translation_m, solution.sigma_rotation_rad
+    if check is not None:
+        sigma_r, sigma_t = check.sigma_honest[:3], check.sigma_honest[3:]
     return CalibrationResult(
         T_flange_sensor=solution.T_flange_sensor,
         target=solution.section,
@@ -194,9 +215,10 @@ def calibrate_samples(
         samples_rejected=sorted(rejections + solution.rejections, key=lambda r: r.index),
         rms_residual_m=solution.rms_residual_m,
         sample_residuals_m=dict(solution.sample_residuals_m),
-        uncertainty_translation_m=solution.sigma_translation_m,
-        uncertainty_rotation_rad=solution.sigma_rotation_rad,
-        warnings=list(solution.warnings),
+        uncertainty_translation_m=sigma_t,
+        uncertainty_rotation_rad=sigma_r,
+        warnings=list(solution.warnings) + ([] if check is None else check.warnings),
+        self_check=check,
         history=dict(solution.history),
         sample_fits=list(solution.sample_fits),
         kinematics=solution.kinematics,

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from .joint_calibration import KinematicIdentifiability
     from .kinematics import KinematicCorrections
+    from .selfcheck import SelfCheck
     from .targets.base import ResultSection
 
 FloatArray = NDArray[np.float64]
@@ -215,6 +216,9 @@ class CalibrationResult:
         The robot's kinematic corrections estimated with the hand-eye (joint calibration).
     identifiability : KinematicIdentifiability or None
         Which kinematic parameters the data determined (joint calibration).
+    self_check : SelfCheck or None
+        The default method's self-check (:mod:`linelaser_calib.core.selfcheck`): accuracy in
+        use, halves, the model's and the widened 1σ; the uncertainty above is its widened one.
     """
 
     T_flange_sensor: FloatArray
@@ -238,3 +242,4 @@ class CalibrationResult:
     base_frame: str = "base_link"
     kinematics: KinematicCorrections | None = None
     identifiability: KinematicIdentifiability | None = None
+    self_check: SelfCheck | None = None

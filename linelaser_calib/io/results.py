@@ -197,6 +197,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             "rms_residual_m": float(result.rms_residual_m),
             "warnings": [str(w) for w in result.warnings],
             **_plain(result.target.quality_entries()),
+            **({} if result.self_check is None else result.self_check.quality_entries()),
             "clock_offset_s": float(result.clock_offset_s),
             "clock_offset_estimated": bool(result.clock_offset_estimated),
             **{

@@ -79,7 +79,7 @@ from linelaser_calib.nodes.common import (
     run_node,
 )
 from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
-from linelaser_calib.summary import one_line_summary
+from linelaser_calib.summary import one_line_summary, self_check_rows
 from msg_adapters import (
     MessageError,
     flange_pose_from_pose_stamped,
@@ -354,6 +354,7 @@ class CalibrationServiceNode(Node):
             String, SESSION_TOPIC, self._on_session, latched_qos(1), callback_group=receive
         )
         self._clock_offset: list[float] = []
+        self._self_check: list[tuple[str, str]] = []
         self.create_subscription(
             Float64MultiArray,
             CLOCK_OFFSET_TOPIC,
@@ -449,6 +450,7 @@ class CalibrationServiceNode(Node):
             hardware_id="",
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]
             + [KeyValue(key="session", value=store.session or "")]
+            + [KeyValue(key=k, value=v) for k, v in self._self_check]
             + self._plan_diagnostics(),
         )
         array = DiagnosticArray(status=[status])
@@ -531,6 +533,7 @@ class CalibrationServiceNode(Node):
         if len(self._clock_offset) == 4:
             add_live_clock_offset(result, *self._clock_offset[:3])
         summary = one_line_summary(result, len(samples))
+        self._self_check = self_check_rows(result)
         self._last_result = result
         self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")
         self._publish(result)

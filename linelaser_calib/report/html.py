@@ -24,6 +24,7 @@ from linelaser_calib.summary import (
     hand_eye_rows,
     rejection_lines,
     residual_rows,
+    self_check_rows,
     target_text,
     truth_rows,
 )
@@ -96,6 +97,11 @@ def _page(
         "<h2>Cylinder and residual</h2>",
         f"<p>{html.escape(target_text(result))}</p>",
         _table(residual_rows(result)),
+        *(
+            ["<h2>Self-check</h2>", _table(self_check_rows(result))]
+            if result.self_check is not None
+            else []
+        ),
         "<h2>Samples</h2>",
         f"<p>{len(result.samples_used)} used, {len(result.samples_rejected)} rejected.</p>",
         _items(rejection_lines(result)),

@@ -195,6 +195,12 @@ class ResultSection(Protocol):
         """Markers of the section next to the calibrated points (N, 3), base frame, m."""
         ...
 
+    def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
+        """Signed distances (N,) in m of what the section models in one sample (its points,
+        or its feature point), mapped into the base frame by ``T_base_sensor`` (4, 4), from
+        the section's geometry (the self-check's held-out error)."""
+        ...
+
     def given_settings(self) -> dict[str, Any]:
         """Shared settings (:data:`SETTINGS`) this section fixes when a result file is the
         starting point of a calibration (e.g. a taught point); usually empty."""

@@ -112,6 +112,9 @@ from ...types import Cylinder
 
 #: Axis parameters (a, b) in the global block, after the hand-eye's 6.
 N_AXIS = 4
+#: Robot variance factor (as a ratio of 1σ) beyond which the arm is said to be less accurate
+#: than the prior (σ_t, σ_r) assumes.
+ROBOT_PRIOR_EXCESS = 2.0
 
 
 @dataclass(frozen=True)
@@ -750,10 +753,30 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
     cylinder_point = state.point - float(state.point @ state.direction) * state.direction
     warnings = list(observability.warnings)
     history = solution.cost_history
+    robot_scale = float(np.sqrt(factors[1]))
+    prior_note = ""
+    if cfg.estimate_variance_factors and robot_scale > ROBOT_PRIOR_EXCESS:
+        prior_note = (
+            f"the robot's pose error is about {robot_scale:.1f} times the prior assumed: "
+            f"{cfg.robot_sigma_t_m * robot_scale * 1e3:.3f} mm and "
+            f"{np.degrees(cfg.robot_sigma_r_rad) * robot_scale:.4f} deg per pose (1 sigma, from "
+            f"the pose corrections) against {cfg.robot_sigma_t_m * 1e3:.3f} mm and "
+            f"{np.degrees(cfg.robot_sigma_r_rad):.4f} deg (--robot-sigma-t, --robot-sigma-r)"
+        )
+        warnings.append(
+            prior_note + "; the 1 sigma above is formed with the larger error, and the arm is "
+            "less accurate than assumed"
+        )
     if not solution.converged:
         warnings.append(
             f"the refinement stopped after {solution.iterations} iterations without converging "
             f"(cost {history[-1]:.6g}); the result may be inaccurate"
+            + (
+                f". A likely reason: {prior_note}; give the larger values with "
+                "--robot-sigma-t and --robot-sigma-r"
+                if prior_note
+                else ""
+            )
         )
     return RefineResult(
         T_flange_sensor=transform_from_rotation_translation(state.R_fs, state.t_fs),
@@ -775,7 +798,7 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
         rms_residual_m=float(np.sqrt(np.sum(squares) / n_points)),
         chi2_dof=chi2_dof,
         sensor_sigma_estimated_m=cfg.sensor_sigma_m * float(np.sqrt(factors[0])),
-        robot_sigma_scale=float(np.sqrt(factors[1])),
+        robot_sigma_scale=robot_scale,
         cost_history=history,
         iterations=solution.iterations,
         converged=solution.converged,

@@ -8,9 +8,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...geometry import FloatArray
+from ...geometry import FloatArray, apply_transform
 from ...residuals import axis_extent
-from ...types import Cylinder
+from ...types import Cylinder, SampleFit
 from ..base import Shape, mm_text, plain_floats, read_vector
 
 
@@ -69,6 +69,13 @@ class CylinderSection:
         centre, length = axis_extent(points_base, c)
         half = 0.5 * length * c.direction / np.linalg.norm(c.direction)
         return [Shape("cylinder", np.stack([centre - half, centre + half]), c.radius, "cylinder")]
+
+    def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
+        """Distance of the sample's points to the axis minus the radius (N,), m."""
+        c = self.cylinder
+        v = apply_transform(T_base_sensor, fit.points) - c.point
+        radial = v - np.outer(v @ c.direction, c.direction)
+        return np.asarray(np.linalg.norm(radial, axis=1) - c.radius)
 
     def given_settings(self) -> dict[str, Any]:
         """None: a cylinder result fixes no setting of a later calibration."""

@@ -8,7 +8,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ...geometry import FloatArray
+from ...geometry import FloatArray, apply_transform
+from ...types import SampleFit
 from ..base import Shape, mm_text, plain_floats, read_vector
 
 #: Diameter of the sphere marker at the known point, m.
@@ -71,6 +72,12 @@ class KnownPoint:
                 (1.0, 0.85, 0.0, 1.0),
             )
         ]
+
+    def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
+        """Distance (1,) of the sample's corner, mapped into the base frame, from the point, m."""
+        x, z = fit.feature_xz
+        corner = apply_transform(T_base_sensor, np.array([[x, 0.0, z]]))
+        return np.asarray(np.linalg.norm(corner - self.point, axis=1))
 
     def given_settings(self) -> dict[str, Any]:
         """A taught point fixes ``point_m`` of a later calibration started from this result."""

@@ -28,6 +28,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from ...errors import DegenerateError, ModelMismatch
+from ...geometry import apply_transform
 from ...solver import Flag, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
@@ -85,6 +86,13 @@ class LineSection:
     def quality_entries(self) -> dict[str, Any]:
         """No further quality entries."""
         return {}
+
+    def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
+        """Distance (1,) of the sample's corner, mapped into the base frame, from the line, m."""
+        x, z = fit.feature_xz
+        v = apply_transform(T_base_sensor, np.array([[x, 0.0, z]])) - self.line.point
+        d = self.line.direction
+        return np.asarray(np.linalg.norm(v - np.outer(v @ d, d), axis=1))
 
     def given_settings(self) -> dict[str, Any]:
         """Nothing: a line fixes no setting of a later calibration."""

@@ -34,7 +34,7 @@ from linelaser_calib.core.errors import (
     ModelMismatch,
     ProfileRejected,
 )
-from linelaser_calib.core.geometry import FloatArray
+from linelaser_calib.core.geometry import FloatArray, apply_transform
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, solve_with_rejection
@@ -195,6 +195,11 @@ class SphereSection:
     def shapes(self, points_base: FloatArray) -> list[Shape]:
         """The sphere."""
         return [Shape("sphere", self.centre_m[None], self.radius_m, "sphere")]
+
+    def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
+        """Distance of the sample's points from the centre minus the radius (N,), m."""
+        points = apply_transform(T_base_sensor, fit.points)
+        return np.asarray(np.linalg.norm(points - self.centre_m, axis=1) - self.radius_m)
 
     def given_settings(self) -> dict[str, Any]:
         """None: a sphere result fixes nothing of a later calibration."""

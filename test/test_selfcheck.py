@@ -1,0 +1,231 @@
+"""The self-check: cross-validation over poses, grouped jackknife, halves, pose clusters, and the
+detection of systematic robot error (simulator truth)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pytest
+
+from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.selfcheck import (
+    DEFAULT_FOLDS,
+    neighbour_correlation,
+    pose_clusters,
+    self_check,
+)
+from linelaser_calib.core.targets.base import TargetSolution
+from linelaser_calib.core.types import FloatArray, SampleFit
+from linelaser_calib.sim import scenario_from_preset, simulate
+from linelaser_calib.summary import truth_error
+
+POINTS = 40
+POINT_SIGMA = 1e-5
+#: Small 1σ for the axes the toy problem does not estimate (never zero).
+OTHER_SIGMA = 1e-3
+
+
+def flange_pose(x: float, y: float) -> FloatArray:
+    """Flange at (x, y, 0) m, axes of the base."""
+    T = np.eye(4)
+    T[:2, 3] = x, y
+    return T
+
+
+@dataclass
+class ToyFeature:
+    """One sample of a plane z = 0 seen straight on: ``POINTS`` points at depth ``depth``."""
+
+    index: int
+    T_base_flange: FloatArray
+    depth: FloatArray
+
+    @property
+    def stamp_ns(self) -> int:
+        return self.index
+
+    def record(self) -> SampleFit:
+        x = np.linspace(-0.01, 0.01, len(self.depth))
+        points = np.stack([x, np.zeros_like(x), self.depth], axis=1)
+        return SampleFit(self.index, self.index, self.T_base_flange, points, np.zeros(2))
+
+
+@dataclass(frozen=True)
+class PlaneSection:
+    """The plane z = 0 of the base frame."""
+
+    key = "plane"
+    title = "plane"
+
+    def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
+        return np.asarray((fit.points @ T_base_sensor[:3, :3].T + T_base_sensor[:3, 3])[:, 2])
+
+    def __getattr__(self, name: str) -> Any:
+        raise AttributeError(name)
+
+
+def toy_solve(features: list[Any]) -> TargetSolution:
+    """The hand-eye's z that puts the mean point on the plane; its 1σ treats every point as
+    independent (what a solver that ignores the shared pose error reports)."""
+    depths = np.concatenate([f.depth for f in features])
+    T = np.eye(4)
+    T[2, 3] = -float(np.mean(depths))
+    sigma_t = np.array([OTHER_SIGMA, OTHER_SIGMA, POINT_SIGMA / np.sqrt(depths.size)])
+    return TargetSolution(
+        T_flange_sensor=T,
+        section=PlaneSection(),  # type: ignore[arg-type]
+        method="default",
+        samples_used=[f.index for f in features],
+        rejections=[],
+        rms_residual_m=POINT_SIGMA,
+        sample_residuals_m={},
+        sigma_translation_m=sigma_t,
+        sigma_rotation_rad=np.full(3, OTHER_SIGMA),
+        warnings=[],
+        history={},
+        sample_fits=[],
+        noise_m=POINT_SIGMA,
+    )
+
+
+def toy_features(
+    rng: np.random.Generator, shared: FloatArray, positions: FloatArray
+) -> list[ToyFeature]:
+    """Samples whose points share the offsets ``shared`` (M,) m plus independent noise."""
+    return [
+        ToyFeature(j, flange_pose(*positions[j]), 0.3 + s + rng.normal(0.0, POINT_SIGMA, POINTS))
+        for j, s in enumerate(shared)
+    ]
+
+
+def spread_positions(rng: np.random.Generator, M: int) -> FloatArray:
+    """M flange positions spread over a 0.6 m square (no clusters)."""
+    return rng.uniform(-0.3, 0.3, (M, 2))
+
+
+def test_grouped_jackknife_matches_monte_carlo_with_shared_pose_error() -> None:
+    """Points of one profile share one pose error: the per-profile jackknife 1σ equals the
+    Monte-Carlo spread of the estimate, while the per-point 1σ is far too small."""
+    rng = np.random.default_rng(3)
+    M, sigma_shared = 40, 1e-4
+    positions = spread_positions(rng, M)
+    estimates, jackknife_variances = [], []
+    for _ in range(300):
+        features = toy_features(rng, rng.normal(0.0, sigma_shared, M), positions)
+        solution = toy_solve(features)
+        check = self_check(features, solution, toy_solve)
+        assert check is not None
+        estimates.append(solution.T_flange_sensor[2, 3])
+        jackknife_variances.append(check.sigma_jackknife[5] ** 2)
+    monte_carlo = float(np.std(estimates))
+    jackknife = float(np.sqrt(np.mean(jackknife_variances)))
+    assert jackknife == pytest.approx(monte_carlo, rel=0.15)
+    assert jackknife == pytest.approx(sigma_shared / np.sqrt(M), rel=0.15)
+    assert solution.sigma_translation_m is not None
+    assert solution.sigma_translation_m[2] < 0.1 * monte_carlo
+
+
+def test_neighbour_correlation_separates_independent_from_systematic_offsets() -> None:
+    rng = np.random.default_rng(5)
+    M = 60
+    T = np.stack([flange_pose(*p) for p in spread_positions(rng, M)])
+    independent = rng.normal(0.0, 1e-4, M)
+    field = 1e-4 * np.sin(T[:, 0, 3] * 8.0) + 1e-4 * T[:, 1, 3] / 0.3
+    assert abs(neighbour_correlation(independent, T)) < 0.3
+    assert neighbour_correlation(field, T) > 0.7
+
+
+def test_systematic_offsets_warn_and_widen_the_sigma() -> None:
+    """A smooth offset field over the workspace: detected, the 1σ covers the shift it causes."""
+    rng = np.random.default_rng(7)
+    M = 40
+    positions = spread_positions(rng, M)
+    field = 1e-4 * np.sin(positions[:, 0] * 8.0) + 1e-4 * positions[:, 1] / 0.3
+    features = toy_features(rng, field, positions)
+    solution = toy_solve(features)
+    check = self_check(features, solution, toy_solve)
+    assert check is not None and check.systematic
+    assert any("looks systematic" in w for w in check.warnings)
+    shift = abs(solution.T_flange_sensor[2, 3] + 0.3)
+    assert shift > 3.0 * check.sigma_model[5]
+    assert shift < 3.0 * check.sigma_honest[5]
+
+
+def test_independent_offsets_keep_the_model_sigma() -> None:
+    rng = np.random.default_rng(9)
+    M = 40
+    features = toy_features(rng, np.zeros(M), spread_positions(rng, M))
+    check = self_check(features, toy_solve(features), toy_solve)
+    assert check is not None and not check.systematic
+    np.testing.assert_allclose(check.sigma_honest, check.sigma_model, rtol=1e-12)
+    assert check.accuracy_in_use_m == pytest.approx(POINT_SIGMA, rel=0.2)
+    assert check.warnings == []
+
+
+def test_halves_that_disagree_warn() -> None:
+    """Even and odd samples 0.2 mm apart: the halves differ by far more than their 1σ."""
+    rng = np.random.default_rng(11)
+    M = 40
+    shared = np.where(np.arange(M) % 2 == 0, 1e-4, -1e-4)
+    features = toy_features(rng, shared, spread_positions(rng, M))
+    check = self_check(features, toy_solve(features), toy_solve)
+    assert check is not None and check.halves_sigmas is not None
+    assert float(np.max(check.halves_sigmas)) > 3.0
+    assert any("even and odd halves differ" in w for w in check.warnings)
+
+
+def test_clustered_poses_warn() -> None:
+    rng = np.random.default_rng(13)
+    centres = np.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.3]])
+    positions = centres[np.arange(30) % 3] + rng.uniform(-0.01, 0.01, (30, 2))
+    assert pose_clusters(np.stack([flange_pose(*p) for p in positions])) == 3
+    features = toy_features(rng, np.zeros(30), positions)
+    check = self_check(features, toy_solve(features), toy_solve)
+    assert check is not None and check.pose_clusters == 3
+    assert any("only 3 clusters" in w for w in check.warnings)
+
+
+def calibrated(
+    preset: str, seed: int, folds: int = DEFAULT_FOLDS, **overrides: Any
+) -> tuple[Any, Any]:
+    data = simulate(scenario_from_preset(preset, **overrides), seed)
+    config = PipelineConfig(seed=seed, self_check_folds=folds)
+    return data, run_pipeline(data.profiles, data.poses, config)
+
+
+def axis_ratios(result: Any, data: Any) -> FloatArray:
+    error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)
+    e = np.concatenate([error.translation_axes_m, error.rotation_axes_rad])
+    sigma = np.concatenate([result.uncertainty_translation_m, result.uncertainty_rotation_rad])
+    return np.asarray(np.abs(e) / sigma)
+
+
+def test_kinematic_robot_error_is_detected_and_its_sigma_honest() -> None:
+    """ur5e_kinematic (nominal kinematics reported, true ones differ): warned, |e|/σ ≤ 3."""
+    data, result = calibrated("ur5e_kinematic", 4)
+    assert result.self_check is not None and result.self_check.systematic
+    assert any("looks systematic" in w for w in result.warnings)
+    assert float(np.max(axis_ratios(result, data))) <= 3.0
+    model = result.self_check.sigma_model
+    widening = np.concatenate([result.uncertainty_translation_m, result.uncertainty_rotation_rad])
+    widening /= np.concatenate([model[3:], model[:3]])
+    assert float(np.max(axis_ratios(result, data) * widening)) > 3.0, "model 1σ was honest"
+
+
+def test_independent_robot_noise_is_not_flagged() -> None:
+    """The paper preset (independent per-pose noise): no warning, the model's 1σ is kept."""
+    _, result = calibrated("paper", 2)
+    check = result.self_check
+    assert check is not None and not check.systematic
+    assert not any("looks systematic" in w for w in result.warnings)
+    np.testing.assert_allclose(result.uncertainty_translation_m, check.sigma_model[3:], rtol=1e-12)
+    assert 5e-5 < check.accuracy_in_use_m < 3e-4
+
+
+def test_robot_less_accurate_than_the_prior_is_named() -> None:
+    """Robot noise 0.5 mm against the default 0.1 mm prior: the warning gives the number."""
+    _, result = calibrated("paper", 1, 0, robot_sigma_translation_m=5e-4, n_poses=30)
+    warning = next(w for w in result.warnings if "times the prior assumed" in w)
+    assert "mm and" in warning and "--robot-sigma-t" in warning
