@@ -49,7 +49,6 @@ from mcap.records import Channel as McapChannel
 from mcap.records import Message as McapMessage
 from mcap.records import Schema as McapSchema
 from mcap.well_known import MessageEncoding, SchemaEncoding
-from mcap.writer import Writer as McapWriter
 from numpy.typing import NDArray
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
@@ -477,6 +476,8 @@ class SessionBagWriter:
                 f"linelaser_calib sample session: the samples are in {SESSION_FILE}\n",
                 encoding="utf-8",
             )
+            from mcap.writer import Writer as McapWriter  # zstandard: only sessions need it
+
             self._stream: BufferedWriter | None = (self.path / SESSION_FILE).open("wb")
             self._writer = McapWriter(self._stream, use_chunking=False)
             self._writer.start(profile="ros2", library="linelaser_calib")
