@@ -835,7 +835,10 @@ def _parse_pose_stamped(raws: Sequence[bytes]) -> _PoseRecords:
         layout &= data_start + 56 == size
         for n in np.unique(length[layout]):
             sub = np.flatnonzero(layout & (length == n))
-            frames, inverse = np.unique(block[sub, 16 : 16 + n], axis=0, return_inverse=True)
+            # Frame ids as single n-byte items: np.unique(axis=0) is ~30x slower.
+            ids = np.ascontiguousarray(block[sub, 16 : 16 + n]).view(np.dtype((np.void, n)))
+            unique_ids, inverse = np.unique(ids[:, 0], return_inverse=True)
+            frames = unique_ids.view(np.uint8).reshape(len(unique_ids), n)
             names: list[str | None] = []
             for frame in frames:
                 try:
