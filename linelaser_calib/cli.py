@@ -41,6 +41,12 @@ from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
+from linelaser_calib.io.kinematics import (
+    SECTION,
+    kinematics_section,
+    load_model,
+    read_kinematics,
+)
 from linelaser_calib.io.results import (
     read_reference_yaml,
     read_result_yaml,
@@ -139,7 +145,6 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.known_point import KnownPoint
     from linelaser_calib.core.targets.line import Line, LineSection
     from linelaser_calib.core.targets.sphere import SphereSection
-    from linelaser_calib.io.kinematics import SECTION, kinematics_section
     from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
     from linelaser_calib.sim.scenario import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
@@ -497,8 +502,6 @@ def _pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel |
         )
     if args.kinematics is None:
         return source, None
-    from linelaser_calib.io.kinematics import load_model  # xml parsing: only with a model
-
     return source, load_model(
         args.kinematics, base_frame=args.base_frame, flange_frame=args.flange_frame
     )
@@ -532,8 +535,6 @@ def _cmd_reconstruct(args: argparse.Namespace) -> int:
             "(PointCloud2 for Foxglove and RViz)"
         )
     _check_output(args.output, "point cloud (--output)")
-    from linelaser_calib.io.kinematics import read_kinematics
-
     try:
         calibration = read_result_yaml(args.calibration)
         corrections = read_kinematics(args.calibration)
