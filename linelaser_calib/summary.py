@@ -135,11 +135,12 @@ def self_check_rows(result: CalibrationResult) -> Rows:
     check = result.self_check
     if check is None:
         return []
+    poses = "recorded poses" if result.kinematics is None else "corrected kinematics"
     rows = [
         (
             "accuracy in use",
             f"{check.accuracy_in_use_m * 1e3:.4f} mm RMS (held-out profiles, {check.folds}-fold "
-            "cross-validation over poses, recorded poses)",
+            f"cross-validation over poses, {poses})",
         ),
         (
             "halves agreement",

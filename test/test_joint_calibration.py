@@ -302,3 +302,25 @@ def test_several_placements_share_the_hand_eye_and_keep_their_cylinders() -> Non
     nominal = model_from_preset("ur5e")
     again = multi.with_flange_poses(forward_kinematics(nominal, np.vstack(qs)))
     np.testing.assert_allclose(again.scans[1].t_bf, problems[1].t_bf)
+
+
+def test_self_check_of_a_joint_calibration_maps_held_out_profiles_through_its_kinematics(
+    tmp_path: Path,
+) -> None:
+    """The committed kinematic-error bag: with the corrections the held-out profiles lie on the
+    cylinder (~20 um) and no systematic robot error is claimed; with nominal kinematics the
+    same recording is flagged and its held-out profiles lie several times farther off."""
+    from linelaser_calib.io.results import read_result_yaml
+
+    bag = Path(__file__).resolve().parent.parent / "bags" / "ur5e_kinematic"
+    checks = {}
+    for name, extra in (("joint", []), ("nominal", ["--nominal-kinematics"])):
+        out = tmp_path / f"{name}.yaml"
+        argv = ["calibrate", str(bag), "--kinematics", "ur5e", *extra, "--output", str(out)]
+        assert main(argv) == 0
+        checks[name] = yaml.safe_load(out.read_text())["quality"]
+        assert read_result_yaml(out).T_flange_sensor.shape == (4, 4)
+    assert checks["joint"]["accuracy_in_use_m"] < 60e-6
+    assert not checks["joint"]["self_check"]["systematic_robot_error"]
+    assert checks["nominal"]["accuracy_in_use_m"] > 2 * checks["joint"]["accuracy_in_use_m"]
+    assert checks["nominal"]["self_check"]["systematic_robot_error"]

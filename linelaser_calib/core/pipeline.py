@@ -19,6 +19,7 @@ Methods
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any
@@ -28,10 +29,11 @@ import numpy as np
 from .errors import DegenerateError, InputError, PairingError
 from .geometry import FloatArray, check_transform
 from .joint_calibration import KinematicSetup
+from .kinematics import forward_kinematics
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .selfcheck import DEFAULT_FOLDS, self_check
 from .targets import DEFAULT_TARGET, get_target
-from .targets.base import Progress, SolveContext, Target
+from .targets.base import Progress, SolveContext, Target, TargetSolution
 from .types import CalibrationResult, FlangePose, Profile, Rejection, Sample
 
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
@@ -202,6 +204,7 @@ def calibrate_samples(
             solution,
             lambda subset: target.solve_default(subset, target_config, quiet),
             config.self_check_folds,
+            None if config.kinematics is None else _corrected_poses(config.kinematics),
         )
         progress("self-check", 1, 1)
     sigma_t, sigma_r = solution.sigma_translation_m, solution.sigma_rotation_rad
@@ -224,6 +227,20 @@ def calibrate_samples(
         kinematics=solution.kinematics,
         identifiability=solution.identifiability,
     )
+
+
+def _corrected_poses(
+    setup: KinematicSetup,
+) -> Callable[[TargetSolution, list[Any]], FloatArray]:
+    """Flange poses of held-out features through a fold's corrected kinematics (its
+    ``kinematics``; nominal where it has none), for the self-check of a joint calibration."""
+
+    def poses(fold: TargetSolution, held: list[Any]) -> FloatArray:
+        model = setup.model if fold.kinematics is None else fold.kinematics.apply(setup.model)
+        q = setup.joint_positions([f.stamp_ns for f in held])
+        return forward_kinematics(model, q)
+
+    return poses
 
 
 def run_pipeline(

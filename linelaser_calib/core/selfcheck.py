@@ -254,6 +254,7 @@ def self_check(
     solution: TargetSolution,
     solve: Callable[[list[Any]], TargetSolution],
     folds: int = DEFAULT_FOLDS,
+    flange_poses: Callable[[TargetSolution, list[Any]], FloatArray] | None = None,
 ) -> SelfCheck | None:
     """Cross-validate a solution over poses, compare disjoint halves, and widen its 1σ when the
     robot's error looks systematic (see the module docstring).
@@ -270,6 +271,11 @@ def self_check(
         The target's default solve of a subset of the features; a subset too small for it
         raises a CalibrationError (the check is then skipped, or the halves left out).
     folds : int
+    flange_poses : callable, optional
+        ``flange_poses(fold, held_out)``: the flange poses (K, 4, 4) a fold's solution gives
+        the held-out features, when the solve also corrects the poses themselves (a joint
+        kinematic calibration: forward kinematics with the fold's corrections). Default:
+        the recorded ``T_base_flange`` of each feature.
 
     Returns
     -------
@@ -292,11 +298,15 @@ def self_check(
         except CalibrationError:
             return None
         estimates.append(hand_eye_difference(solution.T_flange_sensor, fold.T_flange_sensor))
-        for f, g in zip(kept, group, strict=True):
-            if g != k:
-                continue
+        held = [f for f, g in zip(kept, group, strict=True) if g == k]
+        T_held = (
+            np.stack([f.T_base_flange for f in held])
+            if flange_poses is None
+            else flange_poses(fold, held)
+        )
+        for f, T_base_flange in zip(held, T_held, strict=True):
             fit: SampleFit = f.record()
-            d = fold.section.surface_distances(fit, f.T_base_flange @ fold.T_flange_sensor)
+            d = fold.section.surface_distances(fit, T_base_flange @ fold.T_flange_sensor)
             held_rms.append(float(np.sqrt(np.mean(d**2))))
             offsets.append(float(np.mean(d)))
             tilts.append(tilt(fit.points[:, 0], d))
