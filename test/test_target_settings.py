@@ -214,3 +214,19 @@ def test_every_registered_target_has_every_member_of_the_protocol() -> None:
         missing = sorted(m for m in members if not hasattr(target, m))
         assert not missing, f"target {name} lacks {missing}"
         assert target.name == name
+
+
+def test_profiles_taken_in_motion_are_counted_together_with_advice() -> None:
+    """A continuous scan calibrated with the step-and-shoot speed gate: the error says how to
+    calibrate a scan in motion instead of listing each speed apart."""
+    from linelaser_calib.core.targets.base import rejection_digest
+    from linelaser_calib.core.types import Rejection
+
+    rejections = [
+        Rejection(k, k, "pairing", f"robot moving at {30 + k:.1f} mm/s during the profile")
+        for k in range(5)
+    ] + [Rejection(9, 9, "pairing", "robot rotating at 0.71 deg/s during the profile")]
+    digest = rejection_digest(rejections)
+    assert digest.startswith("Rejected: 6 x pairing: robot moving or turning during the profile.")
+    assert "--max-speed 0 --max-angular-speed 0 and --clock-offset auto" in digest
+    assert "--max-speed" not in rejection_digest([Rejection(1, 1, "ellipse", "x")])

@@ -81,6 +81,10 @@ SETTINGS = (
 ConfigT = TypeVar("ConfigT")
 
 
+#: How the pairing begins the reason of a profile taken while the robot moved or turned.
+MOVING_REASONS = ("robot moving", "robot rotating")
+
+
 def _no_progress(stage: str, done: int, total: int) -> None:
     """Default progress callback: silent."""
 
@@ -435,15 +439,31 @@ def extract_each(
 
 
 def rejection_digest(rejections: Sequence[Rejection]) -> str:
-    """'Rejected: 3 x stage: reason; ...' (the four most common), for error messages."""
+    """'Rejected: 3 x stage: reason; ...' (the four most common), for error messages.
+
+    Profiles rejected because the robot moved are counted together, with advice for
+    continuous scans.
+    """
     if not rejections:
         return ""
     counts: dict[str, int] = {}
+    moving = 0
     for r in rejections:
-        key = f"{r.stage}: {r.reason.split(' (')[0].split(':')[0]}"
+        if r.stage == "pairing" and r.reason.startswith(MOVING_REASONS):
+            moving += 1
+            key = f"{r.stage}: robot moving or turning during the profile"
+        else:
+            key = f"{r.stage}: {r.reason.split(' (')[0].split(':')[0]}"
         counts[key] = counts.get(key, 0) + 1
     top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
-    return "Rejected: " + "; ".join(f"{n} x {k}" for k, n in top) + ". "
+    digest = "Rejected: " + "; ".join(f"{n} x {k}" for k, n in top) + ". "
+    if moving:
+        digest += (
+            f"{moving} profiles were taken while the flange moved faster than the speed gate: "
+            "for a scan in motion give --max-speed 0 --max-angular-speed 0 and --clock-offset "
+            "auto (live: the collector's continuous mode). "
+        )
+    return digest
 
 
 def plain_floats(values: Any) -> list[float]:
