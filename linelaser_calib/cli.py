@@ -255,7 +255,7 @@ def simulate_to_bag(
 
 
 #: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
-SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
+SIMULATE_OPTIONS: tuple[tuple[str, str, Callable[[str], object]], ...] = (
     ("--poses", "n_poses", int),
     ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
     ("--points", "resolution", int),
@@ -264,6 +264,8 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--robot-sigma-r", "robot_sigma_rotation_rad", float),
     ("--spikes", "spike_fraction", float),
     ("--arm-seed", "kinematic_seed", int),  # the same arm's kinematic errors in other runs
+    ("--cylinder-base", "cylinder_base_m", _xyz),  # another placement of the cylinder, m
+    ("--axis", "axis_direction", _xyz),
     ("--profile-topic", "profile_topic", str),
     ("--pose-topic", "pose_topic", str),
     ("--sensor-frame", "sensor_frame", str),
@@ -281,6 +283,8 @@ def simulate_command(
     for field, value in overrides.items():
         if field == "organised":
             words.append("--organised" if value else "--dense")
+        elif isinstance(value, tuple):
+            words += [flags[field], ",".join(f"{v:g}" for v in value)]
         else:
             words += [flags[field], str(value)]
     if tf:
@@ -466,6 +470,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             kinematic_calibration=(
                 None if model is None or args.nominal_kinematics else JointCalibrationConfig()
             ),
+            placements=args.placements,
         )
     except PairingError as exc:
         raise PairingError(
@@ -490,6 +495,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print(json.dumps(result_to_dict(run.result), indent=2))
     else:
         print(_input_line(run))
+        if args.placements:
+            print(
+                f"  calibrated together with {len(args.placements)} more recordings "
+                f"({', '.join(args.placements)}): one hand-eye and one set of kinematic "
+                "corrections; the target, residuals and self-check below are the first "
+                "recording's"
+            )
         print(format_summary(run.result, truth))
         for path in written:
             print(f"Wrote {path}")
@@ -1111,6 +1123,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     cal = sub.add_parser("calibrate", help="calibrate the hand-eye from a bag")
     cal.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
+    cal.add_argument(
+        "placements",
+        nargs="*",
+        metavar="BAG",
+        help="with --kinematics: recordings of other placements of the target by the same arm "
+        "and sensor, calibrated together with the first (one hand-eye, one set of kinematic "
+        "corrections)",
+    )
     cal.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
     cal.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
     cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)

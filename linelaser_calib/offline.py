@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from linelaser_calib.core.errors import DegenerateError, InputError
+from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
 from linelaser_calib.core.joint_calibration import JointCalibrationConfig, KinematicSetup
 from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
@@ -50,6 +51,7 @@ def calibrate_bag(
     joint_state_topic: str | None = None,
     model: KinematicModel | None = None,
     kinematic_calibration: JointCalibrationConfig | None = None,
+    placements: Sequence[str | Path] = (),
 ) -> OfflineRun:
     """Calibrate from a bag holding profiles (PointCloud2) and flange poses (any source).
 
@@ -82,6 +84,12 @@ def calibrate_bag(
         With the ``joint_states`` source: estimate the identifiable kinematic corrections
         together with the hand-eye (the result's ``kinematics``); None keeps the model
         nominal.
+    placements : sequence of str or Path
+        Further recordings of the same arm and sensor, each of another placement of the
+        target, read and paired like ``path``, for a joint calibration from all of them
+        (``model`` and ``kinematic_calibration`` given): one hand-eye and one set of
+        kinematic corrections. The result's target section and statistics are those of
+        ``path``.
 
     Raises
     ------
@@ -89,42 +97,29 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
-    refuse_pose_topic(pose_source, pose_topic)
-    bag = read_bag(
-        path,
-        profile_topic=profile_topic,
-        pose_topic=pose_topic,
-        progress=lambda done, total: progress("reading", done, total),
-        read_poses=pose_source is PoseSource.POSE,
-        invalid_values_m=invalid_values_m,
-    )
-    flange_poses = POSE_SOURCES[pose_source](
-        bag,
-        PoseRequest(
-            base_frame, flange_frame, config.pairing.sync_tolerance_s, model, joint_state_topic
-        ),
-    )
-    if all(len(p.points) == 0 for p in bag.profiles):
+    if placements and (model is None or kinematic_calibration is None):
         raise InputError(
-            f"all {len(bag.profiles)} profiles on {bag.profile_topic} in {bag.path} are empty "
-            "(no valid point, every return NaN/Inf): the sensor saw nothing. Check that the "
-            "cylinder is within the sensor's measuring range and the laser is on, then record "
-            "again"
+            f"{len(placements) + 1} recordings are calibrated together only by the joint "
+            "kinematic calibration (--kinematics MODEL, without --nominal-kinematics): give "
+            "one recording, or the robot model"
         )
+    request = PoseRequest(
+        base_frame, flange_frame, config.pairing.sync_tolerance_s, model, joint_state_topic
+    )
+    reading = _Reading(profile_topic, pose_topic, pose_source, invalid_values_m, request)
+    bag, flange_poses = reading.read(path, progress)
     if estimate_offset:
         progress("clock offset", 0, 1)
         offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config)
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
         progress("clock offset", 1, 1)
+    others = []
     if kinematic_calibration is not None and model is not None:
-        states = flange_poses.joint_states
-        if states is None:
-            raise InputError(
-                "the kinematic calibration needs the joint states: use --pose-source joint_states"
-            )
-        setup = KinematicSetup(model, states, config.pairing.clock_offset_s, kinematic_calibration)
+        setup = _setup(flange_poses, model, config, kinematic_calibration)
         config = replace(config, kinematics=setup)
-    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress)
+        for more in placements:
+            others.append(reading.placement(more, bag, config, kinematic_calibration))
+    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others)
     result.clock_offset_estimated = estimate_offset
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame
@@ -136,6 +131,76 @@ def calibrate_bag(
             f"{len(bag.skipped)} malformed messages were skipped: {'; '.join(reasons[:3])}"
         )
     return OfflineRun(result, bag, flange_poses)
+
+
+def _setup(
+    flange_poses: FlangePoses,
+    model: KinematicModel,
+    config: PipelineConfig,
+    kinematic_calibration: JointCalibrationConfig,
+) -> KinematicSetup:
+    """The joint calibration's model and joint states of one recording."""
+    states = flange_poses.joint_states
+    if states is None:
+        raise InputError(
+            "the kinematic calibration needs the joint states: use --pose-source joint_states"
+        )
+    return KinematicSetup(model, states, config.pairing.clock_offset_s, kinematic_calibration)
+
+
+@dataclass(frozen=True)
+class _Reading:
+    """How the recordings of one calibration are read (the same for each)."""
+
+    profile_topic: str | None
+    pose_topic: str | None
+    pose_source: PoseSource
+    invalid_values_m: tuple[float, ...]
+    request: PoseRequest
+
+    def read(self, path: str | Path, progress: Progress) -> tuple[BagContents, FlangePoses]:
+        """The bag's profiles and flange poses; refuses a bag without a valid point."""
+        refuse_pose_topic(self.pose_source, self.pose_topic)
+        bag = read_bag(
+            path,
+            profile_topic=self.profile_topic,
+            pose_topic=self.pose_topic,
+            progress=lambda done, total: progress("reading", done, total),
+            read_poses=self.pose_source is PoseSource.POSE,
+            invalid_values_m=self.invalid_values_m,
+        )
+        flange_poses = POSE_SOURCES[self.pose_source](bag, self.request)
+        if all(len(p.points) == 0 for p in bag.profiles):
+            raise InputError(
+                f"all {len(bag.profiles)} profiles on {bag.profile_topic} in {bag.path} are "
+                "empty (no valid point, every return NaN/Inf): the sensor saw nothing. Check "
+                "that the cylinder is within the sensor's measuring range and the laser is on, "
+                "then record again"
+            )
+        return bag, flange_poses
+
+    def placement(
+        self,
+        path: str | Path,
+        first: BagContents,
+        config: PipelineConfig,
+        kinematic_calibration: JointCalibrationConfig,
+    ) -> tuple[list[Sample], KinematicSetup]:
+        """Another placement's paired samples and joint states, checked against the first
+        recording (same sensor frame and robot model)."""
+        bag, flange_poses = self.read(path, _silent)
+        if bag.sensor_frame != first.sensor_frame:
+            raise InputError(
+                f"{bag.path} holds profiles of the sensor frame {bag.sensor_frame!r} and "
+                f"{first.path} of {first.sensor_frame!r}: recordings calibrated together must "
+                "come from the same sensor on the same arm"
+            )
+        assert self.request.model is not None
+        setup = _setup(flange_poses, self.request.model, config, kinematic_calibration)
+        paired = pair_profiles(bag.profiles, flange_poses.poses, config.pairing)
+        if not paired.samples:
+            raise PairingError(f"{bag.path}: " + paired.explain_nothing_paired(config.pairing))
+        return paired.samples, setup
 
 
 def bag_samples(
