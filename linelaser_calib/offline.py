@@ -6,13 +6,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+import numpy as np
+
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
+from linelaser_calib.core.identifiability import CylinderScan
 from linelaser_calib.core.joint_calibration import JointCalibrationConfig, KinematicSetup
-from linelaser_calib.core.kinematics import KinematicModel
+from linelaser_calib.core.kinematics import KinematicModel, forward_kinematics
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
+from linelaser_calib.core.placement_advice import placement_advice, thinned
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets.base import Progress
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.types import CalibrationResult, Sample
 from linelaser_calib.io.bags import BagContents, read_bag
 from linelaser_calib.io.pose_sources import (
@@ -125,12 +130,42 @@ def calibrate_bag(
     result.child_frame = bag.sensor_frame
     result.base_frame = flange_poses.base_frame
     result.warnings.extend(flange_poses.warnings)
+    if config.kinematics is not None and result.kinematics is not None and not placements:
+        advice = _placement_advice(bag, result, config.kinematics)
+        if advice is not None:
+            result.warnings.append(advice)
     if bag.skipped:
         reasons = sorted({s.reason for s in bag.skipped})
         result.warnings.append(
             f"{len(bag.skipped)} malformed messages were skipped: {'; '.join(reasons[:3])}"
         )
     return OfflineRun(result, bag, flange_poses)
+
+
+def _placement_advice(
+    bag: BagContents, result: CalibrationResult, setup: KinematicSetup
+) -> str | None:
+    """Whether another placement of the cylinder would determine more of the kinematics
+    (:func:`~linelaser_calib.core.placement_advice.placement_advice`, on the first
+    recording's used profiles, 30 points each near the fitted surface); None for other
+    targets."""
+    section = result.target
+    if not isinstance(section, CylinderSection):
+        return None
+    model = setup.model if result.kinematics is None else result.kinematics.apply(setup.model)
+    used = [bag.profiles[i] for i in result.samples_used]
+    q = setup.joint_positions([p.stamp_ns for p in used])
+    T = forward_kinematics(model, q) @ result.T_flange_sensor
+    cylinder = section.cylinder
+    points = []
+    for profile, T_bs in zip(used, T, strict=True):
+        x = profile.points[np.all(np.isfinite(profile.points), axis=1)]
+        v = x @ T_bs[:3, :3].T + T_bs[:3, 3] - cylinder.point
+        radial = v - np.outer(v @ cylinder.direction, cylinder.direction)
+        near = np.abs(np.linalg.norm(radial, axis=1) - cylinder.radius) < 5e-4
+        points.append(x[near])
+    scan = thinned(CylinderScan(q, points, cylinder), 30)
+    return placement_advice(model, [scan], result.T_flange_sensor, setup.config).text()
 
 
 def _setup(

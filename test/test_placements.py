@@ -9,8 +9,11 @@ import yaml
 from test_joint_calibration import ARM_SEED, held_out_rms_m, recording
 
 from linelaser_calib.cli import main
+from linelaser_calib.core.identifiability import CylinderScan
+from linelaser_calib.core.placement_advice import placement_advice, thinned
 from linelaser_calib.io.kinematics import read_kinematics
 from linelaser_calib.io.results import read_result_yaml
+from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate
 
 #: The second placement: moved by about 0.5 m and tilted by 27 degrees.
 MOVED = ["--cylinder-base", "0.3,-0.35,0", "--axis", "0,0.5,1"]
@@ -72,3 +75,50 @@ def test_several_recordings_are_refused_where_no_joint_calibration_runs(
     err = capsys.readouterr().err
     assert expected in err and "Traceback" not in err
     assert not out.exists()
+
+
+def cylinder_scan(data: SimulatedData) -> CylinderScan:
+    """The recording's true cylinder points (30 per profile) with its joint vectors."""
+    truth = data.truth
+    assert truth.joint_positions is not None
+    points = [
+        p[s == Surface.SIDE] for p, s in zip(truth.points_true_sensor, truth.surface, strict=True)
+    ]
+    return thinned(CylinderScan(truth.joint_positions, points, truth.cylinder), 30)
+
+
+def test_advice_asks_for_a_second_placement_that_a_real_one_confirms() -> None:
+    """Six poses of one placement leave combinations free that another placement determines:
+    the advice says so, and a real second recording of the same arm confirms it."""
+    one = recording(31, 6, (0.45, 0.15, 0.0))
+    assert one.truth.arm is not None
+    model, T = one.truth.arm.nominal, one.truth.T_flange_sensor
+    advice = placement_advice(model, [cylinder_scan(one)], T)
+    assert advice.best is not None and advice.best.added > 0
+    assert advice.needed >= 2 and advice.identifiable < 16
+    assert "placements are needed" in advice.text() and "record again" in advice.text()
+    moved = simulate(
+        scenario_from_preset(
+            "ur5e_kinematic",
+            n_poses=6,
+            kinematic_seed=ARM_SEED,
+            cylinder_base_m=(0.3, -0.35, 0.0),
+            axis_direction=(0.0, 0.5, 1.0),
+        ),
+        32,
+    )
+    both = placement_advice(model, [cylinder_scan(one), cylinder_scan(moved)], T)
+    assert both.identifiable > advice.identifiable
+
+
+def test_advice_on_a_full_recording_says_no_placement_adds_a_parameter() -> None:
+    """50 poses determine 16 of 24: the rest is the base's placement, the last link and the
+    parallel axes, which no cylinder placement fixes."""
+    data = recording(33, 50, (0.45, 0.15, 0.0))
+    assert data.truth.arm is not None
+    advice = placement_advice(
+        data.truth.arm.nominal, [cylinder_scan(data)], data.truth.T_flange_sensor
+    )
+    assert advice.identifiable == 16 and advice.needed == 1
+    assert advice.best is not None and advice.best.added == 0 and advice.best.gain > 1.4
+    assert "known_point" in advice.text()
