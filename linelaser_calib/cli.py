@@ -37,8 +37,8 @@ from linelaser_calib.core.planning import (
 )
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
-from linelaser_calib.core.targets.base import configure
-from linelaser_calib.core.types import CalibrationResult
+from linelaser_calib.core.targets.base import ResultSection, configure
+from linelaser_calib.core.types import CalibrationResult, Cylinder, Sample
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
@@ -57,7 +57,7 @@ from linelaser_calib.io.results import (
     write_result_yaml,
     write_truth_yaml,
 )
-from linelaser_calib.offline import OfflineRun, bag_samples, calibrate_bag
+from linelaser_calib.offline import OfflineRun, advise_placements, bag_samples, calibrate_bag
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
@@ -141,7 +141,6 @@ def simulate_to_bag(
     (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
     Returns the bag directory and the truth file.
     """
-    from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
     from linelaser_calib.core.targets.line import Line, LineSection
@@ -761,6 +760,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             np.inf if args.goal_mm is None else args.goal_mm * 1e-3,
             np.inf if args.goal_deg is None else float(np.deg2rad(args.goal_deg)),
         )
+    advice = (
+        None
+        if args.kinematics is None
+        else _placement_advice(args, samples, T_flange_sensor, section, numbers)
+    )
     started = time.monotonic()
     plan = plan_for_target(
         target,
@@ -777,6 +781,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     )
     elapsed = time.monotonic() - started
     print(format_plan(plan, elapsed))
+    if advice:
+        print("Placements: " + advice)
     if args.output is not None:
         print(f"Wrote {write_plan_yaml(plan, args.output)}")
     if args.figure is not None:
@@ -785,6 +791,42 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         sigma_curve_figure(predicted_curve(plan), achieved).savefig(args.figure, dpi=DPI)
         print(f"Wrote {args.figure}")
     return 0
+
+
+def _placement_advice(
+    args: argparse.Namespace,
+    samples: list[Sample],
+    T_flange_sensor: np.ndarray,
+    section: ResultSection | None,
+    numbers: list[float] | None,
+) -> str:
+    """``plan --kinematics``: whether another placement of the cylinder would determine more
+    of the robot's kinematics, from the bag's scans and joint states."""
+    from linelaser_calib.core.targets.cylinder import CylinderSection
+    from linelaser_calib.io.bags import read_joint_states
+
+    if args.bag is None or args.target != "cylinder":
+        raise InputError(
+            "plan --kinematics judges the placements of a cylinder from the scans so far: give "
+            "the bag (with /joint_states) and --target cylinder"
+        )
+    if isinstance(section, CylinderSection):
+        cylinder = section.cylinder
+    elif numbers is not None and args.radius is not None:
+        direction = np.array(numbers[3:6]) / np.linalg.norm(numbers[3:6])
+        cylinder = Cylinder(np.array(numbers[:3]), direction, args.radius)
+    else:
+        raise InputError(
+            "plan --kinematics needs the cylinder's placement: give --from RESULT.yaml (e.g. "
+            "of calibrate --kinematics) or --cylinder with --radius"
+        )
+    model = load_model(args.kinematics)
+    if args.from_result is not None:
+        corrections = read_kinematics(args.from_result)
+        if corrections is not None:
+            model = corrections.apply(model)
+    states = read_joint_states(args.bag)
+    return advise_placements(samples, states, model, T_flange_sensor, cylinder)
 
 
 def format_plan(plan: Plan, elapsed_s: float) -> str:
@@ -1207,6 +1249,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=_span,
         help="LO,HI: the span of the shaft to scan, m along the axis (upwards) from its point "
         "nearest the base origin (default: the span the scans cover)",
+    )
+    plan.add_argument(
+        "--kinematics",
+        metavar="MODEL",
+        help="ur5e, ur10e or a URDF: also say whether another placement of the cylinder would "
+        "determine more of the robot's kinematics (from the bag's scans and /joint_states)",
     )
     plan.add_argument("--n", type=int, default=10, help="poses to plan (default 10)")
     plan.add_argument("--goal-mm", type=_positive_float, help="stop at this 1 sigma, mm")

@@ -11,14 +11,14 @@ import numpy as np
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
 from linelaser_calib.core.identifiability import CylinderScan
 from linelaser_calib.core.joint_calibration import JointCalibrationConfig, KinematicSetup
-from linelaser_calib.core.kinematics import KinematicModel, forward_kinematics
+from linelaser_calib.core.kinematics import JointStates, KinematicModel, forward_kinematics
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
 from linelaser_calib.core.placement_advice import placement_advice, thinned
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets.base import Progress
 from linelaser_calib.core.targets.cylinder import CylinderSection
-from linelaser_calib.core.types import CalibrationResult, Sample
+from linelaser_calib.core.types import CalibrationResult, Cylinder, FloatArray, Profile, Sample
 from linelaser_calib.io.bags import BagContents, read_bag
 from linelaser_calib.io.pose_sources import (
     POSE_SOURCES,
@@ -130,10 +130,24 @@ def calibrate_bag(
     result.child_frame = bag.sensor_frame
     result.base_frame = flange_poses.base_frame
     result.warnings.extend(flange_poses.warnings)
-    if config.kinematics is not None and result.kinematics is not None and not placements:
-        advice = _placement_advice(bag, result, config.kinematics)
-        if advice is not None:
-            result.warnings.append(advice)
+    joint = config.kinematics
+    section, corrections = result.target, result.kinematics
+    if (
+        joint is not None
+        and corrections is not None
+        and isinstance(section, CylinderSection)
+        and not placements
+    ):
+        result.warnings.append(
+            advise_placements(
+                [bag.profiles[i] for i in result.samples_used],
+                joint.states,
+                corrections.apply(joint.model),
+                result.T_flange_sensor,
+                section.cylinder,
+                joint.clock_offset_s,
+            )
+        )
     if bag.skipped:
         reasons = sorted({s.reason for s in bag.skipped})
         result.warnings.append(
@@ -142,30 +156,48 @@ def calibrate_bag(
     return OfflineRun(result, bag, flange_poses)
 
 
-def _placement_advice(
-    bag: BagContents, result: CalibrationResult, setup: KinematicSetup
-) -> str | None:
-    """Whether another placement of the cylinder would determine more of the kinematics
-    (:func:`~linelaser_calib.core.placement_advice.placement_advice`, on the first
-    recording's used profiles, 30 points each near the fitted surface); None for other
-    targets."""
-    section = result.target
-    if not isinstance(section, CylinderSection):
-        return None
-    model = setup.model if result.kinematics is None else result.kinematics.apply(setup.model)
-    used = [bag.profiles[i] for i in result.samples_used]
-    q = setup.joint_positions([p.stamp_ns for p in used])
-    T = forward_kinematics(model, q) @ result.T_flange_sensor
-    cylinder = section.cylinder
+def advise_placements(
+    profiles: Sequence[Profile | Sample],
+    states: JointStates,
+    model: KinematicModel,
+    T_flange_sensor: FloatArray,
+    cylinder: Cylinder,
+    clock_offset_s: float = 0.0,
+) -> str:
+    """Whether another placement of the cylinder would determine more of the robot's
+    kinematics, in words (:func:`~linelaser_calib.core.placement_advice.placement_advice` on
+    up to 30 points of each profile within 0.5 mm of the cylinder).
+
+    Parameters
+    ----------
+    profiles : sequence of Profile or Sample
+        The scans of one placement (stamps, sensor-frame points in m).
+    states : JointStates
+        The recording's joint states.
+    model : KinematicModel
+        The robot model (corrected where a joint calibration gave corrections).
+    T_flange_sensor : ndarray, shape (4, 4)
+    cylinder : Cylinder
+        In the base frame, m.
+    clock_offset_s : float
+        Added to the profile stamps to pair them with the joint states, s.
+
+    Raises
+    ------
+    InputError
+        A model joint the states do not name, or a profile outside the joint-state stream.
+    """
+    setup = KinematicSetup(model, states, clock_offset_s)
+    q = setup.joint_positions([p.stamp_ns for p in profiles])
+    T = forward_kinematics(model, q) @ T_flange_sensor
     points = []
-    for profile, T_bs in zip(used, T, strict=True):
+    for profile, T_bs in zip(profiles, T, strict=True):
         x = profile.points[np.all(np.isfinite(profile.points), axis=1)]
         v = x @ T_bs[:3, :3].T + T_bs[:3, 3] - cylinder.point
         radial = v - np.outer(v @ cylinder.direction, cylinder.direction)
-        near = np.abs(np.linalg.norm(radial, axis=1) - cylinder.radius) < 5e-4
-        points.append(x[near])
+        points.append(x[np.abs(np.linalg.norm(radial, axis=1) - cylinder.radius) < 5e-4])
     scan = thinned(CylinderScan(q, points, cylinder), 30)
-    return placement_advice(model, [scan], result.T_flange_sensor, setup.config).text()
+    return placement_advice(model, [scan], T_flange_sensor, setup.config).text()
 
 
 def _setup(

@@ -122,3 +122,26 @@ def test_advice_on_a_full_recording_says_no_placement_adds_a_parameter() -> None
     assert advice.identifiable == 16 and advice.needed == 1
     assert advice.best is not None and advice.best.added == 0 and advice.best.gain > 1.4
     assert "known_point" in advice.text()
+
+
+def test_plan_with_kinematics_says_how_many_placements_are_needed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Six poses: the plan asks for a second placement; the calibration's summary too."""
+    bag = tmp_path / "few"
+    common = ["--scenario", "ur5e_kinematic", "--poses", "6", "--arm-seed", str(ARM_SEED)]
+    assert main(["simulate", str(bag), *common, "--seed", "31"]) == 0
+    out = tmp_path / "few.yaml"
+    argv = ["calibrate", str(bag), "--kinematics", "ur5e", "--min-samples", "6"]
+    assert main([*argv, "--output", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "placements are needed" in printed
+    argv = ["plan", str(bag), "--from", str(out), "--kinematics", "ur5e", "--n", "2"]
+    assert main([*argv, "--axial-range", "0.02,0.1"]) == 0
+    (line,) = [x for x in capsys.readouterr().out.splitlines() if x.startswith("Placements: ")]
+    assert "2 placements are needed" in line and "record again" in line
+    assert (
+        main(["plan", str(bag), "--from", str(out), "--kinematics", "ur5e", "--target", "sphere"])
+        == 1
+    )
+    assert "--target cylinder" in capsys.readouterr().err

@@ -90,6 +90,10 @@ def test_kinematics_parameter_runs_the_joint_calibration_of_the_session(
     assert np.degrees(rotation) < 0.1 and translation < 1e-3
     published = service.probe.hand_eye()
     assert max(transform_error(published, written.T_flange_sensor)) < 1e-6
+    # ~/plan then also says whether another placement of the cylinder determines more.
+    planned = service.probe.call("/calibration_service/plan")
+    assert planned.success, planned.message
+    assert "placements: 1 placement of the cylinder determines 16 of 24" in planned.message
 
 
 @pytest.mark.ros

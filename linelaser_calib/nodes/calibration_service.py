@@ -29,6 +29,8 @@
   the collector's session bag, whose samples carry the joint vectors the collector stored
   (pose_source joint_states). The answer says how many kinematic corrections were estimated;
   the result YAML has its ``kinematics`` section. A session without joint states is refused.
+  ``~/plan`` then also says whether another placement of the cylinder would determine more
+  of the kinematics, and how to move it (:func:`session_placement_advice`).
 - ``~/plan`` (std_srvs/Trigger) plans the next ``plan_poses`` flange poses that most reduce
   the hand-eye's predicted uncertainty (:func:`~linelaser_calib.core.planning.plan_for_target`),
   from the last calibration (or, before one, from ``initial_hand_eye_path`` with the samples
@@ -62,14 +64,16 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.joint_calibration import JointCalibrationConfig
+from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
 from linelaser_calib.core.planning import Plan, PlanConstraints, fan_shape, plan_for_target
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io import write_result_yaml
-from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info
+from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info, read_joint_states
 from linelaser_calib.io.initial import read_initial_hand_eye
 from linelaser_calib.nodes.collection import DRIFT_FLOOR_S
 from linelaser_calib.nodes.common import (
@@ -88,7 +92,7 @@ from linelaser_calib.nodes.common import (
 )
 from linelaser_calib.nodes.joint_state_input import live_kinematic_model
 from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
-from linelaser_calib.offline import calibrate_bag
+from linelaser_calib.offline import advise_placements, bag_samples, calibrate_bag
 from linelaser_calib.summary import one_line_summary, self_check_rows
 from msg_adapters import (
     MessageError,
@@ -333,6 +337,29 @@ def calibrate_session(
         kinematic_calibration=JointCalibrationConfig(),
     )
     return run.result
+
+
+def session_placement_advice(
+    session: str | None, values: dict[str, Any], result: CalibrationResult | None
+) -> str:
+    """``~/plan`` with ``kinematics`` set: whether another placement of the cylinder would
+    determine more of the robot's kinematics, from the session's samples and joint states
+    and the last calibration (its cylinder and corrections); a clause saying what is
+    missing otherwise."""
+    if result is None or not isinstance(result.target, CylinderSection):
+        return "placements: calibrate the cylinder first to learn how many are needed"
+    if session is None or not any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(session).topics):
+        return "placements: the session holds no joint states (collector pose_source joint_states)"
+    model = live_kinematic_model(
+        str(values["kinematics"]), values["base_frame"], values["flange_frame"]
+    )
+    if result.kinematics is not None:
+        model = result.kinematics.apply(model)
+    samples = bag_samples(session, PairingConfig())
+    states = read_joint_states(session)
+    return "placements: " + advise_placements(
+        samples, states, model, result.T_flange_sensor, result.target.cylinder
+    )
 
 
 def kinematics_summary(result: CalibrationResult) -> str:
@@ -676,11 +703,17 @@ class CalibrationServiceNode(Node):
             marker_array([Marker(action=Marker.DELETEALL), *fans], types=self._types)
         )
         last = plan.poses[-1]
+        advice = ""
+        if p["kinematics"]:
+            try:
+                advice = "; " + session_placement_advice(self._store.session, p, result)
+            except CalibrationError as err:
+                advice = f"; placements: not judged ({err})"
         return True, (
             f"planned {len(plan.poses)} flange poses on {self._planned_pub.topic_name}; "
             f"predicted 1 sigma after them: translation "
             f"{np.array2string(last.sigma_translation_m * 1e3, precision=4)} mm, rotation "
-            f"{np.array2string(np.rad2deg(last.sigma_rotation_rad), precision=4)} deg"
+            f"{np.array2string(np.rad2deg(last.sigma_rotation_rad), precision=4)} deg" + advice
         )
 
     def _publish(self, result: CalibrationResult) -> None:
