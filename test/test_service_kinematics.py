@@ -12,6 +12,7 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 from ros_helpers import wait_for
 from std_msgs.msg import String
+from std_srvs.srv import Trigger
 from test_joint_calibration import ARM_SEED
 from test_nodes_unit import ServiceUnderTest, ros_context  # noqa: F401 - a fixture
 
@@ -61,22 +62,24 @@ def service(
         under_test.close()
 
 
-def announce(service: ServiceUnderTest, session: Path) -> None:
-    """Publish the session as the collector does, then wait until the service holds it."""
+def calibrate_session(
+    service: ServiceUnderTest, data: SimulatedData, session: Path, joints: bool
+) -> Trigger.Response:
+    """Write the session, publish it as the collector does (its path, then its samples) and
+    call calibrate."""
+    samples = write_session(session, data, joints)
     publisher = service.probe.node.create_publisher(String, SESSION_TOPIC, latched_qos(1))
     publisher.publish(String(data=str(session)))
     wait_for(lambda: service.node._store.session == str(session), 20.0, "the session")
+    service.send(samples)
+    return service.probe.call("calibrate")
 
 
 @pytest.mark.ros
 def test_kinematics_parameter_runs_the_joint_calibration_of_the_session(
     service: ServiceUnderTest, arm_scan: SimulatedData, tmp_path: Path
 ) -> None:
-    session = tmp_path / "session"
-    samples = write_session(session, arm_scan, joints=True)
-    announce(service, session)
-    service.send(samples)
-    answer = service.probe.call("calibrate")
+    answer = calibrate_session(service, arm_scan, tmp_path / "session", joints=True)
     assert answer.success, answer.message
     assert "kinematic corrections of the ur5e model: 16 estimated, 8 kept nominal" in (
         answer.message
@@ -100,11 +103,7 @@ def test_kinematics_parameter_runs_the_joint_calibration_of_the_session(
 def test_kinematics_parameter_refuses_a_session_without_joint_states(
     service: ServiceUnderTest, arm_scan: SimulatedData, tmp_path: Path
 ) -> None:
-    session = tmp_path / "session"
-    samples = write_session(session, arm_scan, joints=False)
-    announce(service, session)
-    service.send(samples)
-    answer = service.probe.call("calibrate")
+    answer = calibrate_session(service, arm_scan, tmp_path / "session", joints=False)
     assert not answer.success
     assert "holds no joint states" in answer.message
     assert "pose_source joint_states" in answer.message

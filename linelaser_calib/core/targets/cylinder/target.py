@@ -34,7 +34,7 @@ from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
 from ...joint_calibration import KinematicSetup
 from ...pso_alm import PaperSolution, solve_pso_galm
-from ...types import Rejection, Sample
+from ...types import Cylinder, Rejection, Sample
 from ..base import (
     Option,
     Placement,
@@ -208,14 +208,7 @@ class CylinderTarget:
             else np.asarray(context.initial_T_flange_sensor, dtype=np.float64)
         )
         context.progress("refine", 0, 1)
-        refined = refine_with_outlier_rejection(
-            [f.inlier_points for f in features],
-            np.stack([f.T_base_flange for f in features]),
-            T_init,
-            replace(seed.cylinder, radius=radius),
-            config.refine,
-            radius_m=config.radius_m,
-        )
+        refined = self._refined(features, T_init, replace(seed.cylinder, radius=radius), config)
         context.progress("refine", 1, 1)
         outcome = None
         if context.kinematics is not None:
@@ -282,15 +275,26 @@ class CylinderTarget:
         features = placement.features
         radius = self._checked(features, config, replace(context, n_samples=len(features)))
         seed = self._seed(features, config, context, paper=False)
-        refined = refine_with_outlier_rejection(
+        start = replace(seed.cylinder, radius=radius)
+        refined = self._refined(features, T_flange_sensor, start, config)
+        return self._joint_scan(features, refined, placement.kinematics)
+
+    @staticmethod
+    def _refined(
+        features: list[FittedSample],
+        T_flange_sensor: FloatArray,
+        cylinder: Cylinder,
+        config: CylinderConfig,
+    ) -> RefineResult:
+        """The refinement with outlier samples dropped, at the features' flange poses."""
+        return refine_with_outlier_rejection(
             [f.inlier_points for f in features],
             np.stack([f.T_base_flange for f in features]),
             T_flange_sensor,
-            replace(seed.cylinder, radius=radius),
+            cylinder,
             config.refine,
             radius_m=config.radius_m,
         )
-        return self._joint_scan(features, refined, placement.kinematics)
 
     def check_fit(self, solution: TargetSolution, config: CylinderConfig) -> None:
         """Refuse a solution whose residual or ellipses a cylinder cannot explain."""
