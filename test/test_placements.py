@@ -145,3 +145,18 @@ def test_plan_with_kinematics_says_how_many_placements_are_needed(
         == 1
     )
     assert "--target cylinder" in capsys.readouterr().err
+
+
+def test_recordings_of_another_sensor_are_refused(
+    placements: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    upright, _ = placements
+    other = tmp_path / "other_sensor"
+    common = ["--scenario", "ur5e_kinematic", "--poses", "6", "--arm-seed", str(ARM_SEED)]
+    assert main(["simulate", str(other), *common, "--sensor-frame", "scanner", *MOVED]) == 0
+    out = tmp_path / "refused.yaml"
+    argv = ["calibrate", str(upright), str(other), "--kinematics", "ur5e", "--output", str(out)]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "sensor frame 'scanner'" in err and "same sensor on the same arm" in err
+    assert not out.exists()

@@ -169,7 +169,8 @@ PARAMETERS = (
         "",
         "pose_source joint_states: the robot's kinematic model, a preset (ur5e, ur10e), a "
         "URDF file, or URDF text such as the value of robot_description (its chain "
-        "base_frame -> flange_frame).",
+        "base_frame -> flange_frame). Each sample's joint vector is stored in the session, "
+        "for calibration_service's joint kinematic calibration (its kinematics parameter).",
         read_only=True,
     ),
     ParamSpec(
