@@ -11,7 +11,9 @@ Methods
     covariance and observability diagnostics (:mod:`.refine`). With joint states and a
     robot model (``SolveContext.kinematics``) it then estimates the identifiable kinematic
     corrections together with the hand-eye and the cylinder
-    (:func:`.refine.refine_kinematics`).
+    (:func:`.refine.refine_kinematics`), from the other placements of the cylinder in
+    ``SolveContext.placements`` too (each refined on its own first, from the paper's solve on
+    its ellipse centres).
 
 Model fit
 ---------
