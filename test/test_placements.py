@@ -112,9 +112,9 @@ def test_advice_asks_for_a_second_placement_that_a_real_one_confirms() -> None:
 
 
 def test_advice_on_a_full_recording_says_no_placement_adds_a_parameter() -> None:
-    """50 poses determine 16 of 24: the rest is the base's placement, the last link and the
+    """30 poses determine 16 of 24: the rest is the base's placement, the last link and the
     parallel axes, which no cylinder placement fixes."""
-    data = recording(33, 50, (0.45, 0.15, 0.0))
+    data = recording(33, 30, (0.45, 0.15, 0.0))
     assert data.truth.arm is not None
     advice = placement_advice(
         data.truth.arm.nominal, [cylinder_scan(data)], data.truth.T_flange_sensor
