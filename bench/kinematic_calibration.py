@@ -11,9 +11,9 @@ points are then mapped into the base frame with each calibration from its joint 
 
 With ``--placements 2`` or ``3`` the arm also scans the cylinder at other placements
 (moved and tilted, :data:`PLACEMENTS`), 50 poses each, and all of them are calibrated
-together (:class:`~linelaser_calib.core.joint_calibration.MultiScanProblem`: one hand-eye,
-one set of kinematic corrections, a cylinder per placement); the held-out placement is none
-of them.
+together, as ``calibrate BAG1 BAG2 ... --kinematics ur5e`` does (the pipeline's
+``placements``: one hand-eye, one set of kinematic corrections, a cylinder per placement);
+the held-out placement is none of them.
 
 Printed per seed:
 
@@ -42,9 +42,8 @@ from scipy.optimize import least_squares
 from linelaser_calib.core.geometry import (
     apply_transform,
     orthonormal_basis,
-    transform_from_rotation_translation,
 )
-from linelaser_calib.core.joint_calibration import KinematicSetup, MultiScanProblem, solve_joint
+from linelaser_calib.core.joint_calibration import KinematicSetup
 from linelaser_calib.core.kinematics import (
     KinematicCorrections,
     KinematicModel,
@@ -52,9 +51,6 @@ from linelaser_calib.core.kinematics import (
 )
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
-from linelaser_calib.core.targets.base import SolveContext
-from linelaser_calib.core.targets.cylinder import TARGET, CylinderConfig, CylinderSection
-from linelaser_calib.core.targets.cylinder.refine import kinematic_problem
 from linelaser_calib.core.types import FloatArray
 from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate
 
@@ -112,44 +108,20 @@ def surface_rms_m(data: SimulatedData, points: FloatArray) -> tuple[float, float
 def joint_calibration(
     scans: list[SimulatedData], seed: int
 ) -> tuple[KinematicCorrections, FloatArray, int]:
-    """Corrections, hand-eye and the number of estimated parameters from several scans."""
-    config = CylinderConfig(radius_m=0.02)
-    problems, states, qs = [], [], []
-    T_start = None
-    setup = None
+    """Corrections, hand-eye and the number of estimated parameters from one or several
+    scans (the pipeline's joint calibration, the first scan's self-check included)."""
+    setups = []
     for data in scans:
         assert data.truth.arm is not None and data.joint_states is not None
-        setup = KinematicSetup(data.truth.arm.nominal, data.joint_states)
-        paired = pair_profiles(data.profiles, data.poses, PairingConfig())
-        features, _ = TARGET.extract(paired.samples, config, seed, lambda *_: None)
-        plain = TARGET.solve_default(features, config, SolveContext(n_samples=len(features)))
-        assert isinstance(plain.section, CylinderSection)
-        T_start = plain.T_flange_sensor if T_start is None else T_start
-        q = setup.joint_positions([f.stamp_ns for f in features])
-        problem, state = kinematic_problem(
-            [f.inlier_points for f in features],
-            q,
-            setup,
-            T_start,
-            plain.section.cylinder,
-            config.refine,
-            0.02,
-        )
-        problems.append(problem)
-        states.append(state)
-        qs.append(q)
-    assert setup is not None
-    outcome = solve_joint(
-        MultiScanProblem(tuple(problems)),
-        tuple(states),
-        setup.model,
-        np.vstack(qs),
-        setup.config,
-        problems[0].config.solver,
-    )
-    first = outcome.state[0]
-    T = transform_from_rotation_translation(first.R_fs, first.t_fs)
-    return outcome.corrections, T, len(outcome.identifiability.identifiable)
+        setups.append(KinematicSetup(data.truth.arm.nominal, data.joint_states))
+    placements = [
+        (pair_profiles(data.profiles, data.poses, PairingConfig()).samples, setup)
+        for data, setup in zip(scans[1:], setups[1:], strict=True)
+    ]
+    config = PipelineConfig(seed=seed, kinematics=setups[0])
+    joint = run_pipeline(scans[0].profiles, scans[0].poses, config, placements=placements)
+    assert joint.kinematics is not None and joint.identifiability is not None
+    return joint.kinematics, joint.T_flange_sensor, len(joint.identifiability.identifiable)
 
 
 def main() -> None:
@@ -193,15 +165,7 @@ def main() -> None:
         assert truth.arm is not None and calibration.joint_states is not None
         nominal = truth.arm.nominal
         plain = run_pipeline(calibration.profiles, calibration.poses, PipelineConfig(seed=seed))
-        if len(scans) == 1:
-            setup = KinematicSetup(nominal, calibration.joint_states)
-            config = PipelineConfig(seed=seed, kinematics=setup)
-            joint = run_pipeline(calibration.profiles, calibration.poses, config)
-            assert joint.kinematics is not None and joint.identifiability is not None
-            corrections, T_joint = joint.kinematics, joint.T_flange_sensor
-            estimated = len(joint.identifiability.identifiable)
-        else:
-            corrections, T_joint, estimated = joint_calibration(scans, seed)
+        corrections, T_joint, estimated = joint_calibration(scans, seed)
         corrected = corrections.apply(nominal)
         ho = held_out.truth
         assert ho.joint_positions is not None

@@ -37,8 +37,8 @@ from linelaser_calib.core.planning import (
 )
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
-from linelaser_calib.core.targets.base import configure
-from linelaser_calib.core.types import CalibrationResult
+from linelaser_calib.core.targets.base import ResultSection, configure
+from linelaser_calib.core.types import CalibrationResult, Cylinder, Sample
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye
@@ -57,7 +57,7 @@ from linelaser_calib.io.results import (
     write_result_yaml,
     write_truth_yaml,
 )
-from linelaser_calib.offline import OfflineRun, bag_samples, calibrate_bag
+from linelaser_calib.offline import OfflineRun, advise_placements, bag_samples, calibrate_bag
 from linelaser_calib.summary import format_summary
 
 PROG = "linelaser-calib"
@@ -141,7 +141,6 @@ def simulate_to_bag(
     (:func:`~linelaser_calib.sim.tf_chain.ur_tf_tree`).
     Returns the bag directory and the truth file.
     """
-    from linelaser_calib.core.targets.base import ResultSection
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.core.targets.known_point import KnownPoint
     from linelaser_calib.core.targets.line import Line, LineSection
@@ -255,7 +254,7 @@ def simulate_to_bag(
 
 
 #: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
-SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
+SIMULATE_OPTIONS: tuple[tuple[str, str, Callable[[str], object]], ...] = (
     ("--poses", "n_poses", int),
     ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
     ("--points", "resolution", int),
@@ -264,6 +263,8 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, type], ...] = (
     ("--robot-sigma-r", "robot_sigma_rotation_rad", float),
     ("--spikes", "spike_fraction", float),
     ("--arm-seed", "kinematic_seed", int),  # the same arm's kinematic errors in other runs
+    ("--cylinder-base", "cylinder_base_m", _xyz),  # another placement of the cylinder, m
+    ("--axis", "axis_direction", _xyz),
     ("--profile-topic", "profile_topic", str),
     ("--pose-topic", "pose_topic", str),
     ("--sensor-frame", "sensor_frame", str),
@@ -281,6 +282,8 @@ def simulate_command(
     for field, value in overrides.items():
         if field == "organised":
             words.append("--organised" if value else "--dense")
+        elif isinstance(value, tuple):
+            words += [flags[field], ",".join(f"{v:g}" for v in value)]
         else:
             words += [flags[field], str(value)]
     if tf:
@@ -466,6 +469,7 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             kinematic_calibration=(
                 None if model is None or args.nominal_kinematics else JointCalibrationConfig()
             ),
+            placements=args.placements,
         )
     except PairingError as exc:
         raise PairingError(
@@ -490,6 +494,13 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         print(json.dumps(result_to_dict(run.result), indent=2))
     else:
         print(_input_line(run))
+        if args.placements:
+            print(
+                f"  calibrated together with {len(args.placements)} more recordings "
+                f"({', '.join(args.placements)}): one hand-eye and one set of kinematic "
+                "corrections; the target, residuals and self-check below are the first "
+                "recording's"
+            )
         print(format_summary(run.result, truth))
         for path in written:
             print(f"Wrote {path}")
@@ -749,6 +760,11 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             np.inf if args.goal_mm is None else args.goal_mm * 1e-3,
             np.inf if args.goal_deg is None else float(np.deg2rad(args.goal_deg)),
         )
+    advice = (
+        None
+        if args.kinematics is None
+        else _placement_advice(args, samples, T_flange_sensor, section, numbers)
+    )
     started = time.monotonic()
     plan = plan_for_target(
         target,
@@ -765,6 +781,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     )
     elapsed = time.monotonic() - started
     print(format_plan(plan, elapsed))
+    if advice:
+        print("Placements: " + advice)
     if args.output is not None:
         print(f"Wrote {write_plan_yaml(plan, args.output)}")
     if args.figure is not None:
@@ -773,6 +791,42 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         sigma_curve_figure(predicted_curve(plan), achieved).savefig(args.figure, dpi=DPI)
         print(f"Wrote {args.figure}")
     return 0
+
+
+def _placement_advice(
+    args: argparse.Namespace,
+    samples: list[Sample],
+    T_flange_sensor: np.ndarray,
+    section: ResultSection | None,
+    numbers: list[float] | None,
+) -> str:
+    """``plan --kinematics``: whether another placement of the cylinder would determine more
+    of the robot's kinematics, from the bag's scans and joint states."""
+    from linelaser_calib.core.targets.cylinder import CylinderSection
+    from linelaser_calib.io.bags import read_joint_states
+
+    if args.bag is None or args.target != "cylinder":
+        raise InputError(
+            "plan --kinematics judges the placements of a cylinder from the scans so far: give "
+            "the bag (with /joint_states) and --target cylinder"
+        )
+    if isinstance(section, CylinderSection):
+        cylinder = section.cylinder
+    elif numbers is not None and args.radius is not None:
+        direction = np.array(numbers[3:6]) / np.linalg.norm(numbers[3:6])
+        cylinder = Cylinder(np.array(numbers[:3]), direction, args.radius)
+    else:
+        raise InputError(
+            "plan --kinematics needs the cylinder's placement: give --from RESULT.yaml (e.g. "
+            "of calibrate --kinematics) or --cylinder with --radius"
+        )
+    model = load_model(args.kinematics)
+    if args.from_result is not None:
+        corrections = read_kinematics(args.from_result)
+        if corrections is not None:
+            model = corrections.apply(model)
+    states = read_joint_states(args.bag)
+    return advise_placements(samples, states, model, T_flange_sensor, cylinder)
 
 
 def format_plan(plan: Plan, elapsed_s: float) -> str:
@@ -1111,6 +1165,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     cal = sub.add_parser("calibrate", help="calibrate the hand-eye from a bag")
     cal.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
+    cal.add_argument(
+        "placements",
+        nargs="*",
+        metavar="BAG",
+        help="with --kinematics: recordings of other placements of the target by the same arm "
+        "and sensor, calibrated together with the first (one hand-eye, one set of kinematic "
+        "corrections)",
+    )
     cal.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
     cal.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
     cal.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
@@ -1187,6 +1249,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=_span,
         help="LO,HI: the span of the shaft to scan, m along the axis (upwards) from its point "
         "nearest the base origin (default: the span the scans cover)",
+    )
+    plan.add_argument(
+        "--kinematics",
+        metavar="MODEL",
+        help="ur5e, ur10e or a URDF: also say whether another placement of the cylinder would "
+        "determine more of the robot's kinematics (from the bag's scans and /joint_states)",
     )
     plan.add_argument("--n", type=int, default=10, help="poses to plan (default 10)")
     plan.add_argument("--goal-mm", type=_positive_float, help="stop at this 1 sigma, mm")

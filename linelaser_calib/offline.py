@@ -2,17 +2,23 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from linelaser_calib.core.errors import DegenerateError, InputError
+import numpy as np
+
+from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
+from linelaser_calib.core.identifiability import CylinderScan
 from linelaser_calib.core.joint_calibration import JointCalibrationConfig, KinematicSetup
-from linelaser_calib.core.kinematics import KinematicModel
+from linelaser_calib.core.kinematics import JointStates, KinematicModel, forward_kinematics
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
+from linelaser_calib.core.placement_advice import placement_advice, thinned
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets.base import Progress
-from linelaser_calib.core.types import CalibrationResult, Sample
+from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.types import CalibrationResult, Cylinder, FloatArray, Profile, Sample
 from linelaser_calib.io.bags import BagContents, read_bag
 from linelaser_calib.io.pose_sources import (
     POSE_SOURCES,
@@ -50,6 +56,7 @@ def calibrate_bag(
     joint_state_topic: str | None = None,
     model: KinematicModel | None = None,
     kinematic_calibration: JointCalibrationConfig | None = None,
+    placements: Sequence[str | Path] = (),
 ) -> OfflineRun:
     """Calibrate from a bag holding profiles (PointCloud2) and flange poses (any source).
 
@@ -82,6 +89,12 @@ def calibrate_bag(
         With the ``joint_states`` source: estimate the identifiable kinematic corrections
         together with the hand-eye (the result's ``kinematics``); None keeps the model
         nominal.
+    placements : sequence of str or Path
+        Further recordings of the same arm and sensor, each of another placement of the
+        target, read and paired like ``path``, for a joint calibration from all of them
+        (``model`` and ``kinematic_calibration`` given): one hand-eye and one set of
+        kinematic corrections. The result's target section and statistics are those of
+        ``path``.
 
     Raises
     ------
@@ -89,53 +102,172 @@ def calibrate_bag(
         Bag, pairing, data or solver problems (e.g. every profile empty), with a message
         saying what to do.
     """
-    refuse_pose_topic(pose_source, pose_topic)
-    bag = read_bag(
-        path,
-        profile_topic=profile_topic,
-        pose_topic=pose_topic,
-        progress=lambda done, total: progress("reading", done, total),
-        read_poses=pose_source is PoseSource.POSE,
-        invalid_values_m=invalid_values_m,
-    )
-    flange_poses = POSE_SOURCES[pose_source](
-        bag,
-        PoseRequest(
-            base_frame, flange_frame, config.pairing.sync_tolerance_s, model, joint_state_topic
-        ),
-    )
-    if all(len(p.points) == 0 for p in bag.profiles):
+    if placements and (model is None or kinematic_calibration is None):
         raise InputError(
-            f"all {len(bag.profiles)} profiles on {bag.profile_topic} in {bag.path} are empty "
-            "(no valid point, every return NaN/Inf): the sensor saw nothing. Check that the "
-            "cylinder is within the sensor's measuring range and the laser is on, then record "
-            "again"
+            f"{len(placements) + 1} recordings are calibrated together only by the joint "
+            "kinematic calibration (--kinematics MODEL, without --nominal-kinematics): give "
+            "one recording, or the robot model"
         )
+    request = PoseRequest(
+        base_frame, flange_frame, config.pairing.sync_tolerance_s, model, joint_state_topic
+    )
+    reading = _Reading(profile_topic, pose_topic, pose_source, invalid_values_m, request)
+    bag, flange_poses = reading.read(path, progress)
     if estimate_offset:
         progress("clock offset", 0, 1)
         offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config)
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
         progress("clock offset", 1, 1)
+    others = []
     if kinematic_calibration is not None and model is not None:
-        states = flange_poses.joint_states
-        if states is None:
-            raise InputError(
-                "the kinematic calibration needs the joint states: use --pose-source joint_states"
-            )
-        setup = KinematicSetup(model, states, config.pairing.clock_offset_s, kinematic_calibration)
+        setup = _setup(flange_poses, model, config, kinematic_calibration)
         config = replace(config, kinematics=setup)
-    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress)
+        for more in placements:
+            others.append(reading.placement(more, bag, config, kinematic_calibration))
+    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others)
     result.clock_offset_estimated = estimate_offset
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame
     result.base_frame = flange_poses.base_frame
     result.warnings.extend(flange_poses.warnings)
+    joint = config.kinematics
+    section, corrections = result.target, result.kinematics
+    if (
+        joint is not None
+        and corrections is not None
+        and isinstance(section, CylinderSection)
+        and not placements
+    ):
+        result.warnings.append(
+            advise_placements(
+                [bag.profiles[i] for i in result.samples_used],
+                joint.states,
+                corrections.apply(joint.model),
+                result.T_flange_sensor,
+                section.cylinder,
+                joint.clock_offset_s,
+            )
+        )
     if bag.skipped:
         reasons = sorted({s.reason for s in bag.skipped})
         result.warnings.append(
             f"{len(bag.skipped)} malformed messages were skipped: {'; '.join(reasons[:3])}"
         )
     return OfflineRun(result, bag, flange_poses)
+
+
+def advise_placements(
+    profiles: Sequence[Profile | Sample],
+    states: JointStates,
+    model: KinematicModel,
+    T_flange_sensor: FloatArray,
+    cylinder: Cylinder,
+    clock_offset_s: float = 0.0,
+) -> str:
+    """Whether another placement of the cylinder would determine more of the robot's
+    kinematics, in words (:func:`~linelaser_calib.core.placement_advice.placement_advice` on
+    up to 30 points of each profile within 0.5 mm of the cylinder).
+
+    Parameters
+    ----------
+    profiles : sequence of Profile or Sample
+        The scans of one placement (stamps, sensor-frame points in m).
+    states : JointStates
+        The recording's joint states.
+    model : KinematicModel
+        The robot model (corrected where a joint calibration gave corrections).
+    T_flange_sensor : ndarray, shape (4, 4)
+    cylinder : Cylinder
+        In the base frame, m.
+    clock_offset_s : float
+        Added to the profile stamps to pair them with the joint states, s.
+
+    Raises
+    ------
+    InputError
+        A model joint the states do not name, or a profile outside the joint-state stream.
+    """
+    setup = KinematicSetup(model, states, clock_offset_s)
+    q = setup.joint_positions([p.stamp_ns for p in profiles])
+    T = forward_kinematics(model, q) @ T_flange_sensor
+    points = []
+    for profile, T_bs in zip(profiles, T, strict=True):
+        x = profile.points[np.all(np.isfinite(profile.points), axis=1)]
+        v = x @ T_bs[:3, :3].T + T_bs[:3, 3] - cylinder.point
+        radial = v - np.outer(v @ cylinder.direction, cylinder.direction)
+        points.append(x[np.abs(np.linalg.norm(radial, axis=1) - cylinder.radius) < 5e-4])
+    scan = thinned(CylinderScan(q, points, cylinder), 30)
+    return placement_advice(model, [scan], T_flange_sensor, setup.config).text()
+
+
+def _setup(
+    flange_poses: FlangePoses,
+    model: KinematicModel,
+    config: PipelineConfig,
+    kinematic_calibration: JointCalibrationConfig,
+) -> KinematicSetup:
+    """The joint calibration's model and joint states of one recording."""
+    states = flange_poses.joint_states
+    if states is None:
+        raise InputError(
+            "the kinematic calibration needs the joint states: use --pose-source joint_states"
+        )
+    return KinematicSetup(model, states, config.pairing.clock_offset_s, kinematic_calibration)
+
+
+@dataclass(frozen=True)
+class _Reading:
+    """How the recordings of one calibration are read (the same for each)."""
+
+    profile_topic: str | None
+    pose_topic: str | None
+    pose_source: PoseSource
+    invalid_values_m: tuple[float, ...]
+    request: PoseRequest
+
+    def read(self, path: str | Path, progress: Progress) -> tuple[BagContents, FlangePoses]:
+        """The bag's profiles and flange poses; refuses a bag without a valid point."""
+        refuse_pose_topic(self.pose_source, self.pose_topic)
+        bag = read_bag(
+            path,
+            profile_topic=self.profile_topic,
+            pose_topic=self.pose_topic,
+            progress=lambda done, total: progress("reading", done, total),
+            read_poses=self.pose_source is PoseSource.POSE,
+            invalid_values_m=self.invalid_values_m,
+        )
+        flange_poses = POSE_SOURCES[self.pose_source](bag, self.request)
+        if all(len(p.points) == 0 for p in bag.profiles):
+            raise InputError(
+                f"all {len(bag.profiles)} profiles on {bag.profile_topic} in {bag.path} are "
+                "empty (no valid point, every return NaN/Inf): the sensor saw nothing. Check "
+                "that the cylinder is within the sensor's measuring range and the laser is on, "
+                "then record again"
+            )
+        return bag, flange_poses
+
+    def placement(
+        self,
+        path: str | Path,
+        first: BagContents,
+        config: PipelineConfig,
+        kinematic_calibration: JointCalibrationConfig,
+    ) -> tuple[list[Sample], KinematicSetup]:
+        """Another placement's paired samples and joint states, checked against the first
+        recording (same sensor frame and robot model)."""
+        bag, flange_poses = self.read(path, _silent)
+        if bag.sensor_frame != first.sensor_frame:
+            raise InputError(
+                f"{bag.path} holds profiles of the sensor frame {bag.sensor_frame!r} and "
+                f"{first.path} of {first.sensor_frame!r}: recordings calibrated together must "
+                "come from the same sensor on the same arm"
+            )
+        assert self.request.model is not None
+        setup = _setup(flange_poses, self.request.model, config, kinematic_calibration)
+        paired = pair_profiles(bag.profiles, flange_poses.poses, config.pairing)
+        if not paired.samples:
+            raise PairingError(f"{bag.path}: " + paired.explain_nothing_paired(config.pairing))
+        return paired.samples, setup
 
 
 def bag_samples(

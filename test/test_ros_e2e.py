@@ -34,10 +34,12 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from linelaser_calib.core.geometry import transform_error, transform_from_rotvec_translation
+from linelaser_calib.core.kinematics import forward_kinematics, model_from_preset
 from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.targets.known_point import KnownPoint
 from linelaser_calib.core.types import Cylinder, FlangePose
 from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
+from linelaser_calib.io.bags import read_joint_states
 from linelaser_calib.io.results import Truth
 from linelaser_calib.nodes.collection import SKIP_NOT_CAPTURED
 from linelaser_calib.sim import PRESETS, scenario_from_preset, simulate
@@ -484,4 +486,14 @@ def test_joint_states_source_live_with_the_ur5e_cell(graph: Graph) -> None:
     assert answer.success, answer.message + graph.procs.logs()
     assert samples_used(answer.message) == (sent, sent)
     check_against_truth(probe.hand_eye(), data.truth.T_flange_sensor, "joint_states, live")
+    # The session keeps each sample's joint vector (for calibration_service's kinematics
+    # parameter): the one its flange pose came from.
+    (session,) = graph.sessions()
+    stored = read_joint_states(session)
+    poses = {pose.stamp_ns: pose.T_base_flange for pose in read_bag(session).poses}
+    assert sorted(stored.stamps_ns.tolist()) == sorted(poses)
+    model = model_from_preset("ur5e")
+    T = forward_kinematics(model, stored.positions)
+    for stamp, T_fk in zip(stored.stamps_ns, T, strict=True):
+        assert max(transform_error(T_fk, poses[int(stamp)])) < 1e-6
     assert "Traceback" not in graph.procs.logs()

@@ -19,7 +19,7 @@ Methods
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
 from typing import Any
@@ -33,7 +33,7 @@ from .kinematics import forward_kinematics
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .selfcheck import DEFAULT_FOLDS, self_check
 from .targets import DEFAULT_TARGET, get_target
-from .targets.base import Progress, SolveContext, Target, TargetSolution
+from .targets.base import Placement, Progress, SolveContext, Target, TargetSolution
 from .types import CalibrationResult, FlangePose, Profile, Rejection, Sample
 
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
@@ -151,6 +151,7 @@ def calibrate_samples(
     config: PipelineConfig,
     rejected: list[Rejection] | None = None,
     progress: Progress = _no_progress,
+    placements: Sequence[tuple[list[Sample], KinematicSetup]] = (),
 ) -> CalibrationResult:
     """Calibrate from paired samples (the online path enters here).
 
@@ -161,22 +162,40 @@ def calibrate_samples(
     rejected : list of Rejection, optional
         Rejections from earlier stages (pairing), carried into the result.
     progress : callable, optional
+    placements : sequence of (list of Sample, KinematicSetup), optional
+        Other placements of the target scanned by the same arm, each with its recording's
+        joint states, for a joint kinematic calibration (``config.kinematics`` set, the
+        default method): one hand-eye and one set of kinematic corrections from all of them.
+        The result's target section, samples and residuals are those of ``samples``.
 
     Raises
     ------
     InputError, DegenerateError, SolverError
-        With a message saying what to do.
+        With a message saying what to do; InputError also for ``placements`` where no
+        joint kinematic calibration runs.
     ModelMismatch
         The target's model does not fit the data; nothing is to be written then.
     """
     rejections = list(rejected or [])
     if not samples:
         raise DegenerateError("no samples to calibrate from: collect profiles of the target first")
-    check_units(samples)
     target, target_config = config.target_impl, config.target_config
+    if placements and (config.kinematics is None or config.method is not Method.DEFAULT):
+        raise InputError(
+            f"{len(placements) + 1} recordings are calibrated together only by the joint "
+            "kinematic calibration (the default method with the robot's kinematic model and "
+            "joint states, --kinematics): calibrate one recording at a time otherwise"
+        )
+    check_units(samples)
     features, feature_rejections = target.extract(samples, target_config, config.seed, progress)
     rejections += feature_rejections
     target.check_features(features, target_config)
+    others = []
+    for more, setup in placements:
+        check_units(more)
+        found, _ = target.extract(more, target_config, config.seed, progress)
+        target.check_features(found, target_config)
+        others.append(Placement(found, setup))
     context = SolveContext(
         initial_T_flange_sensor=config.initial_T_flange_sensor,
         seed=config.seed,
@@ -184,10 +203,18 @@ def calibrate_samples(
         n_samples=len(samples),
         progress=progress,
         kinematics=config.kinematics,
+        placements=others,
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
     solution = solve[config.method](features, target_config, context)
     target.check_fit(solution, target_config)
+    if placements and solution.kinematics is None:
+        raise InputError(
+            f"the {target.title} target does not estimate kinematic corrections, so its "
+            f"{len(placements) + 1} recordings cannot be calibrated together; calibrate one "
+            "recording at a time (the cylinder target's default method does the joint "
+            "calibration)"
+        )
     if config.kinematics is not None and solution.kinematics is None:
         solution.warnings.append(
             f"the {solution.method} method of the {target.title} target does not estimate "
@@ -248,8 +275,12 @@ def run_pipeline(
     poses: list[FlangePose],
     config: PipelineConfig,
     progress: Progress = _no_progress,
+    placements: Sequence[tuple[list[Sample], KinematicSetup]] = (),
 ) -> CalibrationResult:
     """Pair profiles with flange poses, then :func:`calibrate_samples` (the offline path).
+
+    ``placements`` are other recordings' samples for a joint calibration
+    (:func:`calibrate_samples`).
 
     Raises
     ------
@@ -264,7 +295,7 @@ def run_pipeline(
     progress("pairing", len(profiles), len(profiles))
     if not paired.samples:
         raise PairingError(paired.explain_nothing_paired(config.pairing))
-    result = calibrate_samples(paired.samples, config, paired.rejected, progress)
+    result = calibrate_samples(paired.samples, config, paired.rejected, progress, placements)
     result.warnings[:0] = paired.notes
     result.clock_offset_s = config.pairing.clock_offset_s
     return result

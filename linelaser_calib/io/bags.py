@@ -83,6 +83,8 @@ JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 TF_TOPIC = "/tf"
 TF_STATIC_TOPIC = "/tf_static"
+#: The joint-state topic of a session (and the default one read from any bag).
+JOINT_STATE_TOPIC = "/joint_states"
 #: File in a session directory that marks it as one (see :class:`SessionBagWriter`).
 SESSION_MARKER = "linelaser_calib_session.txt"
 #: The MCAP file of a session's samples (see :class:`SessionBagWriter`).
@@ -465,6 +467,7 @@ class SessionBagWriter:
         self.organised = organised
         self.count = 0
         self.durable = 0
+        self._joints: int | None = None
         if self.path.exists():
             raise BagError(
                 f"{self.path} exists already and sessions are never overwritten; "
@@ -496,7 +499,12 @@ class SessionBagWriter:
         except OSError as err:
             raise BagError(f"cannot create session {self.path}: {err}") from err
 
-    def append(self, profile: Profile, pose_at_profile: FlangePose) -> int:
+    def append(
+        self,
+        profile: Profile,
+        pose_at_profile: FlangePose,
+        joints_at_profile: tuple[Sequence[str], NDArray[np.float64]] | None = None,
+    ) -> int:
         """Buffer one sample; it is on disk after the next :meth:`flush`.
 
         Parameters
@@ -506,6 +514,10 @@ class SessionBagWriter:
         pose_at_profile : FlangePose
             Flange pose at the profile stamp, in frame ``pose_at_profile.frame_id``. It is
             written with the profile stamp, so both messages carry identical stamps.
+        joints_at_profile : (names, positions (n,)), optional
+            The joint vector the flange pose was computed from (rad or m), written as a
+            ``sensor_msgs/msg/JointState`` on ``/joint_states`` with the profile stamp too,
+            so that the session can be calibrated with the robot's kinematics.
 
         Returns
         -------
@@ -523,16 +535,33 @@ class SessionBagWriter:
             profile.points, stamp, profile.frame_id, types=self._types, organised=self.organised
         )
         store = _typestore()
+        messages = [
+            (self._pose_channel, store.serialize_cdr(pose, POSE_TYPE)),
+            (self._profile_channel, store.serialize_cdr(cloud, PROFILE_TYPE)),
+        ]
         try:
-            for channel, data in (
-                (self._pose_channel, store.serialize_cdr(pose, POSE_TYPE)),
-                (self._profile_channel, store.serialize_cdr(cloud, PROFILE_TYPE)),
-            ):
+            if joints_at_profile is not None:
+                names, positions = joints_at_profile
+                msg = joint_state_msg(stamp, names, positions, types=self._types)
+                messages.append((self._joint_channel(), store.serialize_cdr(msg, JOINT_STATE_TYPE)))
+            for channel, data in messages:
                 self._writer.add_message(channel, stamp, data.tobytes(), stamp, self.count)
         except OSError as err:
             raise BagError(f"cannot write to session {self.path}: {err}") from err
         self.count += 1
         return self.count - 1
+
+    def _joint_channel(self) -> int:
+        """The ``/joint_states`` channel, registered with the first joint vector."""
+        if self._joints is None:
+            text, _ = _typestore().generate_msgdef(JOINT_STATE_TYPE, ros_version=2)
+            schema = self._writer.register_schema(
+                JOINT_STATE_TYPE, SchemaEncoding.ROS2, text.encode()
+            )
+            self._joints = self._writer.register_channel(
+                JOINT_STATE_TOPIC, MessageEncoding.CDR, schema
+            )
+        return self._joints
 
     def flush(self) -> None:
         """Write every appended sample to disk (flush and fsync); they then survive a crash."""
@@ -1084,7 +1113,7 @@ def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointSta
     topics = _summarise(bag, parts).topics
     found = [t for t in topics if t.msgtype == JOINT_STATE_TYPE and t.msgcount > 0]
     if topic is None:
-        default = [t for t in found if t.topic == "/joint_states"]
+        default = [t for t in found if t.topic == JOINT_STATE_TOPIC]
         chosen = default or found
         if not chosen:
             raise BagError(

@@ -24,6 +24,13 @@
   clock offset and live estimate (``linelaser_calib/clock_offset``) in the result, broadcasts
   ``/tf_static`` where ``tf2_ros`` is importable, and writes the result YAML to
   ``output_path`` atomically. A failed calibration leaves the last good file.
+- With ``kinematics`` set (a robot model: ur5e, ur10e, a URDF), ``calibrate`` runs the joint
+  kinematic + hand-eye calibration instead (:func:`calibrate_session`): the offline path on
+  the collector's session bag, whose samples carry the joint vectors the collector stored
+  (pose_source joint_states). The answer says how many kinematic corrections were estimated;
+  the result YAML has its ``kinematics`` section. A session without joint states is refused.
+  ``~/plan`` then also says whether another placement of the cylinder would determine more
+  of the kinematics, and how to move it (:func:`session_placement_advice`).
 - ``~/plan`` (std_srvs/Trigger) plans the next ``plan_poses`` flange poses that most reduce
   the hand-eye's predicted uncertainty (:func:`~linelaser_calib.core.planning.plan_for_target`),
   from the last calibration (or, before one, from ``initial_hand_eye_path`` with the samples
@@ -55,13 +62,18 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.errors import CalibrationError, InputError
+from linelaser_calib.core.joint_calibration import JointCalibrationConfig
+from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
 from linelaser_calib.core.planning import Plan, PlanConstraints, fan_shape, plan_for_target
+from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io import write_result_yaml
+from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info, read_joint_states
 from linelaser_calib.io.initial import read_initial_hand_eye
 from linelaser_calib.nodes.collection import DRIFT_FLOOR_S
 from linelaser_calib.nodes.common import (
@@ -78,7 +90,9 @@ from linelaser_calib.nodes.common import (
     parameter_values,
     run_node,
 )
+from linelaser_calib.nodes.joint_state_input import live_kinematic_model
 from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
+from linelaser_calib.offline import advise_placements, bag_samples, calibrate_bag
 from linelaser_calib.summary import one_line_summary, self_check_rows
 from msg_adapters import (
     MessageError,
@@ -226,6 +240,15 @@ PARAMETERS = (
         "stay above it and the laser never points up.",
         bounds=(-5.0, 5.0),
     ),
+    ParamSpec(
+        "kinematics",
+        "",
+        "The robot's kinematic model for a joint kinematic + hand-eye calibration: a preset "
+        "(ur5e, ur10e), a URDF file or the URDF text; '' for none. When set, calibrate "
+        "reads the collector's session (which holds the joint states with pose_source "
+        "joint_states) and estimates the identifiable kinematic corrections with the hand-eye "
+        "(the result's kinematics section).",
+    ),
     ParamSpec("base_frame", "base_link", "Robot base frame: frame of the cylinder and markers."),
     ParamSpec("flange_frame", "tool0", "Flange frame: parent frame of the hand-eye."),
     ParamSpec("sensor_frame", "laser", "Sensor frame: child frame of the hand-eye."),
@@ -273,6 +296,81 @@ def pipeline_config(
         target_config=configure(target, method.value, settings, SETTING_LABELS),
         seed=values["seed"],
         initial_T_flange_sensor=initial,
+    )
+
+
+def calibrate_session(
+    session: str | None, values: dict[str, Any], warn: Callable[[str], None] = lambda line: None
+) -> CalibrationResult:
+    """The joint kinematic + hand-eye calibration of the collector's session (the
+    ``kinematics`` parameter set): the offline path on the session bag
+    (:func:`~linelaser_calib.offline.calibrate_bag`), the flange poses the model's forward
+    kinematics of the joint states the collector stored with each sample.
+
+    Raises
+    ------
+    CalibrationError
+        No session known, a session without joint states, an unusable model, or what the
+        calibration itself refuses.
+    """
+    model_spec = str(values["kinematics"])
+    if session is None:
+        raise InputError(
+            f"kinematics is {model_spec!r}, so the calibration reads the collector's session, "
+            "but no collector has announced one: start the collector (pose_source "
+            "joint_states) and scan the target"
+        )
+    if not any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(session).topics):
+        raise InputError(
+            f"kinematics is {model_spec!r} but the session {session} holds no joint states: "
+            "run the collector with pose_source joint_states (it stores each sample's joint "
+            "vector), or set kinematics to '' for the hand-eye alone"
+        )
+    model = live_kinematic_model(model_spec, values["base_frame"], values["flange_frame"])
+    run = calibrate_bag(
+        session,
+        pipeline_config(values, warn),
+        flange_frame=values["flange_frame"],
+        pose_source=PoseSource.JOINT_STATES,
+        base_frame=values["base_frame"],
+        model=model,
+        kinematic_calibration=JointCalibrationConfig(),
+    )
+    return run.result
+
+
+def session_placement_advice(
+    session: str | None, values: dict[str, Any], result: CalibrationResult | None
+) -> str:
+    """``~/plan`` with ``kinematics`` set: whether another placement of the cylinder would
+    determine more of the robot's kinematics, from the session's samples and joint states
+    and the last calibration (its cylinder and corrections); a clause saying what is
+    missing otherwise."""
+    if result is None or not isinstance(result.target, CylinderSection):
+        return "placements: calibrate the cylinder first to learn how many are needed"
+    if session is None or not any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(session).topics):
+        return "placements: the session holds no joint states (collector pose_source joint_states)"
+    model = live_kinematic_model(
+        str(values["kinematics"]), values["base_frame"], values["flange_frame"]
+    )
+    if result.kinematics is not None:
+        model = result.kinematics.apply(model)
+    samples = bag_samples(session, PairingConfig())
+    states = read_joint_states(session)
+    return "placements: " + advise_placements(
+        samples, states, model, result.T_flange_sensor, result.target.cylinder
+    )
+
+
+def kinematics_summary(result: CalibrationResult) -> str:
+    """What a joint calibration estimated, in one clause ('' without one)."""
+    corrections = result.kinematics
+    if corrections is None:
+        return ""
+    return (
+        f"; kinematic corrections of the {corrections.model} model: "
+        f"{len(corrections.corrections)} estimated, {len(corrections.kept_nominal)} kept "
+        "nominal (not determined by these scans)"
     )
 
 
@@ -524,7 +622,10 @@ class CalibrationServiceNode(Node):
         )
         start = time.monotonic()
         try:
-            result = calibrate_samples(samples, pipeline_config(p, self._warn))
+            if p["kinematics"]:
+                result = calibrate_session(self._store.session, p, self._warn)
+            else:
+                result = calibrate_samples(samples, pipeline_config(p, self._warn))
         except CalibrationError as err:
             return False, str(err)
         result.parent_frame = p["flange_frame"]
@@ -532,7 +633,7 @@ class CalibrationServiceNode(Node):
         result.base_frame = p["base_frame"]
         if len(self._clock_offset) == 4:
             add_live_clock_offset(result, *self._clock_offset[:3])
-        summary = one_line_summary(result, len(samples))
+        summary = one_line_summary(result, len(samples)) + kinematics_summary(result)
         self._self_check = self_check_rows(result)
         self._last_result = result
         self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")
@@ -602,11 +703,17 @@ class CalibrationServiceNode(Node):
             marker_array([Marker(action=Marker.DELETEALL), *fans], types=self._types)
         )
         last = plan.poses[-1]
+        advice = ""
+        if p["kinematics"]:
+            try:
+                advice = "; " + session_placement_advice(self._store.session, p, result)
+            except CalibrationError as err:
+                advice = f"; placements: not judged ({err})"
         return True, (
             f"planned {len(plan.poses)} flange poses on {self._planned_pub.topic_name}; "
             f"predicted 1 sigma after them: translation "
             f"{np.array2string(last.sigma_translation_m * 1e3, precision=4)} mm, rotation "
-            f"{np.array2string(np.rad2deg(last.sigma_rotation_rad), precision=4)} deg"
+            f"{np.array2string(np.rad2deg(last.sigma_rotation_rad), precision=4)} deg" + advice
         )
 
     def _publish(self, result: CalibrationResult) -> None:

@@ -12,7 +12,9 @@ topics. The logic lives in
   rclpy's MultiThreadedExecutor takes only a few hundred messages per second here, far
   below a 500 Hz flange-pose stream, while the single-threaded one keeps up. They also note
   each message's publisher sequence number, so profiles lost by the transport are counted;
-- a storage thread appends the samples to the session's MCAP file, flushes and fsyncs it
+- a storage thread appends the samples to the session's MCAP file (with pose_source
+  joint_states also each sample's joint vector on ``/joint_states``, for a joint kinematic
+  calibration of the session), flushes and fsyncs it
   every ``flush_period_s``, and only then publishes them on
   ``linelaser_calib/samples/profile`` and ``linelaser_calib/samples/flange_pose`` with
   identical stamps (reliable, transient_local, ``sample_history_depth`` deep, so a late or
@@ -62,7 +64,7 @@ from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.tf import base_frame_warning
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter, read_bag
-from linelaser_calib.io.bags import SESSION_MARKER
+from linelaser_calib.io.bags import JOINT_STATE_TYPE, SESSION_MARKER, bag_info, read_joint_states
 from linelaser_calib.nodes.collection import (
     ClockOffsetTracker,
     CollectorConfig,
@@ -167,7 +169,8 @@ PARAMETERS = (
         "",
         "pose_source joint_states: the robot's kinematic model, a preset (ur5e, ur10e), a "
         "URDF file, or URDF text such as the value of robot_description (its chain "
-        "base_frame -> flange_frame).",
+        "base_frame -> flange_frame). Each sample's joint vector is stored in the session, "
+        "for calibration_service's joint kinematic calibration (its kinematics parameter).",
         read_only=True,
     ),
     ParamSpec(
@@ -337,11 +340,28 @@ def new_session_path(root: Path, now: datetime.datetime) -> Path:
     return path
 
 
-def session_pairs(path: Path) -> list[tuple[Profile, FlangePose]]:
-    """The samples of a session: each profile with the flange pose of identical stamp."""
+#: A stored sample: the profile, the flange pose at its stamp and, with joint states, the
+#: joint vector (names, positions) that pose came from.
+StoredSample = tuple[Profile, FlangePose, tuple[tuple[str, ...], np.ndarray] | None]
+
+
+def session_samples(path: Path) -> list[StoredSample]:
+    """The samples of a session: each profile with the flange pose (and the joint vector,
+    where the session holds joint states) of identical stamp."""
     contents = read_bag(path)
     poses = {pose.stamp_ns: pose for pose in contents.poses}
-    return [(p, poses[p.stamp_ns]) for p in contents.profiles if p.stamp_ns in poses]
+    joints = {}
+    if any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(path).topics):
+        states = read_joint_states(path)
+        joints = {
+            int(stamp): (states.names, states.positions[i])
+            for i, stamp in enumerate(states.stamps_ns)
+        }
+    return [
+        (p, poses[p.stamp_ns], joints.get(p.stamp_ns))
+        for p in contents.profiles
+        if p.stamp_ns in poses
+    ]
 
 
 class CollectorNode(Node):
@@ -489,7 +509,7 @@ class CollectorNode(Node):
 
     def _open_session(self, reload_from: Path | None) -> SessionBagWriter:
         """Create a new session directory, optionally seeded with an old session's samples."""
-        pairs = session_pairs(reload_from) if reload_from is not None else []
+        pairs = session_samples(reload_from) if reload_from is not None else []
         writer = SessionBagWriter(
             new_session_path(self._session_root, datetime.datetime.now()),
             profile_topic=self._profile_sub.topic_name,
@@ -497,10 +517,10 @@ class CollectorNode(Node):
             organised=False,
         )
         self._session_pub.publish(String(data=str(writer.path)))
-        for profile, pose in pairs:
-            writer.append(profile, pose)
+        for profile, pose, joints in pairs:
+            writer.append(profile, pose, joints)
         writer.flush()
-        for profile, pose in pairs:
+        for profile, pose, _ in pairs:
             self._publish_sample(profile, pose)
         with self._collector.lock:
             self._collector.clear(reloaded=len(pairs))
@@ -608,13 +628,23 @@ class CollectorNode(Node):
     def _store(self, batch: list[PendingSample], captured: int | None) -> None:
         """Persist samples (flushed to disk), then publish them; the session lock is held."""
         samples = []
+        joints = []
+        offset_ns = round(self._pipeline.pairing.clock_offset_s * 1e9)
         for pending in batch:
             sample = pending.sample
             profile = Profile(sample.stamp_ns, sample.points, pending.sensor_frame)
             pose = FlangePose(sample.stamp_ns, sample.T_base_flange, pending.base_frame)
             samples.append((profile, pose, pending))
+            joints.append(
+                self._pose_input.joints_at(sample.stamp_ns + offset_ns)
+                if isinstance(self._pose_input, JointStatePoseInput)
+                else None
+            )
         try:
-            numbers = [self._session.append(profile, pose) for profile, pose, _ in samples]
+            numbers = [
+                self._session.append(profile, pose, q)
+                for (profile, pose, _), q in zip(samples, joints, strict=True)
+            ]
             self._session.flush()
         except BagError as err:
             self.get_logger().error(str(err))

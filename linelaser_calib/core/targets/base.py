@@ -278,6 +278,12 @@ class SolveContext:
         identifiable kinematic corrections with the hand-eye
         (:mod:`~linelaser_calib.core.joint_calibration`), the flange pose of each feature
         being the forward kinematics of its joint vector.
+    placements : sequence of Placement
+        Further placements of the target scanned by the same arm and sensor (one recording
+        each), for a joint calibration (``kinematics`` given): one hand-eye and one set of
+        kinematic corrections from all of them, the target's placement per recording. A
+        target's method that does not estimate kinematic corrections ignores them (the
+        pipeline refuses that).
     """
 
     initial_T_flange_sensor: FloatArray | None = None
@@ -286,6 +292,24 @@ class SolveContext:
     n_samples: int = 0
     progress: Progress = field(default=_no_progress)
     kinematics: KinematicSetup | None = None
+    placements: Sequence[Placement] = ()
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Another placement of the target: its features and the joint states of its recording.
+
+    Attributes
+    ----------
+    features : list
+        The target's features of the recording (:meth:`Target.extract`), their flange poses
+        the nominal model's forward kinematics of the joint states.
+    kinematics : KinematicSetup
+        The same model as the main recording's, with this recording's joint states.
+    """
+
+    features: list[Any]
+    kinematics: KinematicSetup
 
 
 class Target(Protocol[ConfigT]):

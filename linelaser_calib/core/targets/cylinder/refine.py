@@ -69,11 +69,12 @@ holds the true error 71 % of the time per axis (bench/refine_study.py, 100 seeds
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch, SolverError
@@ -85,7 +86,7 @@ from ...geometry import (
     right_jacobian_so3,
     transform_from_rotation_translation,
 )
-from ...joint_calibration import JointOutcome, KinematicSetup, solve_joint
+from ...joint_calibration import JointOutcome, KinematicSetup, MultiScanProblem, solve_joint
 from ...kinematics import forward_kinematics
 from ...observability import (
     Observability,
@@ -965,13 +966,11 @@ MAX_REPEATABILITY_SCALE = 3.0
 MAX_CORRECTION_PRIOR_SIGMAS = 10.0
 
 
-def _check_kinematic_fit(
-    result: RefineResult, outcome: JointOutcome[CylinderState], setup: KinematicSetup
-) -> None:
-    """Refuse a joint solve whose kinematic model does not explain the robot's error."""
+def _check_kinematic_fit(scale: float, outcome: JointOutcome[Any], setup: KinematicSetup) -> None:
+    """Refuse a joint solve whose kinematic model does not explain the robot's error (the
+    re-estimated robot σ ``scale``, a multiple of the repeatability)."""
     delta = outcome.solution.state.delta
     ratio = np.abs(delta) / outcome.pose_model.prior_sigma
-    scale = result.robot_sigma_scale
     if scale <= MAX_REPEATABILITY_SCALE and float(np.max(ratio, initial=0.0)) <= (
         MAX_CORRECTION_PRIOR_SIGMAS
     ):
@@ -1018,61 +1017,96 @@ def kinematic_problem(
     return replace(problem, centroid=centroid), _recentred(state, centroid)
 
 
+@dataclass(frozen=True)
+class JointScan:
+    """One recording of a joint calibration: a cylinder placement's samples and joint states.
+
+    Attributes
+    ----------
+    samples_points : list of ndarray, shape (N_j, 3)
+        Inlier profile points of each sample in the sensor frame, m.
+    stamps_ns : ndarray of int64, shape (M,)
+        Profile stamps, ns (the joint states are interpolated there).
+    cylinder0 : Cylinder
+        Start, e.g. :func:`refine_with_outlier_rejection` on the nominal poses.
+    setup : KinematicSetup
+        The model (the same for every scan) and this recording's joint states.
+    """
+
+    samples_points: list[FloatArray]
+    stamps_ns: NDArray[np.int64]
+    cylinder0: Cylinder
+    setup: KinematicSetup
+
+
 def refine_kinematics(
-    samples_points: list[FloatArray],
-    stamps_ns: ArrayLike,
+    scans: Sequence[JointScan],
     T_flange_sensor0: ArrayLike,
-    cylinder0: Cylinder,
-    setup: KinematicSetup,
     config: RefineConfig | None = None,
     radius_m: float | None = None,
-) -> tuple[RefineResult, JointOutcome[CylinderState]]:
+) -> tuple[list[RefineResult], JointOutcome[Any]]:
     """The refinement with the flange poses from joint states and a corrected robot model.
 
     The same cylinder problem, its flange poses the forward kinematics of each sample's
     joint vector with the identifiable kinematic corrections estimated
     (:func:`~linelaser_calib.core.joint_calibration.solve_joint`); the per-sample pose
-    corrections have the arm's repeatability as prior (``setup.config``).
+    corrections have the arm's repeatability as prior (``setup.config``). Several scans
+    (cylinder placements scanned by the same arm) are solved together
+    (:class:`~linelaser_calib.core.joint_calibration.MultiScanProblem`: one hand-eye, one
+    set of corrections, a cylinder per scan).
 
     Parameters
     ----------
-    samples_points : list of ndarray, shape (N_j, 3)
-        Inlier profile points of each sample in the sensor frame, m.
-    stamps_ns : array_like, shape (M,)
-        Profile stamps, ns (the joint states are interpolated there).
-    T_flange_sensor0, cylinder0
-        Start, e.g. :func:`refine_with_outlier_rejection` on the nominal poses.
-    setup : KinematicSetup
+    scans : sequence of JointScan
+        At least one; the first one's model and settings apply to all.
+    T_flange_sensor0 : array_like, shape (4, 4)
+        Start.
     config : RefineConfig, optional
     radius_m : float, optional
-        Known radius, m; None estimates it.
+        Known radius, m; None estimates it (per scan).
 
     Returns
     -------
-    RefineResult
-        At the corrected poses; its 1σ are marginal over the kinematic corrections.
+    list of RefineResult
+        Per scan, at the corrected poses; the 1σ are the hand-eye's, marginal over the
+        kinematic corrections and every scan's cylinder.
     JointOutcome
+        Its state is the first scan's state (one scan) or the tuple of the scans' states.
     """
-    q = setup.joint_positions(stamps_ns)
-    problem, state = kinematic_problem(
-        samples_points, q, setup, T_flange_sensor0, cylinder0, config, radius_m
-    )
-    cfg = problem.config
-    outcome = solve_joint(problem, state, setup.model, q, setup.config, cfg.solver)
+    setup = scans[0].setup
+    problems, states, qs = [], [], []
+    for scan in scans:
+        q = scan.setup.joint_positions(scan.stamps_ns)
+        problem, state = kinematic_problem(
+            scan.samples_points, q, scan.setup, T_flange_sensor0, scan.cylinder0, config, radius_m
+        )
+        problems.append(problem)
+        states.append(state)
+        qs.append(q)
+    cfg = problems[0].config
+    together: Any = problems[0] if len(scans) == 1 else MultiScanProblem(tuple(problems))
+    start: Any = states[0] if len(scans) == 1 else tuple(states)
+    outcome = solve_joint(together, start, setup.model, np.vstack(qs), setup.config, cfg.solver)
     joint = outcome.solution
-    corrected = problem.with_flange_poses(outcome.pose_model.poses(joint.state.delta))
-    linearisation = corrected.linearise(outcome.state)
-    inner = Solution(
-        state=outcome.state,
-        residuals=linearisation.residuals,
-        normal=normal_equations(linearisation, cfg.solver),
-        cost_history=joint.cost_history,
-        iterations=joint.iterations,
-        converged=joint.converged,
-    )
-    result = _summarise(corrected, inner)
-    _check_kinematic_fit(result, outcome, setup)
+    poses = outcome.pose_model.poses(joint.state.delta)
+    found = [outcome.state] if len(scans) == 1 else list(outcome.state)
+    bounds = np.cumsum([0, *(p.n_samples for p in problems)])
+    results = []
+    for i, (problem, state) in enumerate(zip(problems, found, strict=True)):
+        corrected = problem.with_flange_poses(poses[bounds[i] : bounds[i + 1]])
+        linearisation = corrected.linearise(state)
+        inner = Solution(
+            state=state,
+            residuals=linearisation.residuals,
+            normal=normal_equations(linearisation, cfg.solver),
+            cost_history=joint.cost_history,
+            iterations=joint.iterations,
+            converged=joint.converged,
+        )
+        results.append(_summarise(corrected, inner))
+    _check_kinematic_fit(max(r.robot_sigma_scale for r in results), outcome, setup)
     sigma = np.sqrt(np.diag(outcome.covariance)[:N_HAND_EYE])
-    result.sigma_rotation_rad, result.sigma_translation_m = sigma[:3], sigma[3:]
-    result.covariance_hand_eye = outcome.covariance[:N_HAND_EYE, :N_HAND_EYE]
-    return result, outcome
+    for result in results:
+        result.sigma_rotation_rad, result.sigma_translation_m = sigma[:3], sigma[3:]
+        result.covariance_hand_eye = outcome.covariance[:N_HAND_EYE, :N_HAND_EYE]
+    return results, outcome

@@ -11,7 +11,9 @@ Methods
     covariance and observability diagnostics (:mod:`.refine`). With joint states and a
     robot model (``SolveContext.kinematics``) it then estimates the identifiable kinematic
     corrections together with the hand-eye and the cylinder
-    (:func:`.refine.refine_kinematics`).
+    (:func:`.refine.refine_kinematics`), from the other placements of the cylinder in
+    ``SolveContext.placements`` too (each refined on its own first, from the paper's solve on
+    its ellipse centres).
 
 Model fit
 ---------
@@ -32,10 +34,12 @@ import numpy as np
 from ...cylinder_model import centre_distances
 from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
+from ...joint_calibration import KinematicSetup
 from ...pso_alm import PaperSolution, solve_pso_galm
-from ...types import Rejection, Sample
+from ...types import Cylinder, Rejection, Sample
 from ..base import (
     Option,
+    Placement,
     Progress,
     ResultSection,
     SolveContext,
@@ -46,7 +50,13 @@ from ..base import (
 from .config import CylinderConfig
 from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
 from .plan import CylinderPlanner
-from .refine import refine, refine_kinematics, refine_with_outlier_rejection
+from .refine import (
+    JointScan,
+    RefineResult,
+    refine,
+    refine_kinematics,
+    refine_with_outlier_rejection,
+)
 from .section import CylinderSection, read_cylinder_section
 
 #: Points per profile in the refinements of the clock-offset search.
@@ -200,27 +210,18 @@ class CylinderTarget:
             else np.asarray(context.initial_T_flange_sensor, dtype=np.float64)
         )
         context.progress("refine", 0, 1)
-        refined = refine_with_outlier_rejection(
-            [f.inlier_points for f in features],
-            np.stack([f.T_base_flange for f in features]),
-            T_init,
-            replace(seed.cylinder, radius=radius),
-            config.refine,
-            radius_m=config.radius_m,
-        )
+        refined = self._refined(features, T_init, replace(seed.cylinder, radius=radius), config)
         context.progress("refine", 1, 1)
         outcome = None
         if context.kinematics is not None:
-            used = [features[j] for j in refined.used]
+            scans = [self._joint_scan(features, refined, context.kinematics)]
+            for placement in context.placements:
+                scans.append(
+                    self._placement_scan(placement, refined.T_flange_sensor, config, context)
+                )
             context.progress("kinematics", 0, 1)
-            joint, outcome = refine_kinematics(
-                [f.inlier_points for f in used],
-                [f.stamp_ns for f in used],
-                refined.T_flange_sensor,
-                refined.cylinder,
-                context.kinematics,
-                config.refine,
-                radius_m=config.radius_m,
+            (joint, *_), outcome = refine_kinematics(
+                scans, refined.T_flange_sensor, config.refine, radius_m=config.radius_m
             )
             context.progress("kinematics", 1, 1)
             joint.used = refined.used
@@ -249,6 +250,52 @@ class CylinderTarget:
             noise_m=profile_noise_m(features, config.refine.sensor_sigma_m),
             kinematics=None if outcome is None else outcome.corrections,
             identifiability=None if outcome is None else outcome.identifiability,
+        )
+
+    @staticmethod
+    def _joint_scan(
+        features: list[FittedSample], refined: RefineResult, setup: KinematicSetup
+    ) -> JointScan:
+        """The samples a refinement kept, as one scan of the joint calibration."""
+        used = [features[j] for j in refined.used]
+        return JointScan(
+            [f.inlier_points for f in used],
+            np.array([f.stamp_ns for f in used], dtype=np.int64),
+            refined.cylinder,
+            setup,
+        )
+
+    def _placement_scan(
+        self,
+        placement: Placement,
+        T_flange_sensor: FloatArray,
+        config: CylinderConfig,
+        context: SolveContext,
+    ) -> JointScan:
+        """Another placement's scan: its cylinder from the paper's solve on its ellipse
+        centres, refined with the main recording's hand-eye and its outlier samples dropped."""
+        features = placement.features
+        radius = self._checked(features, config, replace(context, n_samples=len(features)))
+        seed = self._seed(features, config, context, paper=False)
+        start = replace(seed.cylinder, radius=radius)
+        refined = self._refined(features, T_flange_sensor, start, config)
+        return self._joint_scan(features, refined, placement.kinematics)
+
+    @staticmethod
+    def _refined(
+        features: list[FittedSample],
+        T_flange_sensor: FloatArray,
+        cylinder: Cylinder,
+        config: CylinderConfig,
+    ) -> RefineResult:
+        """The refinement with outlier samples dropped, at the features' flange poses."""
+        return refine_with_outlier_rejection(
+            [f.inlier_points for f in features],
+            np.stack([f.T_base_flange for f in features]),
+            T_flange_sensor,
+            cylinder,
+            config.refine,
+            radius_m=config.radius_m,
         )
 
     def check_fit(self, solution: TargetSolution, config: CylinderConfig) -> None:
