@@ -65,6 +65,7 @@ Planning stops early once every predicted 1σ of the hand-eye is within the user
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
@@ -93,6 +94,8 @@ MIN_CANDIDATES = 200
 MAX_DRAWS_PER_CANDIDATE = 40
 #: Most sweeps of the exchange pass over the chosen poses.
 MAX_EXCHANGE_SWEEPS = 5
+#: Noise levels a result's section may carry, re-estimated (m, m, rad).
+NOISE_LEVELS = ("sensor_sigma_m", "robot_sigma_t_m", "robot_sigma_r_rad")
 #: Smallest rise of the log det for which the exchange pass swaps a pose.
 EXCHANGE_GAIN = 1e-6
 
@@ -622,6 +625,30 @@ def fan_shape(plan: Plan, constraints: PlanConstraints) -> Shape:
     return Shape("line", points, 0.0005, "planned_fans", (1.0, 0.2, 0.2, 0.8))
 
 
+def with_noise_levels(config: Any, levels: Mapping[str, float] | None) -> Any:
+    """The target's settings with the noise levels a result re-estimated (its section's
+    ``noise_levels``: any of ``sensor_sigma_m``, ``robot_sigma_t_m`` and
+    ``robot_sigma_r_rad`` of the settings' ``refine``, m and rad); unchanged without them.
+
+    Raises
+    ------
+    InputError
+        A level that is not one of those, or not a positive number.
+    """
+    if not levels:
+        return config
+    for key, value in levels.items():
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if key not in NOISE_LEVELS or not (number and math.isfinite(value) and value > 0.0):
+            raise InputError(
+                f"the result's quality.noise_estimated.{key} must be one of "
+                f"{', '.join(NOISE_LEVELS)} with a positive value (m or rad), got {value!r}"
+            )
+    return replace(
+        config, refine=replace(config.refine, **{k: float(v) for k, v in levels.items()})
+    )
+
+
 def plannable(target: Target[Any]) -> Plannable:
     """The target's planner.
 
@@ -670,7 +697,8 @@ def plan_for_target(
     samples : list of Sample, optional
         Samples already taken (their information is the planner's start).
     section, numbers, extent : optional
-        See above and :class:`Plannable`.
+        See above and :class:`Plannable`. A section's re-estimated noise levels replace the
+        configured ones (:func:`with_noise_levels`).
     constraints : PlanConstraints, optional
     goal : (float, float), optional
         (translation m, rotation rad).
@@ -694,6 +722,7 @@ def plan_for_target(
         else None
     )
     if section is not None:
+        config = with_noise_levels(config, getattr(section, "noise_levels", None))
         placement = planner.placement_from_section(section, config, extent, points_base)
     elif numbers is not None:
         placement = planner.placement_from_numbers(numbers, config, extent, points_base)
