@@ -364,7 +364,8 @@ def curve(setup: Setup, label: str, seeds: int, figure_dir: Path | None) -> None
     print(f"\n### Hand-eye accuracy against poses ({seeds} seeds, {label}, paper noise)\n")
     print(
         "RMS over seeds; 1 sigma is the norm of the per-axis 1 sigma of the calibration; "
-        "planner: the planner's prediction of it before the scans (configured noise); best "
+        "planner: the planner's prediction of it before the scans (configured noise, then the last "
+        "calibration's re-estimated noise); best "
         "possible: the predicted 1 sigma of the best poses for a perfect sensor.\n"
     )
     print(
