@@ -441,3 +441,17 @@ def test_plan_from_a_result_uses_its_reestimated_noise() -> None:
 def test_bad_noise_levels_of_a_result_are_refused(levels: dict[str, float]) -> None:
     with pytest.raises(InputError, match="noise_estimated"):
         with_noise_levels(CONFIG, levels)
+
+
+@pytest.mark.parametrize("n", [6, 12])
+def test_planned_translation_meets_but_never_beats_the_robots_bound(n: int) -> None:
+    # A profile of a cylinder shows 2 of the 3 translation directions, and the robot's
+    # translation error adds to the hand-eye's: no n poses beat 3 σ_t / √(2n), even with a
+    # perfect sensor, and the planner's poses come close to it.
+    perfect = with_noise_levels(CONFIG, {"sensor_sigma_m": CONFIG.refine.sensor_sigma_m / 20})
+    plan = plan_poses(
+        PLANNER, _true_placement(), SCENARIO.T_flange_sensor, perfect, n, RNG(n), CONSTRAINTS
+    )
+    bound = 3.0 * CONFIG.refine.robot_sigma_t_m / math.sqrt(2.0 * n)
+    achieved = float(np.linalg.norm(plan.poses[-1].sigma_translation_m))
+    assert bound <= achieved < 1.1 * bound
