@@ -3,6 +3,7 @@ rough placement from exploratory scans, the plan command and its refusals."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -12,14 +13,23 @@ import pytest
 import yaml
 
 from linelaser_calib.cli import main
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import invert_transform
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
 from linelaser_calib.core.planning import (
     PlanConstraints,
+    choose,
+    feasible,
+    gather_candidates,
+    greedy_order,
+    log_det_marginal,
     marginal_hand_eye,
+    plan_for_target,
     plan_poses,
     predicted_profiles,
     robot_angle,
+    with_noise_levels,
 )
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.cylinder import TARGET, CylinderConfig
@@ -30,6 +40,7 @@ from linelaser_calib.core.targets.cylinder.plan import (
     placement,
     rough_placement,
 )
+from linelaser_calib.core.targets.cylinder.section import CylinderSection
 from linelaser_calib.core.targets.sphere import SphereConfig
 from linelaser_calib.core.targets.sphere.plan import SpherePlacement, SpherePlanner
 from linelaser_calib.sim import scenario_from_preset, simulate
@@ -332,3 +343,115 @@ def test_plan_refuses_placements_of_another_target(
     assert main(["plan", *argv, *initial]) == 1
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+
+
+# --- choice, candidates and noise levels ----------------------------------------------------
+
+
+def _pool(seed: int, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` feasible sensor poses around the true shaft and their information."""
+    placed = _true_placement()
+    reach = np.asarray(REACH_CENTRE)
+    T_sensor, _ = gather_candidates(
+        PLANNER, placed, SCENARIO.T_flange_sensor, CONSTRAINTS, reach, RNG(seed), count
+    )
+    profiles = predicted_profiles(PLANNER, placed, T_sensor, CONSTRAINTS)
+    T_flange = T_sensor @ invert_transform(SCENARIO.T_flange_sensor)
+    return T_sensor, PLANNER.information(
+        placed, SCENARIO.T_flange_sensor, profiles, T_flange, CONFIG
+    )
+
+
+def test_candidates_are_drawn_until_enough_are_feasible() -> None:
+    placed = _true_placement()
+    reach = np.asarray(REACH_CENTRE)
+    T_sensor, drawn = gather_candidates(
+        PLANNER, placed, SCENARIO.T_flange_sensor, CONSTRAINTS, reach, RNG(0), 150
+    )
+    assert len(T_sensor) == 150
+    # The upright shaft on its table rejects every view from below: most draws fail.
+    assert drawn > 2 * 150
+    ok = feasible(PLANNER, placed, T_sensor, SCENARIO.T_flange_sensor, CONSTRAINTS, reach)
+    assert np.all(ok)
+
+
+def test_exchange_pass_moves_the_greedy_choice_towards_the_best_subset() -> None:
+    k, greedy_gap, chosen_gap, optimal = 4, 0.0, 0.0, 0
+    for seed in range(6):
+        _, gains = _pool(seed, 14)
+        start = np.eye(gains.shape[1])
+        subsets = np.array(list(itertools.combinations(range(len(gains)), k)))
+        best = float(np.max(log_det_marginal(start + gains[subsets].sum(axis=1))))
+        available = np.ones(len(gains), dtype=bool)
+        greedy = float(
+            log_det_marginal(
+                start + gains[greedy_order(start, gains, k, None, available)].sum(axis=0)
+            )
+        )
+        chosen = float(log_det_marginal(start + gains[choose(start, gains, k, None)].sum(axis=0)))
+        assert greedy - 1e-9 <= chosen <= best + 1e-9
+        greedy_gap += best - greedy
+        chosen_gap += best - chosen
+        optimal += chosen > best - 1e-9
+    assert chosen_gap < 0.5 * greedy_gap and optimal >= 3
+
+
+def test_plan_from_a_result_uses_its_reestimated_noise() -> None:
+    # The arm is 3 times less precise than configured: the result says so, and the plan
+    # predicts with what the result found.
+    truth = scenario_from_preset(
+        "ur_scancontrol",
+        robot_sigma_translation_m=3e-4,
+        robot_sigma_rotation_rad=math.radians(0.03),
+        n_poses=20,
+    )
+    data = simulate(truth, seed=0)
+    samples = pair_profiles(data.profiles, data.poses, PairingConfig()).samples
+    result = calibrate_samples(
+        samples, PipelineConfig(target="cylinder", target_config=CONFIG, seed=0)
+    )
+    section = result.target
+    assert isinstance(section, CylinderSection) and section.noise_levels is not None
+    levels = section.noise_levels
+    assert levels["robot_sigma_t_m"] == pytest.approx(3e-4, rel=0.3)
+    assert levels["sensor_sigma_m"] == pytest.approx(truth.sigma_depth_m, rel=0.3)
+
+    def start_sigma(section: object) -> np.ndarray:
+        plan = plan_for_target(
+            get_target("cylinder"),
+            CONFIG,
+            result.T_flange_sensor,
+            1,
+            samples=samples,
+            section=section,
+            extent=(0.0, truth.cylinder_length_m),
+            constraints=CONSTRAINTS,
+        )
+        assert plan.sigma_translation_m is not None
+        return plan.sigma_translation_m
+
+    configured = start_sigma(replace(section, noise_levels=None))
+    estimated = start_sigma(section)
+    assert np.all((estimated > 2.0 * configured) & (estimated < 3.5 * configured))
+    assert result.uncertainty_translation_m is not None
+    np.testing.assert_allclose(estimated, result.uncertainty_translation_m, rtol=0.25)
+
+
+@pytest.mark.parametrize("levels", [{"robot_sigma_t_m": -1e-4}, {"sensor_sigma": 1e-6}])
+def test_bad_noise_levels_of_a_result_are_refused(levels: dict[str, float]) -> None:
+    with pytest.raises(InputError, match="noise_estimated"):
+        with_noise_levels(CONFIG, levels)
+
+
+@pytest.mark.parametrize("n", [6, 12])
+def test_planned_translation_meets_but_never_beats_the_robots_bound(n: int) -> None:
+    # A profile of a cylinder shows 2 of the 3 translation directions, and the robot's
+    # translation error adds to the hand-eye's: no n poses beat 3 σ_t / √(2n), even with a
+    # perfect sensor, and the planner's poses come close to it.
+    perfect = with_noise_levels(CONFIG, {"sensor_sigma_m": CONFIG.refine.sensor_sigma_m / 20})
+    plan = plan_poses(
+        PLANNER, _true_placement(), SCENARIO.T_flange_sensor, perfect, n, RNG(n), CONSTRAINTS
+    )
+    bound = 3.0 * CONFIG.refine.robot_sigma_t_m / math.sqrt(2.0 * n)
+    achieved = float(np.linalg.norm(plan.poses[-1].sigma_translation_m))
+    assert bound <= achieved < 1.1 * bound

@@ -37,7 +37,11 @@ def random_result(rng: np.random.Generator, *, with_uncertainty: bool = True) ->
         T_flange_sensor=transform_from_rotvec_translation(
             rng.normal(size=3), 0.1 * rng.normal(size=3)
         ),
-        target=CylinderSection(random_cylinder(rng), radius_estimated=True),
+        target=CylinderSection(
+            random_cylinder(rng),
+            radius_estimated=True,
+            noise_levels={"sensor_sigma_m": 5e-6, "robot_sigma_t_m": 1.2e-4},
+        ),
         method="default",
         samples_used=[0, 1, 2, 4, 7],
         samples_rejected=[
@@ -102,6 +106,7 @@ def test_result_round_trips_exactly(tmp_path: Path) -> None:
         assert back.sample_residuals_m == result.sample_residuals_m
         assert back.warnings == result.warnings
         assert back.target.radius_estimated is True
+        assert back.target.noise_levels == result.target.noise_levels
         assert back.clock_offset_live_s == result.clock_offset_live_s
         assert back.clock_offset_live_sigma_s == result.clock_offset_live_sigma_s
         assert (back.method, back.parent_frame, back.child_frame, back.base_frame) == (

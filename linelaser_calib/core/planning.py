@@ -19,13 +19,34 @@ Criterion
 The planner adds poses greedily. At each step it takes the candidate that maximises
 log det of the marginal information of the hand-eye (the 6×6 Schur complement after the
 target's own parameters are eliminated), starting from the information of the samples
-already taken: a D-optimal design. It is preferred to an A-optimal one (the trace of the
-covariance) because the hand-eye mixes rotations (rad) and translations (m): the trace adds
-rad² to m², so its choice depends on the units and on an arbitrary lever, whereas
-log det only shifts by a constant when the units change, so the chosen poses do not.
+already taken: a D-optimal design. An exchange pass (Fedorov's) then swaps any chosen pose
+for a candidate that raises the log det further, until no swap does, and the poses are put
+back in greedy order, so that every prefix of the plan is a good plan too.
+
+D-optimality is preferred to A-optimality (the trace of the covariance) because the hand-eye
+mixes rotations (rad) and translations (m): the trace adds rad² to m², so its choice depends
+on the units and on an arbitrary lever, whereas log det only shifts by a constant when the
+units change, so the chosen poses do not.
 D-optimality also minimises the volume of the hand-eye's confidence ellipsoid, and a greedy
 choice of a log det is close to the best subset (the criterion is submodular on added
-information).
+information). On the cylinder at the paper's noise, the D-optimal 20 poses come within 1 % of
+the 20 that minimise the translation's variance (trace, m²), at a smaller rotation 1σ.
+
+Candidates
+----------
+The target draws candidate sensor poses by its scanning rules; the planner keeps drawing
+until it holds ``CANDIDATES_PER_POSE`` feasible ones per pose to plan (at least
+``MIN_CANDIDATES``; drawing stops after ``MAX_DRAWS_PER_CANDIDATE`` draws per candidate
+wanted). Most draws fail a constraint (an upright shaft on a table rejects every view from
+below), and a greedy choice from too few feasible candidates is little better than a random
+one: at 36 candidates the 20 poses' 1σ is 5 % (translation) and 12 % (rotation) above that
+from 300.
+
+Noise levels
+------------
+The per-pose information uses the target's configured noise levels, or, when the plan
+starts from a result whose section carries re-estimated ones (``noise_levels``: sensor σ,
+robot σ_t and σ_r), those: they are what the next calibration will meet.
 
 Constraints
 -----------
@@ -44,6 +65,7 @@ Planning stops early once every predicted 1σ of the hand-eye is within the user
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any, Protocol
 
@@ -64,10 +86,18 @@ WEAK_PRIOR_INFORMATION = 1.0
 UP = np.array([0.0, 0.0, 1.0])
 #: Solver settings of :func:`per_sample_information` (unit weights are given explicitly).
 UNIT_WEIGHTS = SolverConfig(loss="linear")
-#: Candidates drawn per pose to plan.
-CANDIDATES_PER_POSE = 60
-#: Fewest candidates drawn.
-MIN_CANDIDATES = 300
+#: Feasible candidates gathered per pose to plan.
+CANDIDATES_PER_POSE = 30
+#: Fewest feasible candidates gathered.
+MIN_CANDIDATES = 200
+#: Most candidates drawn per feasible candidate wanted.
+MAX_DRAWS_PER_CANDIDATE = 40
+#: Most sweeps of the exchange pass over the chosen poses.
+MAX_EXCHANGE_SWEEPS = 5
+#: Noise levels a result's section may carry, re-estimated (m, m, rad).
+NOISE_LEVELS = ("sensor_sigma_m", "robot_sigma_t_m", "robot_sigma_r_rad")
+#: Smallest rise of the log det for which the exchange pass swaps a pose.
+EXCHANGE_GAIN = 1e-6
 
 
 @dataclass(frozen=True)
@@ -389,6 +419,102 @@ def predicted_profiles(
     return [d[np.isfinite(d), None] * directions[np.isfinite(d)] for d in depth]
 
 
+def gather_candidates(
+    plannable: Plannable,
+    placement: Any,
+    T_flange_sensor: FloatArray,
+    constraints: PlanConstraints,
+    reach_centre_m: FloatArray,
+    rng: np.random.Generator,
+    wanted: int,
+) -> tuple[FloatArray, int]:
+    """Up to ``wanted`` feasible sensor poses (K, 4, 4), drawn in batches sized by the share
+    of feasible draws so far, and the number of poses drawn."""
+    kept: list[FloatArray] = []
+    found = drawn = 0
+    budget = MAX_DRAWS_PER_CANDIDATE * wanted
+    batch = 4 * wanted
+    while found < wanted and drawn < budget:
+        size = min(batch, budget - drawn)
+        views = plannable.candidate_views(placement, constraints, rng, size)
+        drawn += size
+        ok = feasible(plannable, placement, views, T_flange_sensor, constraints, reach_centre_m)
+        kept.append(views[ok])
+        found += int(ok.sum())
+        batch = math.ceil(1.2 * (wanted - found) * drawn / max(found, 1)) + 1
+    return np.concatenate(kept)[:wanted], drawn
+
+
+def log_det_marginal(information: FloatArray) -> FloatArray:
+    """log det (...,) of the hand-eye's marginal information of each (..., G, G)."""
+    _, logdet = np.linalg.slogdet(marginal_hand_eye(information))
+    return np.asarray(logdet)
+
+
+def within(sigma: tuple[FloatArray, FloatArray], goal: tuple[float, float] | None) -> bool:
+    """Every 1σ (translation (3,) m, rotation (3,) rad) is within the goal (m, rad)."""
+    return goal is not None and bool(np.all(sigma[0] <= goal[0]) and np.all(sigma[1] <= goal[1]))
+
+
+def greedy_order(
+    information: FloatArray,
+    gains: FloatArray,
+    n: int,
+    goal: tuple[float, float] | None,
+    available: BoolArray,
+) -> list[int]:
+    """Up to ``n`` of the available candidates, each the one that raises the log det most
+    given ``information`` (G, G) and those before it; stops once the goal is reached."""
+    open_ = available.copy()
+    chosen: list[int] = []
+    while len(chosen) < n and open_.any():
+        best = int(np.argmax(np.where(open_, log_det_marginal(information + gains), -np.inf)))
+        open_[best] = False
+        information = information + gains[best]
+        chosen.append(best)
+        if within(predicted_sigma(information), goal):
+            break
+    return chosen
+
+
+def exchange(information: FloatArray, gains: FloatArray, chosen: list[int]) -> list[int]:
+    """Fedorov's exchange: swap each chosen candidate for the one that, with the others,
+    gives the largest log det, while that rises by more than ``EXCHANGE_GAIN``."""
+    chosen = list(chosen)
+    for _ in range(MAX_EXCHANGE_SWEEPS):
+        swapped = False
+        for k in range(len(chosen)):
+            others = chosen[:k] + chosen[k + 1 :]
+            logdet = log_det_marginal(information + gains[others].sum(axis=0) + gains)
+            logdet[others] = -np.inf
+            best = int(np.argmax(logdet))
+            if logdet[best] > logdet[chosen[k]] + EXCHANGE_GAIN:
+                chosen[k], swapped = best, True
+        if not swapped:
+            break
+    return chosen
+
+
+def choose(
+    information: FloatArray, gains: FloatArray, n: int, goal: tuple[float, float] | None
+) -> list[int]:
+    """Greedy choice, exchange pass, then the exchanged set in greedy order (module
+    docstring); the greedy choice stays when the exchanged set misses a goal it reached."""
+    greedy = greedy_order(information, gains, n, goal, np.ones(len(gains), dtype=bool))
+    swapped = exchange(information, gains, greedy)
+    if set(swapped) == set(greedy):
+        return greedy
+    mask = np.zeros(len(gains), dtype=bool)
+    mask[swapped] = True
+    ordered = greedy_order(information, gains, len(swapped), goal, mask)
+    final = information + gains[ordered].sum(axis=0)
+    if within(predicted_sigma(information + gains[greedy].sum(axis=0)), goal) and not within(
+        predicted_sigma(final), goal
+    ):
+        return greedy
+    return ordered
+
+
 def plan_poses(
     plannable: Plannable,
     placement: Any,
@@ -399,8 +525,9 @@ def plan_poses(
     constraints: PlanConstraints | None = None,
     current: tuple[list[FloatArray], FloatArray] | None = None,
     goal: tuple[float, float] | None = None,
+    candidates: int | None = None,
 ) -> Plan:
-    """Greedy D-optimal choice of up to ``n`` flange poses (see the module docstring).
+    """D-optimal choice of up to ``n`` flange poses (see the module docstring).
 
     Parameters
     ----------
@@ -420,6 +547,9 @@ def plan_poses(
         Profile points (sensor frame, m) and flange poses of the samples already taken.
     goal : (float, float), optional
         Stop once every predicted 1σ is within (translation m, rotation rad).
+    candidates : int, optional
+        Feasible candidates to choose from; default ``CANDIDATES_PER_POSE`` per pose, at
+        least ``MIN_CANDIDATES``.
 
     Raises
     ------
@@ -438,14 +568,13 @@ def plan_poses(
         reach = T_current[0, :3, 3]
     else:
         reach = plannable.centre(placement)
-    drawn = plannable.candidate_views(
-        placement, limits, rng, max(MIN_CANDIDATES, CANDIDATES_PER_POSE * n)
+    wanted = max(MIN_CANDIDATES, CANDIDATES_PER_POSE * n) if candidates is None else candidates
+    T_sensor, drawn = gather_candidates(
+        plannable, placement, T_flange_sensor, limits, reach, rng, wanted
     )
-    ok = feasible(plannable, placement, drawn, T_flange_sensor, limits, reach)
-    T_sensor = drawn[ok]
     if not len(T_sensor):
         raise DegenerateError(
-            f"none of {len(drawn)} candidate sensor poses satisfies the constraints: the "
+            f"none of {drawn} candidate sensor poses satisfies the constraints: the "
             "flange must stay within the reach box (half side "
             f"{limits.reach_half_extent_m * 1e3:.0f} mm around "
             f"{np.array2string(reach * 1e3, precision=0)} mm), the sensor above the table and "
@@ -465,21 +594,12 @@ def plan_poses(
     information = WEAK_PRIOR_INFORMATION * np.eye(G) + all_info[: len(points)].sum(axis=0)
     gains = all_info[len(points) :]
     start = predicted_sigma(information) if len(points) >= 3 else (None, None)
-    available = np.ones(len(gains), dtype=bool)
     chosen: list[PlannedPose] = []
-    reached = False
-    while len(chosen) < n and available.any():
-        _, logdet = np.linalg.slogdet(marginal_hand_eye(information + gains))
-        best = int(np.argmax(np.where(available, logdet, -np.inf)))
-        available[best] = False
+    for best in choose(information, gains, n, goal):
         information = information + gains[best]
         sigma_t, sigma_r = predicted_sigma(information)
         chosen.append(PlannedPose(T_flange[best], T_sensor[best], sigma_t, sigma_r))
-        reached = goal is not None and bool(
-            np.all(sigma_t <= goal[0]) and np.all(sigma_r <= goal[1])
-        )
-        if reached:
-            break
+    reached = within((chosen[-1].sigma_translation_m, chosen[-1].sigma_rotation_rad), goal)
     return Plan(chosen, start[0], start[1], reached, len(T_sensor), len(points))
 
 
@@ -503,6 +623,30 @@ def fan_shape(plan: Plan, constraints: PlanConstraints) -> Shape:
     ]
     points = np.concatenate(segments) if segments else np.zeros((0, 3))
     return Shape("line", points, 0.0005, "planned_fans", (1.0, 0.2, 0.2, 0.8))
+
+
+def with_noise_levels(config: Any, levels: Mapping[str, float] | None) -> Any:
+    """The target's settings with the noise levels a result re-estimated (its section's
+    ``noise_levels``: any of ``sensor_sigma_m``, ``robot_sigma_t_m`` and
+    ``robot_sigma_r_rad`` of the settings' ``refine``, m and rad); unchanged without them.
+
+    Raises
+    ------
+    InputError
+        A level that is not one of those, or not a positive number.
+    """
+    if not levels:
+        return config
+    for key, value in levels.items():
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if key not in NOISE_LEVELS or not (number and math.isfinite(value) and value > 0.0):
+            raise InputError(
+                f"the result's quality.noise_estimated.{key} must be one of "
+                f"{', '.join(NOISE_LEVELS)} with a positive value (m or rad), got {value!r}"
+            )
+    return replace(
+        config, refine=replace(config.refine, **{k: float(v) for k, v in levels.items()})
+    )
 
 
 def plannable(target: Target[Any]) -> Plannable:
@@ -553,7 +697,8 @@ def plan_for_target(
     samples : list of Sample, optional
         Samples already taken (their information is the planner's start).
     section, numbers, extent : optional
-        See above and :class:`Plannable`.
+        See above and :class:`Plannable`. A section's re-estimated noise levels replace the
+        configured ones (:func:`with_noise_levels`).
     constraints : PlanConstraints, optional
     goal : (float, float), optional
         (translation m, rotation rad).
@@ -577,6 +722,7 @@ def plan_for_target(
         else None
     )
     if section is not None:
+        config = with_noise_levels(config, getattr(section, "noise_levels", None))
         placement = planner.placement_from_section(section, config, extent, points_base)
     elif numbers is not None:
         placement = planner.placement_from_numbers(numbers, config, extent, points_base)

@@ -24,6 +24,9 @@ class CylinderSection:
         Axis point, unit direction and radius in the base frame, m.
     radius_estimated : bool
         True if the radius was estimated rather than given.
+    noise_levels : dict of str to float, or None
+        The noise levels re-estimated from the residuals (``sensor_sigma_m``,
+        ``robot_sigma_t_m``, ``robot_sigma_r_rad``; default method), or None.
     """
 
     key: ClassVar[str] = "cylinder"
@@ -31,6 +34,7 @@ class CylinderSection:
 
     cylinder: Cylinder
     radius_estimated: bool = False
+    noise_levels: Mapping[str, float] | None = None
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
         """``{frame, point, direction, radius}`` (m)."""
@@ -43,8 +47,11 @@ class CylinderSection:
         }
 
     def quality_entries(self) -> dict[str, Any]:
-        """``radius_estimated``."""
-        return {"radius_estimated": bool(self.radius_estimated)}
+        """``radius_estimated`` and the re-estimated noise levels (``noise_estimated``)."""
+        entries: dict[str, Any] = {"radius_estimated": bool(self.radius_estimated)}
+        if self.noise_levels:
+            entries["noise_estimated"] = {k: float(v) for k, v in self.noise_levels.items()}
+        return entries
 
     def describe(self, base_frame: str) -> str:
         """The axis point, direction and radius (mm)."""
@@ -100,4 +107,8 @@ def read_cylinder_section(
     estimated = quality.get("radius_estimated", False)
     if not isinstance(estimated, bool):
         raise ValueError(f"key quality.radius_estimated must be true or false, got {estimated!r}")
-    return CylinderSection(Cylinder(point, direction / norm, float(radius)), estimated)
+    return CylinderSection(
+        Cylinder(point, direction / norm, float(radius)),
+        estimated,
+        dict(quality.get("noise_estimated") or {}) or None,
+    )

@@ -234,7 +234,16 @@ class CylinderTarget:
         ]
         return TargetSolution(
             T_flange_sensor=refined.T_flange_sensor,
-            section=CylinderSection(refined.cylinder, refined.radius_estimated),
+            section=CylinderSection(
+                refined.cylinder,
+                refined.radius_estimated,
+                {
+                    "sensor_sigma_m": refined.sensor_sigma_estimated_m,
+                    "robot_sigma_t_m": config.refine.robot_sigma_t_m * refined.robot_sigma_scale,
+                    "robot_sigma_r_rad": config.refine.robot_sigma_r_rad
+                    * refined.robot_sigma_scale,
+                },
+            ),
             method="default",
             samples_used=[features[j].index for j in refined.used],
             rejections=rejections,
