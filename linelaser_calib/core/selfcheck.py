@@ -135,6 +135,8 @@ class SelfCheck:
         |θ_even − θ_odd| / √(σ_even² + σ_odd²) per axis, each half's model 1σ widened as the
         full solution's (``sigma_honest / sigma_model``); None when the halves could not be
         solved apart.
+    halves_model_sigmas : ndarray, shape (6,) or None
+        The same against the halves' model 1σ.
     pose_clusters : int
         Groups of nearby poses (:data:`CLUSTER_RADIUS_M`, :data:`CLUSTER_ANGLE_RAD`).
     systematic : bool
@@ -158,6 +160,7 @@ class SelfCheck:
     offset_rms_m: float
     lever_m: float
     halves_sigmas: FloatArray | None
+    halves_model_sigmas: FloatArray | None
     pose_clusters: int
     systematic: bool
     sigma_honest: FloatArray
@@ -173,6 +176,9 @@ class SelfCheck:
                 "halves_agreement_sigmas": None
                 if self.halves_sigmas is None
                 else float(np.max(self.halves_sigmas)),
+                "halves_agreement_model_sigmas": None
+                if self.halves_model_sigmas is None
+                else float(np.max(self.halves_model_sigmas)),
                 "jackknife_sigma": {
                     "rotation_rad": [float(v) for v in self.sigma_jackknife[:3]],
                     "translation_m": [float(v) for v in self.sigma_jackknife[3:]],
@@ -487,6 +493,7 @@ def self_check(
         offset_rms_m=offset_rms,
         lever_m=lever,
         halves_sigmas=halves,
+        halves_model_sigmas=None if split is None else split[0] / split[1],
         pose_clusters=clusters,
         systematic=systematic,
         sigma_honest=sigma,
@@ -529,10 +536,20 @@ def _warnings(check: SelfCheck, solution: TargetSolution) -> list[str]:
                 f"the hand-eye moves {check.region_ratio:.1f} times more when one region of "
                 "the workspace is left out than the noise model predicts"
             )
-        if check.halves_sigmas is not None and np.max(check.halves_sigmas) > HALVES_LIMIT_SIGMAS:
+        if (
+            check.halves_model_sigmas is not None
+            and np.max(check.halves_model_sigmas) > HALVES_LIMIT_SIGMAS
+        ):
             evidence.append(
                 "the even and odd halves differ by up to "
-                f"{float(np.max(check.halves_sigmas)):.1f} combined sigma"
+                f"{float(np.max(check.halves_model_sigmas)):.1f} combined sigma of the noise "
+                "model"
+            )
+        if check.halves_sigmas is not None and np.max(check.halves_sigmas) > HALVES_LIMIT_SIGMAS:
+            evidence.append(
+                "and by "
+                f"{float(np.max(check.halves_sigmas)):.1f} combined sigma of the widened 1 sigma "
+                "(widened further to cover them)"
             )
         out.append(
             "the robot's pose error looks systematic (pose-dependent, e.g. kinematic "
