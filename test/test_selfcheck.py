@@ -269,6 +269,21 @@ def test_kinematic_robot_error_is_detected_and_its_sigma_honest() -> None:
     assert float(np.max(axis_ratios(result, data) * widening)) > 3.0, "model 1σ was honest"
 
 
+def test_region_dependent_robot_error_is_detected_and_its_sigma_honest() -> None:
+    """A small cluttered_camera recording (a robot error field shared by neighbouring poses,
+    6 pose clusters): warned, |e|/σ ≤ 3 where the model's 1σ is beyond 3, halves agree."""
+    data, result = calibrated("cluttered_camera", 1, n_poses=48, resolution=1600)
+    check = result.self_check
+    assert check is not None and check.systematic
+    assert check.region_ratio is not None and check.region_ratio > region_limit(check.regions - 1)
+    assert any("looks systematic" in w for w in result.warnings)
+    assert float(np.max(axis_ratios(result, data))) <= 3.0
+    error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)
+    e = np.concatenate([error.rotation_axes_rad, error.translation_axes_m])
+    assert float(np.max(np.abs(e) / check.sigma_model)) > 3.0, "model 1σ was honest"
+    assert check.halves_sigmas is not None and float(np.max(check.halves_sigmas)) <= 3.0
+
+
 def test_independent_robot_noise_is_not_flagged() -> None:
     """The paper preset (independent per-pose noise): no warning, the model's 1σ is kept."""
     _, result = calibrated("paper", 2)
