@@ -188,9 +188,12 @@ def test_region_dispersion_rarely_exceeds_its_limit_under_independent_error() ->
     ratios = []
     for _ in range(300):
         features = toy_features(rng, rng.normal(0.0, sigma_shared, M), positions)
-        sigma, regions = region_jackknife(features, toy_solve(features), toy_solve, DEFAULT_FOLDS)
-        assert sigma is not None and regions == DEFAULT_FOLDS
-        ratios.append(sigma[5] / (sigma_shared / np.sqrt(M)))
+        solution = toy_solve(features)
+        assert solution.sigma_rotation_rad is not None and solution.sigma_translation_m is not None
+        sigma = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
+        region = region_jackknife(features, solution, sigma, toy_solve, DEFAULT_FOLDS)
+        assert region is not None and region.regions == DEFAULT_FOLDS
+        ratios.append(region.sigma[5] / (sigma_shared / np.sqrt(M)))
     assert float(np.median(ratios)) == pytest.approx(0.93, abs=0.15)
     assert float(np.mean(np.array(ratios) > limit)) <= 0.02
 

@@ -42,11 +42,13 @@ independent per-pose noise from one whose error is systematic (pose-dependent: k
 parameters that differ from the nominal ones). Two statistics can, either one marking the
 error as systematic:
 
-- **Region dispersion** √(mean over the axes of (σ_region / σ_model)²). Under the noise model
-  each axis' ratio squared is about χ²_{G−1}/(G − 1); treating the six axes as one (one region
-  pulls them together) the limit :func:`region_limit` is the χ² quantile at a false-alarm
-  probability of 0.27 % (the 3σ convention): 2.02 for 5 regions. Derived, not tuned; the
-  jackknife's bias upwards (Efron–Stein) keeps independent recordings further below it.
+- **Region dispersion** √(mean over the axes of (σ_region / σ_expected)²), σ_expected what
+  the noise model predicts for this jackknife from the region solves' own 1σ
+  (:class:`RegionJackknife`; leaving out a region that holds a whole direction of view moves
+  the estimate more, and the model knows it). Under the noise model each axis' ratio squared
+  is about χ²_{G−1}/(G − 1); treating the six axes as one (one region pulls them together)
+  the limit :func:`region_limit` is the χ² quantile at a false-alarm probability of 0.27 %
+  (the 3σ convention): 2.02 for 5 regions. Derived, not tuned.
 - **Neighbour correlation** of the held-out offsets: each held-out profile's mean signed
   offset from the fitted target is the robot's error at that pose as the target sees it, and
   its tilt across the profile shows the rotation part. Independent errors leave the 3 nearest
@@ -151,7 +153,7 @@ class SelfCheck:
         Jackknife 1σ over the regions (:func:`region_jackknife`), same order; None without
         regions.
     region_ratio : float or None
-        √(mean (σ_region / σ_model)²), the region dispersion; None without regions.
+        The region dispersion (:attr:`RegionJackknife.ratio`); None without regions.
     neighbour_correlation : float
         Correlation of the held-out offsets of neighbouring poses (:func:`neighbour_correlation`).
     offset_rms_m : float
@@ -344,22 +346,50 @@ def region_groups(T_base_flange: FloatArray, groups: int) -> NDArray[np.int64]:
     return np.asarray(np.unique(label, return_inverse=True)[1], dtype=np.int64)
 
 
+@dataclass(frozen=True)
+class RegionJackknife:
+    """The jackknife over regions of the workspace (:func:`region_jackknife`).
+
+    Attributes
+    ----------
+    sigma : ndarray, shape (6,)
+        √((G − 1)/G · Σ_g (θ_g − θ)²) per axis, θ_g the solve without region g and θ the full
+        solution (the order of :func:`hand_eye_difference`).
+    expected : ndarray, shape (6,)
+        What the noise model predicts for it: √((G − 1)/G · Σ_g (σ_g² − σ²)), σ_g the 1σ of
+        the solve without region g and σ the full solution's (the variance of θ_g − θ for
+        nested estimates), at least σ. A region whose absence leaves the poses weak (a whole
+        direction of view missing) moves the estimate more, and the model says so.
+    regions : int
+        G, the regions solved without.
+    """
+
+    sigma: FloatArray
+    expected: FloatArray
+    regions: int
+
+    @property
+    def ratio(self) -> float:
+        """√(mean over the axes of (sigma / expected)²), the region dispersion."""
+        return float(np.sqrt(np.mean((self.sigma / self.expected) ** 2)))
+
+
 def region_jackknife(
     kept: list[Any],
     solution: TargetSolution,
+    sigma_model: FloatArray,
     solve: Callable[[list[Any]], TargetSolution],
     groups: int,
-) -> tuple[FloatArray | None, int]:
-    """Jackknife 1σ (6,) of the hand-eye over regions of the workspace (:func:`region_groups`):
-    √((G − 1)/G · Σ_g (θ_g − θ)²) per axis, θ_g the solve without region g and θ the full
-    solution (the order of :func:`hand_eye_difference`), and G, the regions solved without;
-    (None, 0) when fewer than 3 could be.
+) -> RegionJackknife | None:
+    """Leave each of ``groups`` regions of the workspace (:func:`region_groups`) out in turn and
+    take the jackknife of the hand-eye (:class:`RegionJackknife`); None when fewer than 3
+    regions could be solved without.
 
     Leaving a whole region out moves the estimate by what that region's shared robot error
     put into it; interleaved folds keep every region in every fold and cannot show it.
     """
     label = region_groups(np.stack([f.T_base_flange for f in kept]), groups)
-    moves = []
+    moves, spreads = [], []
     for g in range(int(label.max()) + 1):
         train = [f for f, lab in zip(kept, label, strict=True) if lab != g]
         try:
@@ -367,10 +397,17 @@ def region_jackknife(
         except CalibrationError:
             continue
         moves.append(hand_eye_difference(solution.T_flange_sensor, fold.T_flange_sensor))
+        sigma_fold = _sigma(fold)
+        spreads.append(np.zeros(6) if sigma_fold is None else sigma_fold**2 - sigma_model**2)
     G = len(moves)
     if G < 3:
-        return None, 0
-    return np.asarray(np.sqrt((G - 1) / G * np.sum(np.square(moves), axis=0))), G
+        return None
+    factor = (G - 1) / G
+    return RegionJackknife(
+        sigma=np.sqrt(factor * np.sum(np.square(moves), axis=0)),
+        expected=np.sqrt(np.maximum(factor * np.sum(spreads, axis=0), sigma_model**2)),
+        regions=G,
+    )
 
 
 def region_limit(dof: int) -> float:
@@ -479,10 +516,10 @@ def self_check(
     sigma_jk = np.sqrt((folds - 1) / folds * np.sum((theta - theta.mean(axis=0)) ** 2, axis=0))
     ratio = float(np.sqrt(np.mean((sigma_jk / sigma_model) ** 2)))
     correlation = neighbour_correlation(np.stack([offsets, tilts], axis=1), np.stack(poses))
-    sigma_region, regions = region_jackknife(kept, solution, solve, folds)
-    region_ratio = (
-        None if sigma_region is None else float(np.sqrt(np.mean((sigma_region / sigma_model) ** 2)))
-    )
+    region = region_jackknife(kept, solution, sigma_model, solve, folds)
+    sigma_region = None if region is None else region.sigma
+    regions = 0 if region is None else region.regions
+    region_ratio = None if region is None else region.ratio
     offset_rms = float(np.sqrt(np.mean(np.square(offsets))))
     lever = float(np.median(levers))
     systematic = correlation > neighbour_limit(len(offsets)) or (
