@@ -13,8 +13,8 @@ table gives, as median [max] over the seeds:
 - the cross-validated accuracy in use (held-out point-to-surface RMS, µm);
 - the two statistics that decide whether the error is systematic, as min / max over the
   seeds beside their limits: the neighbour correlation of the held-out offsets and the region
-  dispersion (the hand-eye's jackknife 1σ over regions of the workspace left out, over the
-  model's 1σ);
+  dispersion (the hand-eye's jackknife 1σ over regions of the workspace left out, over what
+  the noise model predicts for it);
 - the even/odd halves' disagreement in combined (reported) σ;
 - how many recordings warned that the robot's error looks systematic, and the CPU time the
   self-check adds (s).

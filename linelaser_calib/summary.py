@@ -157,8 +157,8 @@ def self_check_rows(result: CalibrationResult) -> Rows:
             + (
                 ""
                 if check.region_ratio is None
-                else f", hand-eye moves {check.region_ratio:.1f}x the model 1 sigma when one "
-                f"of {check.regions} regions of the workspace is left out"
+                else f", hand-eye moves {check.region_ratio:.1f}x what the noise model "
+                f"predicts when one of {check.regions} regions of the workspace is left out"
             )
             + ")",
         ),
