@@ -414,7 +414,7 @@ def region_limit(dof: int) -> float:
     """Region dispersion above which the robot's error is systematic, for a jackknife with
     ``dof`` degrees of freedom: √(χ²_dof quantile at 1 − :data:`REGION_FALSE_ALARM` / dof).
 
-    Under the noise model each axis' (σ_region/σ_model)² is about χ²_dof / dof; taking the six
+    Under the noise model each axis' (σ_region/σ_expected)² is about χ²_dof / dof; taking the six
     axes as one (they move together when one region pulls the estimate) keeps the false
     alarm at or below :data:`REGION_FALSE_ALARM`.
     """
