@@ -10,13 +10,18 @@ table gives, as median [max] over the seeds:
 - the reported 1σ (largest axis; mm, deg) and the model's own 1σ before any widening;
 - the largest |error| / 1σ over the six axes, with the reported and with the model's 1σ, and
   the share of axes within 1σ and 2σ of the reported one;
-- the cross-validated accuracy in use (held-out point-to-surface RMS, µm) and the neighbour
-  correlation of the held-out offsets;
+- the cross-validated accuracy in use (held-out point-to-surface RMS, µm);
+- the two statistics that decide whether the error is systematic, as min / max over the
+  seeds beside their limits: the neighbour correlation of the held-out offsets and the region
+  dispersion (the hand-eye's jackknife 1σ over regions of the workspace left out, over what
+  the noise model predicts for it);
+- the even/odd halves' disagreement in combined (reported) σ;
 - how many recordings warned that the robot's error looks systematic, and the CPU time the
   self-check adds (s).
 
-Run: ``.venv/bin/python bench/robot_error.py [--seeds N] [--presets a,b]`` (default 20 seeds;
-about 3 s per recording).
+Run: ``.venv/bin/python bench/robot_error.py [--seeds N] [--presets a,b] [--verbose]``
+(default 20 seeds; 3-5 s of CPU per recording, 20 s on cluttered_camera; ``--verbose`` prints
+each recording's largest |error|/σ and statistics).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import time
 import numpy as np
 
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.selfcheck import neighbour_limit, region_limit
 from linelaser_calib.sim import scenario_from_preset, simulate
 from linelaser_calib.summary import truth_error
 
@@ -60,6 +66,10 @@ def run(preset: str, seed: int) -> dict[str, float]:
         "in2": float(np.mean(z <= 2.0)),
         "acc_um": check.accuracy_in_use_m * 1e6,
         "corr": check.neighbour_correlation,
+        "corr_limit": neighbour_limit(len(check.indices)),
+        "region": float("nan") if check.region_ratio is None else check.region_ratio,
+        "region_limit": region_limit(check.regions - 1) if check.regions else float("nan"),
+        "halves": float("nan") if check.halves_sigmas is None else float(check.halves_sigmas.max()),
         "warned": float(any(SYSTEMATIC_WORDS in w for w in result.warnings)),
         "added_s": checked - plain,
     }
@@ -71,26 +81,45 @@ def cell(rows: list[dict[str, float]], key: str) -> str:
     return f"{np.median(values):>7.3f} [{values.max():>5.2f}]"
 
 
+def span(rows: list[dict[str, float]], key: str, limit: str) -> str:
+    """``min / max (limit)`` of one statistic over the seeds."""
+    values = np.array([r[key] for r in rows])
+    return f"{values.min():.2f} / {values.max():.2f} ({np.median([r[limit] for r in rows]):.2f})"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--presets", default=",".join(PRESETS))
+    parser.add_argument("--verbose", action="store_true", help="print each recording too")
     args = parser.parse_args()
     columns = ("err_mm", "err_deg", "sigma_mm", "sigma_deg", "model_mm", "z", "z_model")
-    columns += ("acc_um", "corr", "added_s")
+    columns += ("acc_um", "halves", "added_s")
     print(
         f"{'preset':<15} {'n':>3} "
         + " ".join(f"{c:>15}" for c in columns)
         + f" {'in 1σ':>6} {'in 2σ':>6} {'warned':>6}"
+        + f" {'neighbour corr (limit)':>24} {'region dispersion (limit)':>26}"
     )
     for preset in args.presets.split(","):
-        rows = [run(preset, seed) for seed in range(1, args.seeds + 1)]
+        rows = []
+        for seed in range(1, args.seeds + 1):
+            rows.append(run(preset, seed))
+            if args.verbose:
+                print(
+                    f"  {preset} seed {seed}: max |e|/σ {rows[-1]['z']:.2f}, warned "
+                    f"{bool(rows[-1]['warned'])}, neighbour correlation {rows[-1]['corr']:.2f}, "
+                    f"region dispersion {rows[-1]['region']:.2f}",
+                    flush=True,
+                )
         print(
             f"{preset:<15} {len(rows):>3} "
             + " ".join(f"{cell(rows, c):>15}" for c in columns)
             + f" {np.mean([r['in1'] for r in rows]):>6.0%}"
             + f" {np.mean([r['in2'] for r in rows]):>6.0%}"
-            + f" {int(sum(r['warned'] for r in rows)):>6}",
+            + f" {int(sum(r['warned'] for r in rows)):>6}"
+            + f" {span(rows, 'corr', 'corr_limit'):>24}"
+            + f" {span(rows, 'region', 'region_limit'):>26}",
             flush=True,
         )
 

@@ -153,7 +153,14 @@ def self_check_rows(result: CalibrationResult) -> Rows:
             "robot error",
             ("systematic" if check.systematic else "independent per pose")
             + f" (held-out offsets {check.offset_rms_m * 1e3:.4f} mm RMS, neighbour "
-            f"correlation {check.neighbour_correlation:.2f})",
+            f"correlation {check.neighbour_correlation:.2f}"
+            + (
+                ""
+                if check.region_ratio is None
+                else f", hand-eye moves {check.region_ratio:.1f}x what the noise model "
+                f"predicts when one of {check.regions} regions of the workspace is left out"
+            )
+            + ")",
         ),
     ]
     if check.systematic:

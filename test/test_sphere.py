@@ -26,6 +26,7 @@ from linelaser_calib.core.geometry import (
 )
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
+from linelaser_calib.core.selfcheck import hand_eye_difference
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
@@ -328,8 +329,16 @@ def test_real_scans_fit_better_than_the_published_hand_eye() -> None:
     assert fits["default"] < fits["published"]
     rot, trans = transform_error(result.T_flange_sensor, published)
     assert rot < math.radians(2.0) and trans < 3e-3
+    # The 15 poses fall into 5 clusters; leaving one out moves the hand-eye more than the
+    # noise model predicts, so the self-check widens the 1σ. The published hand-eye lies 6σ of
+    # the model's 1σ away on one axis, within 3σ of the reported one.
     sigma_t = np.asarray(result.uncertainty_translation_m)
-    assert np.all((sigma_t > 1e-4) & (sigma_t < 1e-3))
+    assert np.all((sigma_t > 1e-4) & (sigma_t < 3e-3))
+    assert result.self_check is not None
+    difference = np.abs(hand_eye_difference(published, result.T_flange_sensor))
+    assert float(np.max(difference / result.self_check.sigma_model)) > 3.0
+    sigma = np.concatenate([result.uncertainty_rotation_rad, sigma_t])
+    assert float(np.max(difference / sigma)) < 3.0
 
 
 @pytest.mark.parametrize("bag", [SPHERE_BAG, REAL_BAG], ids=["simulated", "real"])
