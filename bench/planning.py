@@ -182,12 +182,21 @@ class Setup:
         )
 
 
+def _robot(rig: Scenario) -> dict[str, float]:
+    """The robot prior of the calibration: the simulated robot's 1 sigma, as a user who knows
+    the arm's repeatability sets it."""
+    return {
+        "robot_sigma_t_m": rig.robot_sigma_translation_m,
+        "robot_sigma_r_rad": rig.robot_sigma_rotation_rad,
+    }
+
+
 def cylinder_setup(scenario: Scenario) -> Setup:
     scene = Scene.from_scenario(scenario)
     return Setup(
         scenario,
         "cylinder",
-        CylinderConfig(radius_m=scenario.cylinder_radius_m),
+        with_noise_levels(CylinderConfig(radius_m=scenario.cylinder_radius_m), _robot(scenario)),
         scenario.cylinder_radius_m,
         float(scenario.cylinder_base_m[2]),
         (0.0, scenario.cylinder_length_m),
@@ -203,7 +212,7 @@ def sphere_setup(scenario: SphereScenario) -> Setup:
     return Setup(
         rig,
         "sphere",
-        SphereConfig(radius_m=scenario.radius_m),
+        with_noise_levels(SphereConfig(radius_m=scenario.radius_m), _robot(rig)),
         scenario.radius_m,
         scenario.centre_m[2] - scenario.radius_m - scenario.table_gap_m,
         None,
