@@ -66,7 +66,8 @@ Progress = Callable[[str, int, int], None]
 #: (--sensor-sigma, m), ``robot_sigma_t_m`` (--robot-sigma-t, m), ``robot_sigma_r_rad``
 #: (--robot-sigma-r, rad), ``min_samples`` (int), ``initial`` (--initial: the initial
 #: hand-eye, held by the pipeline configuration, not the target's), ``centre_side``
-#: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on).
+#: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on),
+#: ``estimate_scale`` (--estimate-scale: estimate the sensor's along-line scale as well).
 SETTINGS = (
     "radius_m",
     "point_m",
@@ -75,6 +76,7 @@ SETTINGS = (
     "robot_sigma_t_m",
     "robot_sigma_r_rad",
     "min_samples",
+    "estimate_scale",
     "initial",
 )
 

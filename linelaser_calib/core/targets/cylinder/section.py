@@ -1,4 +1,5 @@
-"""The cylinder target's part of a result: the fitted cylinder in the base frame."""
+"""The cylinder target's part of a result: the fitted cylinder in the base frame, and the
+sensor's along-line scale when it was estimated with it."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from ...geometry import FloatArray, apply_transform
 from ...residuals import axis_extent
 from ...types import Cylinder, SampleFit
 from ..base import Shape, mm_text, plain_floats, read_vector
+from .refine import measured_to_true
 
 
 @dataclass(frozen=True)
@@ -24,6 +26,11 @@ class CylinderSection:
         Axis point, unit direction and radius in the base frame, m.
     radius_estimated : bool
         True if the radius was estimated rather than given.
+    scale : float or None
+        The sensor's along-line scale error s estimated with the cylinder (dimensionless: the
+        profiler reports x as (1 + s) times the true value); None when it was not estimated.
+    scale_sigma : float or None
+        1σ of ``scale``.
     """
 
     key: ClassVar[str] = "cylinder"
@@ -31,16 +38,25 @@ class CylinderSection:
 
     cylinder: Cylinder
     radius_estimated: bool = False
+    scale: float | None = None
+    scale_sigma: float | None = None
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
-        """``{frame, point, direction, radius}`` (m)."""
+        """``{frame, point, direction, radius}`` (m), and with an estimated scale
+        ``along_line_scale`` (the ratio 1 + s) and ``along_line_scale_sigma`` (its 1σ)."""
         c = self.cylinder
-        return {
+        mapping: dict[str, Any] = {
             "frame": base_frame,
             "point": plain_floats(c.point),
             "direction": plain_floats(c.direction),
             "radius": float(c.radius),
         }
+        if self.scale is not None:
+            mapping["along_line_scale"] = 1.0 + float(self.scale)
+            mapping["along_line_scale_sigma"] = (
+                None if self.scale_sigma is None else float(self.scale_sigma)
+            )
+        return mapping
 
     def quality_entries(self) -> dict[str, Any]:
         """``radius_estimated``."""
@@ -55,6 +71,7 @@ class CylinderSection:
             + ", ".join(f"{v:+.5f}" for v in c.direction)
             + f"], radius {c.radius * 1e3:.3f} mm"
             + (" (estimated)" if self.radius_estimated else " (given)")
+            + ("" if self.scale is None else f"; {scale_text(self.scale, self.scale_sigma)}")
         )
 
     def residual_kind(self, method: str) -> str:
@@ -73,7 +90,8 @@ class CylinderSection:
     def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
         """Distance of the sample's points to the axis minus the radius (N,), m."""
         c = self.cylinder
-        v = apply_transform(T_base_sensor, fit.points) - c.point
+        points = fit.points if self.scale is None else measured_to_true(fit.points, self.scale)
+        v = apply_transform(T_base_sensor, points) - c.point
         radial = v - np.outer(v @ c.direction, c.direction)
         return np.asarray(np.linalg.norm(radial, axis=1) - c.radius)
 
@@ -100,4 +118,35 @@ def read_cylinder_section(
     estimated = quality.get("radius_estimated", False)
     if not isinstance(estimated, bool):
         raise ValueError(f"key quality.radius_estimated must be true or false, got {estimated!r}")
-    return CylinderSection(Cylinder(point, direction / norm, float(radius)), estimated)
+    ratio = _optional_number(mapping, "along_line_scale")
+    sigma = _optional_number(mapping, "along_line_scale_sigma")
+    if ratio is not None and not ratio > 0.0:
+        raise ValueError(f"key along_line_scale must be a ratio > 0, got {ratio}")
+    if sigma is not None and not sigma >= 0.0:
+        raise ValueError(f"key along_line_scale_sigma must be >= 0, got {sigma}")
+    return CylinderSection(
+        Cylinder(point, direction / norm, float(radius)),
+        estimated,
+        scale=None if ratio is None else ratio - 1.0,
+        scale_sigma=None if ratio is None else sigma,
+    )
+
+
+def _optional_number(mapping: Mapping[str, Any], key: str) -> float | None:
+    """A finite number under ``key``, or None when absent or null (ValueError naming the key)."""
+    value = mapping.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise ValueError(f"key {key} must be a finite number, got {value!r}")
+    return float(value)
+
+
+def scale_text(scale: float, sigma: float | None) -> str:
+    """The along-line scale in words: the ratio and the difference in %, with 1σ."""
+    spread = "" if sigma is None else f" ± {sigma:.4f}"
+    percent = "" if sigma is None else f" ± {100.0 * sigma:.2f}"
+    return (
+        f"sensor along-line (x) scale {1.0 + scale:.4f}{spread} "
+        f"({100.0 * scale:+.2f}{percent} % from nominal, estimated, 1 sigma)"
+    )

@@ -94,6 +94,7 @@ class CylinderTarget:
         "sensor_sigma_m": Option("refine.sensor_sigma_m", methods=("default",)),
         "robot_sigma_t_m": Option("refine.robot_sigma_t_m", methods=("default",)),
         "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad", methods=("default",)),
+        "estimate_scale": Option("refine.estimate_scale", methods=("default",)),
         "initial": Option("", methods=("default",)),
     }
     #: Pose planning (:mod:`linelaser_calib.core.planning`).
@@ -233,7 +234,12 @@ class CylinderTarget:
         ]
         return TargetSolution(
             T_flange_sensor=refined.T_flange_sensor,
-            section=CylinderSection(refined.cylinder, refined.radius_estimated),
+            section=CylinderSection(
+                refined.cylinder,
+                refined.radius_estimated,
+                scale=None if refined.sigma_scale is None else refined.scale,
+                scale_sigma=refined.sigma_scale,
+            ),
             method="default",
             samples_used=[features[j].index for j in refined.used],
             rejections=rejections,
