@@ -121,6 +121,10 @@ N_AXIS = 4
 #: Robot variance factor (as a ratio of 1σ) beyond which the arm is said to be less accurate
 #: than the prior (σ_t, σ_r) assumes.
 ROBOT_PRIOR_EXCESS = 2.0
+#: 1σ of the estimated along-line scale beyond which the poses are said to barely tell a
+#: profile stretched along the line from a larger cylinder (0.015 % on ``ur_scancontrol`` and
+#: 0.05 % on ``cluttered_camera`` with the radius free).
+MAX_SCALE_SIGMA = 0.002
 
 
 @dataclass(frozen=True)
@@ -410,8 +414,9 @@ class CylinderProblem:
     Sample j's points fill ``points[j, :counts[j]]``; the rest repeat its first point and are
     masked out (residual and Jacobian rows zero), so that every per-point operation is a
     batched array operation without gathers. Global step: θ (3), ρ (3), a (2), b (2) and,
-    when estimated, the radius and then the along-line scale (see the module docstring). With ``centroid`` set, a
-    retraction slides the axis point along the axis to the point nearest it (same cylinder).
+    when estimated, the radius and then the along-line scale (see the module docstring).
+    With ``centroid`` set, a retraction slides the axis point along the axis to the point
+    nearest it (same cylinder).
     """
 
     points: FloatArray  # (M, K, 3) sensor frame, m
@@ -481,8 +486,8 @@ class CylinderProblem:
         """Residuals and their analytic Jacobians.
 
         ``J_global`` (M, K, G) has the columns θ (3), ρ (3), a (2), b (2) and, when
-        estimated, the radius and the along-line scale; ``J_local`` (M, K, 6) the columns ω (3), τ (3) of the point's
-        own sample; both zero on padding.
+        estimated, the radius and the along-line scale; ``J_local`` (M, K, 6) the columns
+        ω (3), τ (3) of the point's own sample; both zero on padding.
         """
         geo = _geometry(self, state)
         scale = (self.mask / self.config.sensor_sigma_m)[..., None]
@@ -807,6 +812,18 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
     beyond = np.sum(np.abs(e) > cfg.loss_scale, axis=1)
     cylinder_point = state.point - float(state.point @ state.direction) * state.direction
     warnings = list(observability.warnings)
+    correlation = (
+        None if r is None or s is None else float(covariance[r, s] / (sigma[r] * sigma[s]))
+    )
+    if s is not None and sigma[s] > MAX_SCALE_SIGMA:
+        warnings.append(
+            f"the sensor's along-line scale is poorly determined (1 sigma {100.0 * sigma[s]:.2f} "
+            "%"
+            + ("" if correlation is None else f", correlated {correlation:+.2f} with the radius")
+            + "): these profiles barely tell a profile stretched along the line from a larger "
+            "cylinder or a shifted hand-eye. Give the measured radius (--radius), or scan with "
+            "the arc at several positions along the laser line"
+        )
     history = solution.cost_history
     robot_scale = float(np.sqrt(factors[1]))
     prior_note = ""
@@ -845,9 +862,7 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
         sigma_radius_m=None if r is None else float(sigma[r]),
         scale=state.scale,
         sigma_scale=None if s is None else float(sigma[s]),
-        scale_radius_correlation=(
-            None if r is None or s is None else float(covariance[r, s] / (sigma[r] * sigma[s]))
-        ),
+        scale_radius_correlation=correlation,
         used=list(range(problem.n_samples)),
         dropped=[],
         sample_rms_m=sample_rms,

@@ -31,6 +31,8 @@ class CylinderSection:
         profiler reports x as (1 + s) times the true value); None when it was not estimated.
     scale_sigma : float or None
         1σ of ``scale``.
+    scale_radius_correlation : float or None
+        Correlation coefficient of the scale and the radius, when both were estimated.
     """
 
     key: ClassVar[str] = "cylinder"
@@ -40,10 +42,12 @@ class CylinderSection:
     radius_estimated: bool = False
     scale: float | None = None
     scale_sigma: float | None = None
+    scale_radius_correlation: float | None = None
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
         """``{frame, point, direction, radius}`` (m), and with an estimated scale
-        ``along_line_scale`` (the ratio 1 + s) and ``along_line_scale_sigma`` (its 1σ)."""
+        ``along_line_scale`` (the ratio 1 + s), ``along_line_scale_sigma`` (its 1σ) and, with
+        the radius estimated too, ``along_line_scale_radius_correlation``."""
         c = self.cylinder
         mapping: dict[str, Any] = {
             "frame": base_frame,
@@ -56,6 +60,10 @@ class CylinderSection:
             mapping["along_line_scale_sigma"] = (
                 None if self.scale_sigma is None else float(self.scale_sigma)
             )
+            if self.scale_radius_correlation is not None:
+                mapping["along_line_scale_radius_correlation"] = float(
+                    self.scale_radius_correlation
+                )
         return mapping
 
     def quality_entries(self) -> dict[str, Any]:
@@ -71,7 +79,12 @@ class CylinderSection:
             + ", ".join(f"{v:+.5f}" for v in c.direction)
             + f"], radius {c.radius * 1e3:.3f} mm"
             + (" (estimated)" if self.radius_estimated else " (given)")
-            + ("" if self.scale is None else f"; {scale_text(self.scale, self.scale_sigma)}")
+            + (
+                ""
+                if self.scale is None
+                else f"; {scale_text(self.scale, self.scale_sigma)}"
+                + correlation_text(self.scale_radius_correlation)
+            )
         )
 
     def residual_kind(self, method: str) -> str:
@@ -120,15 +133,22 @@ def read_cylinder_section(
         raise ValueError(f"key quality.radius_estimated must be true or false, got {estimated!r}")
     ratio = _optional_number(mapping, "along_line_scale")
     sigma = _optional_number(mapping, "along_line_scale_sigma")
+    correlation = _optional_number(mapping, "along_line_scale_radius_correlation")
     if ratio is not None and not ratio > 0.0:
         raise ValueError(f"key along_line_scale must be a ratio > 0, got {ratio}")
     if sigma is not None and not sigma >= 0.0:
         raise ValueError(f"key along_line_scale_sigma must be >= 0, got {sigma}")
+    if correlation is not None and not abs(correlation) <= 1.0:
+        raise ValueError(
+            f"key along_line_scale_radius_correlation must be within [-1, 1], got {correlation}"
+        )
+    scaled = ratio is not None
     return CylinderSection(
         Cylinder(point, direction / norm, float(radius)),
         estimated,
         scale=None if ratio is None else ratio - 1.0,
-        scale_sigma=None if ratio is None else sigma,
+        scale_sigma=sigma if scaled else None,
+        scale_radius_correlation=correlation if scaled else None,
     )
 
 
@@ -140,6 +160,20 @@ def _optional_number(mapping: Mapping[str, Any], key: str) -> float | None:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
         raise ValueError(f"key {key} must be a finite number, got {value!r}")
     return float(value)
+
+
+#: |Correlation| of the along-line scale and the radius named in the description.
+HIGH_CORRELATION = 0.9
+
+
+def correlation_text(correlation: float | None) -> str:
+    """The scale-radius correlation in words when high, else empty."""
+    if correlation is None or abs(correlation) <= HIGH_CORRELATION:
+        return ""
+    return (
+        f", correlated {correlation:+.2f} with the radius (a profile stretched along the line "
+        "looks like a larger cylinder)"
+    )
 
 
 def scale_text(scale: float, sigma: float | None) -> str:

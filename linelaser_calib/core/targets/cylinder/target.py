@@ -8,7 +8,9 @@ Methods
 ``default``
     The paper's solve as a seed, then maximum likelihood on every inlier point with the
     robot's per-sample pose error as nuisance parameters, outlier-sample rejection,
-    covariance and observability diagnostics (:mod:`.refine`). With joint states and a
+    covariance and observability diagnostics (:mod:`.refine`). The sensor's along-line scale
+    is estimated with them when asked (``refine.estimate_scale``, ``--estimate-scale``) or
+    when a given radius contradicts the profiles (:func:`scale_for_radius`). With joint states and a
     robot model (``SolveContext.kinematics``) it then estimates the identifiable kinematic
     corrections together with the hand-eye and the cylinder
     (:func:`.refine.refine_kinematics`).
@@ -29,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ...arc import radius_mismatch
 from ...cylinder_model import centre_distances
 from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
@@ -46,8 +49,8 @@ from ..base import (
 from .config import CylinderConfig
 from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
 from .plan import CylinderPlanner
-from .refine import refine, refine_kinematics, refine_with_outlier_rejection
-from .section import CylinderSection, read_cylinder_section
+from .refine import RefineResult, refine, refine_kinematics, refine_with_outlier_rejection
+from .section import CylinderSection, read_cylinder_section, scale_text
 
 #: Points per profile in the refinements of the clock-offset search.
 OFFSET_SEARCH_POINTS = 50
@@ -62,6 +65,37 @@ PAPER_MISFIT_FACTOR = 100.0
 #: cuts of one cylinder: at most 0.2 % on the committed bags and 25 random simulated scenes;
 #: cuts of a sphere near its equator, the closest look-alike, spread by 5-10 %.
 MAX_SEMI_MINOR_SPREAD = 0.05
+#: Largest along-line scale error taken as a plausible explanation of a radius gap: a
+#: profiler's x scale is typically good to a few tenths of a percent.
+PLAUSIBLE_SCALE_ERROR = 0.01
+
+
+def scale_for_radius(features: list[FittedSample], config: CylinderConfig) -> str | None:
+    """The warning on a given radius the profiles contradict, or None when they agree.
+
+    The default method then estimates the sensor's along-line scale with the hand-eye,
+    whatever ``refine.estimate_scale`` says: with the scale fixed, a profile stretched along
+    the line cannot fit the given radius, and the hand-eye absorbs the misfit (10-18 mm off
+    on the ``cluttered_camera`` preset against 1-2 mm with the scale estimated).
+    """
+    return radius_mismatch([f.ellipse.semi_axes[1] for f in features], config.radius_m)
+
+
+def scale_verdict(refined: RefineResult) -> str:
+    """Whether the estimated along-line scale explains a radius gap, in words."""
+    if refined.sigma_scale is None:
+        return ""
+    text = scale_text(refined.scale, refined.sigma_scale)
+    if abs(refined.scale) > PLAUSIBLE_SCALE_ERROR:
+        return (
+            f". Estimated with the hand-eye, the {text} would explain the gap, but a scale "
+            f"error beyond {100.0 * PLAUSIBLE_SCALE_ERROR:.0f} % is implausible: the cylinder "
+            "is likely not the given size (measure it, or omit --radius)"
+        )
+    return (
+        f". Estimated with the hand-eye, the {text} explains the gap: the calibration used "
+        "the given radius and this scale"
+    )
 
 
 def profile_noise_m(features: list[FittedSample], floor_m: float) -> float:
@@ -200,6 +234,9 @@ class CylinderTarget:
             if context.initial_T_flange_sensor is None
             else np.asarray(context.initial_T_flange_sensor, dtype=np.float64)
         )
+        mismatch = scale_for_radius(features, config)
+        if mismatch is not None:
+            config = replace(config, refine=replace(config.refine, estimate_scale=True))
         context.progress("refine", 0, 1)
         refined = refine_with_outlier_rejection(
             [f.inlier_points for f in features],
@@ -232,6 +269,9 @@ class CylinderTarget:
             Rejection(features[j].index, features[j].stamp_ns, "outlier", reason)
             for j, reason in refined.dropped
         ]
+        notes = arc_notes(features, config)
+        if mismatch is not None:
+            notes[notes.index(mismatch)] = mismatch + scale_verdict(refined)
         return TargetSolution(
             T_flange_sensor=refined.T_flange_sensor,
             section=CylinderSection(
@@ -239,6 +279,7 @@ class CylinderTarget:
                 refined.radius_estimated,
                 scale=None if refined.sigma_scale is None else refined.scale,
                 scale_sigma=refined.sigma_scale,
+                scale_radius_correlation=refined.scale_radius_correlation,
             ),
             method="default",
             samples_used=[features[j].index for j in refined.used],
@@ -249,7 +290,7 @@ class CylinderTarget:
             },
             sigma_translation_m=refined.sigma_translation_m,
             sigma_rotation_rad=refined.sigma_rotation_rad,
-            warnings=[*refined.warnings, *arc_notes(features, config)],
+            warnings=[*refined.warnings, *notes],
             history={**seed.history, "refine_cost": list(refined.cost_history)},
             sample_fits=[features[j].record() for j in refined.used],
             noise_m=profile_noise_m(features, config.refine.sensor_sigma_m),
