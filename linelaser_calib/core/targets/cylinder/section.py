@@ -178,9 +178,9 @@ def correlation_text(correlation: float | None) -> str:
 
 def scale_text(scale: float, sigma: float | None) -> str:
     """The along-line scale in words: the ratio and the difference in %, with 1σ."""
-    spread = "" if sigma is None else f" ± {sigma:.4f}"
-    percent = "" if sigma is None else f" ± {100.0 * sigma:.2f}"
+    spread = "" if sigma is None else f" ± {sigma:.5f}"
+    percent = "" if sigma is None else f" ± {100.0 * sigma:.3f}"
     return (
-        f"sensor along-line (x) scale {1.0 + scale:.4f}{spread} "
-        f"({100.0 * scale:+.2f}{percent} % from nominal, estimated, 1 sigma)"
+        f"sensor along-line (x) scale {1.0 + scale:.5f}{spread} "
+        f"({100.0 * scale:+.3f}{percent} % from nominal, estimated, 1 sigma)"
     )

@@ -66,8 +66,9 @@ PAPER_MISFIT_FACTOR = 100.0
 #: cuts of a sphere near its equator, the closest look-alike, spread by 5-10 %.
 MAX_SEMI_MINOR_SPREAD = 0.05
 #: Largest along-line scale error taken as a plausible explanation of a radius gap: a
-#: profiler's x scale is typically good to a few tenths of a percent.
-PLAUSIBLE_SCALE_ERROR = 0.01
+#: profiler's x scale is typically good to a few tenths of a percent, a poorly calibrated
+#: camera-based one to about a percent.
+PLAUSIBLE_SCALE_ERROR = 0.02
 
 
 def scale_for_radius(features: list[FittedSample], config: CylinderConfig) -> str | None:
