@@ -54,6 +54,10 @@ REFUSED = [
     ("cylinder", "paper", ["--robot-sigma-r", "1e-5"], "--robot-sigma-r"),
     ("cylinder", "paper", ["--initial", INITIAL], "--initial"),
     ("cylinder", "default", ["--point", "0.5,0.1,0"], "--point"),
+    ("cylinder", "paper", ["--estimate-scale"], "--estimate-scale"),
+    ("sphere", "default", ["--estimate-scale"], "--estimate-scale"),
+    ("line", "default", ["--estimate-scale"], "--estimate-scale"),
+    ("known_point", "default", ["--estimate-scale"], "--estimate-scale"),
 ]
 
 
@@ -94,6 +98,11 @@ def test_cylinder_noise_levels_reach_the_refinement() -> None:
         3e-5,
         1e-5,
     )
+
+
+def test_estimate_scale_reaches_the_cylinder_refinement() -> None:
+    assert _pipeline_config(calibrate_args("--estimate-scale")).target_config.refine.estimate_scale
+    assert not _pipeline_config(calibrate_args()).target_config.refine.estimate_scale
 
 
 def test_refusal_exits_1_on_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
