@@ -212,6 +212,11 @@ class ResultSection(Protocol):
         starting point of a calibration (e.g. a taught point); usually empty."""
         ...
 
+    def sensor_points(self, points: FloatArray) -> FloatArray:
+        """Profile points (N, 3), sensor frame, m, corrected by what the calibration estimated
+        of the sensor itself (the cylinder's along-line scale); usually unchanged."""
+        ...
+
 
 @dataclass
 class TargetSolution:

@@ -103,14 +103,17 @@ class CylinderSection:
     def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
         """Distance of the sample's points to the axis minus the radius (N,), m."""
         c = self.cylinder
-        points = fit.points if self.scale is None else measured_to_true(fit.points, self.scale)
-        v = apply_transform(T_base_sensor, points) - c.point
+        v = apply_transform(T_base_sensor, self.sensor_points(fit.points)) - c.point
         radial = v - np.outer(v @ c.direction, c.direction)
         return np.asarray(np.linalg.norm(radial, axis=1) - c.radius)
 
     def given_settings(self) -> dict[str, Any]:
         """None: a cylinder result fixes no setting of a later calibration."""
         return {}
+
+    def sensor_points(self, points: FloatArray) -> FloatArray:
+        """The points with the estimated along-line scale error removed (x / (1 + s))."""
+        return points if self.scale is None else measured_to_true(points, self.scale)
 
 
 def read_cylinder_section(
