@@ -705,7 +705,7 @@ def _scale_run(job: tuple[str, int]) -> list[dict[str, Any]]:
                 "preset": preset,
                 "seed": seed,
                 "radius": "free" if radius is None else "given",
-                "scale": "free" if free else "fixed",
+                "variant": "free" if free else "fixed",
             }
             config = CylinderConfig(radius_m=radius, refine=RefineConfig(estimate_scale=free))
             try:
@@ -733,6 +733,13 @@ def _scale_run(job: tuple[str, int]) -> list[dict[str, Any]]:
                     "truth_scale": data.scenario.lateral_scale_error,
                 }
             )
+            row = out[-1]
+            print(
+                f"scale {preset} seed {seed} radius {row['radius']} scale {row['variant']}: "
+                f"{row['errors'][0]:.4f} deg {row['errors'][1]:.3f} mm, max |err|/σ "
+                f"{np.max(row['ratio']):.2f}, scale {row['scale']}",
+                flush=True,
+            )
     return out
 
 
@@ -749,7 +756,7 @@ def scale(seeds: int, workers: int, presets: Sequence[str] = SCALE_PRESETS) -> l
                 mine = [
                     r
                     for r in runs
-                    if (r["preset"], r["radius"], r["scale"]) == (preset, radius, variant)
+                    if (r["preset"], r["radius"], r["variant"]) == (preset, radius, variant)
                     and "failure" not in r
                 ]
                 if not mine:
