@@ -26,7 +26,7 @@ Every section simulates profiles and the streamed flange poses with the package 
     clustered poses, a robot error field): share of the profiles used, hand-eye error,
     |error| / predicted 1σ, the free radius: simulate → ``run_pipeline`` (no bag).
 ``scale``
-    The sensor's along-line scale fixed against estimated (``--estimate-scale``), radius free
+    The sensor's along-line scale fixed against estimated (``--scale fixed|free``), radius free
     and given, on ``cluttered_camera`` (a 0.5 % scale error) and on the presets without one
     (they must not move): hand-eye error, |error| / 1σ per axis, share within 1σ, the
     estimated scale against the truth: simulate → ``run_pipeline`` (no bag).
@@ -68,7 +68,7 @@ from linelaser_calib.core.pipeline import (
     calibrate_samples,
     run_pipeline,
 )
-from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection, RefineConfig
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
 from linelaser_calib.core.types import CalibrationResult, Sample
 from linelaser_calib.io import read_bag, write_bag
 from linelaser_calib.offline import calibrate_bag
@@ -707,7 +707,7 @@ def _scale_run(job: tuple[str, int]) -> list[dict[str, Any]]:
                 "radius": "free" if radius is None else "given",
                 "variant": "free" if free else "fixed",
             }
-            config = CylinderConfig(radius_m=radius, refine=RefineConfig(estimate_scale=free))
+            config = CylinderConfig(radius_m=radius, scale="free" if free else "fixed")
             try:
                 result = run_pipeline(
                     data.profiles, data.poses, PipelineConfig(seed=seed, target_config=config)

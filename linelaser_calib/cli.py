@@ -335,7 +335,7 @@ SETTING_FLAGS = {
     "robot_sigma_t_m": "--robot-sigma-t",
     "robot_sigma_r_rad": "--robot-sigma-r",
     "min_samples": "--min-samples",
-    "estimate_scale": "--estimate-scale",
+    "scale": "--scale",
     "initial": "--initial FILE.yaml",
 }
 
@@ -362,7 +362,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         "robot_sigma_t_m": args.robot_sigma_t,
         "robot_sigma_r_rad": args.robot_sigma_r,
         "min_samples": args.min_samples,
-        "estimate_scale": True if args.estimate_scale else None,
+        "scale": args.scale,
         "initial": initial,
     }
     target = get_target(args.target)
@@ -1148,10 +1148,11 @@ def build_parser() -> argparse.ArgumentParser:
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
     cal.add_argument(
-        "--estimate-scale",
-        action="store_true",
-        help="cylinder target, default method: estimate the sensor's along-line (x) scale "
-        "with the hand-eye (a profiler whose x reads a fraction of a percent long or short)",
+        "--scale",
+        metavar="auto|fixed|free",
+        help="cylinder target, default method: the sensor's along-line (x) scale, estimated "
+        "with the hand-eye (free) or held at 1 (fixed); default auto: free when --radius is "
+        "given",
     )
     _add_pose_source_arguments(cal)
     cal.add_argument(

@@ -4,7 +4,7 @@ Each profile is paired with the flange pose at its stamp by the same pairing as
 calibration (:func:`~linelaser_calib.core.pairing.pair_profiles`, same options), and its
 valid points go to ``T_base_flange · T_flange_sensor · p``, with their intensity where the
 profiles carry one; p corrected by what the calibration estimated of the sensor itself (the
-along-line scale of a cylinder calibration with ``--estimate-scale``). When the calibration holds
+along-line scale of a cylinder calibration). When the calibration holds
 kinematic corrections, the flange poses come from the recording's joint states through
 the corrected robot model instead of the recorded flange poses.
 """

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
-from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection, RefineConfig
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
 from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.sim import SimulatedData, scenario_from_preset, simulate
 from linelaser_calib.summary import truth_error
@@ -32,7 +32,7 @@ def calibrate(data: SimulatedData, config: CylinderConfig) -> CalibrationResult:
 
 def test_scale_is_recovered_against_the_simulator_truth() -> None:
     data = recording(0)
-    result = calibrate(data, CylinderConfig(refine=RefineConfig(estimate_scale=True)))
+    result = calibrate(data, CylinderConfig(scale="free"))
     section = result.target
     assert isinstance(section, CylinderSection)
     assert section.scale is not None and section.scale_sigma is not None
@@ -50,7 +50,7 @@ def test_a_given_radius_contradicted_by_the_scale_no_longer_spoils_the_hand_eye(
     result = calibrate(data, CylinderConfig(radius_m=given))
     section = result.target
     assert isinstance(section, CylinderSection)
-    # The profiles contradict the given radius, so the scale was estimated without asking ...
+    # With the radius given the scale is estimated without asking ...
     assert section.scale is not None and section.scale_sigma is not None
     assert abs(section.scale - SCALE_ERROR) < 4.0 * section.scale_sigma
     assert section.cylinder.radius == given
@@ -61,3 +61,16 @@ def test_a_given_radius_contradicted_by_the_scale_no_longer_spoils_the_hand_eye(
     (warning,) = [w for w in result.warnings if "against the given 20.00 mm" in w]
     assert "the profiles fit a radius of 20.0" in warning
     assert "explains the gap" in warning
+
+
+def test_a_fixed_scale_leaves_the_given_radius_contradicted_and_says_how_to_free_it() -> None:
+    data = recording(0)
+    result = calibrate(data, CylinderConfig(radius_m=data.truth.cylinder.radius, scale="fixed"))
+    section = result.target
+    assert isinstance(section, CylinderSection) and section.scale is None
+    (warning,) = [w for w in result.warnings if "against the given 20.00 mm" in w]
+    assert "--scale free estimates it" in warning
+    # The stretched profiles cannot fit the given radius: the hand-eye takes the misfit
+    # (0.31 mm off here, against 0.03 mm with the scale estimated).
+    error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)
+    assert error.translation_m > 1.5e-4

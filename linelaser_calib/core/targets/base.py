@@ -67,7 +67,7 @@ Progress = Callable[[str, int, int], None]
 #: (--robot-sigma-r, rad), ``min_samples`` (int), ``initial`` (--initial: the initial
 #: hand-eye, held by the pipeline configuration, not the target's), ``centre_side``
 #: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on),
-#: ``estimate_scale`` (--estimate-scale: estimate the sensor's along-line scale as well).
+#: ``scale`` (--scale, ``auto``/``fixed``/``free``: the cylinder sensor's along-line scale).
 SETTINGS = (
     "radius_m",
     "point_m",
@@ -76,7 +76,7 @@ SETTINGS = (
     "robot_sigma_t_m",
     "robot_sigma_r_rad",
     "min_samples",
-    "estimate_scale",
+    "scale",
     "initial",
 )
 
