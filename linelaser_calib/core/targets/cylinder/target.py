@@ -101,10 +101,7 @@ def scale_verdict(refined: RefineResult) -> str:
             f"error beyond {100.0 * PLAUSIBLE_SCALE_ERROR:.0f} % is implausible: the cylinder "
             "is likely not the given size (measure it, or omit --radius)"
         )
-    return (
-        f". Estimated with the hand-eye, the {text} explains the gap: the calibration used "
-        "the given radius and this scale"
-    )
+    return f". Estimated with the hand-eye, the {text} explains the gap"
 
 
 def profile_noise_m(features: list[FittedSample], floor_m: float) -> float:
