@@ -25,6 +25,11 @@ Every section simulates profiles and the streamed flange poses with the package 
     The ``cluttered_camera`` preset (a coarse camera profiler, background plane, fixture,
     clustered poses, a robot error field): share of the profiles used, hand-eye error,
     |error| / predicted 1σ, the free radius: simulate → ``run_pipeline`` (no bag).
+``scale``
+    The sensor's along-line scale fixed against estimated (``--scale fixed|free``), radius free
+    and given, on ``cluttered_camera`` (a 0.5 % scale error) and on the presets without one
+    (they must not move): hand-eye error, |error| / 1σ per axis, share within 1σ, the
+    estimated scale against the truth: simulate → ``run_pipeline`` (no bag).
 
 A summary table of every goal with its measured value and PASS/FAIL ends the run. Timings
 are medians (the machine is shared); ``--workers`` runs the seeds of the non-timing sections
@@ -35,6 +40,7 @@ Run from the repository root::
     .venv/bin/python bench/accuracy.py               # everything, goal-sized counts
     .venv/bin/python bench/accuracy.py --quick       # small counts, a minute or two
     .venv/bin/python bench/accuracy.py --only speed --profiles 12 50 500
+    .venv/bin/python bench/accuracy.py --only scale --scale-seeds 20
 """
 
 from __future__ import annotations
@@ -62,6 +68,7 @@ from linelaser_calib.core.pipeline import (
     calibrate_samples,
     run_pipeline,
 )
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
 from linelaser_calib.core.types import CalibrationResult, Sample
 from linelaser_calib.io import read_bag, write_bag
 from linelaser_calib.offline import calibrate_bag
@@ -681,7 +688,145 @@ def cluttered(seeds: int, workers: int) -> list[Goal]:
     ]
 
 
-SECTIONS = ("accuracy", "robustness", "honesty", "speed", "outliers", "cluttered")
+# ------------------------------------------------------------------------------- scale
+
+#: Presets of the scale comparison; only ``cluttered_camera`` has a scale error (0.5 %).
+SCALE_PRESETS = ("paper", "ur_scancontrol", "ur5e_kinematic", "cluttered_camera")
+
+
+def _scale_run(job: tuple[str, int]) -> list[dict[str, Any]]:
+    """One seed of one preset: scale fixed and estimated, radius free and given."""
+    preset, seed = job
+    data = simulate(scenario_from_preset(preset), seed)
+    out = []
+    for radius in (None, data.scenario.cylinder_radius_m):
+        for free in (False, True):
+            variant = {
+                "preset": preset,
+                "seed": seed,
+                "radius": "free" if radius is None else "given",
+                "variant": "free" if free else "fixed",
+            }
+            config = CylinderConfig(radius_m=radius, scale="free" if free else "fixed")
+            try:
+                result = run_pipeline(
+                    data.profiles, data.poses, PipelineConfig(seed=seed, target_config=config)
+                )
+            except CalibrationError as err:
+                out.append({**variant, "failure": str(err)})
+                continue
+            assert result.uncertainty_rotation_rad is not None
+            assert result.uncertainty_translation_m is not None
+            sigma = np.concatenate(
+                [result.uncertainty_rotation_rad, result.uncertainty_translation_m]
+            )
+            section = result.target
+            assert isinstance(section, CylinderSection)
+            out.append(
+                {
+                    **variant,
+                    "errors": errors_deg_mm(result, data.truth.T_flange_sensor),
+                    "ratio": np.abs(axis_errors(result, data.truth.T_flange_sensor)) / sigma,
+                    "radius_mm": section.cylinder.radius * 1e3,
+                    "scale": section.scale,
+                    "scale_sigma": section.scale_sigma,
+                    "truth_scale": data.scenario.lateral_scale_error,
+                }
+            )
+            row = out[-1]
+            print(
+                f"scale {preset} seed {seed} radius {row['radius']} scale {row['variant']}: "
+                f"{row['errors'][0]:.4f} deg {row['errors'][1]:.3f} mm, max |err|/σ "
+                f"{np.max(row['ratio']):.2f}, scale {row['scale']}",
+                flush=True,
+            )
+    return out
+
+
+def scale(seeds: int, workers: int, presets: Sequence[str] = SCALE_PRESETS) -> list[Goal]:
+    jobs = [(preset, seed) for preset in presets for seed in range(seeds)]
+    runs = [run for runs in parallel_map(_scale_run, jobs, workers) for run in runs]
+    for failure in (r for r in runs if "failure" in r):
+        print(f"FAIL scale {failure['preset']} seed {failure['seed']}: {failure['failure']}")
+    rows: list[list[object]] = []
+    summary: dict[tuple[str, str, str], tuple[float, float]] = {}
+    for preset in presets:
+        for radius in ("free", "given"):
+            for variant in ("fixed", "free"):
+                mine = [
+                    r
+                    for r in runs
+                    if (r["preset"], r["radius"], r["variant"]) == (preset, radius, variant)
+                    and "failure" not in r
+                ]
+                if not mine:
+                    continue
+                ratio = np.array([r["ratio"] for r in mine])
+                rot, trans = rms(r["errors"][0] for r in mine), rms(r["errors"][1] for r in mine)
+                summary[preset, radius, variant] = (rot, trans)
+                scale_cell = ""
+                if variant == "free":
+                    s = np.array([r["scale"] for r in mine])
+                    z = (s - mine[0]["truth_scale"]) / np.array([r["scale_sigma"] for r in mine])
+                    scale_cell = (
+                        f"{100 * np.median(s):+.3f} % [{100 * s.min():+.3f}, {100 * s.max():+.3f}]"
+                        f" (truth {100 * mine[0]['truth_scale']:+.1f} %), |z| median "
+                        f"{np.median(np.abs(z)):.1f} max {np.max(np.abs(z)):.1f}"
+                    )
+                rows.append(
+                    [
+                        preset,
+                        radius,
+                        variant,
+                        len(mine),
+                        rot,
+                        trans,
+                        f"{100 * np.mean(ratio <= 1.0):.0f} %",
+                        " ".join(f"{v:.1f}" for v in ratio.max(axis=0)),
+                        float(np.median(ratio)),
+                        float(np.median([r["radius_mm"] for r in mine])),
+                        scale_cell,
+                    ]
+                )
+    print_table(
+        "Along-line scale fixed vs estimated: simulate → run_pipeline (self-check included); "
+        "|err|/σ per axis θx θy θz ρx ρy ρz",
+        [
+            "preset",
+            "radius",
+            "scale",
+            "seeds",
+            "RMS rot (deg)",
+            "RMS trans (mm)",
+            "axes within 1σ",
+            "max |err|/σ per axis",
+            "median |err|/σ",
+            "median radius (mm)",
+            "estimated scale: median [range], |(est − truth)/σ|",
+        ],
+        rows,
+    )
+    goals = []
+    for preset in presets:
+        for radius in ("free", "given"):
+            fixed, free = (
+                summary.get((preset, radius, "fixed")),
+                summary.get((preset, radius, "free")),
+            )
+            if fixed is None or free is None:
+                continue
+            goals.append(
+                Goal(
+                    f"scale {preset}, radius {radius}: estimating the scale raises the RMS "
+                    "trans error by ≤ 20 % or lowers it",
+                    f"{fixed[1]:.4f} → {free[1]:.4f} mm",
+                    free[1] <= 1.2 * fixed[1],
+                )
+            )
+    return goals
+
+
+SECTIONS = ("accuracy", "robustness", "honesty", "speed", "outliers", "cluttered", "scale")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -694,6 +839,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--honesty", type=int, help="honesty seeds (default 150)")
     parser.add_argument("--outlier-seeds", type=int, help="outlier seeds (default 20)")
     parser.add_argument("--cluttered-seeds", type=int, help="cluttered seeds (default 20)")
+    parser.add_argument("--scale-seeds", type=int, help="scale seeds per preset (default 20)")
+    parser.add_argument(
+        "--scale-presets",
+        nargs="*",
+        choices=SCALE_PRESETS,
+        default=SCALE_PRESETS,
+        help="scale: presets to compare (default all)",
+    )
     parser.add_argument("--profiles", type=int, nargs="*", help="speed: profile counts")
     parser.add_argument("--repeats", type=int, help="speed: repeats per count (default 5)")
     parser.add_argument(
@@ -727,6 +880,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         goals += outliers(count(args.outlier_seeds, 20, 4), args.workers)
     if "cluttered" in selected:
         goals += cluttered(count(args.cluttered_seeds, 20, 4), args.workers)
+    if "scale" in selected:
+        goals += scale(count(args.scale_seeds, 20, 3), args.workers, args.scale_presets)
     if quick:
         print(
             "\n--quick: counts below the goals' (20 seeds, 200 and 50 scenes, 150 honesty "

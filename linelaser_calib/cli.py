@@ -338,6 +338,7 @@ SETTING_FLAGS = {
     "robot_sigma_t_m": "--robot-sigma-t",
     "robot_sigma_r_rad": "--robot-sigma-r",
     "min_samples": "--min-samples",
+    "scale": "--scale",
     "initial": "--initial FILE.yaml",
 }
 
@@ -364,6 +365,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         "robot_sigma_t_m": args.robot_sigma_t,
         "robot_sigma_r_rad": args.robot_sigma_r,
         "min_samples": args.min_samples,
+        "scale": args.scale,
         "initial": initial,
     }
     target = get_target(args.target)
@@ -1207,6 +1209,13 @@ def build_parser() -> argparse.ArgumentParser:
             cal.add_argument(flag, type=parse, default=default, help=text)
     for flag, parse_setting, text in TARGET_OPTIONS:
         cal.add_argument(flag, type=parse_setting, default=None, help=text)
+    cal.add_argument(
+        "--scale",
+        metavar="auto|fixed|free",
+        help="cylinder target, default method: the sensor's along-line (x) scale, estimated "
+        "with the hand-eye (free) or held at 1 (fixed); default auto: free when --radius is "
+        "given",
+    )
     _add_pose_source_arguments(cal)
     cal.add_argument(
         "--nominal-kinematics",

@@ -3,7 +3,8 @@
 Each profile is paired with the flange pose at its stamp by the same pairing as
 calibration (:func:`~linelaser_calib.core.pairing.pair_profiles`, same options), and its
 valid points go to ``T_base_flange · T_flange_sensor · p``, with their intensity where the
-profiles carry one. When the calibration holds
+profiles carry one; p corrected by what the calibration estimated of the sensor itself (the
+along-line scale of a cylinder calibration). When the calibration holds
 kinematic corrections, the flange poses come from the recording's joint states through
 the corrected robot model instead of the recorded flange poses.
 """
@@ -168,7 +169,8 @@ def reconstruct_bag(
     clouds = []
     for sample in paired.samples:
         T_base_sensor = sample.T_base_flange @ calibration.T_flange_sensor
-        clouds.append((sample.stamp_ns, apply_transform(T_base_sensor, sample.points)))
+        points = calibration.target.sensor_points(sample.points)
+        clouds.append((sample.stamp_ns, apply_transform(T_base_sensor, points)))
     by_stamp = read_profile_intensities(path, bag.profile_topic)
     intensities = None
     if by_stamp and all(

@@ -91,6 +91,24 @@ def test_true_kinematics_put_the_points_on_the_true_cylinder(
     assert np.percentile(distance, 90) < 8e-5
 
 
+def test_a_calibrated_along_line_scale_is_applied_to_the_points(
+    bag: Path, calibrated: Path, tmp_path: Path
+) -> None:
+    # The simulated profiler has no scale error: a calibration claiming the profiles read 1 %
+    # long must shrink them along the line and move the points off the true cylinder.
+    calibration = true_calibration(bag, calibrated, tmp_path / "true.yaml", kinematics=True)
+    data = yaml.safe_load(calibration.read_text(encoding="utf-8"))
+    plain = ply_points(reconstruct(bag, calibration, tmp_path / "plain.ply"))
+    data["cylinder"]["along_line_scale"] = 1.01
+    calibration.write_text(yaml.safe_dump(data), encoding="utf-8")
+    scaled = ply_points(reconstruct(bag, calibration, tmp_path / "scaled.ply"))
+    # Each point moves along the line by 1 - 1 / 1.01 of its distance from the sensor's z axis.
+    assert np.max(np.linalg.norm(scaled - plain, axis=1)) > 1e-4
+    assert np.percentile(surface_distances_m(bag, scaled), 90) > 1.5 * np.percentile(
+        surface_distances_m(bag, plain), 90
+    )
+
+
 def test_nominal_kinematics_leave_the_robot_error_in_the_points(
     bag: Path, calibrated: Path, tmp_path: Path
 ) -> None:

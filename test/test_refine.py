@@ -73,21 +73,27 @@ def test_noise_free_data_is_recovered_exactly(estimate_radius: bool) -> None:
     assert abs(float(result.cylinder.point @ result.cylinder.direction)) < 1e-12
 
 
-def test_jacobian_matches_finite_differences() -> None:
+@pytest.mark.parametrize("estimate_scale", [False, True])
+def test_jacobian_matches_finite_differences(estimate_scale: bool) -> None:
     rng = np.random.default_rng(2)
     scene = make_scene(rng, n_poses=6, n_points=15)
     # Unequal profile lengths exercise the padded layout (padding rows must stay zero).
     points = [p[: 10 + j] for j, p in enumerate(scene.points)]
-    config = RefineConfig()
+    config = RefineConfig(estimate_scale=estimate_scale)
     problem = build_problem(points, scene.T_base_flange, config, True)
     T0, cylinder0 = perturbed_start(rng, scene, radius_offset=1e-3)
     state = initial_state(problem, T0, cylinder0, cylinder0.radius)
-    # Evaluate away from zero corrections so that the right Jacobian of Exp matters.
+    # Evaluate away from zero corrections (and scale) so that the right Jacobian of Exp and
+    # the scaled points matter.
+    start_step = np.zeros(problem.n_global)
+    if problem.scale_index is not None:
+        start_step[problem.scale_index] = 0.01
     state = problem.retract(
         state,
-        np.zeros(problem.n_global),
+        start_step,
         np.hstack([rng.normal(0.0, 0.05, (6, 3)), rng.normal(0.0, 2e-3, (6, 3))]),
     )
+    assert state.scale == pytest.approx(0.01 if estimate_scale else 0.0)
     linearisation = problem.linearise(state)
     J_global, J_local = linearisation.J_global, linearisation.J_local
 

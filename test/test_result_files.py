@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -127,6 +128,32 @@ def test_result_round_trips_exactly(tmp_path: Path) -> None:
             )
 
 
+@pytest.mark.parametrize("correlation", [None, -0.97])
+def test_estimated_along_line_scale_round_trips(tmp_path: Path, correlation: float | None) -> None:
+    rng = np.random.default_rng(34)
+    result = random_result(rng)
+    section = CylinderSection(
+        random_cylinder(rng),
+        radius_estimated=correlation is not None,
+        scale=0.0049,
+        scale_sigma=2.5e-5,
+        scale_radius_correlation=correlation,
+    )
+    path = write_result_yaml(replace(result, target=section), tmp_path / "result.yaml")
+    cylinder = yaml.safe_load(path.read_text())["cylinder"]
+    assert cylinder["along_line_scale"] == pytest.approx(1.0049, abs=1e-15)
+    assert cylinder["along_line_scale_sigma"] == 2.5e-5
+    assert cylinder.get("along_line_scale_radius_correlation") == correlation
+    back = read_result_yaml(path).target
+    assert isinstance(back, CylinderSection)
+    assert back.scale == pytest.approx(0.0049, abs=1e-15)
+    assert (back.scale_sigma, back.scale_radius_correlation) == (2.5e-5, correlation)
+    assert "scale 1.00490 ± 0.00003 (+0.490 ± 0.003 %" in back.describe("base_link")
+    # Without an estimated scale the section keeps its four keys and reads back without one.
+    plain = read_result_yaml(write_result_yaml(result, tmp_path / "plain.yaml")).target
+    assert isinstance(plain, CylinderSection) and plain.scale is None
+
+
 def test_missing_uncertainty_is_written_as_null(tmp_path: Path) -> None:
     result = random_result(np.random.default_rng(32), with_uncertainty=False)
     path = write_result_yaml(result, tmp_path / "result.yaml")
@@ -199,6 +226,8 @@ def test_truth_extras_cannot_replace_the_truth_or_hold_objects(tmp_path: Path) -
         ("set hand_eye.rotation_xyzw [0, 0, a, 1]", "key hand_eye.rotation_xyzw must be numbers"),
         ("set hand_eye.translation [0.5, 0, 0]", "hand_eye.matrix disagrees"),
         ("set cylinder.radius 0", "radius > 0 m"),
+        ("set cylinder.along_line_scale -1", "key along_line_scale must be a ratio > 0"),
+        ("set cylinder.along_line_scale wide", "key along_line_scale must be a finite number"),
         ("set quality.rms_residual_m fast", "key quality.rms_residual_m must be a number"),
         ("delete quality", "key quality is missing"),
     ],

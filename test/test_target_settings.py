@@ -54,6 +54,10 @@ REFUSED = [
     ("cylinder", "paper", ["--robot-sigma-r", "1e-5"], "--robot-sigma-r"),
     ("cylinder", "paper", ["--initial", INITIAL], "--initial"),
     ("cylinder", "default", ["--point", "0.5,0.1,0"], "--point"),
+    ("cylinder", "paper", ["--scale", "free"], "--scale"),
+    ("sphere", "default", ["--scale", "free"], "--scale"),
+    ("line", "default", ["--scale", "fixed"], "--scale"),
+    ("known_point", "default", ["--scale", "free"], "--scale"),
 ]
 
 
@@ -96,6 +100,13 @@ def test_cylinder_noise_levels_reach_the_refinement() -> None:
     )
 
 
+def test_scale_reaches_the_cylinder_config_and_a_bad_one_is_refused() -> None:
+    assert _pipeline_config(calibrate_args("--scale", "free")).target_config.scale == "free"
+    assert _pipeline_config(calibrate_args()).target_config.scale == "auto"
+    with pytest.raises(InputError, match="along-line scale must be one of auto, fixed, free"):
+        _pipeline_config(calibrate_args("--scale", "on"))
+
+
 def test_refusal_exits_1_on_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
     code = main(["calibrate", str(WELD_BAG), "--target", "known_point", "--sensor-sigma", "2e-6"])
     assert code == 1
@@ -128,9 +139,12 @@ def test_every_target_option_names_a_shared_setting_and_a_config_field() -> None
         assert target.name in target_names()
         for name, option in target.options.items():
             if option.field and name != "initial":
-                value: object = {"min_samples": 7, "point_m": np.zeros(3), "centre_side": "-y"}.get(
-                    name, 0.5
-                )
+                value: object = {
+                    "min_samples": 7,
+                    "point_m": np.zeros(3),
+                    "centre_side": "-y",
+                    "scale": "free",
+                }.get(name, 0.5)
                 for method in option.methods:
                     others = {
                         n: INITIAL if n == "initial" else np.zeros(3)

@@ -66,7 +66,8 @@ Progress = Callable[[str, int, int], None]
 #: (--sensor-sigma, m), ``robot_sigma_t_m`` (--robot-sigma-t, m), ``robot_sigma_r_rad``
 #: (--robot-sigma-r, rad), ``min_samples`` (int), ``initial`` (--initial: the initial
 #: hand-eye, held by the pipeline configuration, not the target's), ``centre_side``
-#: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on).
+#: (--centre-side, ``+y``/``-y``: the sensor side of the laser plane a sphere's centre is on),
+#: ``scale`` (--scale, ``auto``/``fixed``/``free``: the cylinder sensor's along-line scale).
 SETTINGS = (
     "radius_m",
     "point_m",
@@ -75,6 +76,7 @@ SETTINGS = (
     "robot_sigma_t_m",
     "robot_sigma_r_rad",
     "min_samples",
+    "scale",
     "initial",
 )
 
@@ -208,6 +210,11 @@ class ResultSection(Protocol):
     def given_settings(self) -> dict[str, Any]:
         """Shared settings (:data:`SETTINGS`) this section fixes when a result file is the
         starting point of a calibration (e.g. a taught point); usually empty."""
+        ...
+
+    def sensor_points(self, points: FloatArray) -> FloatArray:
+        """Profile points (N, 3), sensor frame, m, corrected by what the calibration estimated
+        of the sensor itself (the cylinder's along-line scale); usually unchanged."""
         ...
 
 

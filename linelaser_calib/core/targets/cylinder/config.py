@@ -15,6 +15,8 @@ from .refine import RefineConfig
 
 #: Fewest fitted samples the hand-eye plus axis can be solved from with any margin.
 MIN_SAMPLES = 8
+#: How the default method treats the sensor's along-line scale (``CylinderConfig.scale``).
+SCALE_MODES = ("auto", "fixed", "free")
 
 
 @dataclass(frozen=True)
@@ -25,6 +27,10 @@ class CylinderConfig:
     ----------
     radius_m : float or None
         Cylinder radius, m; None estimates it.
+    scale : str
+        The sensor's along-line scale in the default method: ``free`` estimates it with the
+        hand-eye, ``fixed`` holds it at 1, ``auto`` (default) estimates it when the radius is
+        given (:func:`.target.estimates_scale`).
     min_samples : int
         Fewest fitted samples accepted.
     cleaning : CleaningConfig
@@ -43,6 +49,7 @@ class CylinderConfig:
     """
 
     radius_m: float | None = None
+    scale: str = "auto"
     min_samples: int = MIN_SAMPLES
     cleaning: CleaningConfig = field(default_factory=CleaningConfig)
     ellipse: EllipseConfig = field(default_factory=EllipseConfig)
@@ -55,6 +62,10 @@ class CylinderConfig:
         if self.radius_m is not None and not (np.isfinite(self.radius_m) and self.radius_m > 0):
             raise InputError(
                 f"the cylinder radius must be a positive length in m, got {self.radius_m}"
+            )
+        if self.scale not in SCALE_MODES:
+            raise InputError(
+                f"the along-line scale must be one of {', '.join(SCALE_MODES)}, got {self.scale!r}"
             )
         if self.min_samples < 3:
             raise InputError(f"min_samples must be >= 3, got {self.min_samples}")

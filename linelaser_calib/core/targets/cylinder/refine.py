@@ -15,7 +15,12 @@ an error stated in the base frame, and it keeps rotation and translation errors 
 (a base-frame rotation would swing the flange about the robot base). A point maps into the
 base frame as
 
-    x_jk = T_j · D(δ_j) · T_flange_sensor · p_jk.
+    x_jk = T_j · D(δ_j) · T_flange_sensor · S⁻¹ · p_jk,   S = diag(1 + s, 1, 1),
+
+where s is the sensor's along-line scale error (dimensionless; 0 unless estimated): a
+profiler that reports x as (1 + s) times the true value (s = 0.005 reads 0.5 % long)
+stretches each arc across the line and shifts its centre by s times its along-line
+position.
 
 The cylinder has an axis point c, a unit direction d and a radius R. The residuals are
 
@@ -37,9 +42,10 @@ Every iteration linearises around the current estimate in local coordinates:
   no singularity; the point is kept nearest to the data's centroid, which only slides it
   along the axis);
 - radius: R = R̂ + r (only when estimated);
+- along-line scale: s = ŝ + σ (only when estimated; ``estimate_scale``);
 - corrections: ω_j, τ_j additively (exact right Jacobian of Exp).
 
-The Jacobian is analytic and block-sparse: a point depends on the G = 10 or 11 global
+The Jacobian is analytic and block-sparse: a point depends on the G = 10 to 12 global
 numbers and on its sample's 6. The shared block solver
 (:mod:`linelaser_calib.core.solver`: Levenberg–Marquardt with Marquardt scaling, Nielsen's
 damping update and iteratively re-weighted robust weights) solves the normal equations by a
@@ -116,6 +122,10 @@ N_AXIS = 4
 #: Robot variance factor (as a ratio of 1σ) beyond which the arm is said to be less accurate
 #: than the prior (σ_t, σ_r) assumes.
 ROBOT_PRIOR_EXCESS = 2.0
+#: 1σ of the estimated along-line scale beyond which the poses are said to barely tell a
+#: profile stretched along the line from a larger cylinder (0.015 % on ``ur_scancontrol`` and
+#: 0.05 % on ``cluttered_camera`` with the radius free).
+MAX_SCALE_SIGMA = 0.002
 
 
 @dataclass(frozen=True)
@@ -144,6 +154,10 @@ class RefineConfig:
     estimate_radius : bool
         Estimate the radius even when ``radius_m`` is given (it is then the start value).
         Without a ``radius_m`` the radius is always estimated.
+    estimate_scale : bool
+        Estimate the sensor's along-line scale error s (the profiler reports x as (1 + s)
+        times the true value; a point (x, z) is taken as (x / (1 + s), z)) as one more global
+        parameter. Default False: s = 0.
     max_iterations : int
         Levenberg–Marquardt iterations (linearisations). Default 50.
     tolerance : float
@@ -185,6 +199,7 @@ class RefineConfig:
     loss_scale: float = 3.0
     max_points_per_profile: int = 200
     estimate_radius: bool = False
+    estimate_scale: bool = False
     max_iterations: int = 50
     tolerance: float = 1e-10
     step_tolerance_m: float = 1e-12
@@ -268,6 +283,15 @@ class RefineResult:
         1σ of ρ, m.
     sigma_radius_m : float or None
         1σ of the radius, when estimated.
+    scale : float
+        The sensor's along-line scale error s (dimensionless: the profiler reports x as
+        (1 + s) times the true value); 0 when not estimated.
+    sigma_scale : float or None
+        1σ of ``scale``, when estimated, from the noise model only: with the radius given,
+        whatever else stretches every arc (grazing-angle smear) goes into the scale too
+        (+0.83 ± 0.02 % for a true +0.5 % on ``cluttered_camera``).
+    scale_radius_correlation : float or None
+        Correlation coefficient of the scale and the radius, when both are estimated.
     used : list of int
         Indices (into the caller's list) of the samples in the solve.
     dropped : list of DroppedSample
@@ -312,6 +336,9 @@ class RefineResult:
     sigma_rotation_rad: FloatArray
     sigma_translation_m: FloatArray
     sigma_radius_m: float | None
+    scale: float
+    sigma_scale: float | None
+    scale_radius_correlation: float | None
     used: list[int]
     dropped: list[DroppedSample]
     sample_rms_m: FloatArray
@@ -357,6 +384,8 @@ class CylinderState:
         m.
     omega, tau : ndarray, shape (M, 3)
         Pose corrections, rad and m, flange frame.
+    scale : float
+        The sensor's along-line scale error s (dimensionless).
     """
 
     R_fs: FloatArray
@@ -366,12 +395,14 @@ class CylinderState:
     radius: float
     omega: FloatArray
     tau: FloatArray
+    scale: float = 0.0
 
 
 class _Geometry(NamedTuple):
     """Per-point intermediate quantities at one state."""
 
-    y: FloatArray  # (M, K, 3) point in the nominal flange frame, R_fs p + t_fs
+    p: FloatArray  # (M, K, 3) sensor point with the along-line scale removed, S⁻¹ p
+    y: FloatArray  # (M, K, 3) point in the nominal flange frame, R_fs S⁻¹ p + t_fs
     RE: FloatArray  # (M, 3, 3) R_bf·Exp(ω) per sample
     distance: FloatArray  # (M, K) distance to the axis, m
     normal: FloatArray  # (M, K, 3) unit radial direction in the base frame
@@ -386,8 +417,9 @@ class CylinderProblem:
     Sample j's points fill ``points[j, :counts[j]]``; the rest repeat its first point and are
     masked out (residual and Jacobian rows zero), so that every per-point operation is a
     batched array operation without gathers. Global step: θ (3), ρ (3), a (2), b (2) and,
-    when estimated, the radius (see the module docstring). With ``centroid`` set, a
-    retraction slides the axis point along the axis to the point nearest it (same cylinder).
+    when estimated, the radius and then the along-line scale (see the module docstring).
+    With ``centroid`` set, a retraction slides the axis point along the axis to the point
+    nearest it (same cylinder).
     """
 
     points: FloatArray  # (M, K, 3) sensor frame, m
@@ -398,6 +430,7 @@ class CylinderProblem:
     estimate_radius: bool
     config: RefineConfig
     centroid: FloatArray | None = None
+    estimate_scale: bool = False
 
     @property
     def n_samples(self) -> int:
@@ -405,13 +438,25 @@ class CylinderProblem:
 
     @property
     def n_global(self) -> int:
-        return N_HAND_EYE + N_AXIS + int(self.estimate_radius)
+        return N_HAND_EYE + N_AXIS + int(self.estimate_radius) + int(self.estimate_scale)
+
+    @property
+    def radius_index(self) -> int | None:
+        """Position of the radius in the global step, when estimated."""
+        return N_HAND_EYE + N_AXIS if self.estimate_radius else None
+
+    @property
+    def scale_index(self) -> int | None:
+        """Position of the along-line scale in the global step, when estimated."""
+        return self.n_global - 1 if self.estimate_scale else None
 
     @property
     def step_scale(self) -> FloatArray:
-        """Rotations times the lever, lengths as they are."""
+        """Rotations and the along-line scale times the lever, lengths as they are."""
         scale = np.ones(self.n_global)
         scale[:3] = _lever(self)
+        if self.scale_index is not None:
+            scale[self.scale_index] = _lever(self)
         return scale
 
     def with_flange_poses(self, T_base_flange: FloatArray) -> CylinderProblem:
@@ -444,8 +489,8 @@ class CylinderProblem:
         """Residuals and their analytic Jacobians.
 
         ``J_global`` (M, K, G) has the columns θ (3), ρ (3), a (2), b (2) and, when
-        estimated, the radius; ``J_local`` (M, K, 6) the columns ω (3), τ (3) of the point's
-        own sample; both zero on padding.
+        estimated, the radius and the along-line scale; ``J_local`` (M, K, 6) the columns
+        ω (3), τ (3) of the point's own sample; both zero on padding.
         """
         geo = _geometry(self, state)
         scale = (self.mask / self.config.sensor_sigma_m)[..., None]
@@ -455,9 +500,12 @@ class CylinderProblem:
         n_sensor = n_flange @ state.R_fs  # rows R_fsᵀ n_flange
         u, v = orthonormal_basis(state.direction)
         n_uv = n_base @ np.column_stack([u, v])
-        columns = [_cross(self.points, n_sensor), n_flange, -geo.along[..., None] * n_uv, -n_uv]
+        columns = [_cross(geo.p, n_sensor), n_flange, -geo.along[..., None] * n_uv, -n_uv]
         if self.estimate_radius:
             columns.append(-scale)
+        if self.estimate_scale:
+            # d (x / (1 + s)) / d s = −x / (1 + s)² = −(x / (1 + s)) / (1 + s)
+            columns.append((-n_sensor[..., 0] * geo.p[..., 0] / (1.0 + state.scale))[..., None])
         J_omega = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
         return Linearisation(
             residuals=self._residuals(state, geo),
@@ -472,14 +520,16 @@ class CylinderProblem:
         """Apply increments in the local coordinates of :meth:`linearise`."""
         u, v = orthonormal_basis(state.direction)
         direction = state.direction + step_global[6] * u + step_global[7] * v
+        r, s = self.radius_index, self.scale_index
         moved = CylinderState(
             R_fs=state.R_fs @ exp_so3(step_global[None, :3])[0],
             t_fs=state.t_fs + step_global[3:6],
             point=state.point + step_global[8] * u + step_global[9] * v,
             direction=direction / np.linalg.norm(direction),
-            radius=state.radius + (float(step_global[10]) if self.estimate_radius else 0.0),
+            radius=state.radius + (0.0 if r is None else float(step_global[r])),
             omega=state.omega + step_local[:, :3],
             tau=state.tau + step_local[:, 3:],
+            scale=state.scale + (0.0 if s is None else float(step_global[s])),
         )
         return moved if self.centroid is None else _recentred(moved, self.centroid)
 
@@ -497,13 +547,23 @@ def _sample_transforms(
 def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
     """Base-frame points and their relation to the axis."""
     RE, offset = _sample_transforms(problem, state)
-    y = problem.points @ state.R_fs.T + state.t_fs
+    p = measured_to_true(problem.points, state.scale)
+    y = p @ state.R_fs.T + state.t_fs
     w = y @ RE.transpose(0, 2, 1) + (offset - state.point)[:, None, :]
     along = w @ state.direction
     radial = w - along[..., None] * state.direction
     distance = np.sqrt(np.sum(radial**2, axis=2))
     normal = radial / np.maximum(distance, 1e-300)[..., None]
-    return _Geometry(y, RE, distance, normal, along)
+    return _Geometry(p, y, RE, distance, normal, along)
+
+
+def measured_to_true(points: ArrayLike, scale: float) -> FloatArray:
+    """Sensor points (..., 3) with the along-line scale error s removed: x → x / (1 + s), m."""
+    if scale == 0.0:
+        return np.asarray(points, dtype=np.float64)
+    p = np.array(points, dtype=np.float64)
+    p[..., 0] /= 1.0 + scale
+    return p
 
 
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
@@ -517,7 +577,7 @@ def _data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray
     """Mean of the profiles' centroids in the base frame (3,), m."""
     RE, offset = _sample_transforms(problem, state)
     means = np.sum(problem.points * problem.mask[..., None], axis=1) / problem.counts[:, None]
-    y = means @ state.R_fs.T + state.t_fs
+    y = measured_to_true(means, state.scale) @ state.R_fs.T + state.t_fs
     return np.asarray(np.mean(np.einsum("mij,mj->mi", RE, y) + offset, axis=0))
 
 
@@ -528,7 +588,7 @@ def _recentred(state: CylinderState, centroid: FloatArray) -> CylinderState:
 
 
 def _marginal_hand_eye(information: FloatArray) -> FloatArray:
-    """Information (6, 6) of the hand-eye after eliminating the axis (and radius)."""
+    """Information (6, 6) of the hand-eye after eliminating the axis (radius, scale)."""
     h, o = slice(0, N_HAND_EYE), slice(N_HAND_EYE, None)
     S_oo = information[o, o]
     return np.asarray(
@@ -556,7 +616,7 @@ def build_problem(
     """Validate the input (InputError/DegenerateError with advice) and stack it.
 
     Parameters are those of :func:`refine`; ``estimate_radius`` adds the radius to the
-    global parameters.
+    global parameters, ``config.estimate_scale`` the along-line scale.
     """
     T_all = np.asarray(T_base_flange, dtype=np.float64)
     M = len(samples_points)
@@ -603,6 +663,7 @@ def build_problem(
         t_bf=np.ascontiguousarray(T_all[:, :3, 3]),
         estimate_radius=estimate_radius,
         config=config,
+        estimate_scale=config.estimate_scale,
     )
 
 
@@ -747,12 +808,25 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
     observability.raise_if_unobservable()
     covariance = np.linalg.inv(normal.schur_information(*factors))
     sigma = np.sqrt(np.diag(covariance))
+    r, s = problem.radius_index, problem.scale_index
 
     squares = np.sum((e * cfg.sensor_sigma_m) ** 2, axis=1)
     sample_rms = np.sqrt(squares / problem.counts)
     beyond = np.sum(np.abs(e) > cfg.loss_scale, axis=1)
     cylinder_point = state.point - float(state.point @ state.direction) * state.direction
     warnings = list(observability.warnings)
+    correlation = (
+        None if r is None or s is None else float(covariance[r, s] / (sigma[r] * sigma[s]))
+    )
+    if s is not None and sigma[s] > MAX_SCALE_SIGMA:
+        warnings.append(
+            f"the sensor's along-line scale is poorly determined (1 sigma {100.0 * sigma[s]:.2f} "
+            "%"
+            + ("" if correlation is None else f", correlated {correlation:+.2f} with the radius")
+            + "): these profiles barely tell a profile stretched along the line from a larger "
+            "cylinder or a shifted hand-eye. Give the measured radius (--radius), or scan with "
+            "the arc at several positions along the laser line"
+        )
     history = solution.cost_history
     robot_scale = float(np.sqrt(factors[1]))
     prior_note = ""
@@ -788,7 +862,10 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
         covariance_hand_eye=covariance[:N_HAND_EYE, :N_HAND_EYE],
         sigma_rotation_rad=sigma[:3],
         sigma_translation_m=sigma[3:6],
-        sigma_radius_m=float(sigma[-1]) if problem.estimate_radius else None,
+        sigma_radius_m=None if r is None else float(sigma[r]),
+        scale=state.scale,
+        sigma_scale=None if s is None else float(sigma[s]),
+        scale_radius_correlation=correlation,
         used=list(range(problem.n_samples)),
         dropped=[],
         sample_rms_m=sample_rms,
@@ -874,7 +951,9 @@ def point_residuals_m(
     out = []
     for p, T, delta in zip(samples_points, T_all, result.pose_corrections, strict=True):
         R = T[:3, :3] @ exp_so3(delta[None, :3])[0]
-        w = (np.asarray(p) @ R_fs.T + t_fs) @ R.T + (T[:3, 3] + T[:3, :3] @ delta[3:] - c)
+        w = (measured_to_true(p, result.scale) @ R_fs.T + t_fs) @ R.T + (
+            T[:3, 3] + T[:3, :3] @ delta[3:] - c
+        )
         radial = w - np.outer(w @ d, d)
         out.append(np.sqrt(np.sum(radial**2, axis=1)) - result.cylinder.radius)
     return out

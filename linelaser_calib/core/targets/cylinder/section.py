@@ -1,4 +1,5 @@
-"""The cylinder target's part of a result: the fitted cylinder in the base frame."""
+"""The cylinder target's part of a result: the fitted cylinder in the base frame, and the
+sensor's along-line scale when it was estimated with it."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from ...geometry import FloatArray, apply_transform
 from ...residuals import axis_extent
 from ...types import Cylinder, SampleFit
 from ..base import Shape, mm_text, plain_floats, read_vector
+from .refine import measured_to_true
 
 
 @dataclass(frozen=True)
@@ -27,6 +29,13 @@ class CylinderSection:
     noise_levels : dict of str to float, or None
         The noise levels re-estimated from the residuals (``sensor_sigma_m``,
         ``robot_sigma_t_m``, ``robot_sigma_r_rad``; default method), or None.
+    scale : float or None
+        The sensor's along-line scale error s estimated with the cylinder (dimensionless: the
+        profiler reports x as (1 + s) times the true value); None when it was not estimated.
+    scale_sigma : float or None
+        1σ of ``scale``.
+    scale_radius_correlation : float or None
+        Correlation coefficient of the scale and the radius, when both were estimated.
     """
 
     key: ClassVar[str] = "cylinder"
@@ -35,16 +44,31 @@ class CylinderSection:
     cylinder: Cylinder
     radius_estimated: bool = False
     noise_levels: Mapping[str, float] | None = None
+    scale: float | None = None
+    scale_sigma: float | None = None
+    scale_radius_correlation: float | None = None
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
-        """``{frame, point, direction, radius}`` (m)."""
+        """``{frame, point, direction, radius}`` (m), and with an estimated scale
+        ``along_line_scale`` (the ratio 1 + s), ``along_line_scale_sigma`` (its 1σ) and, with
+        the radius estimated too, ``along_line_scale_radius_correlation``."""
         c = self.cylinder
-        return {
+        mapping: dict[str, Any] = {
             "frame": base_frame,
             "point": plain_floats(c.point),
             "direction": plain_floats(c.direction),
             "radius": float(c.radius),
         }
+        if self.scale is not None:
+            mapping["along_line_scale"] = 1.0 + float(self.scale)
+            mapping["along_line_scale_sigma"] = (
+                None if self.scale_sigma is None else float(self.scale_sigma)
+            )
+            if self.scale_radius_correlation is not None:
+                mapping["along_line_scale_radius_correlation"] = float(
+                    self.scale_radius_correlation
+                )
+        return mapping
 
     def quality_entries(self) -> dict[str, Any]:
         """``radius_estimated`` and the re-estimated noise levels (``noise_estimated``)."""
@@ -62,6 +86,12 @@ class CylinderSection:
             + ", ".join(f"{v:+.5f}" for v in c.direction)
             + f"], radius {c.radius * 1e3:.3f} mm"
             + (" (estimated)" if self.radius_estimated else " (given)")
+            + (
+                ""
+                if self.scale is None
+                else f"; {scale_text(self.scale, self.scale_sigma)}"
+                + correlation_text(self.scale_radius_correlation)
+            )
         )
 
     def residual_kind(self, method: str) -> str:
@@ -80,13 +110,17 @@ class CylinderSection:
     def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
         """Distance of the sample's points to the axis minus the radius (N,), m."""
         c = self.cylinder
-        v = apply_transform(T_base_sensor, fit.points) - c.point
+        v = apply_transform(T_base_sensor, self.sensor_points(fit.points)) - c.point
         radial = v - np.outer(v @ c.direction, c.direction)
         return np.asarray(np.linalg.norm(radial, axis=1) - c.radius)
 
     def given_settings(self) -> dict[str, Any]:
         """None: a cylinder result fixes no setting of a later calibration."""
         return {}
+
+    def sensor_points(self, points: FloatArray) -> FloatArray:
+        """The points with the estimated along-line scale error removed (x / (1 + s))."""
+        return points if self.scale is None else measured_to_true(points, self.scale)
 
 
 def read_cylinder_section(
@@ -107,8 +141,57 @@ def read_cylinder_section(
     estimated = quality.get("radius_estimated", False)
     if not isinstance(estimated, bool):
         raise ValueError(f"key quality.radius_estimated must be true or false, got {estimated!r}")
+    ratio = _optional_number(mapping, "along_line_scale")
+    sigma = _optional_number(mapping, "along_line_scale_sigma")
+    correlation = _optional_number(mapping, "along_line_scale_radius_correlation")
+    if ratio is not None and not ratio > 0.0:
+        raise ValueError(f"key along_line_scale must be a ratio > 0, got {ratio}")
+    if sigma is not None and not sigma >= 0.0:
+        raise ValueError(f"key along_line_scale_sigma must be >= 0, got {sigma}")
+    if correlation is not None and not abs(correlation) <= 1.0:
+        raise ValueError(
+            f"key along_line_scale_radius_correlation must be within [-1, 1], got {correlation}"
+        )
+    scaled = ratio is not None
     return CylinderSection(
         Cylinder(point, direction / norm, float(radius)),
         estimated,
         dict(quality.get("noise_estimated") or {}) or None,
+        scale=None if ratio is None else ratio - 1.0,
+        scale_sigma=sigma if scaled else None,
+        scale_radius_correlation=correlation if scaled else None,
+    )
+
+
+def _optional_number(mapping: Mapping[str, Any], key: str) -> float | None:
+    """A finite number under ``key``, or None when absent or null (ValueError naming the key)."""
+    value = mapping.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise ValueError(f"key {key} must be a finite number, got {value!r}")
+    return float(value)
+
+
+#: |Correlation| of the along-line scale and the radius named in the description.
+HIGH_CORRELATION = 0.9
+
+
+def correlation_text(correlation: float | None) -> str:
+    """The scale-radius correlation in words when high, else empty."""
+    if correlation is None or abs(correlation) <= HIGH_CORRELATION:
+        return ""
+    return (
+        f", correlated {correlation:+.2f} with the radius (a profile stretched along the line "
+        "looks like a larger cylinder)"
+    )
+
+
+def scale_text(scale: float, sigma: float | None) -> str:
+    """The along-line scale in words: the ratio and the difference in %, with 1σ."""
+    spread = "" if sigma is None else f" ± {sigma:.5f}"
+    percent = "" if sigma is None else f" ± {100.0 * sigma:.3f}"
+    return (
+        f"sensor along-line (x) scale {1.0 + scale:.5f}{spread} "
+        f"({100.0 * scale:+.3f}{percent} % from nominal, estimated, 1 sigma)"
     )

@@ -83,6 +83,10 @@ class KnownPoint:
         """A taught point fixes ``point_m`` of a later calibration started from this result."""
         return {} if self.estimated else {"point_m": np.asarray(self.point, dtype=np.float64)}
 
+    def sensor_points(self, points: FloatArray) -> FloatArray:
+        """The points unchanged: this target estimates nothing of the sensor itself."""
+        return points
+
 
 def read_known_point_section(mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> KnownPoint:
     """The section from a result file's ``known_point`` mapping (ValueError naming the key)."""

@@ -98,6 +98,10 @@ class LineSection:
         """Nothing: a line fixes no setting of a later calibration."""
         return {}
 
+    def sensor_points(self, points: FloatArray) -> FloatArray:
+        """The points unchanged: this target estimates nothing of the sensor itself."""
+        return points
+
     def describe(self, base_frame: str) -> str:
         """One line, mm."""
         p, d = self.line.point * 1e3, self.line.direction

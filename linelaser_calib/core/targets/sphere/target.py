@@ -205,6 +205,10 @@ class SphereSection:
         """None: a sphere result fixes nothing of a later calibration."""
         return {}
 
+    def sensor_points(self, points: FloatArray) -> FloatArray:
+        """The points unchanged: this target estimates nothing of the sensor itself."""
+        return points
+
 
 def read_sphere_section(mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> SphereSection:
     """The section from a result file's ``sphere`` mapping (ValueError naming a bad key)."""
