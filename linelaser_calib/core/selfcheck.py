@@ -60,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from .errors import CalibrationError
+from .forked import map_forked
 from .geometry import FloatArray, rotvec_from_matrix
 from .targets.base import TargetSolution
 from .types import SampleFit
@@ -255,6 +256,7 @@ def self_check(
     solve: Callable[[list[Any]], TargetSolution],
     folds: int = DEFAULT_FOLDS,
     flange_poses: Callable[[TargetSolution, list[Any]], FloatArray] | None = None,
+    workers: int = 1,
 ) -> SelfCheck | None:
     """Cross-validate a solution over poses, compare disjoint halves, and widen its 1σ when the
     robot's error looks systematic (see the module docstring).
@@ -276,6 +278,8 @@ def self_check(
         the held-out features, when the solve also corrects the poses themselves (a joint
         kinematic calibration: forward kinematics with the fold's corrections). Default:
         the recorded ``T_base_flange`` of each feature.
+    workers : int
+        Processes for the subset solves (:func:`solve_subsets`).
 
     Returns
     -------
@@ -291,11 +295,10 @@ def self_check(
     estimates, held_rms, offsets, poses, indices, levers = [], [], [], [], [], []
     tilts: list[float] = []
     squares, count = 0.0, 0
+    solved = solve_subsets(kept, folds, solve, workers)
     for k in range(folds):
-        train = [f for f, g in zip(kept, group, strict=True) if g != k]
-        try:
-            fold = solve(train)
-        except CalibrationError:
+        fold = solved[k]
+        if isinstance(fold, CalibrationError):
             return None
         estimates.append(hand_eye_difference(solution.T_flange_sensor, fold.T_flange_sensor))
         held = [f for f, g in zip(kept, group, strict=True) if g == k]
@@ -319,7 +322,7 @@ def self_check(
     sigma_jk = np.sqrt((folds - 1) / folds * np.sum((theta - theta.mean(axis=0)) ** 2, axis=0))
     ratio = float(np.sqrt(np.mean((sigma_jk / sigma_model) ** 2)))
     correlation = neighbour_correlation(np.stack([offsets, tilts], axis=1), np.stack(poses))
-    halves = _halves(kept, solve)
+    halves = _halves(solved[folds], solved[folds + 1])
     T_poses = np.stack([f.T_base_flange for f in kept])
     clusters = pose_clusters(T_poses)
     disagree = halves is not None and float(np.max(halves)) > HALVES_LIMIT_SIGMAS
@@ -352,12 +355,28 @@ def self_check(
     return check
 
 
-def _halves(kept: list[Any], solve: Callable[[list[Any]], TargetSolution]) -> FloatArray | None:
-    """|θ_even − θ_odd| / combined 1σ per axis (6,), or None."""
-    even, odd = kept[0::2], kept[1::2]
-    try:
-        a, b = solve(even), solve(odd)
-    except CalibrationError:
+def solve_subsets(
+    kept: list[Any],
+    folds: int,
+    solve: Callable[[list[Any]], TargetSolution],
+    workers: int = 1,
+) -> list[TargetSolution | CalibrationError]:
+    """The solves of the self-check, each a solution or the CalibrationError it raised: every
+    fold's training features (all but every ``folds``-th from k, for each fold k), then the
+    even and the odd features. They are independent; with ``workers`` 2 a forked child takes
+    half of them (:func:`~linelaser_calib.core.forked.map_forked`; same outcomes as one
+    process)."""
+    group = np.arange(len(kept)) % folds
+    subsets = [[f for f, g in zip(kept, group, strict=True) if g != k] for k in range(folds)]
+    return map_forked(solve, [*subsets, kept[0::2], kept[1::2]], workers)
+
+
+def _halves(
+    a: TargetSolution | CalibrationError, b: TargetSolution | CalibrationError
+) -> FloatArray | None:
+    """|θ_even − θ_odd| / combined 1σ per axis (6,) of the even (a) and odd (b) solves, or
+    None."""
+    if isinstance(a, CalibrationError) or isinstance(b, CalibrationError):
         return None
     sigma_a, sigma_b = _sigma(a), _sigma(b)
     if sigma_a is None or sigma_b is None:

@@ -278,6 +278,10 @@ class SolveContext:
         identifiable kinematic corrections with the hand-eye
         (:mod:`~linelaser_calib.core.joint_calibration`), the flange pose of each feature
         being the forward kinematics of its joint vector.
+    warm_start : TargetSolution or None
+        A default-method solution from a superset of the features (the self-check's solves
+        of subsets start at the solve of all): a target may start its local solve there
+        instead of at its global seed.
     """
 
     initial_T_flange_sensor: FloatArray | None = None
@@ -286,6 +290,7 @@ class SolveContext:
     n_samples: int = 0
     progress: Progress = field(default=_no_progress)
     kinematics: KinematicSetup | None = None
+    warm_start: TargetSolution | None = None
 
 
 class Target(Protocol[ConfigT]):
