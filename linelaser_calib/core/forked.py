@@ -10,9 +10,7 @@ time: its items are then computed here. The child is always waited for (no zombi
 killed when this process is interrupted.
 
 Forking is unsafe in a process with other threads that hold locks (a ROS executor), so it is
-off unless asked for: by ``workers=2``, or, where a call cannot pass it on (a target's
-feature extraction behind the target protocol), by :func:`sharing` around the call. The
-command line asks for it, the nodes do not.
+off unless asked for (``workers=2``); the command line asks for it, the nodes do not.
 """
 
 from __future__ import annotations
@@ -20,9 +18,7 @@ from __future__ import annotations
 import os
 import pickle
 import signal
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
-from contextvars import ContextVar
+from collections.abc import Callable, Sequence
 from typing import NoReturn, TypeVar
 
 from .errors import CalibrationError
@@ -32,18 +28,6 @@ Value = TypeVar("Value")
 
 #: Processes a solve may use: this one and at most one child.
 MAX_WORKERS = 2
-
-_WORKERS: ContextVar[int] = ContextVar("workers", default=1)
-
-
-@contextmanager
-def sharing(workers: int) -> Iterator[None]:
-    """Within the block, :func:`map_forked` calls that give no ``workers`` use ``workers``."""
-    token = _WORKERS.set(workers)
-    try:
-        yield
-    finally:
-        _WORKERS.reset(token)
 
 
 def available_workers() -> int:
@@ -78,7 +62,7 @@ def _child(function: Callable[[Item], Value], items: Sequence[Item], pipe: int) 
 
 
 def map_forked(
-    function: Callable[[Item], Value], items: Sequence[Item], workers: int | None = None
+    function: Callable[[Item], Value], items: Sequence[Item], workers: int = 1
 ) -> list[Value | CalibrationError]:
     """``function`` of every item, or the CalibrationError it raised, in the items' order.
 
@@ -87,11 +71,10 @@ def map_forked(
     function : callable
         Deterministic given its item.
     items : sequence
-    workers : int, optional
+    workers : int
         1 runs everything here; 2 shares the items with a forked child (see the module
-        docstring). None: as set by :func:`sharing` (1 outside it).
+        docstring).
     """
-    workers = _WORKERS.get() if workers is None else workers
     if workers < 2 or len(items) < 2 or not hasattr(os, "fork"):
         return [_outcome(function, item) for item in items]
     read, write = os.pipe()

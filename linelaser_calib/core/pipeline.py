@@ -27,7 +27,6 @@ from typing import Any
 import numpy as np
 
 from .errors import DegenerateError, InputError, PairingError
-from .forked import sharing
 from .geometry import FloatArray, check_transform
 from .joint_calibration import KinematicSetup
 from .kinematics import forward_kinematics
@@ -76,10 +75,9 @@ class PipelineConfig:
         Folds of the default method's self-check (:mod:`.selfcheck`: cross-validated
         accuracy in use, halves, a 1σ widened for systematic robot error); 0 skips it.
     workers : int
-        Processes for the feature extraction (where the target's allows) and the self-check's
-        solves: 1, or 2 to share them with a forked child (:mod:`.forked`: same result, less
-        wall time on a second core). Not for a process with threads that hold locks (a ROS
-        node).
+        Processes for the self-check's solves: 1, or 2 to share them with a forked child
+        (:mod:`.forked`: same result, less wall time on a second core). Not for a process
+        with threads that hold locks (a ROS node).
     """
 
     method: Method = Method.DEFAULT
@@ -181,8 +179,7 @@ def calibrate_samples(
         raise DegenerateError("no samples to calibrate from: collect profiles of the target first")
     check_units(samples)
     target, target_config = config.target_impl, config.target_config
-    with sharing(config.workers):
-        features, feature_rejections = target.extract(samples, target_config, config.seed, progress)
+    features, feature_rejections = target.extract(samples, target_config, config.seed, progress)
     rejections += feature_rejections
     target.check_features(features, target_config)
     context = SolveContext(

@@ -15,12 +15,11 @@ from ...arc import (
     trimming_note,
     without_grazing_ends,
 )
-from ...errors import CalibrationError, InputError, ProfileRejected
-from ...forked import map_forked
+from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...profile import clean_profile
 from ...types import EllipseFit, Rejection, Sample, SampleFit
-from ..base import Progress
+from ..base import Progress, extract_each
 from .config import CylinderConfig
 
 
@@ -90,30 +89,20 @@ def fit_samples(
 ) -> tuple[list[FittedSample], list[Rejection]]:
     """Fit every sample's ellipse (semi-axes bounded by ``config.radius_m`` when given).
 
-    Each sample's RANSAC draws from its own generator, seeded by ``seed`` and the sample's
-    index, so that the samples are independent: within :func:`~linelaser_calib.core.forked.
-    sharing` a forked child fits half of them.
-
     Raises
     ------
     InputError
-        When a configured radius disagrees with the profiles (:func:`settle_radius`), or a
-        profile is malformed.
+        When a configured radius disagrees with the profiles (:func:`settle_radius`).
     """
 
-    def fit_bounded(sample: Sample) -> FittedSample | Rejection:
-        rng = np.random.default_rng([seed, sample.index])
-        return fit_sample(sample, config, rng, config.radius_m)
+    def fit_bounded(
+        sample: Sample, cfg: CylinderConfig, rng: np.random.Generator
+    ) -> FittedSample | Rejection:
+        return fit_sample(sample, cfg, rng, cfg.radius_m)
 
-    fitted, rejections = [], []
-    for k, outcome in enumerate(map_forked(fit_bounded, samples)):
-        if isinstance(outcome, CalibrationError):
-            raise outcome
-        if isinstance(outcome, Rejection):
-            rejections.append(outcome)
-        else:
-            fitted.append(outcome)
-        progress("ellipse", k + 1, len(samples))
+    fitted, rejections = extract_each(
+        samples, config, np.random.default_rng(seed), fit_bounded, progress, "ellipse"
+    )
     if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):
         # Most profiles failed with the given radius: fit freely to tell the user why.
         free = [fit_sample(s, config, np.random.default_rng(seed)) for s in samples]
