@@ -3,7 +3,11 @@ solve: the same outcomes as one process solving each subset from its own seed.""
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
+import threading
 from dataclasses import replace
 from pathlib import Path
 
@@ -29,45 +33,71 @@ def seeded_mean(item: int) -> float:
     return float(np.mean(np.random.default_rng(item).normal(size=1000)))
 
 
-def assert_no_child_left() -> None:
-    with pytest.raises(ChildProcessError):
-        os.waitpid(-1, os.WNOHANG)
+#: Run in a fresh process (a test runner may run helper threads, which turn forking off):
+#: which items a child solved, a child that fails, outcomes against one process.
+PROBE = """
+import json, os
+from linelaser_calib.core.errors import DegenerateError
+from linelaser_calib.core.forked import map_forked
+
+parent = os.getpid()
+
+def where(item):
+    if item == 4:
+        raise DegenerateError("item 4 refused")
+    return [item, os.getpid() != parent]
+
+def fails_in_the_child(item):
+    if os.getpid() != parent:
+        raise RuntimeError("child failure")
+    return [item, False]
+
+shared = [o if isinstance(o, list) else str(o) for o in map_forked(where, list(range(7)), 2)]
+fallback = map_forked(fails_in_the_child, list(range(7)), 2)
+try:
+    os.waitpid(-1, os.WNOHANG)
+    left = True
+except ChildProcessError:
+    left = False
+print(json.dumps({"shared": shared, "fallback": fallback, "child_left": left}))
+"""
 
 
-def assert_same_outcomes(
-    got: list[float | CalibrationError], expected: list[float | CalibrationError]
-) -> None:
-    assert len(got) == len(expected)
-    for a, b in zip(got, expected, strict=True):
+def test_a_forked_child_solves_every_other_item_and_a_failing_child_costs_only_time() -> None:
+    run = subprocess.run(
+        [sys.executable, "-c", PROBE], capture_output=True, text=True, check=True, timeout=60
+    )
+    report = json.loads(run.stdout.splitlines()[-1])
+    expected = [[k, k % 2 == 1] for k in range(7)]
+    expected[4] = "item 4 refused"
+    assert report["shared"] == expected
+    assert report["fallback"] == [[k, False] for k in range(7)]
+    assert report["child_left"] is False
+
+
+def test_the_outcomes_equal_those_of_one_process_in_order() -> None:
+    items = list(range(1, 12))
+    serial = map_forked(seeded_mean, items, workers=1)
+    assert sum(isinstance(o, DegenerateError) for o in serial) == 3
+    shared = map_forked(seeded_mean, items, workers=2)
+    for a, b in zip(shared, serial, strict=True):
         if isinstance(b, CalibrationError):
             assert type(a) is type(b) and str(a) == str(b)
         else:
             assert isinstance(a, float) and a == pytest.approx(b, rel=1e-12)
 
 
-def test_a_forked_child_gives_the_outcomes_of_one_process_in_order() -> None:
-    items = list(range(1, 12))
-    serial = map_forked(seeded_mean, items, workers=1)
-    assert sum(isinstance(o, DegenerateError) for o in serial) == 3
-    assert_same_outcomes(map_forked(seeded_mean, items, workers=2), serial)
-    assert_no_child_left()
-
-
-def test_a_failing_child_costs_only_time() -> None:
-    """A child that fails (here: an error that is not a CalibrationError, in the child only)
-    leaves its items to this process."""
+def test_a_process_with_other_threads_does_not_fork() -> None:
     parent = os.getpid()
-
-    def fails_in_the_child(item: int) -> float:
-        if os.getpid() != parent:
-            raise RuntimeError("child failure")
-        return seeded_mean(item)
-
-    items = list(range(1, 8))
-    assert_same_outcomes(
-        map_forked(fails_in_the_child, items, workers=2), map_forked(seeded_mean, items)
-    )
-    assert_no_child_left()
+    release = threading.Event()
+    helper = threading.Thread(target=release.wait)
+    helper.start()
+    try:
+        pids = map_forked(lambda _: os.getpid(), list(range(6)), workers=2)
+    finally:
+        release.set()
+        helper.join()
+    assert pids == [parent] * 6
 
 
 def test_available_workers_is_one_or_two() -> None:
@@ -99,17 +129,25 @@ def test_a_subset_solve_started_at_the_full_solve_equals_one_from_its_own_seed(
     np.testing.assert_allclose(warm.sigma_translation_m, cold.sigma_translation_m, rtol=1e-6)
 
 
-def test_the_self_check_with_a_forked_child_equals_one_process(
+def test_the_self_check_of_the_command_line_equals_one_process(
     paper_samples: tuple[PipelineConfig, list[Sample]],
 ) -> None:
+    """The command line (its own process: a forked child on a second core) and one process."""
     config, samples = paper_samples
     one = calibrate_samples(samples, config)
-    two = calibrate_samples(samples, replace(config, workers=2))
-    assert one.self_check is not None and two.self_check is not None
-    assert two.self_check.accuracy_in_use_m == pytest.approx(
-        one.self_check.accuracy_in_use_m, rel=1e-9
+    run = subprocess.run(
+        [sys.executable, "-m", "linelaser_calib.cli", "calibrate", str(PAPER_BAG), "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=300,
     )
-    np.testing.assert_allclose(two.self_check.sigma_jackknife, one.self_check.sigma_jackknife)
-    np.testing.assert_allclose(two.uncertainty_translation_m, one.uncertainty_translation_m)
-    assert two.self_check.indices == one.self_check.indices
-    assert_no_child_left()
+    quality = json.loads(run.stdout)["quality"]
+    assert one.self_check is not None
+    assert quality["accuracy_in_use_m"] == pytest.approx(one.self_check.accuracy_in_use_m, rel=1e-6)
+    jackknife = quality["self_check"]["jackknife_sigma"]
+    np.testing.assert_allclose(
+        jackknife["rotation_rad"] + jackknife["translation_m"],
+        one.self_check.sigma_jackknife,
+        rtol=1e-6,
+    )

@@ -9,8 +9,10 @@ item (seeded randomness, no state shared between calls). A child that fails in a
 time: its items are then computed here. The child is always waited for (no zombie), and
 killed when this process is interrupted.
 
-Forking is unsafe in a process with other threads that hold locks (a ROS executor), so it is
-off unless asked for (``workers=2``); the command line asks for it, the nodes do not.
+Forking is unsafe in a process with other threads (a lock another thread holds stays locked
+in the child, which may then wait forever: a ROS executor, a test runner's helpers), so it is
+off unless asked for (``workers=2``; the command line asks for it, the nodes do not), and a
+process that runs other Python threads solves everything itself even then.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from __future__ import annotations
 import os
 import pickle
 import signal
+import threading
 from collections.abc import Callable, Sequence
 from typing import NoReturn, TypeVar
 
@@ -72,10 +75,11 @@ def map_forked(
         Deterministic given its item.
     items : sequence
     workers : int
-        1 runs everything here; 2 shares the items with a forked child (see the module
-        docstring).
+        1 runs everything here; 2 shares the items with a forked child when this process
+        runs no other thread (see the module docstring).
     """
-    if workers < 2 or len(items) < 2 or not hasattr(os, "fork"):
+    alone = threading.active_count() == 1
+    if workers < 2 or len(items) < 2 or not alone or not hasattr(os, "fork"):
         return [_outcome(function, item) for item in items]
     read, write = os.pipe()
     try:
