@@ -7,6 +7,7 @@ the time.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -50,3 +51,36 @@ def test_the_chi_square_quantile_equals_scipy_stats() -> None:
     for dof in (3, 6):
         p = np.array([0.05, 1e-3, 1e-6, 1e-9])
         np.testing.assert_allclose(chdtri(dof, p), chi2.isf(p, dof), rtol=1e-12)
+
+
+ENTRY_PROBE = """
+import json, sys
+from linelaser_calib.entry import main
+sys.argv = ["linelaser-calib", "info", "bags/paper"]
+code = main()
+import os
+status = open("/proc/self/status").read() if os.path.exists("/proc/self/status") else ""
+threads = [int(line.split()[1]) for line in status.splitlines() if line.startswith("Threads:")]
+blas = os.environ.get("OPENBLAS_NUM_THREADS")
+print(json.dumps({"code": code, "blas": blas, "threads": threads}))
+"""
+
+
+def test_the_console_script_runs_one_blas_thread_unless_the_user_chose() -> None:
+    for preset, expected in ((None, "1"), ("2", "2")):
+        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+        if preset is not None:
+            env["OPENBLAS_NUM_THREADS"] = preset
+        run = subprocess.run(
+            [sys.executable, "-c", ENTRY_PROBE],
+            cwd=REPO_ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        report = json.loads(run.stdout.splitlines()[-1])
+        assert report["code"] == 0
+        assert report["blas"] == expected
+        if preset is None and report["threads"]:
+            assert report["threads"] == [1], "the process runs BLAS threads"
