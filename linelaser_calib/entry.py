@@ -2,7 +2,8 @@
 
 Every BLAS call of a calibration is small (a few dozen rows), so a second OpenBLAS thread
 only costs: its start when numpy loads, and its waiting beside the forked child that takes
-half of the self-check's solves (:mod:`linelaser_calib.core.forked`). The limit is set here,
+half of the self-check's solves (:mod:`linelaser_calib.core.forked`, which forks only a
+process without other threads). The limit is set here,
 in the command line's own process before numpy loads, and only where the user has not set
 ``OPENBLAS_NUM_THREADS``; importing :mod:`linelaser_calib.cli` (tests, other programs) does
 not set it.

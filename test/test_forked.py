@@ -24,6 +24,8 @@ from linelaser_calib.core.types import Sample
 from linelaser_calib.io.bags import read_bag
 
 PAPER_BAG = Path(__file__).resolve().parent.parent / "bags" / "paper"
+#: The console script's code.
+ENTRY = "import sys; from linelaser_calib.entry import main; sys.exit(main())"
 
 
 def seeded_mean(item: int) -> float:
@@ -132,11 +134,12 @@ def test_a_subset_solve_started_at_the_full_solve_equals_one_from_its_own_seed(
 def test_the_self_check_of_the_command_line_equals_one_process(
     paper_samples: tuple[PipelineConfig, list[Sample]],
 ) -> None:
-    """The command line (its own process: a forked child on a second core) and one process."""
+    """The console script (its own process: a forked child on a second core) and one
+    process."""
     config, samples = paper_samples
     one = calibrate_samples(samples, config)
     run = subprocess.run(
-        [sys.executable, "-m", "linelaser_calib.cli", "calibrate", str(PAPER_BAG), "--json"],
+        [sys.executable, "-c", ENTRY, "calibrate", str(PAPER_BAG), "--json"],
         capture_output=True,
         text=True,
         check=True,

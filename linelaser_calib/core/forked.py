@@ -10,9 +10,10 @@ time: its items are then computed here. The child is always waited for (no zombi
 killed when this process is interrupted.
 
 Forking is unsafe in a process with other threads (a lock another thread holds stays locked
-in the child, which may then wait forever: a ROS executor, a test runner's helpers), so it is
-off unless asked for (``workers=2``; the command line asks for it, the nodes do not), and a
-process that runs other Python threads solves everything itself even then.
+in the child, which may then wait forever: a ROS executor's, a middleware's), so it is off
+unless asked for (``workers=2``; the command line asks for it, the nodes do not), and a
+process that runs any other thread solves everything itself even then (:func:`alone`: the
+command line runs one BLAS thread for that reason, :mod:`linelaser_calib.entry`).
 """
 
 from __future__ import annotations
@@ -41,6 +42,19 @@ def available_workers() -> int:
     except AttributeError:  # not Linux
         cores = os.cpu_count() or 1
     return max(1, min(MAX_WORKERS, cores))
+
+
+def alone() -> bool:
+    """True when this process runs no other thread: the operating system's count where
+    ``/proc`` gives it (threads of C libraries included), else Python's."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Threads:"):
+                    return int(line.split()[1]) == 1
+    except OSError:
+        pass
+    return threading.active_count() == 1
 
 
 def _outcome(function: Callable[[Item], Value], item: Item) -> Value | CalibrationError:
@@ -78,8 +92,7 @@ def map_forked(
         1 runs everything here; 2 shares the items with a forked child when this process
         runs no other thread (see the module docstring).
     """
-    alone = threading.active_count() == 1
-    if workers < 2 or len(items) < 2 or not alone or not hasattr(os, "fork"):
+    if workers < 2 or len(items) < 2 or not hasattr(os, "fork") or not alone():
         return [_outcome(function, item) for item in items]
     read, write = os.pipe()
     try:
