@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.special import chdtri
@@ -32,15 +33,22 @@ print(json.dumps({"import": after_import, "calibrate": loaded(), "code": code}))
 """
 
 
-def test_the_cli_and_a_calibration_load_no_plotting_ros_or_statistics() -> None:
+def probe(script: str, *args: str, env: dict[str, str] | None = None) -> dict[str, Any]:
+    """The JSON report a script prints last, run in a fresh interpreter in the repository."""
     run = subprocess.run(
-        [sys.executable, "-c", PROBE, *NOT_NEEDED],
+        [sys.executable, "-c", script, *args],
         cwd=REPO_ROOT,
+        env=env,
         capture_output=True,
         text=True,
         check=True,
     )
-    report = json.loads(run.stdout.splitlines()[-1])
+    report: dict[str, Any] = json.loads(run.stdout.splitlines()[-1])
+    return report
+
+
+def test_the_cli_and_a_calibration_load_no_plotting_ros_or_statistics() -> None:
+    report = probe(PROBE, *NOT_NEEDED)
     assert report["code"] == 0
     assert report["import"] == [], "imported by linelaser_calib.cli"
     assert report["calibrate"] == [], "imported by calibrate bags/paper"
@@ -71,15 +79,7 @@ def test_the_console_script_runs_one_blas_thread_unless_the_user_chose() -> None
         env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
         if preset is not None:
             env["OPENBLAS_NUM_THREADS"] = preset
-        run = subprocess.run(
-            [sys.executable, "-c", ENTRY_PROBE],
-            cwd=REPO_ROOT,
-            env=env,
-            capture_output=True,
-            text=True,
-            check=True,
-        )
-        report = json.loads(run.stdout.splitlines()[-1])
+        report = probe(ENTRY_PROBE, env=env)
         assert report["code"] == 0
         assert report["blas"] == expected
         if preset is None and report["threads"]:
