@@ -36,7 +36,7 @@ setup(
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "linelaser-calib = linelaser_calib.cli:main",
+            "linelaser-calib = linelaser_calib.entry:main",
             "collector = linelaser_calib.nodes.collector:main",
             "calibration_service = linelaser_calib.nodes.calibration_service:main",
         ],

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
+from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.kinematics import KinematicModel
@@ -382,6 +383,7 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
         initial_T_flange_sensor=initial,
+        workers=available_workers(),
     )
 
 
@@ -948,6 +950,7 @@ def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, fl
             seed=seed,
             pairing=pairing,
             initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
+            workers=available_workers(),
         )
         started = time.perf_counter()
         run = calibrate_bag(bag, config, estimate_offset=continuous)

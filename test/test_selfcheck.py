@@ -17,6 +17,7 @@ from linelaser_calib.core.selfcheck import (
     region_groups,
     region_jackknife,
     region_limit,
+    region_subsets,
     self_check,
 )
 from linelaser_calib.core.targets.base import TargetSolution
@@ -191,7 +192,8 @@ def test_region_dispersion_rarely_exceeds_its_limit_under_independent_error() ->
         solution = toy_solve(features)
         assert solution.sigma_rotation_rad is not None and solution.sigma_translation_m is not None
         sigma = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
-        region = region_jackknife(features, solution, sigma, toy_solve, DEFAULT_FOLDS)
+        solves = [toy_solve(subset) for subset in region_subsets(features, DEFAULT_FOLDS)]
+        region = region_jackknife(solves, solution, sigma)
         assert region is not None and region.regions == DEFAULT_FOLDS
         ratios.append(region.sigma[5] / (sigma_shared / np.sqrt(M)))
     assert float(np.median(ratios)) == pytest.approx(0.93, abs=0.15)

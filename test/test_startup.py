@@ -7,9 +7,11 @@ the time.
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.special import chdtri
@@ -31,15 +33,22 @@ print(json.dumps({"import": after_import, "calibrate": loaded(), "code": code}))
 """
 
 
-def test_the_cli_and_a_calibration_load_no_plotting_ros_or_statistics() -> None:
+def probe(script: str, *args: str, env: dict[str, str] | None = None) -> dict[str, Any]:
+    """The JSON report a script prints last, run in a fresh interpreter in the repository."""
     run = subprocess.run(
-        [sys.executable, "-c", PROBE, *NOT_NEEDED],
+        [sys.executable, "-c", script, *args],
         cwd=REPO_ROOT,
+        env=env,
         capture_output=True,
         text=True,
         check=True,
     )
-    report = json.loads(run.stdout.splitlines()[-1])
+    report: dict[str, Any] = json.loads(run.stdout.splitlines()[-1])
+    return report
+
+
+def test_the_cli_and_a_calibration_load_no_plotting_ros_or_statistics() -> None:
+    report = probe(PROBE, *NOT_NEEDED)
     assert report["code"] == 0
     assert report["import"] == [], "imported by linelaser_calib.cli"
     assert report["calibrate"] == [], "imported by calibrate bags/paper"
@@ -50,3 +59,28 @@ def test_the_chi_square_quantile_equals_scipy_stats() -> None:
     for dof in (3, 6):
         p = np.array([0.05, 1e-3, 1e-6, 1e-9])
         np.testing.assert_allclose(chdtri(dof, p), chi2.isf(p, dof), rtol=1e-12)
+
+
+ENTRY_PROBE = """
+import json, sys
+from linelaser_calib.entry import main
+sys.argv = ["linelaser-calib", "info", "bags/paper"]
+code = main()
+import os
+status = open("/proc/self/status").read() if os.path.exists("/proc/self/status") else ""
+threads = [int(line.split()[1]) for line in status.splitlines() if line.startswith("Threads:")]
+blas = os.environ.get("OPENBLAS_NUM_THREADS")
+print(json.dumps({"code": code, "blas": blas, "threads": threads}))
+"""
+
+
+def test_the_console_script_runs_one_blas_thread_unless_the_user_chose() -> None:
+    for preset, expected in ((None, "1"), ("2", "2")):
+        env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+        if preset is not None:
+            env["OPENBLAS_NUM_THREADS"] = preset
+        report = probe(ENTRY_PROBE, env=env)
+        assert report["code"] == 0
+        assert report["blas"] == expected
+        if preset is None and report["threads"]:
+            assert report["threads"] == [1], "the process runs BLAS threads"

@@ -74,6 +74,10 @@ class PipelineConfig:
     self_check_folds : int
         Folds of the default method's self-check (:mod:`.selfcheck`: cross-validated
         accuracy in use, halves, a 1σ widened for systematic robot error); 0 skips it.
+    workers : int
+        Processes for the self-check's solves: 1, or 2 to share them with a forked child
+        (:mod:`.forked`: same result, less wall time on a second core). Not for a process
+        with threads that hold locks (a ROS node).
     """
 
     method: Method = Method.DEFAULT
@@ -84,6 +88,7 @@ class PipelineConfig:
     initial_T_flange_sensor: FloatArray | None = None
     kinematics: KinematicSetup | None = None
     self_check_folds: int = DEFAULT_FOLDS
+    workers: int = 1
 
     def __post_init__(self) -> None:
         if self.self_check_folds < 0 or self.self_check_folds == 1:
@@ -224,7 +229,7 @@ def calibrate_samples(
         )
     check = None
     if config.method is Method.DEFAULT and config.self_check_folds:
-        quiet = replace(context, progress=_no_progress)
+        quiet = replace(context, progress=_no_progress, warm_start=solution)
         progress("self-check", 0, 1)
         check = self_check(
             features,
@@ -232,6 +237,7 @@ def calibrate_samples(
             lambda subset: target.solve_default(subset, target_config, quiet),
             config.self_check_folds,
             None if config.kinematics is None else _corrected_poses(config.kinematics),
+            config.workers,
         )
         progress("self-check", 1, 1)
     sigma_t, sigma_r = solution.sigma_translation_m, solution.sigma_rotation_rad

@@ -91,6 +91,7 @@ from numpy.typing import NDArray
 from scipy.special import chdtri, ndtri, stdtrit
 
 from .errors import CalibrationError
+from .forked import map_forked
 from .geometry import FloatArray, rotvec_from_matrix
 from .targets.base import TargetSolution
 from .types import SampleFit
@@ -374,27 +375,31 @@ class RegionJackknife:
         return float(np.sqrt(np.mean((self.sigma / self.expected) ** 2)))
 
 
+def region_subsets(kept: list[Any], groups: int) -> list[list[Any]]:
+    """The features without each of ``groups`` regions of the workspace
+    (:func:`region_groups` of their flange poses), one list per region."""
+    label = region_groups(np.stack([f.T_base_flange for f in kept]), groups)
+    return [
+        [f for f, lab in zip(kept, label, strict=True) if lab != g]
+        for g in range(int(label.max()) + 1)
+    ]
+
+
 def region_jackknife(
-    kept: list[Any],
+    solves: Sequence[TargetSolution | CalibrationError],
     solution: TargetSolution,
     sigma_model: FloatArray,
-    solve: Callable[[list[Any]], TargetSolution],
-    groups: int,
 ) -> RegionJackknife | None:
-    """Leave each of ``groups`` regions of the workspace (:func:`region_groups`) out in turn and
-    take the jackknife of the hand-eye (:class:`RegionJackknife`); None when fewer than 3
-    regions could be solved without.
+    """The jackknife of the hand-eye over the solves of :func:`region_subsets` (each region
+    left out in turn; :class:`RegionJackknife`); None when fewer than 3 regions could be
+    solved without.
 
     Leaving a whole region out moves the estimate by what that region's shared robot error
     put into it; interleaved folds keep every region in every fold and cannot show it.
     """
-    label = region_groups(np.stack([f.T_base_flange for f in kept]), groups)
     moves, spreads = [], []
-    for g in range(int(label.max()) + 1):
-        train = [f for f, lab in zip(kept, label, strict=True) if lab != g]
-        try:
-            fold = solve(train)
-        except CalibrationError:
+    for fold in solves:
+        if isinstance(fold, CalibrationError):
             continue
         moves.append(hand_eye_difference(solution.T_flange_sensor, fold.T_flange_sensor))
         sigma_fold = _sigma(fold)
@@ -452,6 +457,7 @@ def self_check(
     solve: Callable[[list[Any]], TargetSolution],
     folds: int = DEFAULT_FOLDS,
     flange_poses: Callable[[TargetSolution, list[Any]], FloatArray] | None = None,
+    workers: int = 1,
 ) -> SelfCheck | None:
     """Cross-validate a solution over poses, compare disjoint halves, and widen its 1σ when the
     robot's error looks systematic (see the module docstring).
@@ -473,6 +479,8 @@ def self_check(
         the held-out features, when the solve also corrects the poses themselves (a joint
         kinematic calibration: forward kinematics with the fold's corrections). Default:
         the recorded ``T_base_flange`` of each feature.
+    workers : int
+        Processes for the subset solves (:func:`solve_subsets`).
 
     Returns
     -------
@@ -488,11 +496,10 @@ def self_check(
     estimates, held_rms, offsets, poses, indices, levers = [], [], [], [], [], []
     tilts: list[float] = []
     squares, count = 0.0, 0
+    solved = solve_subsets(kept, folds, solve, workers)
     for k in range(folds):
-        train = [f for f, g in zip(kept, group, strict=True) if g != k]
-        try:
-            fold = solve(train)
-        except CalibrationError:
+        fold = solved[k]
+        if isinstance(fold, CalibrationError):
             return None
         estimates.append(hand_eye_difference(solution.T_flange_sensor, fold.T_flange_sensor))
         held = [f for f, g in zip(kept, group, strict=True) if g == k]
@@ -516,7 +523,7 @@ def self_check(
     sigma_jk = np.sqrt((folds - 1) / folds * np.sum((theta - theta.mean(axis=0)) ** 2, axis=0))
     ratio = float(np.sqrt(np.mean((sigma_jk / sigma_model) ** 2)))
     correlation = neighbour_correlation(np.stack([offsets, tilts], axis=1), np.stack(poses))
-    region = region_jackknife(kept, solution, sigma_model, solve, folds)
+    region = region_jackknife(solved[folds + 2 :], solution, sigma_model)
     sigma_region = None if region is None else region.sigma
     regions = 0 if region is None else region.regions
     region_ratio = None if region is None else region.ratio
@@ -530,7 +537,7 @@ def self_check(
         if systematic
         else sigma_model.copy()
     )
-    split = _halves(kept, solve)
+    split = _halves(solved[folds], solved[folds + 1])
     halves = None
     if split is not None:
         difference, combined = split
@@ -566,15 +573,31 @@ def self_check(
     return check
 
 
+def solve_subsets(
+    kept: list[Any],
+    folds: int,
+    solve: Callable[[list[Any]], TargetSolution],
+    workers: int = 1,
+) -> list[TargetSolution | CalibrationError]:
+    """The solves of the self-check, each a solution or the CalibrationError it raised: every
+    fold's training features (all but every ``folds``-th from k, for each fold k), then the
+    even and the odd features, then the features without each region of the workspace
+    (:func:`region_subsets`, ``folds`` regions). They are independent; with ``workers`` 2 a
+    forked child takes half of them (:func:`~linelaser_calib.core.forked.map_forked`; same
+    outcomes as one process)."""
+    group = np.arange(len(kept)) % folds
+    subsets = [[f for f, g in zip(kept, group, strict=True) if g != k] for k in range(folds)]
+    return map_forked(
+        solve, [*subsets, kept[0::2], kept[1::2], *region_subsets(kept, folds)], workers
+    )
+
+
 def _halves(
-    kept: list[Any], solve: Callable[[list[Any]], TargetSolution]
+    a: TargetSolution | CalibrationError, b: TargetSolution | CalibrationError
 ) -> tuple[FloatArray, FloatArray] | None:
-    """|θ_even − θ_odd| (6,) and the halves' combined model 1σ √(σ_even² + σ_odd²) (6,), or
-    None when they cannot be solved apart."""
-    even, odd = kept[0::2], kept[1::2]
-    try:
-        a, b = solve(even), solve(odd)
-    except CalibrationError:
+    """|θ_even − θ_odd| (6,) and the halves' combined model 1σ √(σ_even² + σ_odd²) (6,) of the
+    even (a) and odd (b) solves, or None when they could not be solved apart."""
+    if isinstance(a, CalibrationError) or isinstance(b, CalibrationError):
         return None
     sigma_a, sigma_b = _sigma(a), _sigma(b)
     if sigma_a is None or sigma_b is None:

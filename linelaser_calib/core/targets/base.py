@@ -291,6 +291,10 @@ class SolveContext:
         kinematic corrections from all of them, the target's placement per recording. A
         target's method that does not estimate kinematic corrections ignores them (the
         pipeline refuses that).
+    warm_start : TargetSolution or None
+        A default-method solution from a superset of the features (the self-check's solves
+        of subsets start at the solve of all): a target may start its local solve there
+        instead of at its global seed.
     """
 
     initial_T_flange_sensor: FloatArray | None = None
@@ -300,6 +304,7 @@ class SolveContext:
     progress: Progress = field(default=_no_progress)
     kinematics: KinematicSetup | None = None
     placements: Sequence[Placement] = ()
+    warm_start: TargetSolution | None = None
 
 
 @dataclass(frozen=True)

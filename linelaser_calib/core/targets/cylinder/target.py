@@ -241,23 +241,36 @@ class CylinderTarget:
             noise_m=config.refine.robot_sigma_t_m,
         )
 
-    def solve_default(
-        self, features: list[Any], config: CylinderConfig, context: SolveContext
-    ) -> TargetSolution:
-        """Maximum likelihood on every inlier point, seeded by the paper's solve."""
-        radius = self._checked(features, config, context)
+    def _start(
+        self, features: list[FittedSample], config: CylinderConfig, context: SolveContext
+    ) -> tuple[FloatArray, Cylinder, dict[str, Any]]:
+        """Hand-eye (4, 4) and axis the refinement starts from, and the seed's history: the
+        warm start's when the context has one (no seed solve), else the seed's, the hand-eye
+        replaced by the initial one when given."""
+        warm = context.warm_start
+        if warm is not None and isinstance(warm.section, CylinderSection):
+            return warm.T_flange_sensor, warm.section.cylinder, {}
         seed = self._seed(features, config, context, paper=False)
         T_init = (
             seed.T_flange_sensor
             if context.initial_T_flange_sensor is None
             else np.asarray(context.initial_T_flange_sensor, dtype=np.float64)
         )
+        return T_init, seed.cylinder, dict(seed.history)
+
+    def solve_default(
+        self, features: list[Any], config: CylinderConfig, context: SolveContext
+    ) -> TargetSolution:
+        """Maximum likelihood on every inlier point, seeded by the paper's solve (or started
+        at the context's warm start)."""
+        radius = self._checked(features, config, context)
+        T_init, cylinder0, seed_history = self._start(features, config, context)
         mismatch = radius_mismatch([f.ellipse.semi_axes[1] for f in features], config.radius_m)
         config = replace(
             config, refine=replace(config.refine, estimate_scale=estimates_scale(config))
         )
         context.progress("refine", 0, 1)
-        refined = self._refined(features, T_init, replace(seed.cylinder, radius=radius), config)
+        refined = self._refined(features, T_init, replace(cylinder0, radius=radius), config)
         context.progress("refine", 1, 1)
         outcome = None
         if context.kinematics is not None:
@@ -307,7 +320,7 @@ class CylinderTarget:
             sigma_translation_m=refined.sigma_translation_m,
             sigma_rotation_rad=refined.sigma_rotation_rad,
             warnings=[*refined.warnings, *notes],
-            history={**seed.history, "refine_cost": list(refined.cost_history)},
+            history={**seed_history, "refine_cost": list(refined.cost_history)},
             sample_fits=[features[j].record() for j in refined.used],
             noise_m=profile_noise_m(features, config.refine.sensor_sigma_m),
             kinematics=None if outcome is None else outcome.corrections,

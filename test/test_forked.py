@@ -1,0 +1,156 @@
+"""Solves shared with a forked child, and the self-check's subset solves started at the full
+solve: the same outcomes as one process solving each subset from its own seed."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from linelaser_calib.core.errors import CalibrationError, DegenerateError
+from linelaser_calib.core.forked import available_workers, map_forked
+from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.pairing import pair_profiles
+from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
+from linelaser_calib.core.targets.base import SolveContext
+from linelaser_calib.core.types import Sample
+from linelaser_calib.io.bags import read_bag
+
+PAPER_BAG = Path(__file__).resolve().parent.parent / "bags" / "paper"
+#: The console script's code.
+ENTRY = "import sys; from linelaser_calib.entry import main; sys.exit(main())"
+
+
+def seeded_mean(item: int) -> float:
+    """A deterministic computation of one item; items divisible by 3 are refused."""
+    if item % 3 == 0:
+        raise DegenerateError(f"item {item} refused")
+    return float(np.mean(np.random.default_rng(item).normal(size=1000)))
+
+
+#: Run in a fresh process (a test runner may run helper threads, which turn forking off):
+#: which items a child solved, a child that fails, outcomes against one process.
+PROBE = """
+import json, os
+from linelaser_calib.core.errors import DegenerateError
+from linelaser_calib.core.forked import map_forked
+
+parent = os.getpid()
+
+def where(item):
+    if item == 4:
+        raise DegenerateError("item 4 refused")
+    return [item, os.getpid() != parent]
+
+def fails_in_the_child(item):
+    if os.getpid() != parent:
+        raise RuntimeError("child failure")
+    return [item, False]
+
+shared = [o if isinstance(o, list) else str(o) for o in map_forked(where, list(range(7)), 2)]
+fallback = map_forked(fails_in_the_child, list(range(7)), 2)
+try:
+    os.waitpid(-1, os.WNOHANG)
+    left = True
+except ChildProcessError:
+    left = False
+print(json.dumps({"shared": shared, "fallback": fallback, "child_left": left}))
+"""
+
+
+def test_a_forked_child_solves_every_other_item_and_a_failing_child_costs_only_time() -> None:
+    run = subprocess.run(
+        [sys.executable, "-c", PROBE], capture_output=True, text=True, check=True, timeout=60
+    )
+    report = json.loads(run.stdout.splitlines()[-1])
+    expected = [[k, k % 2 == 1] for k in range(7)]
+    expected[4] = "item 4 refused"
+    assert report["shared"] == expected
+    assert report["fallback"] == [[k, False] for k in range(7)]
+    assert report["child_left"] is False
+
+
+def test_the_outcomes_equal_those_of_one_process_in_order() -> None:
+    items = list(range(1, 12))
+    serial = map_forked(seeded_mean, items, workers=1)
+    assert sum(isinstance(o, DegenerateError) for o in serial) == 3
+    shared = map_forked(seeded_mean, items, workers=2)
+    for a, b in zip(shared, serial, strict=True):
+        if isinstance(b, CalibrationError):
+            assert type(a) is type(b) and str(a) == str(b)
+        else:
+            assert isinstance(a, float) and a == pytest.approx(b, rel=1e-12)
+
+
+def test_a_process_with_other_threads_does_not_fork() -> None:
+    parent = os.getpid()
+    release = threading.Event()
+    helper = threading.Thread(target=release.wait)
+    helper.start()
+    try:
+        pids = map_forked(lambda _: os.getpid(), list(range(6)), workers=2)
+    finally:
+        release.set()
+        helper.join()
+    assert pids == [parent] * 6
+
+
+def test_available_workers_is_one_or_two() -> None:
+    assert available_workers() in (1, 2)
+
+
+@pytest.fixture(scope="module")
+def paper_samples() -> tuple[PipelineConfig, list[Sample]]:
+    config = PipelineConfig()
+    bag = read_bag(PAPER_BAG)
+    return config, pair_profiles(bag.profiles, bag.poses, config.pairing).samples
+
+
+def test_a_subset_solve_started_at_the_full_solve_equals_one_from_its_own_seed(
+    paper_samples: tuple[PipelineConfig, list[Sample]],
+) -> None:
+    config, samples = paper_samples
+    target, target_config = config.target_impl, config.target_config
+    features, _ = target.extract(samples, target_config, config.seed, lambda *_: None)
+    context = SolveContext(seed=config.seed, n_samples=len(features))
+    full = target.solve_default(features, target_config, context)
+    subset = features[1::3] + features[2::3]
+    cold = target.solve_default(subset, target_config, context)
+    warm = target.solve_default(subset, target_config, replace(context, warm_start=full))
+    rotation, translation = transform_error(cold.T_flange_sensor, warm.T_flange_sensor)
+    assert rotation < 1e-9 and translation < 1e-9
+    assert cold.samples_used == warm.samples_used
+    assert cold.sigma_translation_m is not None and warm.sigma_translation_m is not None
+    np.testing.assert_allclose(warm.sigma_translation_m, cold.sigma_translation_m, rtol=1e-6)
+
+
+def test_the_self_check_of_the_command_line_equals_one_process(
+    paper_samples: tuple[PipelineConfig, list[Sample]],
+) -> None:
+    """The console script (its own process: a forked child on a second core) and one
+    process."""
+    config, samples = paper_samples
+    one = calibrate_samples(samples, config)
+    run = subprocess.run(
+        [sys.executable, "-c", ENTRY, "calibrate", str(PAPER_BAG), "--json"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=300,
+    )
+    quality = json.loads(run.stdout)["quality"]
+    assert one.self_check is not None
+    assert quality["accuracy_in_use_m"] == pytest.approx(one.self_check.accuracy_in_use_m, rel=1e-6)
+    jackknife = quality["self_check"]["jackknife_sigma"]
+    np.testing.assert_allclose(
+        jackknife["rotation_rad"] + jackknife["translation_m"],
+        one.self_check.sigma_jackknife,
+        rtol=1e-6,
+    )
