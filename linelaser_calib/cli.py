@@ -59,7 +59,7 @@ from linelaser_calib.io.results import (
     write_truth_yaml,
 )
 from linelaser_calib.offline import OfflineRun, advise_placements, bag_samples, calibrate_bag
-from linelaser_calib.summary import format_summary
+from linelaser_calib.summary import format_summary, hand_eye_seen
 
 PROG = "linelaser-calib"
 
@@ -957,7 +957,8 @@ def _demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, fl
         seconds = time.perf_counter() - started
         print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
         print(format_summary(run.result, truth))
-        rot, trans = transform_error(run.result.T_flange_sensor, compare)
+        seen = compare if truth is None else hand_eye_seen(truth, run.result.kinematics)
+        rot, trans = transform_error(run.result.T_flange_sensor, seen)
         if truth is None:
             print(
                 f"Difference to the reference hand-eye: rotation {np.degrees(rot):.4f} deg, "

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import (
     FloatArray,
     quaternion_xyzw_from_matrix,
@@ -20,6 +21,7 @@ from linelaser_calib.core.geometry import (
     rotvec_from_matrix,
     rpy_from_matrix,
 )
+from linelaser_calib.core.kinematics import KinematicCorrections, effective_hand_eye
 from linelaser_calib.core.targets.base import mm_text
 from linelaser_calib.core.types import CalibrationResult, Rejection
 from linelaser_calib.io.results import Truth
@@ -217,9 +219,36 @@ def truth_error(T_estimate: ArrayLike, T_truth: ArrayLike) -> TruthError:
     )
 
 
+def hand_eye_seen(truth: Truth, corrections: KinematicCorrections | None = None) -> FloatArray:
+    """The true hand-eye (4, 4) as the calibration's flange poses can see it.
+
+    When the truth file holds the simulated arm's kinematic errors (its ``kinematics``
+    section: the true parameters as corrections to the nominal model), flange poses from the
+    nominal model (with ``corrections`` applied, for a joint calibration) see the true
+    hand-eye moved by the arm's error after its last joint's motion
+    (:func:`~linelaser_calib.core.kinematics.effective_hand_eye`), which no scan separates
+    from the hand-eye. Otherwise, or when that section cannot be used, the physical one.
+    """
+    section = truth.raw.get("kinematics")
+    if not isinstance(section, dict):
+        return truth.T_flange_sensor
+    from linelaser_calib.io.kinematics import load_model
+
+    try:
+        nominal = load_model(str(section["model"]))
+        true = KinematicCorrections(
+            nominal.name, {str(k): float(v) for k, v in section["corrections"].items()}
+        ).apply(nominal)
+        used = nominal if corrections is None else corrections.apply(nominal)
+    except (InputError, KeyError, TypeError, ValueError, AttributeError):
+        return truth.T_flange_sensor
+    return effective_hand_eye(used, true, truth.T_flange_sensor)
+
+
 def truth_rows(result: CalibrationResult, truth: Truth) -> Rows:
-    """The error against the truth: totals and per axis, beside the 1 sigma when known."""
-    error = truth_error(result.T_flange_sensor, truth.T_flange_sensor)
+    """The error against the truth (:func:`hand_eye_seen`): totals and per axis, beside the
+    1 sigma when known."""
+    error = truth_error(result.T_flange_sensor, hand_eye_seen(truth, result.kinematics))
     rows = [
         ("rotation", f"{np.degrees(error.rotation_rad):.4f} deg"),
         ("translation", f"{error.translation_m * 1e3:.4f} mm"),
@@ -288,10 +317,11 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
     lines += [f"WARNING: {warning}" for warning in result.warnings]
     if truth is not None:
         lines.append("Error against truth:")
-        if result.kinematics is not None:
+        if isinstance(truth.raw.get("kinematics"), dict):
             lines.append(
-                "  (the hand-eye here absorbs the flange-side kinematic errors: it is right "
-                "together with the corrected kinematics, not alone)"
+                "  (against the true hand-eye moved by the arm's kinematic error after its last "
+                "joint's motion, which is one constant transform in the flange frame that no scan "
+                "tells from the hand-eye)"
             )
         lines += table(truth_rows(result, truth))
     return "\n".join(lines)

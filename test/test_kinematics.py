@@ -11,6 +11,7 @@ from linelaser_calib.core.kinematics import (
     UR_JOINT_NAMES,
     JointStates,
     KinematicCorrections,
+    effective_hand_eye,
     flange_poses_from_joint_states,
     forward_kinematics,
     inverse_kinematics,
@@ -131,3 +132,27 @@ def test_corrections_change_only_the_named_parameters() -> None:
     assert np.count_nonzero(delta) == 2
     with pytest.raises(InputError, match="does not have"):
         KinematicCorrections("ur5e", {"elbow_joint.x": 0.1}).apply(model)
+
+
+@pytest.mark.parametrize("source", ["dh", "urdf"])
+def test_last_link_error_is_one_hand_eye_change(source: str) -> None:
+    """An error after the last joint's motion is a constant transform in the flange frame:
+    nominal flange poses with the effective hand-eye put the sensor where the true arm and
+    the true hand-eye do; an error before it is not."""
+    nominal = model_from_preset("ur5e") if source == "dh" else model_from_urdf(ur_urdf("ur5e"))
+    rng = np.random.default_rng(3)
+    last = max(i for i, e in enumerate(nominal.elements) if e.joint >= 0)
+    delta = rng.normal(0.0, 1e-3, len(nominal.elements))
+    tail = np.arange(len(delta)) >= last
+    X = np.eye(4)
+    X[:3, 3] = (0.012, -0.085, 0.095)
+    q = rng.uniform(-2.0, 2.0, (8, 6))
+    true = nominal.with_parameters(nominal.parameters + delta * tail)
+    seen = effective_hand_eye(nominal, true, X)
+    assert np.abs(seen[:3, 3] - X[:3, 3]).max() > 1e-4
+    np.testing.assert_allclose(
+        forward_kinematics(nominal, q) @ seen, forward_kinematics(true, q) @ X, atol=1e-12
+    )
+    wrong = nominal.with_parameters(nominal.parameters + delta * ~tail)
+    moved = forward_kinematics(nominal, q) @ effective_hand_eye(nominal, wrong, X)
+    assert np.abs(moved - forward_kinematics(wrong, q) @ X).max() > 1e-4

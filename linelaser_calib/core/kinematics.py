@@ -223,6 +223,40 @@ def forward_kinematics(model: KinematicModel, q: ArrayLike) -> FloatArray:
     return np.asarray(T @ model.T_tip_flange)
 
 
+def flange_side_transform(model: KinematicModel) -> FloatArray:
+    """The fixed end of the chain, (4, 4): the last joint element at its zero offset (q = 0)
+    and every element after it, then ``T_tip_flange``.
+
+    ``FK(q) = P(q) · M(q_last) · flange_side_transform(model)``, where ``M`` is the last
+    joint's motion by q_last alone (a rotation about, or translation along, the element's own
+    axis commutes with the offset on it) and ``P`` the chain before it. An error in these
+    parameters is therefore one constant transform in the flange frame at every pose.
+    """
+    last = max(i for i, e in enumerate(model.elements) if e.joint >= 0)
+    T = np.eye(4)
+    for element in model.elements[last:]:
+        T = T @ _elementary(element, np.array([element.value]))[0]
+    return np.asarray(T @ model.T_tip_flange)
+
+
+def effective_hand_eye(
+    model: KinematicModel, true: KinematicModel, T_flange_sensor: ArrayLike
+) -> FloatArray:
+    """The hand-eye (4, 4) that flange poses from ``model`` see on an arm whose kinematics are
+    ``true``: ``L_model⁻¹ · L_true · T_flange_sensor`` with L the
+    :func:`flange_side_transform`.
+
+    The arm's error in the parameters after its last joint's motion (the last link's length,
+    twist and zero offset) moves the sensor by one constant transform in the flange frame, the
+    same at every pose; scans of any target with those flange poses cannot tell it from a
+    different hand-eye. A calibration is right when it finds this hand-eye: with it and the
+    model's flange poses, scan points land where the true hand-eye and the true flange poses
+    put them, up to the error of the rest of the chain.
+    """
+    L = np.linalg.inv(flange_side_transform(model)) @ flange_side_transform(true)
+    return np.asarray(L @ np.asarray(T_flange_sensor, dtype=np.float64))
+
+
 def parameter_jacobian(model: KinematicModel, q: ArrayLike) -> FloatArray:
     """Derivative of the flange pose with respect to every kinematic parameter.
 
