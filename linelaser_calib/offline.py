@@ -17,7 +17,6 @@ from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset,
 from linelaser_calib.core.placement_advice import placement_advice, thinned
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets.base import Progress
-from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.types import CalibrationResult, Cylinder, FloatArray, Profile, Sample
 from linelaser_calib.io.bags import BagContents, read_bag
 from linelaser_calib.io.pose_sources import (
@@ -132,22 +131,21 @@ def calibrate_bag(
     result.warnings.extend(flange_poses.warnings)
     joint = config.kinematics
     section, corrections = result.target, result.kinematics
-    if (
-        joint is not None
-        and corrections is not None
-        and isinstance(section, CylinderSection)
-        and not placements
-    ):
-        result.warnings.append(
-            advise_placements(
-                [bag.profiles[i] for i in result.samples_used],
-                joint.states,
-                corrections.apply(joint.model),
-                result.T_flange_sensor,
-                section.cylinder,
-                joint.clock_offset_s,
+    if joint is not None and corrections is not None and not placements:
+        # Imported here: other commands need no target loaded.
+        from linelaser_calib.core.targets.cylinder import CylinderSection
+
+        if isinstance(section, CylinderSection):
+            result.warnings.append(
+                advise_placements(
+                    [bag.profiles[i] for i in result.samples_used],
+                    joint.states,
+                    corrections.apply(joint.model),
+                    result.T_flange_sensor,
+                    section.cylinder,
+                    joint.clock_offset_s,
+                )
             )
-        )
     if bag.skipped:
         reasons = sorted({s.reason for s in bag.skipped})
         result.warnings.append(
