@@ -159,7 +159,7 @@ def test_kinematics_section_round_trips(
     assert main(["calibrate", str(bag), "--kinematics", "ur5e", "--output", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "Kinematic corrections of the ur5e model" in printed
-    assert "absorbs the flange-side kinematic errors" in printed
+    assert "moved by the arm's kinematic error after its last joint's motion" in printed
     raw = yaml.safe_load(out.read_text(encoding="utf-8"))["kinematics"]
     assert raw["model"] == "ur5e" and raw["base_frame"] == "base_link"
     read = read_kinematics(out)
