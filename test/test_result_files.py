@@ -257,3 +257,31 @@ def test_malformed_result_files_raise_result_file_error(
         read_result_yaml(path)
     assert expected_text in str(caught.value)
     assert str(path) in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    "section",
+    [
+        {"model": "no_such_robot", "corrections": {}},
+        {"model": "ur5e", "corrections": {"no_such_joint.d": 1e-4}},
+        {"model": "ur5e", "corrections": [1, 2]},
+        {"corrections": {}},
+    ],
+)
+def test_truth_with_unusable_arm_kinematics_compares_with_the_physical_hand_eye(
+    tmp_path: Path, section: dict[str, object]
+) -> None:
+    """A truth file's kinematics section only refines the comparison: one that cannot be used
+    leaves the physical hand-eye, without an error."""
+    from linelaser_calib.summary import hand_eye_seen
+
+    rng = np.random.default_rng(35)
+    T = transform_from_rotvec_translation(rng.normal(size=3), rng.normal(size=3))
+    path = write_truth_yaml(
+        tmp_path / "truth.yaml",
+        T,
+        CylinderSection(random_cylinder(rng)),
+        extra={"kinematics": section},
+    )
+    truth = read_truth_yaml(path)
+    np.testing.assert_allclose(hand_eye_seen(truth), truth.T_flange_sensor, atol=0.0)

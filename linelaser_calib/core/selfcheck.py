@@ -64,8 +64,11 @@ The widened 1σ (:func:`honest_sigma`) has two parts, added in quadrature:
 - the part of the error that varies over the workspace: the region 1σ times the Student-t
   over normal quantile ratio at 95 % for its G − 1 degrees of freedom (:func:`t_factor`,
   1.42 for 5 regions: a 1σ from 5 groups is itself uncertain), and at least the model's;
-- the part all poses share, which no subset of the poses can see (for a kinematic error the
-  last link's part is a constant flange-side offset, absorbed whole into the hand-eye): a
+- the part all poses share, which no subset of the poses can see (for a kinematic error,
+  whatever of the rest of the chain acts like one more constant flange-side transform over
+  the poses scanned; the last link's own error is such a transform at every pose, and
+  belongs to the hand-eye these flange poses see, see
+  :func:`~linelaser_calib.core.kinematics.effective_hand_eye`): a
   prior of :data:`SYSTEMATIC_FLOOR` times the held-out offsets' RMS for translation, and that
   over the lever of the profile points (their median distance from the sensor) for
   rotation. This factor is a prior, not an estimate.
@@ -110,8 +113,9 @@ NEIGHBOURS = 3
 NEIGHBOUR_LIMIT = 0.3
 #: Prior 1σ of the part of a systematic error that all poses share, as a multiple of the
 #: held-out offsets' RMS (the part that varies): no subset of the poses can see the shared
-#: part, so it is a prior, not an estimate; with 1 the kinematic-error arm of
-#: bench/robot_error.py was up to 5σ off, with 2 within 3σ.
+#: part, so it is a prior, not an estimate. Set against the physical hand-eye (with 1 the
+#: kinematic-error arm of bench/robot_error.py was up to 5σ off, with 2 within 3σ); against
+#: the hand-eye its flange poses see, the flagged recordings stay within 1.6σ.
 SYSTEMATIC_FLOOR = 2.0
 #: Halves that differ by more than this many combined σ on an axis disagree.
 HALVES_LIMIT_SIGMAS = 3.0
