@@ -121,14 +121,23 @@ def test_a_subset_solve_started_at_the_full_solve_equals_one_from_its_own_seed(
     features, _ = target.extract(samples, target_config, config.seed, lambda *_: None)
     context = SolveContext(seed=config.seed, n_samples=len(features))
     full = target.solve_default(features, target_config, context)
+    assert full.subset_start is not None
     subset = features[1::3] + features[2::3]
     cold = target.solve_default(subset, target_config, context)
     warm = target.solve_default(subset, target_config, replace(context, warm_start=full))
-    rotation, translation = transform_error(cold.T_flange_sensor, warm.T_flange_sensor)
-    assert rotation < 1e-9 and translation < 1e-9
-    assert cold.samples_used == warm.samples_used
+    # The warm solve keeps the full solve's point trimming and stops at a 1 nm step: it
+    # agrees with the cold one to far below the 1 sigma (about 20 um, 0.002 deg here) ...
     assert cold.sigma_translation_m is not None and warm.sigma_translation_m is not None
-    np.testing.assert_allclose(warm.sigma_translation_m, cold.sigma_translation_m, rtol=1e-6)
+    assert cold.sigma_rotation_rad is not None
+    rotation, translation = transform_error(cold.T_flange_sensor, warm.T_flange_sensor)
+    assert translation < 1e-3 * float(np.min(cold.sigma_translation_m))
+    assert rotation < 1e-3 * float(np.min(cold.sigma_rotation_rad))
+    assert cold.samples_used == warm.samples_used
+    np.testing.assert_allclose(warm.sigma_translation_m, cold.sigma_translation_m, rtol=1e-4)
+    # ... in a few linearisations, without a seed solve (whose cost history it lacks).
+    assert len(warm.history["refine_cost"]) <= 4 < len(cold.history["refine_cost"])
+    assert "refine_cost" in warm.history and len(cold.history) > len(warm.history)
+    assert warm.subset_start is None
 
 
 def test_the_self_check_of_the_command_line_equals_one_process(

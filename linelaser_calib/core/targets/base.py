@@ -246,6 +246,10 @@ class TargetSolution:
         them (:attr:`SolveContext.kinematics`) and the target's default method gives them.
     identifiability : KinematicIdentifiability or None
         Which kinematic parameters the data determined (with ``kinematics``).
+    subset_start : object or None
+        The target's own record of its solve (its problem and state at the solution), from
+        which its default solve of a subset of the used features starts when this solution
+        is the context's ``warm_start``; None where the target keeps none.
     """
 
     T_flange_sensor: FloatArray
@@ -263,6 +267,7 @@ class TargetSolution:
     noise_m: float
     kinematics: KinematicCorrections | None = None
     identifiability: KinematicIdentifiability | None = None
+    subset_start: object | None = None
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,7 @@ orders of magnitude above it means the data are not a cylinder at the recorded p
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -56,8 +56,10 @@ from .plan import CylinderPlanner
 from .refine import (
     JointScan,
     RefineResult,
+    SolvedProblem,
     refine,
     refine_kinematics,
+    refine_subset,
     refine_with_outlier_rejection,
 )
 from .section import CylinderSection, read_cylinder_section, scale_text
@@ -114,6 +116,30 @@ def scale_verdict(refined: RefineResult) -> str:
             "is likely not the given size (measure it, or omit --radius)"
         )
     return f". Estimated with the hand-eye, the {text} explains the gap"
+
+
+@dataclass(frozen=True)
+class _SubsetStart:
+    """A default solve's problem and solution (:attr:`TargetSolution.subset_start`) and the
+    row of each used feature (by profile index) in it."""
+
+    solved: SolvedProblem
+    rows: Mapping[int, int]
+
+
+def _subset_start(features: list[FittedSample], context: SolveContext) -> _SubsetStart | None:
+    """Where a solve of ``features`` starts when they are a subset of the warm start's (the
+    self-check's solves): its solved problem, or None for a solve of its own (no warm
+    start, a joint kinematic calibration, a feature the warm start did not use)."""
+    warm = context.warm_start
+    start = None if warm is None else warm.subset_start
+    if (
+        not isinstance(start, _SubsetStart)
+        or context.kinematics is not None
+        or any(f.index not in start.rows for f in features)
+    ):
+        return None
+    return start
 
 
 def profile_noise_m(features: list[FittedSample], floor_m: float) -> float:
@@ -264,13 +290,19 @@ class CylinderTarget:
         """Maximum likelihood on every inlier point, seeded by the paper's solve (or started
         at the context's warm start)."""
         radius = self._checked(features, config, context)
-        T_init, cylinder0, seed_history = self._start(features, config, context)
         mismatch = radius_mismatch([f.ellipse.semi_axes[1] for f in features], config.radius_m)
         config = replace(
             config, refine=replace(config.refine, estimate_scale=estimates_scale(config))
         )
-        context.progress("refine", 0, 1)
-        refined = self._refined(features, T_init, replace(cylinder0, radius=radius), config)
+        start = _subset_start(features, context)
+        seed_history: dict[str, Any] = {}
+        if start is not None:
+            context.progress("refine", 0, 1)
+            refined = refine_subset(start.solved, [start.rows[f.index] for f in features])
+        else:
+            T_init, cylinder0, seed_history = self._start(features, config, context)
+            context.progress("refine", 0, 1)
+            refined = self._refined(features, T_init, replace(cylinder0, radius=radius), config)
         context.progress("refine", 1, 1)
         outcome = None
         if context.kinematics is not None:
@@ -325,6 +357,13 @@ class CylinderTarget:
             noise_m=profile_noise_m(features, config.refine.sensor_sigma_m),
             kinematics=None if outcome is None else outcome.corrections,
             identifiability=None if outcome is None else outcome.identifiability,
+            subset_start=(
+                None
+                if start is not None or outcome is not None or refined.solved is None
+                else _SubsetStart(
+                    refined.solved, {features[j].index: k for k, j in enumerate(refined.used)}
+                )
+            ),
         )
 
     @staticmethod
