@@ -125,7 +125,7 @@ def run(seeds: int, robot_sigma_m: float) -> dict[tuple[str, str], Row]:
                         truth.taught_point_m,
                         config,
                         method,
-                        np.random.default_rng(seed),
+                        seed,
                     )
                     T = result.T_flange_sensor
                     in_sample = in_sample_error(result, truth)

@@ -73,7 +73,7 @@ def calibrate(
         data.truth.taught_point_m if point else None,
         kw.pop("config", CONFIG),
         method,
-        np.random.default_rng(0),
+        0,
     )
 
 

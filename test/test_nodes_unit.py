@@ -434,8 +434,7 @@ def simulated_samples(profiles: list[Profile], T_base_flange: np.ndarray) -> lis
 
 def validation_stages(samples: list[Sample], config: PipelineConfig) -> list[str | None]:
     """The rejection stage of each sample (None: valid)."""
-    rng = np.random.default_rng(0)
-    outcomes = [validate_sample(s, config, rng) for s in samples]
+    outcomes = [validate_sample(s, config) for s in samples]
     return [None if r is None else r.stage for r in outcomes]
 
 

@@ -33,7 +33,7 @@ from .kinematics import forward_kinematics
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .selfcheck import DEFAULT_FOLDS, self_check
 from .targets import DEFAULT_TARGET, get_target
-from .targets.base import Placement, Progress, SolveContext, Target, TargetSolution
+from .targets.base import Placement, Progress, SolveContext, Target, TargetSolution, sample_rng
 from .types import CalibrationResult, FlangePose, Profile, Rejection, Sample
 
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
@@ -117,20 +117,22 @@ def _no_progress(stage: str, done: int, total: int) -> None:
     """Default progress callback: silent."""
 
 
-def validate_sample(
-    sample: Sample, config: PipelineConfig, rng: np.random.Generator
-) -> Rejection | None:
+def validate_sample(sample: Sample, config: PipelineConfig) -> Rejection | None:
     """Whether one sample is usable for ``config.target``; a rejection says why it is not.
 
     The same checks the calibration applies to each sample (the collector validates live
-    profiles with it): the target's cleaning and feature fit.
+    profiles with it): the target's cleaning and feature fit, with the sample's own random
+    draws (:func:`~linelaser_calib.core.targets.base.sample_rng` of ``config.seed`` and its
+    index), as in the calibration.
 
     Returns
     -------
     Rejection or None
         None when the sample is usable.
     """
-    return config.target_impl.validate(sample, config.target_config, rng)
+    return config.target_impl.validate(
+        sample, config.target_config, sample_rng(config.seed, sample.index)
+    )
 
 
 def check_units(samples: list[Sample]) -> None:
@@ -192,13 +194,15 @@ def calibrate_samples(
             "joint states, --kinematics): calibrate one recording at a time otherwise"
         )
     check_units(samples)
-    features, feature_rejections = target.extract(samples, target_config, config.seed, progress)
+    features, feature_rejections = target.extract(
+        samples, target_config, config.seed, progress, config.workers
+    )
     rejections += feature_rejections
     target.check_features(features, target_config)
     others = []
     for more, setup in placements:
         check_units(more)
-        found, _ = target.extract(more, target_config, config.seed, progress)
+        found, _ = target.extract(more, target_config, config.seed, progress, config.workers)
         target.check_features(found, target_config)
         others.append(Placement(found, setup))
     context = SolveContext(
@@ -337,7 +341,9 @@ def estimate_clock_offset(
     paired = pair_profiles(profiles, poses, moving)
     if not paired.samples:
         raise PairingError(paired.explain_nothing_paired(config.pairing))
-    features, rejections = target.extract(paired.samples, target_config, config.seed, _no_progress)
+    features, rejections = target.extract(
+        paired.samples, target_config, config.seed, _no_progress, config.workers
+    )
     context = SolveContext(seed=config.seed, rejections=rejections, n_samples=len(paired.samples))
     cost_of_poses = target.offset_cost(features, target_config, context)
     if cost_of_poses is None:

@@ -403,7 +403,6 @@ class CollectorNode(Node):
             seed=p["seed"],
             pairing=pairing,
         )
-        self._rng = np.random.default_rng(p["seed"])
         self._types = rclpy_types()
         self._collector = LiveCollector(config, self._log_new_reason)
         self._offsets = (
@@ -705,7 +704,7 @@ class CollectorNode(Node):
                     check, self._to_check = self._to_check, None
                     batch = None if self._offsets is None else self._offsets.take_batch()
                 if pending is not None:
-                    rejection = validate_sample(pending.sample, self._pipeline, self._rng)
+                    rejection = validate_sample(pending.sample, self._pipeline)
                     with self._collector.lock:
                         if rejection is None:
                             self._collector.admit(pending)
@@ -715,7 +714,7 @@ class CollectorNode(Node):
                     self._estimate_offset(*batch)
                 elif check is not None and time.monotonic() >= next_check:
                     next_check = time.monotonic() + LIVE_CHECK_PERIOD_S
-                    rejection = validate_sample(check.sample, self._pipeline, self._rng)
+                    rejection = validate_sample(check.sample, self._pipeline)
                     with self._collector.lock:
                         self._collector.note_check(rejection)
                 else:

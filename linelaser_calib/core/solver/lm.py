@@ -371,9 +371,11 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
     converged = False
     iterations = 0
     normal: BlockNormal | None = None
+    linearisation: Linearisation | None = None
     while iterations < config.max_iterations:
         if normal is None:
-            normal = normal_equations(problem.linearise(state), config)
+            linearisation = problem.linearise(state)
+            normal = normal_equations(linearisation, config)
             iterations += 1
         step_global, step_local = solve_damped(normal, damping)
         if float(np.max(np.abs(step_global * scale))) < config.step_tolerance_m:
@@ -407,11 +409,13 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
             if damping > MAX_DAMPING:
                 converged = True
                 break
-    linearisation = problem.linearise(state)
+    if normal is None or linearisation is None:  # the state moved since the last one
+        linearisation = problem.linearise(state)
+        normal = normal_equations(linearisation, config)
     return Solution(
         state=state,
         residuals=linearisation.residuals,
-        normal=normal_equations(linearisation, config),
+        normal=normal,
         cost_history=history,
         iterations=iterations,
         converged=converged,

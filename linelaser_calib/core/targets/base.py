@@ -46,13 +46,15 @@ Everything is in SI units (m, rad); mm and degrees appear only in human text, la
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
 from typing import Any, ClassVar, Protocol, TypeVar
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import CalibrationError, InputError
+from ..forked import map_forked
 from ..geometry import FloatArray
 from ..joint_calibration import KinematicIdentifiability, KinematicSetup
 from ..kinematics import KinematicCorrections
@@ -347,9 +349,16 @@ class Target(Protocol[ConfigT]):
         ...
 
     def extract(
-        self, samples: list[Sample], config: ConfigT, seed: int, progress: Progress
+        self,
+        samples: list[Sample],
+        config: ConfigT,
+        seed: int,
+        progress: Progress,
+        workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
-        """Features of the usable samples and the rejections of the others."""
+        """Features of the usable samples and the rejections of the others (each sample's
+        random draws from :func:`sample_rng`; ``workers`` 2 shares the samples with a forked
+        child, same outcome)."""
         ...
 
     def solve_paper(
@@ -458,24 +467,51 @@ def configure(
     return result
 
 
+def sample_rng(seed: int, index: int) -> np.random.Generator:
+    """The random generator of one sample's feature extraction (RANSAC draws): seeded by the
+    run's seed and the sample's profile index, so that a profile's feature does not depend on
+    which profiles came before it (the collector's check of a live profile, a subset, the
+    order, a forked worker all draw the same numbers for it)."""
+    return np.random.default_rng([seed, index])
+
+
 def extract_each(
     samples: list[Sample],
     config: ConfigT,
-    rng: np.random.Generator,
+    seed: int,
     extract_one: Callable[[Sample, ConfigT, np.random.Generator], Any],
     progress: Progress,
     stage: str,
+    workers: int = 1,
 ) -> tuple[list[Any], list[Rejection]]:
-    """Features of every sample by ``extract_one`` (feature or Rejection), in order."""
+    """Features of every sample by ``extract_one`` (feature or Rejection), in order.
+
+    Each sample draws from its own generator (:func:`sample_rng`), so the samples are
+    independent and ``workers`` 2 shares them with a forked child
+    (:func:`~linelaser_calib.core.forked.map_forked`) with the same outcome. The first
+    CalibrationError raised (in the samples' order) is raised here.
+    """
+    parent, reported = os.getpid(), [0]
+
+    def one(item: tuple[int, Sample]) -> Any:
+        k, sample = item
+        outcome = extract_one(sample, config, sample_rng(seed, sample.index))
+        if os.getpid() == parent:  # the forked child reports nothing
+            reported[0] = k + 1
+            progress(stage, k + 1, len(samples))
+        return outcome
+
     features: list[Any] = []
     rejections: list[Rejection] = []
-    for k, sample in enumerate(samples):
-        outcome = extract_one(sample, config, rng)
+    for outcome in map_forked(one, list(enumerate(samples)), workers):
+        if isinstance(outcome, CalibrationError):
+            raise outcome
         if isinstance(outcome, Rejection):
             rejections.append(outcome)
         else:
             features.append(outcome)
-        progress(stage, k + 1, len(samples))
+    if reported[0] < len(samples):
+        progress(stage, len(samples), len(samples))
     return features, rejections
 
 

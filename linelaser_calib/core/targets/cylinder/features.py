@@ -19,7 +19,7 @@ from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...profile import clean_profile
 from ...types import EllipseFit, Rejection, Sample, SampleFit
-from ..base import Progress, extract_each
+from ..base import Progress, extract_each, sample_rng
 from .config import CylinderConfig
 
 
@@ -85,9 +85,14 @@ def fit_sample(
 
 
 def fit_samples(
-    samples: list[Sample], config: CylinderConfig, seed: int, progress: Progress
+    samples: list[Sample],
+    config: CylinderConfig,
+    seed: int,
+    progress: Progress,
+    workers: int = 1,
 ) -> tuple[list[FittedSample], list[Rejection]]:
-    """Fit every sample's ellipse (semi-axes bounded by ``config.radius_m`` when given).
+    """Fit every sample's ellipse (semi-axes bounded by ``config.radius_m`` when given);
+    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`.
 
     Raises
     ------
@@ -101,11 +106,11 @@ def fit_samples(
         return fit_sample(sample, cfg, rng, cfg.radius_m)
 
     fitted, rejections = extract_each(
-        samples, config, np.random.default_rng(seed), fit_bounded, progress, "ellipse"
+        samples, config, seed, fit_bounded, progress, "ellipse", workers
     )
     if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):
         # Most profiles failed with the given radius: fit freely to tell the user why.
-        free = [fit_sample(s, config, np.random.default_rng(seed)) for s in samples]
+        free = [fit_sample(s, config, sample_rng(seed, s.index)) for s in samples]
         free_fitted = [f for f in free if isinstance(f, FittedSample)]
         if len(free_fitted) > len(fitted):
             settle_radius(free_fitted, config.radius_m)

@@ -186,10 +186,15 @@ class CylinderTarget:
         return outcome if isinstance(outcome, Rejection) else None
 
     def extract(
-        self, samples: list[Sample], config: CylinderConfig, seed: int, progress: Progress
+        self,
+        samples: list[Sample],
+        config: CylinderConfig,
+        seed: int,
+        progress: Progress,
+        workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
         """Every sample's ellipse (:func:`.features.fit_samples`)."""
-        fitted, rejections = fit_samples(samples, config, seed, progress)
+        fitted, rejections = fit_samples(samples, config, seed, progress, workers)
         return list(fitted), rejections
 
     def _checked(

@@ -90,8 +90,10 @@ def _silent(stage: str, done: int, total: int) -> None:
 def extract_corners(
     samples: list[Sample],
     config: KnownPointConfig,
-    rng: np.random.Generator,
+    seed: int,
     progress: Progress = _silent,
+    workers: int = 1,
 ) -> tuple[list[CornerSample], list[Rejection]]:
-    """:func:`extract_corner` of every sample: the corners and the rejections."""
-    return extract_each(samples, config, rng, extract_corner, progress, "corner")
+    """:func:`extract_corner` of every sample: the corners and the rejections (``seed`` and
+    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`)."""
+    return extract_each(samples, config, seed, extract_corner, progress, "corner", workers)

@@ -237,7 +237,7 @@ def calibrate_known_point(
     point_base: ArrayLike | None,
     config: KnownPointConfig,
     method: str,
-    rng: np.random.Generator,
+    seed: int = 0,
 ) -> KnownPointResult:
     """Correct (or find) the hand-eye from views of one weld-seam point.
 
@@ -257,8 +257,9 @@ def calibrate_known_point(
     config : KnownPointConfig
     method : str
         ``default`` (closed form + maximum likelihood) or ``paper`` (grid search + shift).
-    rng : numpy.random.Generator
-        For the RANSAC corner fits.
+    seed : int
+        Of the RANSAC corner fits (each sample's own generator,
+        :func:`~linelaser_calib.core.targets.base.sample_rng`).
 
     Returns
     -------
@@ -274,7 +275,7 @@ def calibrate_known_point(
     SolverError
     """
     X0, taught = _inputs(T_flange_sensor_initial, point_base, method)
-    corner_samples, rejections = extract_corners(samples, config, rng)
+    corner_samples, rejections = extract_corners(samples, config, seed)
     _check_count(corner_samples, len(samples), rejections, config.min_samples)
     if method == "paper":
         assert X0 is not None and taught is not None  # checked by _inputs
@@ -505,12 +506,15 @@ class KnownPointTarget:
         return outcome if isinstance(outcome, Rejection) else None
 
     def extract(
-        self, samples: list[Sample], config: KnownPointConfig, seed: int, progress: Progress
+        self,
+        samples: list[Sample],
+        config: KnownPointConfig,
+        seed: int,
+        progress: Progress,
+        workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
         """Every sample's V corner."""
-        corners, rejections = extract_corners(
-            samples, config, np.random.default_rng(seed), progress
-        )
+        corners, rejections = extract_corners(samples, config, seed, progress, workers)
         return list(corners), rejections
 
     def _solve(

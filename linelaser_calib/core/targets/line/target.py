@@ -220,16 +220,22 @@ class LineTarget:
         return outcome if isinstance(outcome, Rejection) else None
 
     def extract(
-        self, samples: list[Sample], config: LineConfig, seed: int, progress: Progress
+        self,
+        samples: list[Sample],
+        config: LineConfig,
+        seed: int,
+        progress: Progress,
+        workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
         """The seam corner of every sample (:mod:`.features`)."""
         return extract_each(
             samples,
             config,
-            np.random.default_rng(seed),
+            seed,
             lambda s, cfg, rng: extract_line_feature(s, cfg.features, rng),
             progress,
             "corner",
+            workers,
         )
 
     def solve_paper(

@@ -287,11 +287,15 @@ class SphereTarget:
         return outcome if isinstance(outcome, Rejection) else None
 
     def extract(
-        self, samples: list[Sample], config: SphereConfig, seed: int, progress: Progress
+        self,
+        samples: list[Sample],
+        config: SphereConfig,
+        seed: int,
+        progress: Progress,
+        workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
         """The circles of all samples and the rejections."""
-        rng = np.random.default_rng(seed)
-        return extract_each(samples, config, rng, extract_feature, progress, "circle")
+        return extract_each(samples, config, seed, extract_feature, progress, "circle", workers)
 
     def _require(
         self, features: list[SphereFeature], config: SphereConfig, context: SolveContext
