@@ -7,9 +7,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation
 
-from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
+from linelaser_calib.core.geometry import (
+    QUATERNION_NORM_TOLERANCE,
+    matrices_from_quaternions_xyzw,
+)
 from linelaser_calib.core.tf import StampedTransform
 from msg_adapters.errors import MessageError
 from msg_adapters.message_types import (
@@ -106,7 +108,7 @@ def stamped_transforms_from_msgs(msgs: Sequence[Any]) -> list[StampedTransform |
     T[:, 3, 3] = 1.0
     T[:, :3, 3] = values[:, :3]
     if good.any():
-        T[good, :3, :3] = Rotation.from_quat(values[good, 3:] / norm[good, None]).as_matrix()
+        T[good, :3, :3] = matrices_from_quaternions_xyzw(values[good, 3:])
     out: list[StampedTransform | str] = []
     for k, msg in enumerate(msgs):
         if not good[k]:

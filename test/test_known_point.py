@@ -297,3 +297,13 @@ def test_input_errors() -> None:
         calibrate(data, "default", initial=np.eye(4) * 2.0)
     with pytest.raises(DegenerateError, match="show a weld-seam corner"):
         calibrate(data, "default", samples=samples_of(data)[:4])
+
+
+def test_the_scatter_counts_an_axis_whose_mean_sits_exactly_on_the_taught_point() -> None:
+    # x: mean 0 exactly at the taught x; y, z: off it. The x scatter (2) must count, as it
+    # does for a taught x a nanometre away: the score is continuous there.
+    points = np.array([[-1.0, 0.0, 1.0], [1.0, 0.5, 2.0], [0.0, 1.0, 3.0]])
+    on = float(scatter_delta_r(points, np.array([0.0, -1.0, -1.0])))
+    near = float(scatter_delta_r(points, np.array([1e-9, -1.0, -1.0])))
+    assert on == pytest.approx(near, rel=1e-12)
+    assert on == pytest.approx(math.sqrt(2.0**2 + 1.0**2 + 2.0**2), rel=1e-12)

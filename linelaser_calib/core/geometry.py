@@ -9,13 +9,16 @@ Conventions (those of the whole package):
 
 Every ``check_*`` function validates its input at the entry and raises ``ValueError``
 that shows the bad value.
+
+The rotation conversions are written out here on numpy (Rodrigues' formula, Shepperd's
+quaternion extraction) rather than taken from ``scipy.spatial.transform``: importing that
+module costs a calibration about 0.3 s, as long as the whole solve.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation
 
 FloatArray = NDArray[np.float64]
 
@@ -96,26 +99,78 @@ def check_quaternion_xyzw(q: ArrayLike) -> FloatArray:
     return q / norm
 
 
+def matrices_from_quaternions_xyzw(q_xyzw: ArrayLike) -> FloatArray:
+    """Rotation matrices (M, 3, 3) from ``xyzw`` quaternions (M, 4), each normalised first
+    (not validated: see :func:`check_quaternion_xyzw`)."""
+    q = np.asarray(q_xyzw, dtype=np.float64)
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty((*q.shape[:-1], 3, 3))
+    R[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[..., 0, 1] = 2.0 * (x * y - z * w)
+    R[..., 0, 2] = 2.0 * (x * z + y * w)
+    R[..., 1, 0] = 2.0 * (x * y + z * w)
+    R[..., 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[..., 1, 2] = 2.0 * (y * z - x * w)
+    R[..., 2, 0] = 2.0 * (x * z - y * w)
+    R[..., 2, 1] = 2.0 * (y * z + x * w)
+    R[..., 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return R
+
+
 def matrix_from_quaternion_xyzw(q_xyzw: ArrayLike) -> FloatArray:
     """Rotation matrix (3, 3) from a unit ``xyzw`` quaternion (validated)."""
-    q = check_quaternion_xyzw(q_xyzw)
-    return np.asarray(Rotation.from_quat(q).as_matrix(), dtype=np.float64)
+    return matrices_from_quaternions_xyzw(check_quaternion_xyzw(q_xyzw))
+
+
+def _quaternion_xyzw(R: FloatArray) -> FloatArray:
+    """Unit ``xyzw`` quaternions (..., 4) with w >= 0 of rotation matrices (..., 3, 3), by
+    Shepperd's method: each from the largest of its trace and diagonal, so that no division
+    is by a small number."""
+    M = R.reshape(-1, 3, 3)
+    diagonal = np.einsum("mii->mi", M)
+    trace = np.sum(diagonal, axis=1)
+    choice = np.argmax(np.column_stack([diagonal, trace]), axis=1)
+    q = np.empty((len(M), 4))
+    by_trace = choice == 3
+    q[by_trace, 3] = 1.0 + trace[by_trace]
+    q[by_trace, 0] = M[by_trace, 2, 1] - M[by_trace, 1, 2]
+    q[by_trace, 1] = M[by_trace, 0, 2] - M[by_trace, 2, 0]
+    q[by_trace, 2] = M[by_trace, 1, 0] - M[by_trace, 0, 1]
+    for i in range(3):
+        rows = choice == i
+        j, k = (i + 1) % 3, (i + 2) % 3
+        q[rows, i] = 1.0 + 2.0 * diagonal[rows, i] - trace[rows]
+        q[rows, j] = M[rows, j, i] + M[rows, i, j]
+        q[rows, k] = M[rows, k, i] + M[rows, i, k]
+        q[rows, 3] = M[rows, k, j] - M[rows, j, k]
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 3] < 0.0] *= -1.0
+    return q.reshape((*R.shape[:-2], 4))
 
 
 def quaternion_xyzw_from_matrix(R: ArrayLike) -> FloatArray:
     """Unit ``xyzw`` quaternion with w >= 0 from a rotation matrix (3, 3)."""
-    q = np.asarray(Rotation.from_matrix(check_rotation(R, 1e-4)).as_quat(), dtype=np.float64)
-    return q if q[3] >= 0.0 else -q
+    return _quaternion_xyzw(check_rotation(R, 1e-4))
 
 
 def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
     """Rotation matrix (3, 3) from a rotation vector (3,) in radians."""
-    return np.asarray(Rotation.from_rotvec(np.asarray(rotvec, dtype=np.float64)).as_matrix())
+    return np.asarray(exp_so3(np.asarray(rotvec, dtype=np.float64).reshape(1, 3))[0])
 
 
 def rotvec_from_matrix(R: ArrayLike) -> FloatArray:
-    """Rotation vector (3,) in radians from a rotation matrix (3, 3)."""
-    return np.asarray(Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_rotvec())
+    """Rotation vectors (..., 3) in radians, angles in [0, pi], of rotation matrices
+    (..., 3, 3)."""
+    q = _quaternion_xyzw(np.asarray(R, dtype=np.float64))
+    angle = 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), q[..., 3])
+    small = angle < 1e-3
+    safe = np.where(small, 1.0, angle)
+    # angle / sin(angle / 2), by its series for small angles
+    factor = np.where(
+        small, 2.0 + angle**2 / 12.0 + 7.0 * angle**4 / 2880.0, safe / np.sin(safe / 2.0)
+    )
+    return np.asarray(factor[..., None] * q[..., :3])
 
 
 def transform_from_rotation_translation(R: ArrayLike, t: ArrayLike) -> FloatArray:
@@ -211,8 +266,41 @@ def skew(v: ArrayLike) -> FloatArray:
 
 
 def rpy_from_matrix(R: ArrayLike) -> FloatArray:
-    """Roll, pitch, yaw (rad) of a rotation, ROS convention: fixed axes x-y-z, R = Rz Ry Rx."""
-    return np.asarray(Rotation.from_matrix(np.asarray(R, dtype=np.float64)).as_euler("xyz"))
+    """Roll, pitch, yaw (rad) of a rotation, ROS convention: fixed axes x-y-z, R = Rz Ry Rx.
+
+    Pitch is in [-pi/2, pi/2], roll and yaw in (-pi, pi]; at pitch ±pi/2 (gimbal lock) only
+    roll ∓ yaw is determined, and yaw is set to 0.
+    """
+    M = np.asarray(R, dtype=np.float64)
+    cos_pitch = float(np.hypot(M[0, 0], M[1, 0]))
+    pitch = float(np.arctan2(-M[2, 0], cos_pitch))
+    if cos_pitch > 1e-9:
+        roll = float(np.arctan2(M[2, 1], M[2, 2]))
+        yaw = float(np.arctan2(M[1, 0], M[0, 0]))
+    else:
+        roll = float(np.arctan2(-M[1, 2], M[1, 1]))
+        yaw = 0.0
+    return np.array([roll, pitch, yaw])
+
+
+def matrix_from_rpy(rpy: ArrayLike) -> FloatArray:
+    """Rotation matrix (3, 3) of roll, pitch, yaw (rad), ROS convention: R = Rz Ry Rx."""
+    roll, pitch, yaw = np.asarray(rpy, dtype=np.float64)
+    cr, sr, cp, sp, cy, sy = (
+        np.cos(roll),
+        np.sin(roll),
+        np.cos(pitch),
+        np.sin(pitch),
+        np.cos(yaw),
+        np.sin(yaw),
+    )
+    return np.array(
+        [
+            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+            [-sp, cp * sr, cp * cr],
+        ]
+    )
 
 
 def orthonormal_basis(direction: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -226,8 +314,19 @@ def orthonormal_basis(direction: ArrayLike) -> tuple[FloatArray, FloatArray]:
 
 
 def exp_so3(omega: FloatArray) -> FloatArray:
-    """Rotation matrices (M, 3, 3) of rotation vectors (M, 3), rad."""
-    return np.asarray(Rotation.from_rotvec(omega).as_matrix())
+    """Rotation matrices (M, 3, 3) of rotation vectors (M, 3), rad (Rodrigues' formula,
+    its coefficients by their series below 1e-4 rad)."""
+    w = np.asarray(omega, dtype=np.float64)
+    theta2 = np.sum(w * w, axis=-1)
+    theta = np.sqrt(theta2)
+    small = theta < 1e-4
+    safe = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0 - theta2 / 6.0, np.sin(safe) / safe)
+    b = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / safe**2)
+    K = skews(w.reshape(-1, 3)).reshape((*w.shape[:-1], 3, 3))
+    return np.asarray(
+        np.eye(3) + a[..., None, None] * K + b[..., None, None] * (K @ K), dtype=np.float64
+    )
 
 
 def skews(v: FloatArray) -> FloatArray:

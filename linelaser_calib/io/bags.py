@@ -54,10 +54,9 @@ from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
-from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
+from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE, matrices_from_quaternions_xyzw
 from linelaser_calib.core.kinematics import JointStates
 from linelaser_calib.core.tf import StampedTransform
 from linelaser_calib.core.types import FlangePose, Profile
@@ -914,7 +913,7 @@ def _flange_poses(
     T = np.zeros((len(raws), 4, 4))
     T[:, 3, 3] = 1.0
     if good.any():
-        T[good, :3, :3] = Rotation.from_quat(q_xyzw[good] / norm[good, None]).as_matrix()
+        T[good, :3, :3] = matrices_from_quaternions_xyzw(q_xyzw[good])
     T[:, :3, 3] = position
     out: list[FlangePose | SkippedMessage] = []
     for k in range(len(raws)):

@@ -28,10 +28,14 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.geometry import project_to_so3, transform_from_rotation_translation
+from linelaser_calib.core.geometry import (
+    matrices_from_quaternions_xyzw,
+    matrix_from_rpy,
+    project_to_so3,
+    transform_from_rotation_translation,
+)
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.results import MATRIX_TOLERANCE, _load
 
@@ -76,7 +80,7 @@ def _rotation_from_quaternion(q_xyzw: FloatArray, warnings: list[str]) -> FloatA
         )
     if abs(norm - 1.0) > NEAR_UNIT:
         warnings.append(f"the quaternion {q_xyzw.tolist()} (xyzw) has norm {norm:.6f}; normalised")
-    return np.asarray(Rotation.from_quat(q_xyzw / norm).as_matrix(), dtype=np.float64)
+    return matrices_from_quaternions_xyzw(q_xyzw)
 
 
 def _rotation_from_matrix(M: FloatArray, warnings: list[str]) -> FloatArray:
@@ -116,7 +120,7 @@ def _from_numbers(values: list[float]) -> InitialHandEye:
                 f"roll pitch yaw {angles.tolist()} exceed 2 pi: are these degrees? Give "
                 f"radians, e.g. {np.radians(angles).round(6).tolist()}"
             )
-        R = np.asarray(Rotation.from_euler("xyz", angles).as_matrix(), dtype=np.float64)
+        R = matrix_from_rpy(angles)
     else:
         raise InputError(
             f"expected 7 numbers 'x y z qx qy qz qw' or 6 numbers 'x y z roll pitch yaw', got "

@@ -81,7 +81,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch, SolverError
 from ...geometry import (
@@ -100,6 +99,7 @@ from ...observability import (
     analyse_observability,
     pose_geometry,
 )
+from ...quantiles import chi2_upper_quantile
 from ...solver import (
     LOSSES,
     N_HAND_EYE,
@@ -970,7 +970,8 @@ def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[Flag]:
     rms, z_rms = result.sample_rms_m, result.sample_rms_zscore
     prior_chi2 = result.sample_prior_chi2
     z_prior = _robust_zscore(np.sqrt(prior_chi2))
-    chi2_limit = float(chdtri(N_LOCAL, config.outlier_prior_probability))  # P(chi2 > limit)
+    # P(chi2 > limit) = outlier_prior_probability
+    chi2_limit = float(chi2_upper_quantile(N_LOCAL, config.outlier_prior_probability))
     median_rms = float(np.median(rms))
     flagged = []
     for j in range(len(rms)):

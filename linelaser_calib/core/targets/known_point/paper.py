@@ -67,7 +67,12 @@ def scatter_delta_r(points_base: ArrayLike, point_base: ArrayLike) -> FloatArray
     """
     p = np.asarray(points_base, dtype=np.float64)
     mean = p.mean(axis=-2)
-    K = np.sign(mean - np.asarray(point_base)) * np.abs(p - mean[..., None, :]).sum(axis=-2)
+    # The sign of an axis where the mean sits exactly on the taught point is +1, not 0: a
+    # zero would drop that axis's scatter. For a line the reference point is the mean of the
+    # initial hand-eye's points, so a candidate equal to that hand-eye to the last bit scored
+    # an axis short and won the grid (bags/line: 1.83 instead of 0.71 deg).
+    sign = np.where(mean - np.asarray(point_base) < 0.0, -1.0, 1.0)
+    K = sign * np.abs(p - mean[..., None, :]).sum(axis=-2)
     return np.asarray(np.linalg.norm(K, axis=-1))
 
 
