@@ -82,3 +82,22 @@ def test_roll_pitch_yaw_at_gimbal_lock_rebuild_the_rotation() -> None:
         rpy = geometry.rpy_from_matrix(R)
         assert abs(rpy[2]) < 1e-15  # yaw set to zero at the lock
         np.testing.assert_allclose(geometry.matrix_from_rpy(rpy), R, atol=1e-12)
+
+
+def test_rotation_vector_conversions_take_stacks_like_single_ones() -> None:
+    rotvecs = Rotation.random(40, random_state=11).as_rotvec().reshape(2, 20, 3)
+    matrices = geometry.matrix_from_rotvec(rotvecs)
+    assert matrices.shape == (2, 20, 3, 3)
+    np.testing.assert_allclose(
+        matrices,
+        Rotation.from_rotvec(rotvecs.reshape(-1, 3)).as_matrix().reshape(2, 20, 3, 3),
+        atol=1e-14,
+    )
+    np.testing.assert_allclose(geometry.rotvec_from_matrix(matrices), rotvecs, atol=1e-13)
+    for k in range(20):
+        np.testing.assert_allclose(
+            geometry.matrix_from_rotvec(rotvecs[1, k]), matrices[1, k], atol=1e-15
+        )
+        np.testing.assert_allclose(
+            geometry.rotvec_from_matrix(matrices[1, k]), rotvecs[1, k], atol=1e-13
+        )

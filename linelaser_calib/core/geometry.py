@@ -17,6 +17,8 @@ module costs a calibration about 0.3 s, as long as the whole solve.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -123,10 +125,36 @@ def matrix_from_quaternion_xyzw(q_xyzw: ArrayLike) -> FloatArray:
     return matrices_from_quaternions_xyzw(check_quaternion_xyzw(q_xyzw))
 
 
+def _quaternion_xyzw_one(R: FloatArray) -> FloatArray:
+    """:func:`_quaternion_xyzw` of one matrix (3, 3), in scalar arithmetic (several times
+    faster than the masked array code for one)."""
+    rows = R.tolist()
+    diagonal = (rows[0][0], rows[1][1], rows[2][2])
+    trace = diagonal[0] + diagonal[1] + diagonal[2]
+    i = max(range(3), key=diagonal.__getitem__)
+    if diagonal[i] >= trace:  # the choice of np.argmax over (diagonal, trace)
+        j, k = (i + 1) % 3, (i + 2) % 3
+        q = [0.0, 0.0, 0.0, rows[k][j] - rows[j][k]]
+        q[i] = 1.0 + 2.0 * diagonal[i] - trace
+        q[j] = rows[j][i] + rows[i][j]
+        q[k] = rows[k][i] + rows[i][k]
+    else:
+        q = [
+            rows[2][1] - rows[1][2],
+            rows[0][2] - rows[2][0],
+            rows[1][0] - rows[0][1],
+            1.0 + trace,
+        ]
+    scale = (1.0 if q[3] >= 0.0 else -1.0) / math.sqrt(sum(v * v for v in q))
+    return np.array([scale * v for v in q])
+
+
 def _quaternion_xyzw(R: FloatArray) -> FloatArray:
     """Unit ``xyzw`` quaternions (..., 4) with w >= 0 of rotation matrices (..., 3, 3), by
     Shepperd's method: each from the largest of its trace and diagonal, so that no division
     is by a small number."""
+    if R.shape == (3, 3):
+        return _quaternion_xyzw_one(R)
     M = R.reshape(-1, 3, 3)
     diagonal = np.einsum("mii->mi", M)
     trace = np.sum(diagonal, axis=1)
@@ -155,14 +183,40 @@ def quaternion_xyzw_from_matrix(R: ArrayLike) -> FloatArray:
 
 
 def matrix_from_rotvec(rotvec: ArrayLike) -> FloatArray:
-    """Rotation matrix (3, 3) from a rotation vector (3,) in radians."""
-    return np.asarray(exp_so3(np.asarray(rotvec, dtype=np.float64).reshape(1, 3))[0])
+    """Rotation matrix (3, 3) from a rotation vector (3,) in radians (Rodrigues' formula in
+    scalar arithmetic, its coefficients by their series below 1e-4 rad); matrices (..., 3, 3)
+    from rotation vectors (..., 3) (:func:`exp_so3`)."""
+    w = np.asarray(rotvec, dtype=np.float64)
+    if w.shape != (3,):
+        return exp_so3(w)
+    x, y, z = w.tolist()
+    theta2 = x * x + y * y + z * z
+    if theta2 < 1e-8:
+        a, b = 1.0 - theta2 / 6.0, 0.5 - theta2 / 24.0
+    else:
+        theta = math.sqrt(theta2)
+        a, b = math.sin(theta) / theta, (1.0 - math.cos(theta)) / theta2
+    return np.array(
+        [
+            [1.0 - b * (y * y + z * z), b * x * y - a * z, b * x * z + a * y],
+            [b * x * y + a * z, 1.0 - b * (x * x + z * z), b * y * z - a * x],
+            [b * x * z - a * y, b * y * z + a * x, 1.0 - b * (x * x + y * y)],
+        ]
+    )
 
 
 def rotvec_from_matrix(R: ArrayLike) -> FloatArray:
     """Rotation vectors (..., 3) in radians, angles in [0, pi], of rotation matrices
     (..., 3, 3)."""
     q = _quaternion_xyzw(np.asarray(R, dtype=np.float64))
+    if q.shape == (4,):
+        x, y, z, w = q.tolist()
+        half = math.atan2(math.sqrt(x * x + y * y + z * z), w)
+        if half < 5e-4:
+            one = 2.0 + half**2 / 3.0 + 7.0 * half**4 / 180.0
+        else:
+            one = 2.0 * half / math.sin(half)
+        return np.array([one * x, one * y, one * z])
     angle = 2.0 * np.arctan2(np.linalg.norm(q[..., :3], axis=-1), q[..., 3])
     small = angle < 1e-3
     safe = np.where(small, 1.0, angle)
