@@ -756,6 +756,8 @@ def refine(
     cylinder0: Cylinder,
     config: RefineConfig | None = None,
     radius_m: float | None = None,
+    pose_corrections0: FloatArray | None = None,
+    scale0: float = 0.0,
 ) -> RefineResult:
     """Maximum-likelihood hand-eye, axis and radius from every profile point.
 
@@ -773,6 +775,10 @@ def refine(
     config : RefineConfig, optional
     radius_m : float, optional
         Known radius, m (fixed unless ``config.estimate_radius``); None estimates it.
+    pose_corrections0 : ndarray, shape (M, 6), optional
+        Start of the pose corrections ``[ω, τ]`` (default zero), e.g. an earlier solve's.
+    scale0 : float
+        Start of the along-line scale error, when estimated.
 
     Returns
     -------
@@ -794,6 +800,11 @@ def refine(
     state = initial_state(
         problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
     )
+    if pose_corrections0 is not None:
+        start = np.asarray(pose_corrections0, dtype=np.float64)
+        state = replace(state, omega=start[:, :3].copy(), tau=start[:, 3:].copy())
+    if problem.estimate_scale:
+        state = replace(state, scale=float(scale0))
     geometric = normal_equations(problem.linearise(state), cfg.solver, np.ones_like(problem.mask))
     _observability(problem, state, geometric.schur_information()).raise_if_unobservable()
 
@@ -1077,15 +1088,31 @@ def refine_with_outlier_rejection(
     T_all = np.asarray(T_base_flange, dtype=np.float64)
     T0, start = T_flange_sensor0, cylinder0
     points = list(samples_points)
+    first: RefineResult | None = None
+    trimmed_any = False
     if cfg.point_outlier_sigmas > 0.0:
         first = refine(points, T_all, T0, start, cfg, radius_m)
         sigma = max(cfg.sensor_sigma_m, first.sensor_sigma_estimated_m)
         trimmed, removed = _trim_points(points, T_all, first, cfg.point_outlier_sigmas * sigma)
         if removed and all(len(p) >= cfg.min_points_per_profile for p in trimmed):
-            points = trimmed
+            points, trimmed_any = trimmed, True
         T0, start = first.T_flange_sensor, first.cylinder
 
     def solve_subset(keep: list[int], previous: RefineResult | None) -> RefineResult:
+        if previous is None and first is not None:
+            if not trimmed_any and len(keep) == len(points):
+                return first  # the same problem, solved already
+            # From the first solve, its pose corrections included: a few iterations.
+            return refine(
+                [points[i] for i in keep],
+                T_all[keep],
+                first.T_flange_sensor,
+                first.cylinder,
+                cfg,
+                radius_m,
+                first.pose_corrections[keep],
+                first.scale,
+            )
         T_start = T0 if previous is None else previous.T_flange_sensor
         axis = start if previous is None else previous.cylinder
         return refine([points[i] for i in keep], T_all[keep], T_start, axis, cfg, radius_m)
