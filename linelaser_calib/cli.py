@@ -74,6 +74,18 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _seed(text: str) -> int:
+    """A seed of the random stages: an integer from 0 to 2**32 - 1 (numpy's generators take
+    no negative seed)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+    if not 0 <= value < 2**32:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to 2**32 - 1, got {text}")
+    return value
+
+
 def _non_negative_float(text: str) -> float:
     try:
         value = float(text)
@@ -1128,7 +1140,7 @@ def build_parser() -> argparse.ArgumentParser:
             "cluttered_camera, weld_seam, weld_seam_general, sphere, line, line_features"
         ),
     )
-    sim.add_argument("--seed", type=int, default=0)
+    sim.add_argument("--seed", type=_seed, default=0)
     for flag, field, kind in SIMULATE_OPTIONS:
         sim.add_argument(flag, dest=field, type=kind, default=None, help=f"scenario {field}")
     layout = sim.add_mutually_exclusive_group()
@@ -1202,7 +1214,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
     _add_initial_argument(cal)
-    cal.add_argument("--seed", type=int, default=0, help="seed of RANSAC and PSO")
+    cal.add_argument("--seed", type=_seed, default=0, help="seed of RANSAC and PSO")
     _add_pairing_arguments(
         cal,
         "added to profile stamps to reach the pose clock, s (default 0); 'auto' estimates "
@@ -1305,7 +1317,7 @@ def build_parser() -> argparse.ArgumentParser:
     for flag, parse_setting, text in TARGET_OPTIONS:
         if flag in PLAN_TARGET_OPTIONS:
             plan.add_argument(flag, type=parse_setting, default=None, help=text)
-    plan.add_argument("--seed", type=int, default=0, help="seed of the candidate poses")
+    plan.add_argument("--seed", type=_seed, default=0, help="seed of the candidate poses")
     plan.add_argument("--output", help="plan YAML to write (its directory must exist)")
     plan.add_argument(
         "--figure",

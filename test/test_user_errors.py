@@ -24,7 +24,9 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from linelaser_calib.cli import main
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import invert_transform, transform_error
+from linelaser_calib.core.pipeline import PipelineConfig
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import read_result_yaml, write_bag
 from linelaser_calib.sim import Scenario, scenario_from_preset, simulate
@@ -532,3 +534,22 @@ def test_the_simulators_truth_yaml_is_compared(
     code, out, err = run_cli(["calibrate", str(bag)], capsys)
     assert code == 0 and err == ""
     assert "Error against truth" in out
+
+
+@pytest.mark.parametrize("command", ["calibrate", "simulate", "plan"])
+def test_a_negative_seed_is_refused_with_its_range(
+    command: str, good_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    where = {"calibrate": [str(good_bag)], "simulate": [str(tmp_path / "bag")], "plan": []}
+    with pytest.raises(SystemExit) as stop:
+        main([command, *where[command], "--seed", "-1"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    assert "--seed: expected a whole number from 0 to 2**32 - 1, got -1" in err
+    assert "Traceback" not in err
+
+
+def test_the_pipeline_refuses_a_seed_numpy_cannot_take() -> None:
+    for bad in (-1, 2**32, 1.5):
+        with pytest.raises(InputError, match="the seed must be a whole number"):
+            PipelineConfig(seed=bad)  # type: ignore[arg-type]

@@ -91,6 +91,10 @@ class PipelineConfig:
     workers: int = 1
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.seed, (int, np.integer)) and 0 <= self.seed < 2**32):
+            raise InputError(
+                f"the seed must be a whole number from 0 to 2**32 - 1, got {self.seed!r}"
+            )
         if self.self_check_folds < 0 or self.self_check_folds == 1:
             raise InputError(f"self_check_folds must be 0 or >= 2, got {self.self_check_folds}")
         target = get_target(self.target)
