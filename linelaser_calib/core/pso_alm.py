@@ -796,9 +796,12 @@ def _levenberg_marquardt(
         A, g = J.T @ J, J.T @ r
         diagonal = np.maximum(np.diag(A), 1e-300)
         while True:
-            step = np.linalg.solve(A + damping * np.diag(diagonal), -g)
-            trial = residuals(p + step)
-            trial_cost = float(trial @ trial)
+            try:
+                step = np.linalg.solve(A + damping * np.diag(diagonal), -g)
+                trial = residuals(p + step)
+                trial_cost = float(trial @ trial)
+            except np.linalg.LinAlgError:  # singular at this damping: damp more
+                trial_cost = np.inf
             if np.isfinite(trial_cost) and trial_cost < cost:
                 break
             damping *= 10.0
