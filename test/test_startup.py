@@ -30,6 +30,16 @@ code = linelaser_calib.cli.main(["calibrate", "bags/paper", "--json"])
 print(json.dumps({"import": after_import, "calibrate": loaded(), "code": code}))
 """
 
+LINE_PROBE = """
+import json, sys
+import linelaser_calib.cli
+code = linelaser_calib.cli.main([
+    "calibrate", "bags/line", "--target", "line", "--initial", "bags/line/initial.yaml",
+    "--max-speed", "0", "--max-angular-speed", "0", "--clock-offset", "auto", "--json",
+])
+print(json.dumps({"code": code, "scipy": sorted(m for m in sys.modules if m.startswith("scipy"))}))
+"""
+
 
 def probe(script: str, *args: str, env: dict[str, str] | None = None) -> dict[str, Any]:
     """The JSON report a script prints last, run in a fresh interpreter in the repository."""
@@ -43,6 +53,12 @@ def probe(script: str, *args: str, env: dict[str, str] | None = None) -> dict[st
     )
     report: dict[str, Any] = json.loads(run.stdout.splitlines()[-1])
     return report
+
+
+def test_a_straight_seam_calibration_loads_no_scipy_either() -> None:
+    report = probe(LINE_PROBE)
+    assert report["code"] == 0
+    assert report["scipy"] == []
 
 
 def test_the_cli_and_a_calibration_load_no_plotting_ros_or_scipy() -> None:

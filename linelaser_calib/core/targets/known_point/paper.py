@@ -9,9 +9,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation
 
-from ...geometry import FloatArray, rotvec_from_matrix, transform_from_rotation_translation
+from ...geometry import (
+    FloatArray,
+    exp_so3,
+    matrix_from_rotvec,
+    rotvec_from_matrix,
+    transform_from_rotation_translation,
+)
 from .config import GridStep, KnownPointConfig
 
 #: Candidates evaluated at once in the grid search (memory: candidates × views × 3 floats).
@@ -119,7 +124,7 @@ def _grid_best(
     scores = np.empty(len(offsets))
     for start in range(0, len(offsets), GRID_CHUNK):
         rotvecs = centre + offsets[start : start + GRID_CHUNK]
-        R = Rotation.from_rotvec(rotvecs).as_matrix()  # (K, 3, 3)
+        R = exp_so3(rotvecs)  # (K, 3, 3)
         in_flange = np.einsum("kab,mb->kma", R, s)
         points = np.einsum("mab,kmb->kma", R_i, in_flange) + base
         scores[start : start + GRID_CHUNK] = scatter_delta_r(points @ across, point @ across)
@@ -171,7 +176,7 @@ def paper_correction(
     start = float(scatter_delta_r(weld_points_base(corners_xz, T, X0) @ across, p @ across))
     r1, score1, edge = _grid_best(r0, cfg.grid_coarse, s, T, t_fs, p, across)
     r2, score2, _ = _grid_best(r1, cfg.grid_fine, s, T, t_fs, p, across)
-    R = Rotation.from_rotvec(r2).as_matrix()
+    R = matrix_from_rotvec(r2)
     rotated = transform_from_rotation_translation(R, t_fs)
     offsets = (weld_points_base(corners_xz, T, rotated) - p) @ across
     shift = -np.mean(np.einsum("mji,mj->mi", T[:, :3, :3], offsets), axis=0)

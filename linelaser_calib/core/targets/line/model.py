@@ -53,11 +53,11 @@ from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.spatial.transform import Rotation
 
 from ...errors import DegenerateError, InputError
 from ...geometry import (
     exp_so3,
+    matrix_from_rotvec,
     orthonormal_basis,
     project_to_so3,
     right_jacobian_so3,
@@ -124,7 +124,7 @@ def retract_line(
     R_L: FloatArray, offset: FloatArray, delta: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Move a line parametrisation by ``delta`` (4,): turns about e1, e2 (rad), shifts (m)."""
-    turn = Rotation.from_rotvec([delta[0], delta[1], 0.0]).as_matrix()
+    turn = matrix_from_rotvec([delta[0], delta[1], 0.0])
     return np.asarray(R_L @ turn), np.asarray(offset + delta[2:4])
 
 

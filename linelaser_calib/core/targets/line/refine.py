@@ -18,10 +18,13 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ...errors import InputError, SolverError
-from ...geometry import rotvec_from_matrix, transform_from_rotation_translation
+from ...geometry import (
+    matrix_from_rotvec,
+    rotvec_from_matrix,
+    transform_from_rotation_translation,
+)
 from ...solver import Linearisation, SolverConfig, solve
 from ...solver.lm import Residuals
 from ...types import FloatArray
@@ -180,7 +183,7 @@ class _LineProblem:
 
     def retract(self, state: _State, step_global: FloatArray, step_local: FloatArray) -> _State:
         X = state.X.copy()
-        X[:3, :3] = X[:3, :3] @ Rotation.from_rotvec(step_global[:3]).as_matrix()
+        X[:3, :3] = X[:3, :3] @ matrix_from_rotvec(step_global[:3])
         X[:3, 3] += step_global[3:6]
         R_L, offset = retract_line(state.R_L, state.offset, step_global[6:])
         return _State(X, R_L, offset, state.pose + step_local)

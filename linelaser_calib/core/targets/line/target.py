@@ -25,10 +25,10 @@ from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.stats import chi2
 
 from ...errors import DegenerateError, ModelMismatch
 from ...geometry import apply_transform
+from ...quantiles import chi2_upper_quantile
 from ...solver import Flag, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
@@ -276,7 +276,7 @@ class LineTarget:
         X0 = context.initial_T_flange_sensor
         c, cov, T = _stack(features)
         X_start, line_start = _start(features, X0)
-        limit = float(chi2.isf(config.outlier_probability, 2))
+        limit = float(chi2_upper_quantile(2, config.outlier_probability))
 
         def solve_subset(kept: list[int], previous: LineRefinement | None) -> LineRefinement:
             X, line = (
