@@ -957,3 +957,17 @@ def test_readme_parameter_reference_matches_the_declarations() -> None:
     for module in (collector, calibration_service):
         table = markdown_parameter_table(module.PARAMETERS)
         assert table in readme, f"README parameter table of {module.__name__} is out of date"
+
+
+def test_service_sets_the_along_line_scale_as_the_command_line_does() -> None:
+    default = calibration_service.pipeline_config(service_values())
+    assert default.target_config.scale == "auto"
+    for mode in ("auto", "fixed", "free"):
+        config = calibration_service.pipeline_config(service_values(scale=mode, radius=0.02))
+        assert config.target_config.scale == mode
+    for refused in (
+        service_values(scale="free", method="paper"),
+        service_values(scale="free", target="known_point"),
+    ):
+        with pytest.raises(CalibrationError, match="scale does not"):
+            calibration_service.pipeline_config(refused)

@@ -127,6 +127,7 @@ SETTING_LABELS = {
     "point_m": "known_point",
     "min_samples": "min_samples",
     "initial": "initial_hand_eye_path",
+    "scale": "scale",
 }
 
 #: Every parameter; all but the read-only ones are read at each calibration, so
@@ -145,6 +146,15 @@ PARAMETERS = (
         "Cylinder radius, m (half the diameter); 0 estimates it from the profiles (cylinder "
         "target; refused by the others).",
         bounds=(0.0, 1.0),
+    ),
+    ParamSpec(
+        "scale",
+        "",
+        "The sensor's along-line (x) scale (cylinder target, default method): free "
+        "estimates it with the hand-eye, fixed holds it at 1, auto (or '') is free when a "
+        "radius is given; the result's along_line_scale and its 1 sigma. Refused by the "
+        "other targets and the paper method.",
+        choices=("", "auto", "fixed", "free"),
     ),
     ParamSpec(
         "known_point",
@@ -260,9 +270,10 @@ def pipeline_config(
 ) -> PipelineConfig:
     """The pipeline configuration from the parameter values in effect (by name).
 
-    ``radius`` 0, ``known_point`` [], ``min_samples`` 0 and ``initial_hand_eye_path`` '' mean
-    "not given"; a given one that does not act on the target and method is refused. ``warn``
-    receives one line per value of the initial hand-eye that was normalised.
+    ``radius`` 0, ``known_point`` [], ``min_samples`` 0, ``scale`` '' and
+    ``initial_hand_eye_path`` '' mean "not given"; a given one that does not act on the
+    target and method is refused. ``warn`` receives one line per value of the initial
+    hand-eye that was normalised.
 
     Raises
     ------
@@ -288,6 +299,8 @@ def pipeline_config(
         settings["point_m"] = np.array(values["known_point"], dtype=np.float64)
     if values["min_samples"]:
         settings["min_samples"] = int(values["min_samples"])
+    if values["scale"]:
+        settings["scale"] = values["scale"]
     method = Method(values["method"])
     target = get_target(values["target"])
     return PipelineConfig(
