@@ -878,7 +878,7 @@ def format_plan(plan: Plan, elapsed_s: float) -> str:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from linelaser_calib.export import ExportFormat, export_text, ur_kinematics_yaml
+    from linelaser_calib.export import ExportFormat, export_text, scale_note, ur_kinematics_yaml
 
     form = ExportFormat(args.format)
     if form is ExportFormat.UR_KINEMATICS:
@@ -890,7 +890,11 @@ def _cmd_export(args: argparse.Namespace) -> int:
             )
         print(ur_kinematics_yaml(corrections))
         return 0
-    print(export_text(read_result_yaml(args.result), form))
+    result = read_result_yaml(args.result)
+    print(export_text(result, form))
+    note = scale_note(result)
+    if note:
+        print(note, file=sys.stderr)
     return 0
 
 

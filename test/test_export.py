@@ -148,3 +148,25 @@ def test_publish_launch_publishes_the_result_frames_and_transform(tmp_path: Path
     if importlib.util.find_spec("launch_ros") is None:
         with pytest.raises(RuntimeError, match="--format static-tf"):
             module.generate_launch_description()
+
+
+def test_an_estimated_along_line_scale_is_named_beside_the_export(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """No transform carries the profiler's scale: the export says so on stderr and leaves its
+    own text (stdout, for a file) as it is."""
+    plain = result_of(hand_eyes()[0])
+    scaled = result_of(hand_eyes()[0])
+    scaled.target = CylinderSection(
+        Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02), scale=0.0081, scale_sigma=2e-4
+    )
+    outputs = []
+    for name, result in (("plain", plain), ("scaled", scaled)):
+        path = tmp_path / f"{name}.yaml"
+        write_result_yaml(result, path)
+        assert main(["export", str(path), "--format", "urdf"]) == 0
+        outputs.append(capsys.readouterr())
+    assert outputs[0].out == outputs[1].out
+    assert outputs[0].err == ""
+    assert "along-line (x) scale was estimated as 1.00810" in outputs[1].err
+    assert "+0.81 % +- 0.02 %" in outputs[1].err
