@@ -199,7 +199,7 @@ def _store_from_definitions(definitions: tuple[tuple[str, str], ...]) -> Typesto
     return store
 
 
-def _reading_store(connections: Sequence[Connection | _SessionConnection]) -> Typestore:
+def reading_store(connections: Sequence[Connection | _SessionConnection]) -> Typestore:
     """The typestore that decodes the messages of ``connections``.
 
     Built from the message definitions the recording carries (rosbag2 >= 8, MCAP) when each
@@ -667,7 +667,7 @@ class _SessionReader:
         self._messages = []
 
 
-def _bag_parts(path: Path) -> list[Path]:
+def bag_parts(path: Path) -> list[Path]:
     """The bag directories or files to read for ``path`` (one, or a session's samples)."""
     if not path.exists():
         raise BagError(f"bag {path} does not exist; check the path")
@@ -709,7 +709,7 @@ def _is_session_file(path: Path) -> bool:
 
 
 @contextmanager
-def _open_part(part: Path, bag: Path) -> Iterator[Reader | _SessionReader]:
+def open_part(part: Path, bag: Path) -> Iterator[Reader | _SessionReader]:
     """Open one bag (rosbags) or session file; any failure to parse it becomes a
     :class:`BagError`."""
     try:
@@ -745,7 +745,7 @@ def _summarise(bag: Path, parts: Sequence[Path]) -> _Summary:
     starts: list[int] = []
     ends: list[int] = []
     for part in parts:
-        with _open_part(part, bag) as reader:
+        with open_part(part, bag) as reader:
             for conn in reader.connections:
                 key = (conn.topic, conn.msgtype)
                 counts[key] = counts.get(key, 0) + conn.msgcount
@@ -793,7 +793,7 @@ def _choose_topic(
     )
 
 
-def _raw_messages(
+def raw_messages(
     reader: Reader | _SessionReader, connections: Sequence[Any], bag: Path, part: Path
 ) -> Iterator[tuple[Any, int, Any]]:
     """``reader.messages(connections)``, with a damaged chunk turned into :class:`BagError`."""
@@ -803,12 +803,12 @@ def _raw_messages(
             item = next(iterator)
         except StopIteration:
             return
-        except Exception as err:  # a damaged chunk: see _open_part
+        except Exception as err:  # a damaged chunk: see open_part
             raise BagError(_unreadable(bag, part, err)) from err
         yield item
 
 
-def _decode(store: Typestore, topic: str, msgtype: str, log_ns: int, raw: Any) -> Any:
+def decode_message(store: Typestore, topic: str, msgtype: str, log_ns: int, raw: Any) -> Any:
     """Deserialise one message; undecodable bytes become a :class:`SkippedMessage`."""
     try:
         return store.deserialize_cdr(raw, msgtype)
@@ -920,7 +920,7 @@ def _flange_poses(
         if good[k]:
             out.append(FlangePose(int(records.stamps_ns[k]), T[k], records.frame_ids[k]))
             continue
-        msg = _decode(_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
+        msg = decode_message(_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
         if isinstance(msg, SkippedMessage):
             out.append(msg)
             continue
@@ -972,7 +972,7 @@ def read_bag(
         wrongly typed topics, or no readable profile or pose at all.
     """
     bag = Path(path)
-    parts = _bag_parts(bag)
+    parts = bag_parts(bag)
     summary = _summarise(bag, parts)
     if summary.start_ns is None or summary.end_ns is None:
         if any(_is_session_file(part) for part in parts):
@@ -993,12 +993,12 @@ def read_bag(
     pose_log_ns: list[int] = []
     done = 0
     for part in parts:
-        with _open_part(part, bag) as reader:
+        with open_part(part, bag) as reader:
             connections = [c for c in reader.connections if (c.topic, c.msgtype) in wanted]
-            store = _reading_store(connections)
-            for conn, log_ns, raw in _raw_messages(reader, connections, bag, part):
+            store = reading_store(connections)
+            for conn, log_ns, raw in raw_messages(reader, connections, bag, part):
                 if conn.msgtype == PROFILE_TYPE:
-                    msg = _decode(store, conn.topic, conn.msgtype, log_ns, raw)
+                    msg = decode_message(store, conn.topic, conn.msgtype, log_ns, raw)
                     decoded.append(
                         msg
                         if isinstance(msg, SkippedMessage)
@@ -1059,7 +1059,7 @@ def read_profile_intensities(path: str | Path, topic: str) -> dict[int, NDArray[
     """
     bag = Path(path)
     found: dict[int, NDArray[np.float64]] = {}
-    for msg in _decoded_messages(bag, _bag_parts(bag), topic, PROFILE_TYPE):
+    for msg in _decoded_messages(bag, bag_parts(bag), topic, PROFILE_TYPE):
         if not any(field.name == "intensity" for field in msg.fields):
             return {}
         try:
@@ -1073,13 +1073,13 @@ def read_profile_intensities(path: str | Path, topic: str) -> dict[int, NDArray[
 def _decoded_messages(bag: Path, parts: Sequence[Path], topic: str, msgtype: str) -> Iterator[Any]:
     """The decoded messages of one topic and type, part by part; undecodable ones left out."""
     for part in parts:
-        with _open_part(part, bag) as reader:
+        with open_part(part, bag) as reader:
             connections = [
                 c for c in reader.connections if (c.topic, c.msgtype) == (topic, msgtype)
             ]
-            store = _reading_store(connections)
-            for _, log_ns, raw in _raw_messages(reader, connections, bag, part):
-                msg = _decode(store, topic, msgtype, log_ns, raw)
+            store = reading_store(connections)
+            for _, log_ns, raw in raw_messages(reader, connections, bag, part):
+                msg = decode_message(store, topic, msgtype, log_ns, raw)
                 if not isinstance(msg, SkippedMessage):
                     yield msg
 
@@ -1108,7 +1108,7 @@ def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointSta
         none readable.
     """
     bag = Path(path)
-    parts = _bag_parts(bag)
+    parts = bag_parts(bag)
     topics = _summarise(bag, parts).topics
     found = [t for t in topics if t.msgtype == JOINT_STATE_TYPE and t.msgcount > 0]
     if topic is None:
@@ -1163,7 +1163,7 @@ def bag_info(
         If the bag does not exist or cannot be opened at all.
     """
     bag = Path(path)
-    summary = _summarise(bag, _bag_parts(bag))
+    summary = _summarise(bag, bag_parts(bag))
     try:
         contents: BagContents | None = read_bag(
             bag, profile_topic=profile_topic, pose_topic=pose_topic

@@ -35,12 +35,12 @@ from linelaser_calib.io.bags import (
     TF_TYPE,
     BagContents,
     SkippedMessage,
-    _bag_parts,
-    _decode,
-    _open_part,
-    _raw_messages,
-    _reading_store,
+    bag_parts,
+    decode_message,
+    open_part,
+    raw_messages,
     read_joint_states,
+    reading_store,
 )
 from linelaser_calib.io.errors import BagError
 from msg_adapters import stamp_ns_from_msg, stamped_transforms_from_msgs
@@ -127,17 +127,17 @@ def read_tf(path: str | Path) -> TfRecording:
     skipped: list[SkippedMessage] = []
     topics: set[str] = set()
     items: list[tuple[str, list[Any]]] = []
-    for part in _bag_parts(bag):
-        with _open_part(part, bag) as reader:
+    for part in bag_parts(bag):
+        with open_part(part, bag) as reader:
             connections = [
                 c
                 for c in reader.connections
                 if c.msgtype == TF_TYPE and c.topic in (TF_TOPIC, TF_STATIC_TOPIC)
             ]
             topics |= {c.topic for c in reader.connections}
-            store = _reading_store(connections)
-            for conn, log_ns, raw in _raw_messages(reader, connections, bag, part):
-                msg = _decode(store, conn.topic, TF_TYPE, log_ns, raw)
+            store = reading_store(connections)
+            for conn, log_ns, raw in raw_messages(reader, connections, bag, part):
+                msg = decode_message(store, conn.topic, TF_TYPE, log_ns, raw)
                 if isinstance(msg, SkippedMessage):
                     skipped.append(msg)
                     continue
