@@ -304,3 +304,10 @@ def test_robot_less_accurate_than_the_prior_is_named() -> None:
     _, result = calibrated("paper", 1, 0, robot_sigma_translation_m=5e-4, n_poses=30)
     warning = next(w for w in result.warnings if "times the prior assumed" in w)
     assert "mm and" in warning and "--robot-sigma-t" in warning
+
+
+def test_a_continuous_sweep_counts_by_its_extent_not_as_one_cluster() -> None:
+    # 2 mm steps along 0.39 m: every step links the poses into one group, which takes 4 of
+    # the 0.1 m neighbourhoods that count as one cluster each to cover.
+    positions = np.column_stack([np.linspace(0.0, 0.39, 196), np.zeros(196)])
+    assert pose_clusters(np.stack([flange_pose(*p) for p in positions])) == 4

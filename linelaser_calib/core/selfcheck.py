@@ -124,6 +124,9 @@ HALVES_LIMIT_SIGMAS = 3.0
 CLUSTER_RADIUS_M = 0.05
 #: ... and this (rad) belong to one cluster.
 CLUSTER_ANGLE_RAD = float(np.deg2rad(8.0))
+#: A linked group of poses counts once per neighbourhood of this many times the limits above
+#: that it takes to cover it (a continuous sweep is one linked group).
+CLUSTER_SPAN = 2.0
 #: Warn when the poses fall into at most this many clusters.
 FEW_CLUSTERS = 6
 #: Most Lloyd iterations of :func:`region_groups`.
@@ -255,21 +258,36 @@ def _sigma(solution: TargetSolution) -> FloatArray | None:
 
 
 def pose_clusters(T_base_flange: FloatArray) -> int:
-    """Number of groups of poses (M, 4, 4) linked by steps within :data:`CLUSTER_RADIUS_M`
-    and :data:`CLUSTER_ANGLE_RAD` (single linkage)."""
-    M = len(T_base_flange)
+    """Number of clusters of poses (M, 4, 4): groups linked by steps within
+    :data:`CLUSTER_RADIUS_M` and :data:`CLUSTER_ANGLE_RAD` (single linkage), each counted once
+    per neighbourhood of :data:`CLUSTER_SPAN` times those limits that it takes to cover it
+    (greedily, around the first pose not yet covered).
+
+    A tight group counts once however many poses it holds; a continuous sweep, which steps
+    link into one group across the whole workspace, counts by its extent."""
     t = T_base_flange[:, :3, 3]
     z = T_base_flange[:, :3, 2]
-    near = (np.linalg.norm(t[:, None] - t[None], axis=2) < CLUSTER_RADIUS_M) & (
-        np.clip(z @ z.T, -1.0, 1.0) > np.cos(CLUSTER_ANGLE_RAD)
+    step = np.linalg.norm(t[:, None] - t[None], axis=2)
+    cosine = np.clip(z @ z.T, -1.0, 1.0)
+    near = (step < CLUSTER_RADIUS_M) & (cosine > np.cos(CLUSTER_ANGLE_RAD))
+    within = (step < CLUSTER_SPAN * CLUSTER_RADIUS_M) & (
+        cosine > np.cos(CLUSTER_SPAN * CLUSTER_ANGLE_RAD)
     )
-    label = np.arange(M)
+    label = np.arange(len(T_base_flange))
     changed = True
     while changed:
-        merged = np.array([label[near[i]].min() for i in range(M)])
+        merged = np.array([label[near[i]].min() for i in range(len(label))])
         changed = bool(np.any(merged != label))
         label = merged[merged]
-    return len(np.unique(label))
+    count = 0
+    for group in np.unique(label):
+        members = np.flatnonzero(label == group)
+        reach = within[np.ix_(members, members)]
+        covered = np.zeros(len(members), dtype=bool)
+        while not np.all(covered):
+            covered |= reach[int(np.argmin(covered))]
+            count += 1
+    return count
 
 
 def pose_distances(T_base_flange: FloatArray) -> FloatArray:
