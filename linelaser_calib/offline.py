@@ -16,8 +16,15 @@ from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
 from linelaser_calib.core.placement_advice import placement_advice, thinned
 from linelaser_calib.core.pose_source import PoseSource
-from linelaser_calib.core.targets.base import Progress
-from linelaser_calib.core.types import CalibrationResult, Cylinder, FloatArray, Profile, Sample
+from linelaser_calib.core.targets.base import Progress, rejection_digest
+from linelaser_calib.core.types import (
+    CalibrationResult,
+    Cylinder,
+    FloatArray,
+    Profile,
+    Rejection,
+    Sample,
+)
 from linelaser_calib.io.bags import BagContents, read_bag
 from linelaser_calib.io.pose_sources import (
     POSE_SOURCES,
@@ -118,12 +125,23 @@ def calibrate_bag(
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
         progress("clock offset", 1, 1)
     others = []
+    unpaired = []
     if kinematic_calibration is not None and model is not None:
         setup = _setup(flange_poses, model, config, kinematic_calibration)
         config = replace(config, kinematics=setup)
-        for more in placements:
-            others.append(reading.placement(more, bag, config, kinematic_calibration))
+        for k, more in enumerate(placements, start=2):
+            samples, more_setup, rejected = reading.placement(
+                more, bag, config, kinematic_calibration
+            )
+            others.append((samples, more_setup))
+            if rejected:
+                unpaired.append(
+                    f"recording {k} ({more}): {len(rejected)} of its "
+                    f"{len(samples) + len(rejected)} profiles did not pair with a flange pose "
+                    f"and were left out. {rejection_digest(rejected)}".rstrip()
+                )
     result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others)
+    result.warnings.extend(unpaired)
     result.clock_offset_estimated = estimate_offset
     result.parent_frame = flange_frame
     result.child_frame = bag.sensor_frame
@@ -250,9 +268,9 @@ class _Reading:
         first: BagContents,
         config: PipelineConfig,
         kinematic_calibration: JointCalibrationConfig,
-    ) -> tuple[list[Sample], KinematicSetup]:
-        """Another placement's paired samples and joint states, checked against the first
-        recording (same sensor frame and robot model)."""
+    ) -> tuple[list[Sample], KinematicSetup, list[Rejection]]:
+        """Another placement's paired samples, joint states and pairing rejections, checked
+        against the first recording (same sensor frame and robot model)."""
         bag, flange_poses = self.read(path, _silent)
         if bag.sensor_frame != first.sensor_frame:
             raise InputError(
@@ -265,7 +283,7 @@ class _Reading:
         paired = pair_profiles(bag.profiles, flange_poses.poses, config.pairing)
         if not paired.samples:
             raise PairingError(f"{bag.path}: " + paired.explain_nothing_paired(config.pairing))
-        return paired.samples, setup
+        return paired.samples, setup, paired.rejected
 
 
 def bag_samples(

@@ -2,15 +2,21 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from test_joint_calibration import ARM_SEED, held_out_rms_m, recording
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.identifiability import CylinderScan
+from linelaser_calib.core.joint_calibration import KinematicSetup
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
 from linelaser_calib.core.placement_advice import placement_advice, thinned
+from linelaser_calib.core.targets.cylinder import CylinderConfig
 from linelaser_calib.io.kinematics import read_kinematics
 from linelaser_calib.io.results import read_result_yaml
 from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate
@@ -160,3 +166,28 @@ def test_recordings_of_another_sensor_are_refused(
     err = capsys.readouterr().err
     assert "sensor frame 'scanner'" in err and "same sensor on the same arm" in err
     assert not out.exists()
+
+
+def test_profiles_another_recording_lost_are_named_in_the_result() -> None:
+    """A second recording's profiles without an ellipse are left out with a warning that
+    says how many and why; before, only the first recording's losses were reported."""
+    first = recording(31, 16, (0.45, 0.15, 0.0))
+    second = recording(32, 16, (0.35, -0.25, 0.0))
+    assert first.truth.arm is not None and first.joint_states is not None
+    assert second.joint_states is not None
+    samples = [pair_profiles(d.profiles, d.poses, PairingConfig()).samples for d in (first, second)]
+    # Three profiles of the second recording hold only a few points: no ellipse.
+    broken = [replace(s, points=s.points[:4]) if k < 3 else s for k, s in enumerate(samples[1])]
+    nominal = first.truth.arm.nominal
+    config = PipelineConfig(
+        target_config=CylinderConfig(radius_m=0.02),
+        kinematics=KinematicSetup(nominal, first.joint_states),
+        self_check_folds=0,
+    )
+    result = calibrate_samples(
+        samples[0], config, placements=[(broken, KinematicSetup(nominal, second.joint_states))]
+    )
+    (note,) = [w for w in result.warnings if w.startswith("recording 2:")]
+    assert "3 of its 16 paired profiles gave no feature" in note
+    assert "Rejected: 3 x cleaning" in note
+    assert np.all(np.isfinite(result.T_flange_sensor))

@@ -33,7 +33,15 @@ from .kinematics import forward_kinematics
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .selfcheck import DEFAULT_FOLDS, self_check
 from .targets import DEFAULT_TARGET, get_target
-from .targets.base import Placement, Progress, SolveContext, Target, TargetSolution, sample_rng
+from .targets.base import (
+    Placement,
+    Progress,
+    SolveContext,
+    Target,
+    TargetSolution,
+    rejection_digest,
+    sample_rng,
+)
 from .types import CalibrationResult, FlangePose, Profile, Rejection, Sample
 
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
@@ -141,7 +149,8 @@ def validate_sample(sample: Sample, config: PipelineConfig) -> Rejection | None:
 
 def check_units(samples: list[Sample]) -> None:
     """Raise InputError when the data is evidently in millimetres rather than metres."""
-    depths = [float(np.nanmedian(np.abs(s.points[:, 2]))) for s in samples if s.points.size]
+    finite = [s.points[np.isfinite(s.points[:, 2]), 2] for s in samples]
+    depths = [float(np.median(np.abs(z))) for z in finite if z.size]
     reach = [float(np.linalg.norm(s.T_base_flange[:3, 3])) for s in samples]
     if depths and float(np.median(depths)) > MAX_PLAUSIBLE_DEPTH_M:
         raise InputError(
@@ -204,11 +213,17 @@ def calibrate_samples(
     rejections += feature_rejections
     target.check_features(features, target_config)
     others = []
-    for more, setup in placements:
+    placement_notes = []
+    for k, (more, setup) in enumerate(placements, start=2):
         check_units(more)
-        found, _ = target.extract(more, target_config, config.seed, progress, config.workers)
+        found, lost = target.extract(more, target_config, config.seed, progress, config.workers)
         target.check_features(found, target_config)
         others.append(Placement(found, setup))
+        if lost:
+            placement_notes.append(
+                f"recording {k}: {len(lost)} of its {len(more)} paired profiles gave no "
+                f"feature and were left out. {rejection_digest(lost)}".rstrip()
+            )
     context = SolveContext(
         initial_T_flange_sensor=config.initial_T_flange_sensor,
         seed=config.seed,
@@ -261,7 +276,9 @@ def calibrate_samples(
         sample_residuals_m=dict(solution.sample_residuals_m),
         uncertainty_translation_m=sigma_t,
         uncertainty_rotation_rad=sigma_r,
-        warnings=list(solution.warnings) + ([] if check is None else check.warnings),
+        warnings=list(solution.warnings)
+        + placement_notes
+        + ([] if check is None else check.warnings),
         self_check=check,
         history=dict(solution.history),
         sample_fits=list(solution.sample_fits),
