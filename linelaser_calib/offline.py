@@ -149,11 +149,12 @@ def calibrate_bag(
     result.warnings.extend(flange_poses.warnings)
     joint = config.kinematics
     section, corrections = result.target, result.kinematics
-    if joint is not None and corrections is not None and not placements:
+    if joint is not None and corrections is not None:
         # Imported here: other commands need no target loaded.
         from linelaser_calib.core.targets.cylinder import CylinderSection
 
-        if isinstance(section, CylinderSection):
+        placed = [s for s in result.placement_sections if isinstance(s, CylinderSection)]
+        if isinstance(section, CylinderSection) and len(placed) == len(others):
             result.warnings.append(
                 advise_placements(
                     [bag.profiles[i] for i in result.samples_used],
@@ -162,6 +163,10 @@ def calibrate_bag(
                     result.T_flange_sensor,
                     section.cylinder,
                     joint.clock_offset_s,
+                    more=[
+                        (samples, setup.states, p.cylinder)
+                        for (samples, setup), p in zip(others, placed, strict=True)
+                    ],
                 )
             )
     if bag.skipped:
@@ -179,6 +184,7 @@ def advise_placements(
     T_flange_sensor: FloatArray,
     cylinder: Cylinder,
     clock_offset_s: float = 0.0,
+    more: Sequence[tuple[Sequence[Profile | Sample], JointStates, Cylinder]] = (),
 ) -> str:
     """Whether another placement of the cylinder would determine more of the robot's
     kinematics, in words (:func:`~linelaser_calib.core.placement_advice.placement_advice` on
@@ -197,6 +203,9 @@ def advise_placements(
         In the base frame, m.
     clock_offset_s : float
         Added to the profile stamps to pair them with the joint states, s.
+    more : sequence of (profiles, JointStates, Cylinder)
+        The placements scanned besides (a joint calibration of several recordings): each
+        one's scans, joint states and cylinder; the advice is then whether one more adds.
 
     Raises
     ------
@@ -204,16 +213,35 @@ def advise_placements(
         A model joint the states do not name, or a profile outside the joint-state stream.
     """
     setup = KinematicSetup(model, states, clock_offset_s)
+    scans = [
+        _advice_scan(
+            scanned,
+            KinematicSetup(model, scanned_states, clock_offset_s),
+            T_flange_sensor,
+            placed,
+        )
+        for scanned, scanned_states, placed in [(profiles, states, cylinder), *more]
+    ]
+    return placement_advice(model, scans, T_flange_sensor, setup.config).text()
+
+
+def _advice_scan(
+    profiles: Sequence[Profile | Sample],
+    setup: KinematicSetup,
+    T_flange_sensor: FloatArray,
+    cylinder: Cylinder,
+) -> CylinderScan:
+    """One placement for the advice: its joint vectors and up to 30 points of each profile
+    within 0.5 mm of its cylinder (mapped with ``setup``'s model)."""
     q = setup.joint_positions([p.stamp_ns for p in profiles])
-    T = forward_kinematics(model, q) @ T_flange_sensor
+    T = forward_kinematics(setup.model, q) @ T_flange_sensor
     points = []
     for profile, T_bs in zip(profiles, T, strict=True):
         x = profile.points[np.all(np.isfinite(profile.points), axis=1)]
         v = x @ T_bs[:3, :3].T + T_bs[:3, 3] - cylinder.point
         radial = v - np.outer(v @ cylinder.direction, cylinder.direction)
         points.append(x[np.abs(np.linalg.norm(radial, axis=1) - cylinder.radius) < 5e-4])
-    scan = thinned(CylinderScan(q, points, cylinder), 30)
-    return placement_advice(model, [scan], T_flange_sensor, setup.config).text()
+    return thinned(CylinderScan(q, points, cylinder), 30)
 
 
 def _setup(

@@ -44,6 +44,8 @@ def test_two_placements_give_one_hand_eye_and_kinematics_that_map_a_held_out_sca
     assert main(argv) == 0
     printed = capsys.readouterr().out
     assert "calibrated together with 1 more recordings" in printed
+    # The placement advice judges both placements together (it covered one only before).
+    assert "2 placements of the cylinder determine" in printed
     result = read_result_yaml(out)
     corrections = read_kinematics(out)
     assert corrections is not None and len(corrections.corrections) >= 16

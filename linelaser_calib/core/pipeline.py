@@ -284,6 +284,7 @@ def calibrate_samples(
         sample_fits=list(solution.sample_fits),
         kinematics=solution.kinematics,
         identifiability=solution.identifiability,
+        placement_sections=list(solution.placement_sections),
     )
 
 

@@ -219,6 +219,9 @@ class CalibrationResult:
     self_check : SelfCheck or None
         The default method's self-check (:mod:`linelaser_calib.core.selfcheck`): accuracy in
         use, halves, the model's and the widened 1σ; the uncertainty above is its widened one.
+    placement_sections : list of ResultSection
+        The target in each further recording of a joint calibration (same order as given),
+        solved with the corrected poses (not written to result files).
     """
 
     T_flange_sensor: FloatArray
@@ -243,3 +246,4 @@ class CalibrationResult:
     kinematics: KinematicCorrections | None = None
     identifiability: KinematicIdentifiability | None = None
     self_check: SelfCheck | None = None
+    placement_sections: list[ResultSection] = field(default_factory=list)

@@ -252,6 +252,9 @@ class TargetSolution:
         The target's own record of its solve (its problem and state at the solution), from
         which its default solve of a subset of the used features starts when this solution
         is the context's ``warm_start``; None where the target keeps none.
+    placement_sections : list of ResultSection
+        The target's placement in each further recording of a joint calibration
+        (:attr:`SolveContext.placements`, same order), as solved with the corrected poses.
     """
 
     T_flange_sensor: FloatArray
@@ -270,6 +273,7 @@ class TargetSolution:
     kinematics: KinematicCorrections | None = None
     identifiability: KinematicIdentifiability | None = None
     subset_start: object | None = None
+    placement_sections: list[ResultSection] = field(default_factory=list)
 
 
 @dataclass(frozen=True)

@@ -310,6 +310,7 @@ class CylinderTarget:
             refined = self._refined(features, T_init, replace(cylinder0, radius=radius), config)
         context.progress("refine", 1, 1)
         outcome = None
+        placed: list[RefineResult] = []
         if context.kinematics is not None:
             scans = [self._joint_scan(features, refined, context.kinematics)]
             for placement in context.placements:
@@ -317,7 +318,7 @@ class CylinderTarget:
                     self._placement_scan(placement, refined.T_flange_sensor, config, context)
                 )
             context.progress("kinematics", 0, 1)
-            (joint, *_), outcome = refine_kinematics(
+            (joint, *placed), outcome = refine_kinematics(
                 scans, refined.T_flange_sensor, config.refine, radius_m=config.radius_m
             )
             context.progress("kinematics", 1, 1)
@@ -362,6 +363,7 @@ class CylinderTarget:
             noise_m=profile_noise_m(features, config.refine.sensor_sigma_m),
             kinematics=None if outcome is None else outcome.corrections,
             identifiability=None if outcome is None else outcome.identifiability,
+            placement_sections=[CylinderSection(p.cylinder, p.radius_estimated) for p in placed],
             subset_start=(
                 None
                 if start is not None or outcome is not None or refined.solved is None
