@@ -25,7 +25,8 @@ from linelaser_calib.core.geometry import (
     project_to_so3,
     transform_from_rotation_translation,
 )
-from linelaser_calib.core.types import Cylinder, FloatArray
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import FloatArray
 
 MM = 1e-3
 

@@ -68,8 +68,9 @@ from linelaser_calib.core.pipeline import (
     calibrate_samples,
     run_pipeline,
 )
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
-from linelaser_calib.core.types import CalibrationResult, Sample
+from linelaser_calib.core.types import Sample
 from linelaser_calib.io import read_bag, write_bag
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.sim import SimulatedData, random_scenario, scenario_from_preset, simulate

@@ -43,14 +43,14 @@ from linelaser_calib.core.geometry import (
     apply_transform,
     orthonormal_basis,
 )
-from linelaser_calib.core.joint_calibration import KinematicSetup
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.robot.joint_calibration import KinematicSetup
+from linelaser_calib.core.robot.kinematics import (
     KinematicCorrections,
     KinematicModel,
     forward_kinematics,
 )
-from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.types import FloatArray
 from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate
 

@@ -23,7 +23,8 @@ import numpy as np
 
 from linelaser_calib.core.geometry import apply_transform
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
-from linelaser_calib.core.types import Cylinder, FloatArray
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import FloatArray
 from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate
 from linelaser_calib.summary import truth_error
 

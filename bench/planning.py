@@ -95,12 +95,13 @@ from linelaser_calib.core.planning import (
     predicted_curve,
     with_noise_levels,
 )
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.cylinder import CylinderConfig
 from linelaser_calib.core.targets.cylinder.plan import placement
 from linelaser_calib.core.targets.sphere import SphereConfig
 from linelaser_calib.core.targets.sphere.plan import SpherePlacement
-from linelaser_calib.core.types import CalibrationResult, Sample
+from linelaser_calib.core.types import Sample
 from linelaser_calib.sim import Scenario, random_scenario, scenario_from_preset
 from linelaser_calib.sim.poses import sample_sensor_poses
 from linelaser_calib.sim.profiler import Trace, measure, trace

@@ -8,7 +8,7 @@ table gives, as median [max] over the seeds:
 
 - the hand-eye error (mm, deg) against the simulator's truth. With an arm's kinematics
   (``ur5e_kinematic``) the truth is the hand-eye the nominal flange poses can see
-  (:func:`~linelaser_calib.core.kinematics.effective_hand_eye`: the true one with the arm's
+  (:func:`~linelaser_calib.core.robot.kinematics.effective_hand_eye`: the true one with the arm's
   error after its last joint's motion, a constant transform in the flange frame that no scan
   separates from the hand-eye and that a user's scans with nominal kinematics need);
   ``phys_mm`` is the error against the physical hand-eye, for comparison;
@@ -36,8 +36,8 @@ import time
 
 import numpy as np
 
-from linelaser_calib.core.kinematics import effective_hand_eye
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.robot.kinematics import effective_hand_eye
 from linelaser_calib.core.selfcheck import neighbour_limit, region_limit
 from linelaser_calib.sim import scenario_from_preset, simulate
 from linelaser_calib.summary import truth_error

@@ -34,6 +34,7 @@ import numpy as np
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
@@ -43,7 +44,6 @@ from linelaser_calib.core.targets.sphere.model import (
     fit_sphere_centre,
     fixed_point_residuals,
 )
-from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io.bags import read_bag
 from linelaser_calib.io.results import read_reference_yaml
 from linelaser_calib.offline import calibrate_bag

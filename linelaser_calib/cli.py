@@ -24,8 +24,6 @@ import numpy as np
 from linelaser_calib.core.errors import CalibrationError, InputError, PairingError
 from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.geometry import transform_error
-from linelaser_calib.core.joint_calibration import JointCalibrationConfig
-from linelaser_calib.core.kinematics import KinematicModel
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.planning import (
@@ -37,9 +35,13 @@ from linelaser_calib.core.planning import (
     predicted_curve,
 )
 from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
+from linelaser_calib.core.robot.kinematics import KinematicModel
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, configure
-from linelaser_calib.core.types import CalibrationResult, Cylinder, Sample
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import Sample
 from linelaser_calib.io.bags import bag_info, format_bag_info, write_bag
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.initial import FORMS, read_initial_hand_eye

@@ -21,13 +21,13 @@ from linelaser_calib.core.geometry import (
     rpy_from_matrix,
     translation_quaternion_from_transform,
 )
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.robot.kinematics import (
     UR_DH,
     UR_JOINT_NAMES,
     KinematicCorrections,
     model_from_preset,
 )
-from linelaser_calib.core.types import CalibrationResult
 
 
 class ExportFormat(Enum):

@@ -9,22 +9,17 @@ from pathlib import Path
 import numpy as np
 
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
-from linelaser_calib.core.identifiability import CylinderScan
-from linelaser_calib.core.joint_calibration import JointCalibrationConfig, KinematicSetup
-from linelaser_calib.core.kinematics import JointStates, KinematicModel, forward_kinematics
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
-from linelaser_calib.core.placement_advice import placement_advice, thinned
 from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig, KinematicSetup
+from linelaser_calib.core.robot.kinematics import JointStates, KinematicModel, forward_kinematics
 from linelaser_calib.core.targets.base import Progress, rejection_digest
-from linelaser_calib.core.types import (
-    CalibrationResult,
-    Cylinder,
-    FloatArray,
-    Profile,
-    Rejection,
-    Sample,
-)
+from linelaser_calib.core.targets.cylinder.advice import placement_advice, thinned
+from linelaser_calib.core.targets.cylinder.identifiability import CylinderScan
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import FloatArray, Profile, Rejection, Sample
 from linelaser_calib.io.bags import BagContents, read_bag
 from linelaser_calib.io.pose_sources import (
     POSE_SOURCES,
@@ -187,7 +182,7 @@ def advise_placements(
     more: Sequence[tuple[Sequence[Profile | Sample], JointStates, Cylinder]] = (),
 ) -> str:
     """Whether another placement of the cylinder would determine more of the robot's
-    kinematics, in words (:func:`~linelaser_calib.core.placement_advice.placement_advice` on
+    kinematics, in words (:func:`~linelaser_calib.core.targets.cylinder.advice.placement_advice` on
     up to 30 points of each profile within 0.5 mm of the cylinder).
 
     Parameters

@@ -18,10 +18,11 @@ import numpy as np
 
 from linelaser_calib.core.errors import InputError, PairingError
 from linelaser_calib.core.geometry import apply_transform
-from linelaser_calib.core.kinematics import KinematicCorrections, KinematicModel
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pose_source import PoseSource
-from linelaser_calib.core.types import CalibrationResult, FloatArray, Rejection
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.robot.kinematics import KinematicCorrections, KinematicModel
+from linelaser_calib.core.types import FloatArray, Rejection
 from linelaser_calib.io.bags import BagContents, read_bag, read_profile_intensities
 from linelaser_calib.io.kinematics import load_model
 from linelaser_calib.io.pose_sources import (

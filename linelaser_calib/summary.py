@@ -21,9 +21,10 @@ from linelaser_calib.core.geometry import (
     rotvec_from_matrix,
     rpy_from_matrix,
 )
-from linelaser_calib.core.kinematics import KinematicCorrections, effective_hand_eye
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.robot.kinematics import KinematicCorrections, effective_hand_eye
 from linelaser_calib.core.targets.base import mm_text
-from linelaser_calib.core.types import CalibrationResult, Rejection
+from linelaser_calib.core.types import Rejection
 from linelaser_calib.io.results import Truth
 
 #: How roll, pitch and yaw are defined (ROS, REP 103).
@@ -226,7 +227,7 @@ def hand_eye_seen(truth: Truth, corrections: KinematicCorrections | None = None)
     section: the true parameters as corrections to the nominal model), flange poses from the
     nominal model (with ``corrections`` applied, for a joint calibration) see the true
     hand-eye moved by the arm's error after its last joint's motion
-    (:func:`~linelaser_calib.core.kinematics.effective_hand_eye`), which no scan separates
+    (:func:`~linelaser_calib.core.robot.kinematics.effective_hand_eye`), which no scan separates
     from the hand-eye. Otherwise, or when that section cannot be used, the physical one.
     """
     section = truth.raw.get("kinematics")

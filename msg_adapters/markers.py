@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike
 
 from linelaser_calib.core.geometry import orthonormal_basis, transform_from_rotation_translation
 from linelaser_calib.core.targets.base import Shape
-from linelaser_calib.core.types import Cylinder
+from linelaser_calib.core.targets.cylinder.model import Cylinder
 from msg_adapters.errors import MessageError
 from msg_adapters.message_types import TypeResolver, header_msg, uint8_field, vector_fields
 from msg_adapters.pose import pose_msg_from_transform

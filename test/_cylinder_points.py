@@ -35,7 +35,7 @@ from linelaser_calib.core.geometry import (
     project_to_so3,
     transform_from_rotation_translation,
 )
-from linelaser_calib.core.types import Cylinder
+from linelaser_calib.core.targets.cylinder.model import Cylinder
 
 #: The cylinder paper's simulated hand-eye (eq. 17, mm), projected onto SO(3) below.
 _PAPER_T_EL_MM = np.array(

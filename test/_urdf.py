@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from linelaser_calib.core.kinematics import UR_DH, UR_JOINT_NAMES
+from linelaser_calib.core.robot.kinematics import UR_DH, UR_JOINT_NAMES
 
 
 def ur_urdf(preset: str = "ur5e", joint_names: tuple[str, ...] = UR_JOINT_NAMES) -> str:

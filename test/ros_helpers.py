@@ -35,7 +35,7 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 
 from linelaser_calib.core.geometry import transform_from_translation_quaternion
-from linelaser_calib.core.kinematics import JointStates
+from linelaser_calib.core.robot.kinematics import JointStates
 from linelaser_calib.core.types import FlangePose, Profile
 from msg_adapters import (
     joint_state_msg,

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
-from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.sim import SimulatedData, scenario_from_preset, simulate
 from linelaser_calib.summary import truth_error
 

@@ -22,7 +22,7 @@ import yaml
 from _compare import assert_float32_close, assert_floats_close, assert_trees_close
 
 from linelaser_calib.cli import main
-from linelaser_calib.core.kinematics import JointStates
+from linelaser_calib.core.robot.kinematics import JointStates
 from linelaser_calib.io.bags import BagContents, read_bag, read_joint_states
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from linelaser_calib.core.corner import CornerConfig, fit_corner
 from linelaser_calib.core.errors import InputError, ProfileRejected
+from linelaser_calib.core.profile.corner import CornerConfig, fit_corner
 
 CONFIG = CornerConfig()
 

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 from _synthetic_centres import paper_setup, random_setup, synthetic_centres
 
-from linelaser_calib.core.cylinder_model import (
+from linelaser_calib.core.errors import DegenerateError, InputError
+from linelaser_calib.core.geometry import check_rotation
+from linelaser_calib.core.targets.cylinder.model import (
     CentreAxisProblem,
     calibration_from_x,
     centre_distances,
@@ -17,8 +19,6 @@ from linelaser_calib.core.cylinder_model import (
     constraints_jacobian,
     x_from_calibration,
 )
-from linelaser_calib.core.errors import DegenerateError, InputError
-from linelaser_calib.core.geometry import check_rotation
 
 
 def _problem(

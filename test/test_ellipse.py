@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from _compare import assert_floats_close
 
-from linelaser_calib.core.ellipse import (
+from linelaser_calib.core.errors import InputError, ProfileRejected
+from linelaser_calib.core.targets.cylinder.ellipse import (
     EllipseConfig,
     centre_from_conic,
     centre_from_gradient,
@@ -17,7 +18,6 @@ from linelaser_calib.core.ellipse import (
     fit_ellipse_ransac,
     sampson_distance,
 )
-from linelaser_calib.core.errors import InputError, ProfileRejected
 
 RADIUS = 0.02  # m, the paper's 40 mm shaft
 CUT = math.radians(60.0)  # angle between the laser plane and the cylinder axis

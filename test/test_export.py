@@ -17,8 +17,9 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     transform_from_translation_quaternion,
 )
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderSection
-from linelaser_calib.core.types import CalibrationResult, Cylinder
+from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.export import static_transform_arguments
 from linelaser_calib.io.results import write_result_yaml
 

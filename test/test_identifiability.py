@@ -7,15 +7,16 @@ from functools import lru_cache
 import numpy as np
 
 from linelaser_calib.core.geometry import orthonormal_basis, transform_from_rotvec_translation
-from linelaser_calib.core.identifiability import (
+from linelaser_calib.core.robot.kinematics import KinematicModel, forward_kinematics
+from linelaser_calib.core.targets.cylinder.identifiability import (
     CYLINDER_NAMES,
     HAND_EYE_NAMES,
     CylinderScan,
     cylinder_identifiability,
     cylinder_scan_jacobian,
 )
-from linelaser_calib.core.kinematics import KinematicModel, forward_kinematics
-from linelaser_calib.core.types import Cylinder, FloatArray
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import FloatArray
 from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate
 
 

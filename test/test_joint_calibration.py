@@ -13,21 +13,21 @@ import yaml
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import apply_transform
-from linelaser_calib.core.joint_calibration import (
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.robot.joint_calibration import (
     JointProblem,
     JointState,
     KinematicPoseModel,
     KinematicSetup,
     MultiScanProblem,
 )
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.robot.kinematics import (
     UR_JOINT_NAMES,
     KinematicCorrections,
     KinematicModel,
     forward_kinematics,
     model_from_preset,
 )
-from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.targets.base import SolveContext, TargetSolution
 from linelaser_calib.core.targets.cylinder import TARGET, CylinderConfig
 from linelaser_calib.core.targets.cylinder.refine import (

@@ -18,7 +18,7 @@ from ros_helpers import init_context, new_domain_id, reliable_qos
 from linelaser_calib.cli import main, simulate_to_bag
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.geometry import invert_transform, rotvec_from_matrix
-from linelaser_calib.core.kinematics import UR_JOINT_NAMES, forward_kinematics
+from linelaser_calib.core.robot.kinematics import UR_JOINT_NAMES, forward_kinematics
 from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io.bags import read_bag
 from linelaser_calib.io.pose_sources import read_tf

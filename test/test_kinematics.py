@@ -7,7 +7,7 @@ import pytest
 from _urdf import ur_urdf
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.robot.kinematics import (
     UR_JOINT_NAMES,
     JointStates,
     KinematicCorrections,

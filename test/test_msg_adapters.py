@@ -23,7 +23,8 @@ from linelaser_calib.core.geometry import (
     matrix_from_quaternion_xyzw,
     transform_from_rotvec_translation,
 )
-from linelaser_calib.core.types import Cylinder, FlangePose
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import FlangePose
 from msg_adapters import (
     MessageError,
     cloud_from_pointcloud2,

@@ -40,18 +40,12 @@ from linelaser_calib.core.geometry import (
 )
 from linelaser_calib.core.pairing import NS_PER_S, PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
-from linelaser_calib.core.residuals import axis_extent
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.targets.cylinder.residuals import axis_extent
 from linelaser_calib.core.targets.known_point import KnownPoint, KnownPointConfig, extract_corner
-from linelaser_calib.core.types import (
-    CalibrationResult,
-    Cylinder,
-    FlangePose,
-    Profile,
-    Rejection,
-    Sample,
-    SampleFit,
-)
+from linelaser_calib.core.types import FlangePose, Profile, Rejection, Sample, SampleFit
 from linelaser_calib.io import ResultFileError, SessionBagWriter, read_bag, read_result_yaml
 from linelaser_calib.nodes import calibration_service, collector
 from linelaser_calib.nodes.collection import (

@@ -11,12 +11,12 @@ import yaml
 from test_joint_calibration import ARM_SEED, held_out_rms_m, recording
 
 from linelaser_calib.cli import main
-from linelaser_calib.core.identifiability import CylinderScan
-from linelaser_calib.core.joint_calibration import KinematicSetup
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
-from linelaser_calib.core.placement_advice import placement_advice, thinned
+from linelaser_calib.core.robot.joint_calibration import KinematicSetup
 from linelaser_calib.core.targets.cylinder import CylinderConfig
+from linelaser_calib.core.targets.cylinder.advice import placement_advice, thinned
+from linelaser_calib.core.targets.cylinder.identifiability import CylinderScan
 from linelaser_calib.io.kinematics import read_kinematics
 from linelaser_calib.io.results import read_result_yaml
 from linelaser_calib.sim import SimulatedData, Surface, scenario_from_preset, simulate

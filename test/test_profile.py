@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from linelaser_calib.core.ellipse import EllipseConfig, fit_ellipse_ransac
 from linelaser_calib.core.errors import InputError, ProfileRejected
-from linelaser_calib.core.profile import CleaningConfig, clean_profile
+from linelaser_calib.core.profile.cleaning import CleaningConfig, clean_profile
+from linelaser_calib.core.targets.cylinder.ellipse import EllipseConfig, fit_ellipse_ransac
 
 RADIUS = 0.02  # m
 SEMI_MAJOR = RADIUS / math.sin(math.radians(60.0))

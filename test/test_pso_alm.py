@@ -9,10 +9,10 @@ import pytest
 from _compare import assert_floats_close, assert_trees_close
 from _synthetic_centres import MM, axis_errors, paper_setup, random_setup, synthetic_centres
 
-from linelaser_calib.core.cylinder_model import CentreAxisProblem, x_from_calibration
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import transform_error
-from linelaser_calib.core.pso_alm import (
+from linelaser_calib.core.targets.cylinder.model import CentreAxisProblem, x_from_calibration
+from linelaser_calib.core.targets.cylinder.pso_alm import (
     GalmConfig,
     HybridConfig,
     PsoConfig,
@@ -21,7 +21,9 @@ from linelaser_calib.core.pso_alm import (
     search_box,
     solve_pso_galm,
 )
-from linelaser_calib.core.pso_alm import _levenberg_marquardt as levenberg_marquardt
+from linelaser_calib.core.targets.cylinder.pso_alm import (
+    _levenberg_marquardt as levenberg_marquardt,
+)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from _cylinder_points import Scene, make_scene, perturbed_start
 from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
 from linelaser_calib.core.solver import normal_equations, solve_damped
+from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.cylinder.refine import (
     RefineConfig,
     RefineResult,
@@ -20,7 +21,6 @@ from linelaser_calib.core.targets.cylinder.refine import (
     refine,
     refine_with_outlier_rejection,
 )
-from linelaser_calib.core.types import Cylinder
 
 RADIUS = 0.02
 NOISE_FREE: dict[str, Any] = {"sensor_sigma": 0.0, "robot_sigma_t": 0.0, "robot_sigma_r": 0.0}

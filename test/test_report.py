@@ -31,12 +31,14 @@ from linelaser_calib.core.geometry import (
     transform_error,
 )
 from linelaser_calib.core.pipeline import Method, PipelineConfig
-from linelaser_calib.core.residuals import (
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.targets.cylinder.residuals import (
     cylinder_coordinates,
     sample_centre_distances,
     sample_surface_residuals,
 )
-from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection, SampleFit
+from linelaser_calib.core.types import Rejection, SampleFit
 from linelaser_calib.io import Truth, read_truth_yaml
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.report import write_report

@@ -15,8 +15,10 @@ from linelaser_calib.core.geometry import (
     matrix_from_quaternion_xyzw,
     transform_from_rotvec_translation,
 )
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderSection
-from linelaser_calib.core.types import CalibrationResult, Cylinder, Rejection
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import Rejection
 from linelaser_calib.io import (
     ResultFileError,
     read_result_yaml,

@@ -34,10 +34,11 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
 from linelaser_calib.core.geometry import transform_error, transform_from_rotvec_translation
-from linelaser_calib.core.kinematics import forward_kinematics, model_from_preset
+from linelaser_calib.core.robot.kinematics import forward_kinematics, model_from_preset
 from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.known_point import KnownPoint
-from linelaser_calib.core.types import Cylinder, FlangePose
+from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io import read_bag, read_result_yaml, read_truth_yaml
 from linelaser_calib.io.bags import read_joint_states
 from linelaser_calib.io.results import Truth

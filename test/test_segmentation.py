@@ -8,17 +8,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linelaser_calib.core.arc import (
+from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.pipeline import PipelineConfig
+from linelaser_calib.core.profile.segmentation import SegmentKind, estimate_noise, segment_profile
+from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.cylinder.arc import (
     fit_arc_in_scene,
     grazing_ends_biased,
     radius_mismatch,
     without_grazing_ends,
 )
-from linelaser_calib.core.ellipse import EllipseConfig
-from linelaser_calib.core.geometry import transform_error
-from linelaser_calib.core.pipeline import PipelineConfig
-from linelaser_calib.core.segmentation import SegmentKind, estimate_noise, segment_profile
-from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.cylinder.ellipse import EllipseConfig
 from linelaser_calib.io.results import read_truth_yaml
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.sim import Surface, scenario_from_preset, simulate

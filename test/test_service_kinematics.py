@@ -17,7 +17,7 @@ from test_joint_calibration import ARM_SEED
 from test_nodes_unit import ServiceUnderTest, ros_context  # noqa: F401 - a fixture
 
 from linelaser_calib.core.geometry import transform_error
-from linelaser_calib.core.kinematics import forward_kinematics
+from linelaser_calib.core.robot.kinematics import forward_kinematics
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import SessionBagWriter, read_result_yaml
 from linelaser_calib.nodes.common import SESSION_TOPIC, latched_qos

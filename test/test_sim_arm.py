@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.robot.kinematics import (
     UR_JOINT_NAMES,
     flange_poses_from_joint_states,
     forward_kinematics,

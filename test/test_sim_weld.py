@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 from _compare import assert_floats_close
 
-from linelaser_calib.core.corner import CornerConfig, fit_corner
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import (
     apply_transform,
     rotation_angle,
     rotvec_from_matrix,
 )
-from linelaser_calib.core.profile import CleaningConfig, clean_profile
+from linelaser_calib.core.profile.cleaning import CleaningConfig, clean_profile
+from linelaser_calib.core.profile.corner import CornerConfig, fit_corner
 from linelaser_calib.sim.weld import (
     WELD_PRESETS,
     WeldScenario,

@@ -13,7 +13,7 @@ import pytest
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import apply_transform, check_transform, orthonormal_basis
-from linelaser_calib.core.structured_light import (
+from linelaser_calib.core.targets.known_point.structured_light import (
     PAPER_INTRINSICS,
     PAPER_LIGHT_PLANE,
     CameraIntrinsics,

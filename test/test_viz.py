@@ -19,12 +19,12 @@ from mcap_ros2.decoder import DecoderFactory
 
 from linelaser_calib.core.geometry import transform_from_translation_quaternion
 from linelaser_calib.core.pipeline import PipelineConfig
-from linelaser_calib.core.residuals import (
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets.cylinder.residuals import (
     cylinder_coordinates,
     sample_points_base,
     sample_surface_residuals,
 )
-from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io import write_bag
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.report import VIZ_TOPICS, write_viz_mcap

@@ -28,9 +28,10 @@ import numpy as np
 
 from .errors import DegenerateError, InputError, PairingError
 from .geometry import FloatArray, check_transform
-from .joint_calibration import KinematicSetup
-from .kinematics import forward_kinematics
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
+from .result import CalibrationResult
+from .robot.joint_calibration import KinematicSetup
+from .robot.kinematics import forward_kinematics
 from .selfcheck import DEFAULT_FOLDS, self_check
 from .targets import DEFAULT_TARGET, get_target
 from .targets.base import (
@@ -42,7 +43,7 @@ from .targets.base import (
     rejection_digest,
     sample_rng,
 )
-from .types import CalibrationResult, FlangePose, Profile, Rejection, Sample
+from .types import FlangePose, Profile, Rejection, Sample
 
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
 MAX_PLAUSIBLE_DEPTH_M = 5.0

@@ -12,7 +12,7 @@ class PoseSource(Enum):
     tcp_pose_broadcaster). ``tf``: the chain base frame -> flange frame from ``/tf`` and
     ``/tf_static`` (robot_state_publisher, MoveIt), each dynamic transform interpolated.
     ``joint_states``: forward kinematics of every ``sensor_msgs/JointState`` through the
-    robot's kinematic model (:mod:`linelaser_calib.core.kinematics`).
+    robot's kinematic model (:mod:`linelaser_calib.core.robot.kinematics`).
     """
 
     POSE = "pose"

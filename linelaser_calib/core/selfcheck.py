@@ -68,7 +68,7 @@ The widened 1σ (:func:`honest_sigma`) has two parts, added in quadrature:
   whatever of the rest of the chain acts like one more constant flange-side transform over
   the poses scanned; the last link's own error is such a transform at every pose, and
   belongs to the hand-eye these flange poses see, see
-  :func:`~linelaser_calib.core.kinematics.effective_hand_eye`): a
+  :func:`~linelaser_calib.core.robot.kinematics.effective_hand_eye`): a
   prior of :data:`SYSTEMATIC_FLOOR` times the held-out offsets' RMS for translation, and that
   over the lever of the profile points (their median distance from the sensor) for
   rotation. This factor is a prior, not an estimate.

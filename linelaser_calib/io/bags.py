@@ -57,7 +57,7 @@ from rosbags.typesys.store import Typestore
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE, matrices_from_quaternions_xyzw
-from linelaser_calib.core.kinematics import JointStates
+from linelaser_calib.core.robot.kinematics import JointStates
 from linelaser_calib.core.tf import StampedTransform
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io.errors import BagError

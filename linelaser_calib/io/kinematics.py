@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.robot.kinematics import (
     UR_DH,
     JointSpec,
     KinematicCorrections,

@@ -8,7 +8,7 @@ the profiles always come from :func:`~linelaser_calib.io.bags.read_bag`.
   :class:`~linelaser_calib.core.tf.TransformTree`, and the chain base frame -> flange frame
   evaluated at every stamp of its dynamic transforms.
 - ``joint_states``: the ``sensor_msgs/msg/JointState`` stream of the bag through the robot
-  model (:func:`~linelaser_calib.core.kinematics.flange_poses_from_joint_states`); each
+  model (:func:`~linelaser_calib.core.robot.kinematics.flange_poses_from_joint_states`); each
   flange pose keeps its joint state's stamp, so that pairing interpolates between them as
   between recorded poses.
 """
@@ -21,12 +21,12 @@ from pathlib import Path
 from typing import Any
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.robot.kinematics import (
     JointStates,
     KinematicModel,
     flange_poses_from_joint_states,
 )
-from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.tf import StampedTransform, TransformTree, base_frame_warning
 from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io.bags import (

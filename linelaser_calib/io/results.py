@@ -49,11 +49,12 @@ from linelaser_calib.core.geometry import (
     transform_from_translation_quaternion,
     translation_quaternion_from_transform,
 )
-from linelaser_calib.core.kinematics import KinematicCorrections
 from linelaser_calib.core.planning import Plan
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.robot.kinematics import KinematicCorrections
 from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
-from linelaser_calib.core.types import CalibrationResult, Rejection
+from linelaser_calib.core.types import Rejection
 from linelaser_calib.io.errors import ResultFileError
 
 FloatArray = NDArray[np.float64]

@@ -63,15 +63,15 @@ from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from linelaser_calib.core.errors import CalibrationError, InputError
-from linelaser_calib.core.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
 from linelaser_calib.core.planning import Plan, PlanConstraints, fan_shape, plan_for_target
 from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.targets.cylinder import CylinderSection
-from linelaser_calib.core.types import CalibrationResult
 from linelaser_calib.io import write_result_yaml
 from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info, read_joint_states
 from linelaser_calib.io.initial import read_initial_hand_eye

@@ -4,7 +4,7 @@
 joint_states``).
 
 Every joint state goes through the forward kinematics of the robot model
-(:func:`~linelaser_calib.core.kinematics.flange_poses_from_joint_states`, the function the
+(:func:`~linelaser_calib.core.robot.kinematics.flange_poses_from_joint_states`, the function the
 offline ``--pose-source joint_states`` uses) and gives one flange pose at its stamp, which
 then goes through the collector's ordinary pairing.
 """
@@ -23,7 +23,7 @@ from rclpy.qos import QoSProfile
 from sensor_msgs.msg import JointState
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.robot.kinematics import (
     JointStates,
     KinematicModel,
     flange_poses_from_joint_states,

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from linelaser_calib.core.geometry import FloatArray, apply_transform
-from linelaser_calib.core.types import CalibrationResult, Sample
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.types import Sample
 
 
 @dataclass(frozen=True)

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderSection
-from linelaser_calib.core.types import CalibrationResult, Cylinder
+from linelaser_calib.core.targets.cylinder.model import Cylinder
 
 
 class ReportError(CalibrationError):

@@ -3,7 +3,7 @@
 Importing this module imports matplotlib; :func:`linelaser_calib.report.html.write_report`
 imports it only after checking that matplotlib is installed. Every figure is built from a
 :class:`ReportData` (the result plus its residuals, computed once by
-:mod:`linelaser_calib.core.residuals`) and listed in :data:`FIGURES`, which the HTML page
+:mod:`~..core.targets.cylinder.residuals`) and listed in :data:`FIGURES`, which the HTML page
 shows in order.
 
 Lengths are shown in mm and residuals in µm, each axis labelled with its unit.
@@ -22,14 +22,15 @@ from numpy.typing import NDArray
 
 from linelaser_calib.core.geometry import FloatArray, orthonormal_basis
 from linelaser_calib.core.planning import SigmaPoint
-from linelaser_calib.core.residuals import (
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.targets.cylinder.residuals import (
     CylinderCoordinates,
     axis_extent,
     cylinder_coordinates,
     sample_centre_distances,
     sample_points_base,
 )
-from linelaser_calib.core.types import CalibrationResult, Cylinder
 from linelaser_calib.report.errors import require_cylinder
 
 matplotlib.use("Agg")

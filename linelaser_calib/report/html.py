@@ -16,7 +16,7 @@ import os
 from collections.abc import Sequence
 from pathlib import Path
 
-from linelaser_calib.core.types import CalibrationResult
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.io.results import Truth
 from linelaser_calib.report.errors import ReportError
 from linelaser_calib.summary import (

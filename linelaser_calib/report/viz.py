@@ -32,8 +32,9 @@ from mcap.writer import Writer
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from linelaser_calib.core.residuals import sample_points_base
-from linelaser_calib.core.types import CalibrationResult, FloatArray
+from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets.cylinder.residuals import sample_points_base
+from linelaser_calib.core.types import FloatArray
 from linelaser_calib.report.errors import ReportError
 from msg_adapters import (
     marker_array,

@@ -27,7 +27,7 @@ import numpy as np
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import invert_transform
-from linelaser_calib.core.kinematics import (
+from linelaser_calib.core.robot.kinematics import (
     KinematicCorrections,
     KinematicModel,
     forward_kinematics,

@@ -85,8 +85,9 @@ from linelaser_calib.core.geometry import (
     quaternion_xyzw_from_matrix,
     transform_from_rotation_translation,
 )
-from linelaser_calib.core.kinematics import UR_DH
-from linelaser_calib.core.types import Cylinder, FloatArray
+from linelaser_calib.core.robot.kinematics import UR_DH
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import FloatArray
 
 Vec3 = tuple[float, float, float]
 Range = tuple[float, float]

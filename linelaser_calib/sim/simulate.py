@@ -9,8 +9,9 @@ from typing import Generic, Protocol, TypeVar
 import numpy as np
 
 from linelaser_calib.core.geometry import invert_transform
-from linelaser_calib.core.kinematics import JointStates
-from linelaser_calib.core.types import BoolArray, Cylinder, FlangePose, FloatArray, Profile
+from linelaser_calib.core.robot.kinematics import JointStates
+from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.arm import Arm, plan_arm
 from linelaser_calib.sim.clutter import (
     camera_effects,

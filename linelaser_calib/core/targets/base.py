@@ -56,8 +56,8 @@ import numpy as np
 from ..errors import CalibrationError, InputError
 from ..forked import map_forked
 from ..geometry import FloatArray
-from ..joint_calibration import KinematicIdentifiability, KinematicSetup
-from ..kinematics import KinematicCorrections
+from ..robot.joint_calibration import KinematicIdentifiability, KinematicSetup
+from ..robot.kinematics import KinematicCorrections
 from ..types import Rejection, Sample, SampleFit
 
 #: Progress callback: (stage name, done, total).
@@ -294,7 +294,7 @@ class SolveContext:
     kinematics : KinematicSetup or None
         The robot model and joint states: the default method then estimates the
         identifiable kinematic corrections with the hand-eye
-        (:mod:`~linelaser_calib.core.joint_calibration`), the flange pose of each feature
+        (:mod:`~linelaser_calib.core.robot.joint_calibration`), the flange pose of each feature
         being the forward kinematics of its joint vector.
     placements : sequence of Placement
         Further placements of the target scanned by the same arm and sensor (one recording

@@ -6,11 +6,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...arc import ArcConfig
-from ...ellipse import EllipseConfig
 from ...errors import InputError
-from ...profile import CleaningConfig
-from ...pso_alm import HybridConfig
+from ...profile.cleaning import CleaningConfig
+from .arc import ArcConfig
+from .ellipse import EllipseConfig
+from .pso_alm import HybridConfig
 from .refine import RefineConfig
 
 #: Fewest fitted samples the hand-eye plus axis can be solved from with any margin.
@@ -36,7 +36,7 @@ class CylinderConfig:
     cleaning : CleaningConfig
     ellipse : EllipseConfig
     arc : ArcConfig
-        Finding the arc among the planes of the scene (:mod:`linelaser_calib.core.arc`).
+        Finding the arc among the planes of the scene (:mod:`.arc`).
     hybrid : HybridConfig
         The global solve of the ``paper`` method.
     seed_hybrid : HybridConfig

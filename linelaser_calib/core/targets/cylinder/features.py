@@ -1,5 +1,5 @@
 """Per profile: the cleaned points and a RANSAC ellipse (the cylinder's cut by the laser plane),
-found among the planes of the scene (:mod:`linelaser_calib.core.arc`)."""
+found among the planes of the scene (:mod:`linelaser_calib.core.targets.cylinder.arc`)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...arc import (
+from ...errors import InputError, ProfileRejected
+from ...geometry import FloatArray
+from ...profile.cleaning import clean_profile
+from ...types import Rejection, Sample, SampleFit
+from ..base import Progress, extract_each, sample_rng
+from .arc import (
     ArcFit,
     fit_arc_in_scene,
     grazing_ends_biased,
@@ -15,12 +20,8 @@ from ...arc import (
     trimming_note,
     without_grazing_ends,
 )
-from ...errors import InputError, ProfileRejected
-from ...geometry import FloatArray
-from ...profile import clean_profile
-from ...types import EllipseFit, Rejection, Sample, SampleFit
-from ..base import Progress, extract_each, sample_rng
 from .config import CylinderConfig
+from .ellipse import EllipseFit
 
 
 @dataclass

@@ -44,9 +44,9 @@ import numpy as np
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, orthonormal_basis
 from ...planning import UP, PlanConstraints, per_sample_information, required_radius
-from ...types import Cylinder
 from .config import CylinderConfig
 from .features import FittedSample
+from .model import Cylinder
 from .refine import build_problem, initial_state
 
 #: Cut-angle ranges of long-axis (α) and short-axis (β) profiles, rad (paper appendix).

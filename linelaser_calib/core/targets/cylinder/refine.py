@@ -91,8 +91,6 @@ from ...geometry import (
     right_jacobian_so3,
     transform_from_rotation_translation,
 )
-from ...joint_calibration import JointOutcome, KinematicSetup, MultiScanProblem, solve_joint
-from ...kinematics import forward_kinematics
 from ...observability import (
     Observability,
     ObservabilityConfig,
@@ -100,6 +98,8 @@ from ...observability import (
     pose_geometry,
 )
 from ...quantiles import chi2_upper_quantile
+from ...robot.joint_calibration import JointOutcome, KinematicSetup, MultiScanProblem, solve_joint
+from ...robot.kinematics import forward_kinematics
 from ...solver import (
     LOSSES,
     N_HAND_EYE,
@@ -115,7 +115,7 @@ from ...solver import (
     solve_with_rejection,
     variance_factors,
 )
-from ...types import Cylinder
+from .model import Cylinder
 
 #: Axis parameters (a, b) in the global block, after the hand-eye's 6.
 N_AXIS = 4
@@ -1243,10 +1243,10 @@ def refine_kinematics(
 
     The same cylinder problem, its flange poses the forward kinematics of each sample's
     joint vector with the identifiable kinematic corrections estimated
-    (:func:`~linelaser_calib.core.joint_calibration.solve_joint`); the per-sample pose
+    (:func:`~linelaser_calib.core.robot.joint_calibration.solve_joint`); the per-sample pose
     corrections have the arm's repeatability as prior (``setup.config``). Several scans
     (cylinder placements scanned by the same arm) are solved together
-    (:class:`~linelaser_calib.core.joint_calibration.MultiScanProblem`: one hand-eye, one
+    (:class:`~linelaser_calib.core.robot.joint_calibration.MultiScanProblem`: one hand-eye, one
     set of corrections, a cylinder per scan).
 
     Parameters

@@ -10,10 +10,11 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ...geometry import FloatArray, apply_transform
-from ...residuals import axis_extent
-from ...types import Cylinder, SampleFit
+from ...types import SampleFit
 from ..base import Shape, mm_text, plain_floats, read_vector
+from .model import Cylinder
 from .refine import measured_to_true
+from .residuals import axis_extent
 
 
 @dataclass(frozen=True)

@@ -33,13 +33,10 @@ from typing import Any
 
 import numpy as np
 
-from ...arc import radius_mismatch
-from ...cylinder_model import centre_distances
 from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
-from ...joint_calibration import KinematicSetup
-from ...pso_alm import PaperSolution, solve_pso_galm
-from ...types import Cylinder, Rejection, Sample
+from ...robot.joint_calibration import KinematicSetup
+from ...types import Rejection, Sample
 from ..base import (
     Option,
     Placement,
@@ -50,9 +47,12 @@ from ..base import (
     mismatch_message,
     rejection_digest,
 )
+from .arc import radius_mismatch
 from .config import CylinderConfig
 from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
+from .model import Cylinder, centre_distances
 from .plan import CylinderPlanner
+from .pso_alm import PaperSolution, solve_pso_galm
 from .refine import (
     JointScan,
     RefineResult,
@@ -144,7 +144,7 @@ def _subset_start(features: list[FittedSample], context: SolveContext) -> _Subse
 
 def profile_noise_m(features: list[FittedSample], floor_m: float) -> float:
     """The point noise the profiles themselves show, m: the larger of the median noise
-    estimated from each profile's scan line (:mod:`linelaser_calib.core.segmentation`) and
+    estimated from each profile's scan line (:mod:`linelaser_calib.core.profile.segmentation`) and
     the median RMS of each profile's own ellipse fit, or ``floor_m`` without features.
 
     A model-free measure: a cylinder that explains the data leaves point residuals near it,

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 from .config import GridStep, KnownPointConfig
-from .diagnosis import KnownPointObservability, analyse_known_point
 from .features import CornerSample, extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
+from .observability import KnownPointObservability, analyse_known_point
 from .paper import paper_correction, scatter_delta_r, weld_points_base
 from .refine import KnownPointRefinement, refine_known_point
 from .section import KnownPoint

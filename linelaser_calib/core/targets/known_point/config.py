@@ -7,10 +7,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...corner import CornerConfig
 from ...errors import InputError
 from ...geometry import FloatArray
-from ...profile import CleaningConfig
+from ...profile.cleaning import CleaningConfig
+from ...profile.corner import CornerConfig
 
 
 @dataclass(frozen=True)

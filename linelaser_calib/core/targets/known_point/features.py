@@ -6,10 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...corner import CornerFit, fit_corner
 from ...errors import ProfileRejected
 from ...geometry import FloatArray
-from ...profile import clean_profile
+from ...profile.cleaning import clean_profile
+from ...profile.corner import CornerFit, fit_corner
 from ...types import Rejection, Sample, SampleFit
 from ..base import Progress, extract_each
 from .config import KnownPointConfig

@@ -1,7 +1,7 @@
 """Hand-eye from one known point seen from many poses (the weld-seam paper, and better).
 
 A weld-seam point p (taught in the base frame with the tool tip, or unknown) is scanned from
-M flange poses; each profile is a V whose corner (:mod:`linelaser_calib.core.corner`) is p in
+M flange poses; each profile is a V whose corner (:mod:`~...profile.corner`) is p in
 the sensor frame, s_i = (x_i, 0, z_i). With the hand-eye X = (R_X, t_X) (``T_flange_sensor``)
 and the reported flange poses (R_i, t_i) (``T_base_flange``)::
 
@@ -111,9 +111,9 @@ from ..base import (
     rejection_digest,
 )
 from .config import KnownPointConfig
-from .diagnosis import KnownPointObservability, analyse_known_point
 from .features import CornerSample, extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
+from .observability import KnownPointObservability, analyse_known_point
 from .paper import paper_correction, weld_points_base
 from .refine import KnownPointRefinement, paper_information, refine_known_point
 from .section import KnownPoint, read_known_point_section

@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...corner import CornerConfig
 from ...errors import InputError
-from ...profile import CleaningConfig
+from ...profile.cleaning import CleaningConfig
+from ...profile.corner import CornerConfig
 from ...types import Rejection, Sample
 from ..known_point import CornerSample, KnownPointConfig, extract_corner
 

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from linelaser_calib.core.errors import InputError, ProfileRejected
-from linelaser_calib.core.profile import MAD_TO_SIGMA
+from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA
 from linelaser_calib.core.types import BoolArray, FloatArray
 
 #: Rounds of "refit on the inliers, recompute the threshold and the inliers".

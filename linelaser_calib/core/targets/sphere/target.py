@@ -36,7 +36,7 @@ from linelaser_calib.core.errors import (
 )
 from linelaser_calib.core.geometry import FloatArray, apply_transform
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
-from linelaser_calib.core.profile import MAD_TO_SIGMA, clean_profile
+from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, solve_with_rejection
 from linelaser_calib.core.targets.base import (
     Option,

@@ -37,9 +37,9 @@ from enum import Enum
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
-from .geometry import rotvec_from_matrix
-from .types import FlangePose, FloatArray
+from ..errors import InputError
+from ..geometry import rotvec_from_matrix
+from ..types import FlangePose, FloatArray
 
 _UNIT = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 

@@ -1,12 +1,12 @@
 """The cylinder's arc in a cluttered profile: pick it among the curved segments and fit it.
 
-:func:`~linelaser_calib.core.segmentation.segment_profile` sets the planes of the scene
+:func:`~linelaser_calib.core.profile.segmentation.segment_profile` sets the planes of the scene
 aside and measures the noise; :func:`fit_arc_in_scene` then
 
 1. scales the RANSAC inlier threshold to the measured noise: at least
    ``ARC_NOISE_SIGMAS`` sigmas, never below the configured threshold (which suits a
    5-10 um profiler);
-2. fits an ellipse (:func:`~linelaser_calib.core.ellipse.fit_ellipse_ransac`) to each
+2. fits an ellipse (:func:`~.ellipse.fit_ellipse_ransac`) to each
    curved candidate with enough points, its share rule applied to the candidate's own
    points rather than to the whole profile, and keeps the fit with the most inliers;
 3. polishes the ellipse on the arc without its grazing-angle ends, the inliers seen at
@@ -27,17 +27,18 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ...errors import ProfileRejected
+from ...profile.cleaning import MAD_TO_SIGMA
+from ...profile.segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
+from ...types import BoolArray, FloatArray
 from .ellipse import (
     EllipseConfig,
+    EllipseFit,
     centre_from_conic,
     fit_ellipse_ransac,
     refine_conic,
     sampson_distance,
 )
-from .errors import ProfileRejected
-from .profile import MAD_TO_SIGMA
-from .segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
-from .types import BoolArray, EllipseFit, FloatArray
 
 #: RANSAC inlier threshold in measured noise sigmas (a hypothesis from five noisy points
 #: must still collect the whole arc).

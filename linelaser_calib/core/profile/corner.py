@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import InputError, ProfileRejected
-from .types import BoolArray, FloatArray
+from ..errors import InputError, ProfileRejected
+from ..types import BoolArray, FloatArray
 
 #: Rounds of "refit, re-assign" after RANSAC.
 MAX_REFIT_ROUNDS = 10

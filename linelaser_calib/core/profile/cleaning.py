@@ -42,8 +42,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError, ProfileRejected
-from .types import BoolArray, FloatArray
+from ..errors import InputError, ProfileRejected
+from ..types import BoolArray, FloatArray
 
 IntArray = NDArray[np.intp]
 

@@ -53,7 +53,27 @@ from numpy.typing import ArrayLike
 
 from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import check_transform, project_to_so3
-from linelaser_calib.core.types import Cylinder, FloatArray
+from linelaser_calib.core.types import FloatArray
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """A cylinder in the base frame.
+
+    Attributes
+    ----------
+    point : ndarray, shape (3,)
+        A point on the axis, m (the one closest to the base origin).
+    direction : ndarray, shape (3,)
+        Unit axis direction.
+    radius : float
+        m.
+    """
+
+    point: FloatArray
+    direction: FloatArray
+    radius: float
+
 
 #: Number of unknowns in the paper's vector x (eq. 10).
 N_PARAMS = 15

@@ -55,16 +55,9 @@ from typing import Generic, Protocol, Self, TypeVar
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import InputError, SolverError
-from .geometry import FloatArray, right_jacobian_so3
-from .kinematics import (
-    JointStates,
-    KinematicCorrections,
-    KinematicModel,
-    forward_kinematics,
-    parameter_jacobian,
-)
-from .solver import (
+from ..errors import InputError, SolverError
+from ..geometry import FloatArray, right_jacobian_so3
+from ..solver import (
     N_HAND_EYE,
     Linearisation,
     Residuals,
@@ -72,6 +65,13 @@ from .solver import (
     SolverConfig,
     normal_equations,
     solve,
+)
+from .kinematics import (
+    JointStates,
+    KinematicCorrections,
+    KinematicModel,
+    forward_kinematics,
+    parameter_jacobian,
 )
 
 State = TypeVar("State")

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .errors import InputError
-from .geometry import apply_transform, invert_transform, transform_from_rotation_translation
-from .types import FloatArray
+from ...errors import InputError
+from ...geometry import apply_transform, invert_transform, transform_from_rotation_translation
+from ...types import FloatArray
 
 #: A ray meeting the light plane at a smaller |cos| of the angle to its normal than this
 #: (relative) is taken as parallel to the plane and gives NaN.

@@ -24,7 +24,7 @@ Choices where the paper is silent (documented defaults):
 Departures, each with its switch in :class:`HybridConfig`:
 
 1. ``normalised=True`` (default): the bounded cost with N/|N|
-   (:mod:`~linelaser_calib.core.cylinder_model`, departure 1); ``False`` is the literal
+   (:mod:`~linelaser_calib.core.targets.cylinder.model`, departure 1); ``False`` is the literal
    eq. 12, whose GALM runs diverge. A GALM run flagged as diverged never becomes g_best.
 2. ``PsoConfig.stagnation_generations`` (default 6, 0 disables): the hybrid also stops after
    that many generations without improvement of f_best (the paper only has n_max and ψ,
@@ -56,7 +56,7 @@ The paper's algorithm is ``HybridConfig(faithful=True, box="paper")`` (with the 
 add ``normalised=False`` for the literal one).
 
 Units: configs are SI (ψ in m²); inside, the problem's length unit applies
-(:class:`~linelaser_calib.core.cylinder_model.CentreAxisProblem`). GALM works on f in that
+(:class:`~linelaser_calib.core.targets.cylinder.model.CentreAxisProblem`). GALM works on f in that
 unit: σ0 and the divergence bound are in unit², which with the default unit (the RMS centre
 norm) makes them scale-free.
 """
@@ -71,18 +71,19 @@ from typing import Literal, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from linelaser_calib.core.cylinder_model import (
+from linelaser_calib.core.errors import DegenerateError, InputError, SolverError
+from linelaser_calib.core.geometry import matrix_from_rotvec, orthonormal_basis
+from linelaser_calib.core.targets.cylinder.model import (
     DIRECTION,
     N_PARAMS,
     POINT,
     TRANS,
     CentreAxisProblem,
+    Cylinder,
     calibration_from_x,
     x_from_calibration,
 )
-from linelaser_calib.core.errors import DegenerateError, InputError, SolverError
-from linelaser_calib.core.geometry import matrix_from_rotvec, orthonormal_basis
-from linelaser_calib.core.types import Cylinder, FloatArray
+from linelaser_calib.core.types import FloatArray
 
 #: The paper's ψ for the noisy simulation (0.5 mm²), in m².
 PAPER_PSI_M2 = 0.5e-6
@@ -226,7 +227,7 @@ def galm(
     x0 : array-like, shape (n,)
         Initial point.
     problem : ConstrainedProblem
-        For example a :class:`~linelaser_calib.core.cylinder_model.CentreAxisProblem`.
+        For example a :class:`~linelaser_calib.core.targets.cylinder.model.CentreAxisProblem`.
     config : GalmConfig
     multipliers0 : array-like, shape (l,), optional
         λ0; zeros by default.

@@ -41,9 +41,39 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError, ProfileRejected
-from .profile import MAD_TO_SIGMA
-from .types import BoolArray, EllipseFit, FloatArray
+from ...errors import InputError, ProfileRejected
+from ...profile.cleaning import MAD_TO_SIGMA
+from ...types import BoolArray, FloatArray
+
+
+@dataclass(frozen=True)
+class EllipseFit:
+    """A RANSAC ellipse fitted to one profile in the sensor x-z plane.
+
+    Attributes
+    ----------
+    centre_xz : ndarray, shape (2,)
+        Ellipse centre (x_c, z_c) in the sensor frame, m (paper eq. 5).
+    conic : ndarray, shape (6,)
+        (A, B, C, D, E, F) of A x^2 + B xz + C z^2 + D x + E z + F = 0, in m units,
+        scaled so that F = 1 when F is not ~0 (paper eq. 4).
+    semi_axes : ndarray, shape (2,)
+        Semi-major and semi-minor axis lengths, m.
+    inliers : ndarray of bool, shape (N,)
+        Inlier mask over the cleaned points handed to the fit.
+    coverage_rad : float
+        Angular extent of the inlier arc in the ellipse's parametric angle, rad.
+    rms_m : float
+        RMS algebraic-to-geometric residual of the inliers, m.
+    """
+
+    centre_xz: FloatArray
+    conic: FloatArray
+    semi_axes: FloatArray
+    inliers: BoolArray
+    coverage_rad: float
+    rms_m: float
+
 
 #: Points in a minimal sample: five points fix a conic.
 SAMPLE_SIZE = 5

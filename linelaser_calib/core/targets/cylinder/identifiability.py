@@ -32,9 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .geometry import orthonormal_basis
-from .kinematics import KinematicModel, forward_kinematics, parameter_jacobian
-from .types import Cylinder, FloatArray
+from ...geometry import orthonormal_basis
+from ...robot.kinematics import KinematicModel, forward_kinematics, parameter_jacobian
+from ...types import FloatArray
+from .model import Cylinder
 
 #: Names of the hand-eye and cylinder unknowns, after the kinematic parameters.
 HAND_EYE_NAMES = tuple(f"hand_eye.{k}" for k in ("tx", "ty", "tz", "rx", "ry", "rz"))

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cylinder_model import centre_distances
-from .geometry import FloatArray, apply_transform, check_transform, orthonormal_basis
-from .types import Cylinder, SampleFit
+from ...geometry import FloatArray, apply_transform, check_transform, orthonormal_basis
+from ...types import SampleFit
+from .model import Cylinder, centre_distances
 
 
 @dataclass(frozen=True)

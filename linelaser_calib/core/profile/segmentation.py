@@ -7,7 +7,7 @@ sphere's circle, a seam's V corner) among the rest, wherever it lies and however
 share of the profile. Pure numpy.
 
 Steps of :func:`segment_profile`, on points in scan-line order (sorted by ray angle,
-:func:`~linelaser_calib.core.profile.scan_order`):
+:func:`~linelaser_calib.core.profile.cleaning.scan_order`):
 
 1. **Noise.** :func:`estimate_noise` measures the sensor noise from the data: the
    distance of each point from the chord through its two neighbours is, on a smooth curve,
@@ -32,7 +32,7 @@ Steps of :func:`segment_profile`, on points in scan-line order (sorted by ray an
    ``min_segment_points`` points, are the candidates for the target's feature.
 
 Each target's fitter picks its feature from the result: the cylinder fits an ellipse to
-each curved segment (:mod:`~linelaser_calib.core.arc`); a sphere's circle is found the
+each curved segment (:mod:`~..targets.cylinder.arc`); a sphere's circle is found the
 same way; a seam's V corner is where two adjacent straight segments meet (their line fits
 are in the result). The noise estimate scales every target's inlier thresholds.
 
@@ -49,9 +49,9 @@ from enum import Enum
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import InputError
-from .profile import MAD_TO_SIGMA, scan_order
-from .types import FloatArray
+from ..errors import InputError
+from ..types import FloatArray
+from .cleaning import MAD_TO_SIGMA, scan_order
 
 IntArray = NDArray[np.intp]
 

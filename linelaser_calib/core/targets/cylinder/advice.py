@@ -27,15 +27,15 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .geometry import FloatArray, exp_so3
-from .identifiability import CylinderScan, cylinder_scan_jacobian
-from .joint_calibration import (
+from ...geometry import FloatArray, exp_so3
+from ...robot.joint_calibration import (
     JointCalibrationConfig,
     KinematicIdentifiability,
     kinematic_identifiability,
 )
-from .kinematics import KinematicModel, forward_kinematics, inverse_kinematics
-from .types import Cylinder
+from ...robot.kinematics import KinematicModel, forward_kinematics, inverse_kinematics
+from .identifiability import CylinderScan, cylinder_scan_jacobian
+from .model import Cylinder
 
 #: Share of the views that the arm must reach for a move to be proposed.
 MIN_REACHED = 0.6
