@@ -21,6 +21,7 @@ from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SolveContext
 from linelaser_calib.core.targets.known_point import CornerSample
+from linelaser_calib.core.targets.line.config import LineConfig
 from linelaser_calib.core.targets.line.features import LineFeatureConfig, extract_line_feature
 from linelaser_calib.core.targets.line.model import (
     Line,
@@ -28,7 +29,6 @@ from linelaser_calib.core.targets.line.model import (
     retract_line,
     solve_line_linear,
 )
-from linelaser_calib.core.targets.line.refine import LineConfig
 from linelaser_calib.core.types import Rejection, Sample
 from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
 from linelaser_calib.sim.line import LineSimulatedData, line_scenario_from_preset, simulate_line

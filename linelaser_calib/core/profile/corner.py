@@ -27,7 +27,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import InputError, ProfileRejected
-from ..types import BoolArray, FloatArray
+from ..types import BoolArray, FloatArray, Rejection, Sample, SampleFit
+from .cleaning import CleaningConfig, clean_profile
 
 #: Rounds of "refit, re-assign" after RANSAC.
 MAX_REFIT_ROUNDS = 10
@@ -310,4 +311,74 @@ def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Genera
         inliers=masks,
         bend_rad=bend,
         rms_m=np.array([line.rms for line in lines]),
+    )
+
+
+@dataclass(frozen=True)
+class CornerSample:
+    """A sample whose profile gave a weld-seam corner.
+
+    Attributes
+    ----------
+    index : int
+        Profile index in the input stream.
+    stamp_ns : int
+    T_base_flange : ndarray, shape (4, 4)
+        Flange pose as paired (recorded).
+    corner_xz : ndarray, shape (2,)
+        Corner in the sensor x-z plane, m.
+    covariance_xz : ndarray, shape (2, 2)
+        From the line fits, m².
+    points : ndarray, shape (K, 3)
+        The two lines' inlier points, sensor frame, m.
+    """
+
+    index: int
+    stamp_ns: int
+    T_base_flange: FloatArray
+    corner_xz: FloatArray
+    covariance_xz: FloatArray
+    points: FloatArray
+
+    def record(self) -> SampleFit:
+        """The plain record kept in the result (the V corner as the feature point)."""
+        return SampleFit(self.index, self.stamp_ns, self.T_base_flange, self.points, self.corner_xz)
+
+
+def extract_corner_sample(
+    sample: Sample, cleaning: CleaningConfig, corner: CornerConfig, rng: np.random.Generator
+) -> CornerSample | Rejection:
+    """Clean one sample's profile and fit its V corner; a rejection says why it failed.
+
+    Shared by the targets that see a V (the known point, the straight seam).
+
+    Parameters
+    ----------
+    sample : Sample
+        Profile (sensor frame, m) paired with its flange pose.
+    cleaning : CleaningConfig
+    corner : CornerConfig
+    rng : numpy.random.Generator
+        For the RANSAC line fits.
+
+    Returns
+    -------
+    CornerSample or Rejection
+        A rejection has stage ``cleaning`` or ``corner``.
+    """
+    try:
+        cleaned = clean_profile(sample.points, cleaning)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
+    try:
+        fit = fit_corner(cleaned.points_xz, corner, rng)
+    except ProfileRejected as exc:
+        return Rejection(sample.index, sample.stamp_ns, "corner", str(exc))
+    return CornerSample(
+        sample.index,
+        sample.stamp_ns,
+        np.asarray(sample.T_base_flange, dtype=np.float64),
+        fit.corner_xz,
+        fit.covariance_xz,
+        cleaned.points[fit.inliers.any(axis=0)],
     )

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from ...profile.corner import CornerSample
 from .config import GridStep, KnownPointConfig
-from .features import CornerSample, extract_corner, extract_corners
+from .features import extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
 from .observability import KnownPointObservability, analyse_known_point
 from .paper import paper_correction, scatter_delta_r, weld_points_base

@@ -98,6 +98,7 @@ from numpy.typing import ArrayLike
 
 from ...errors import DegenerateError, InputError, ModelMismatch
 from ...geometry import FloatArray, check_transform
+from ...profile.corner import CornerSample
 from ...quantiles import chi2_upper_quantile
 from ...solver import Flag, solve_with_rejection
 from ...types import Rejection, Sample
@@ -111,7 +112,7 @@ from ..base import (
     rejection_digest,
 )
 from .config import KnownPointConfig
-from .features import CornerSample, extract_corner, extract_corners
+from .features import extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
 from .observability import KnownPointObservability, analyse_known_point
 from .paper import paper_correction, weld_points_base

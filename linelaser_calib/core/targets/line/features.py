@@ -3,7 +3,7 @@
 Two kinds of input:
 
 - A whole profile of a V or fillet joint: the V-corner fit of the known-point target
-  (:func:`linelaser_calib.core.targets.known_point.extract_corner`: cleaning, two RANSAC lines,
+  (:func:`~...profile.corner.extract_corner_sample`: cleaning, two RANSAC lines,
   their intersection and its covariance).
 - Feature points only, as seam trackers publish them: a message with at most
   ``max_feature_points`` finite points. One point is the seam point. With three or more,
@@ -23,9 +23,8 @@ import numpy as np
 
 from ...errors import InputError
 from ...profile.cleaning import CleaningConfig
-from ...profile.corner import CornerConfig
+from ...profile.corner import CornerConfig, CornerSample, extract_corner_sample
 from ...types import Rejection, Sample
-from ..known_point import CornerSample, KnownPointConfig, extract_corner
 
 #: Default largest number of finite points of a feature-point message.
 MAX_FEATURE_POINTS = 8
@@ -128,6 +127,4 @@ def extract_line_feature(
         )
     if count <= config.max_feature_points:
         return _feature_corner(sample, finite, config)
-    return extract_corner(
-        sample, KnownPointConfig(cleaning=config.cleaning, corner=config.corner), rng
-    )
+    return extract_corner_sample(sample, config.cleaning, config.corner, rng)

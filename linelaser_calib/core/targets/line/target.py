@@ -21,33 +21,33 @@ further from the line than the sensor and robot noise explain.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
-from typing import Any, ClassVar
+from dataclasses import replace
+from typing import Any
 
 import numpy as np
 
 from ...errors import DegenerateError, ModelMismatch
-from ...geometry import apply_transform
+from ...profile.corner import CornerSample
 from ...quantiles import chi2_upper_quantile
 from ...solver import Flag, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
     Option,
     Progress,
-    Shape,
     SolveContext,
     TargetSolution,
     extract_each,
     mismatch_message,
-    plain_floats,
     read_vector,
     rejection_digest,
 )
-from ..known_point import CornerSample, KnownPointConfig, paper_correction, weld_points_base
+from ..known_point import KnownPointConfig, paper_correction, weld_points_base
+from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
-from .refine import LineConfig, LineRefinement, refine_line
+from .refine import LineRefinement, refine_line
+from .section import LineSection
 
 #: A default-method fit whose RMS residual exceeds this many times the noise the model
 #: expects is refused.
@@ -58,68 +58,6 @@ PAPER_MISMATCH_FACTOR = 30.0
 #: Typical distance from the flange to a corner, m: turns a flange rotation error into a
 #: corner displacement for the expected noise.
 FLANGE_LEVER_M = 0.2
-
-
-@dataclass(frozen=True)
-class LineSection:
-    """The ``line`` section of a result: the seam in the base frame.
-
-    Attributes
-    ----------
-    line : Line
-        Point nearest the base origin (m) and unit direction.
-    """
-
-    key: ClassVar[str] = "line"
-    title: ClassVar[str] = "straight line"
-
-    line: Line
-
-    def to_mapping(self, base_frame: str) -> dict[str, Any]:
-        """``{frame, point: [x, y, z] (m), direction: [x, y, z]}``."""
-        return {
-            "frame": base_frame,
-            "point": plain_floats(self.line.point),
-            "direction": plain_floats(self.line.direction),
-        }
-
-    def quality_entries(self) -> dict[str, Any]:
-        """No further quality entries."""
-        return {}
-
-    def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
-        """Distance (1,) of the sample's corner, mapped into the base frame, from the line, m."""
-        x, z = fit.feature_xz
-        v = apply_transform(T_base_sensor, np.array([[x, 0.0, z]])) - self.line.point
-        d = self.line.direction
-        return np.asarray(np.linalg.norm(v - np.outer(v @ d, d), axis=1))
-
-    def given_settings(self) -> dict[str, Any]:
-        """Nothing: a line fixes no setting of a later calibration."""
-        return {}
-
-    def sensor_points(self, points: FloatArray) -> FloatArray:
-        """The points unchanged: this target estimates nothing of the sensor itself."""
-        return points
-
-    def describe(self, base_frame: str) -> str:
-        """One line, mm."""
-        p, d = self.line.point * 1e3, self.line.direction
-        return (
-            f"seam line ({base_frame}): through ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm "
-            f"along ({d[0]:+.4f}, {d[1]:+.4f}, {d[2]:+.4f})"
-        )
-
-    def residual_kind(self, method: str) -> str:
-        """What a sample's residual measures."""
-        return "distance of the corner (recorded pose) from the seam line"
-
-    def shapes(self, points_base: FloatArray) -> list[Shape]:
-        """The seam as a segment spanning the points' extent along it."""
-        along = (np.asarray(points_base) - self.line.point) @ self.line.direction
-        lo, hi = (float(np.min(along)), float(np.max(along))) if along.size else (-0.05, 0.05)
-        ends = self.line.point + np.outer([lo, hi], self.line.direction)
-        return [Shape("line", ends, 5e-4, "line", (1.0, 0.5, 0.1, 0.8))]
 
 
 def _stack(features: list[CornerSample]) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -9,7 +9,8 @@ Modules: :mod:`.circle` (per-profile RANSAC circle and the profile's own noise),
 from __future__ import annotations
 
 from linelaser_calib.core.targets.sphere.config import SphereConfig
-from linelaser_calib.core.targets.sphere.target import SphereFeature, SphereSection, SphereTarget
+from linelaser_calib.core.targets.sphere.section import SphereSection
+from linelaser_calib.core.targets.sphere.target import SphereFeature, SphereTarget
 
 #: The registered sphere target.
 TARGET = SphereTarget()
