@@ -1,4 +1,6 @@
-"""The layering the package promises: core is pure numpy/scipy/opencv, nodes are the only ROS."""
+"""The layering the package promises: core is pure numpy/scipy/opencv, nodes are the only ROS,
+no import circle anywhere (``TYPE_CHECKING`` imports counted), and the ground floor of core
+imports nothing above it."""
 
 from __future__ import annotations
 
@@ -11,7 +13,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-CORE = sorted((ROOT / "linelaser_calib" / "core").glob("*.py"))
+CORE = sorted((ROOT / "linelaser_calib" / "core").rglob("*.py"))
+PACKAGES = ("linelaser_calib", "msg_adapters")
 FORBIDDEN_IN_CORE = {"rclpy", "rosbags", "mcap", "mcap_ros2", "yaml", "matplotlib", "msg_adapters"}
 
 
@@ -29,7 +32,7 @@ def imported_roots(path: Path) -> set[str]:
     return roots
 
 
-@pytest.mark.parametrize("path", CORE, ids=lambda p: p.name)
+@pytest.mark.parametrize("path", CORE, ids=lambda p: str(p.relative_to(ROOT)))
 def test_core_imports_no_ros_io_or_plotting(path: Path) -> None:
     bad = {
         r
@@ -37,6 +40,87 @@ def test_core_imports_no_ros_io_or_plotting(path: Path) -> None:
         if r in FORBIDDEN_IN_CORE or r.startswith("linelaser_calib.")
     }
     assert not bad, f"{path.name} imports {sorted(bad)}"
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def own_modules() -> dict[str, Path]:
+    return {module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+
+
+def imported_modules(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The package's own modules that ``path`` imports, wherever the import sits (in a
+    function, under ``TYPE_CHECKING``): ``from pkg import sub`` counts as ``pkg.sub``."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            for alias in node.names:
+                sub = f"{module}.{alias.name}"
+                found.add(sub if sub in modules else module)
+    return {m for m in found if m in modules and m != name}
+
+
+def import_graph() -> dict[str, set[str]]:
+    modules = own_modules()
+    return {name: imported_modules(name, path, modules) for name, path in modules.items()}
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one module (or a self-loop)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    names = sorted(graph)
+    index = {n: i for i, n in enumerate(names)}
+    edges = [(index[a], index[b]) for a in names for b in graph[a]]
+    rows, cols = zip(*edges, strict=True) if edges else ((), ())
+    matrix = coo_matrix(([1] * len(edges), (rows, cols)), shape=(len(names), len(names)))
+    _, labels = connected_components(matrix, directed=True, connection="strong")
+    groups: dict[int, list[str]] = {}
+    for name, label in zip(names, labels, strict=True):
+        groups.setdefault(int(label), []).append(name)
+    return [g for g in groups.values() if len(g) > 1]
+
+
+def test_no_import_circle_in_the_package_counting_type_checking_imports() -> None:
+    found = circles(import_graph())
+    assert not found, f"import circles: {found}"
+
+
+def test_the_circle_finder_sees_a_circle_through_type_checking() -> None:
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert circles(graph) == [["a", "b", "c"]]
+
+
+#: The ground floor of core: records and helpers every stage uses; they import no other
+#: module of the package but each other (and only downwards in this order).
+GROUND_FLOOR = ("errors", "geometry", "types")
+
+
+def test_the_ground_floor_of_core_imports_nothing_above_it() -> None:
+    graph = import_graph()
+    floor = {f"linelaser_calib.core.{m}" for m in GROUND_FLOOR}
+    for module in floor:
+        assert graph[module] <= floor, f"{module} imports {sorted(graph[module] - floor)}"
+
+
+def test_the_solver_and_the_shared_profile_code_know_no_target() -> None:
+    graph = import_graph()
+    for name, imports in graph.items():
+        if name.startswith(("linelaser_calib.core.solver", "linelaser_calib.core.profile")):
+            targets = {m for m in imports if m.startswith("linelaser_calib.core.targets")}
+            assert not targets, f"{name} imports {sorted(targets)}"
 
 
 def test_core_pipeline_loads_without_ros_or_bag_libraries() -> None:

@@ -21,9 +21,6 @@ from linelaser_calib.core.targets.cylinder.pso_alm import (
     search_box,
     solve_pso_galm,
 )
-from linelaser_calib.core.targets.cylinder.pso_alm import (
-    _levenberg_marquardt as levenberg_marquardt,
-)
 
 
 @dataclass(frozen=True)
@@ -191,21 +188,3 @@ def test_accept_early_seed_stops_at_the_first_accepted_polish() -> None:
     assert rotation_error < 1e-7 and translation_error < 1e-7 * MM
     with pytest.raises(InputError):
         HybridConfig(accept_early=True, faithful=True)
-
-
-def test_the_polishing_levenberg_marquardt_finds_scipys_minimum() -> None:
-    """The seed's polish (own LM, so that a calibration need not import scipy.optimize)
-    reaches the minimum MINPACK's LM reaches, on a noisy nonlinear fit from a poor start."""
-    from scipy.optimize import least_squares
-
-    rng = np.random.default_rng(5)
-    t = np.linspace(0.0, 4.0, 60)
-    y = 2.5 * np.exp(-1.3 * t) * np.cos(3.1 * t + 0.4) + 0.01 * rng.normal(size=t.size)
-
-    def residuals(p: np.ndarray) -> np.ndarray:
-        return np.asarray(p[0] * np.exp(-p[1] * t) * np.cos(p[2] * t + p[3]) - y)
-
-    start = np.array([1.0, 1.0, 2.8, 0.0])
-    ours = levenberg_marquardt(residuals, start)
-    theirs = least_squares(residuals, start, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15).x
-    np.testing.assert_allclose(ours, theirs, rtol=1e-7, atol=1e-9)

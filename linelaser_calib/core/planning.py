@@ -74,7 +74,6 @@ import numpy as np
 from .errors import DegenerateError, InputError
 from .geometry import FloatArray, invert_transform
 from .solver import N_HAND_EYE, Linearisation, Residuals, SolverConfig, normal_equations
-from .targets import all_targets
 from .targets.base import Shape, Target
 from .types import BoolArray, Sample
 
@@ -659,10 +658,9 @@ def plannable(target: Target[Any]) -> Plannable:
     """
     planner: Plannable | None = getattr(target, "planner", None)
     if planner is None:
-        able = [t.name for t in all_targets() if getattr(t, "planner", None) is not None]
         raise InputError(
-            f"poses cannot be planned for the {target.title} target yet; they can for: "
-            + ", ".join(able)
+            f"poses cannot be planned for the {target.title} target yet: record its poses by "
+            "hand (the recording guide gives the rules)"
         )
     return planner
 

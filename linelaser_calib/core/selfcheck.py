@@ -92,11 +92,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.special import chdtri, ndtri, stdtrit
 
 from .errors import CalibrationError
 from .forked import map_forked
 from .geometry import FloatArray, rotvec_from_matrix
-from .quantiles import chi2_upper_quantile, normal_quantile, student_t_quantile
 from .targets.base import TargetSolution
 from .types import SampleFit
 
@@ -446,14 +446,14 @@ def region_limit(dof: int) -> float:
     axes as one (they move together when one region pulls the estimate) keeps the false
     alarm at or below :data:`REGION_FALSE_ALARM`.
     """
-    return float(np.sqrt(chi2_upper_quantile(dof, REGION_FALSE_ALARM) / dof))
+    return float(np.sqrt(chdtri(dof, REGION_FALSE_ALARM) / dof))
 
 
 def t_factor(dof: int) -> float:
     """Student-t over normal quantile at :data:`T_COVERAGE` (two-sided) for a 1σ estimated
     with ``dof`` degrees of freedom (2.78 / 1.96 = 1.42 for 4)."""
     q = 0.5 + T_COVERAGE / 2.0
-    return float(student_t_quantile(dof, q) / normal_quantile(q))
+    return float(stdtrit(dof, q) / ndtri(q))
 
 
 def honest_sigma(

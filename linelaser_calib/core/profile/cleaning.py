@@ -41,6 +41,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError, ProfileRejected
 from ..types import BoolArray, FloatArray
@@ -183,29 +185,6 @@ def scan_order(xz: ArrayLike) -> IntArray:
     return np.asarray(np.argsort(key, kind="stable"), dtype=np.intp)
 
 
-def connected_components(n: int, row: IntArray, col: IntArray) -> IntArray:
-    """A label (n,) per node of the undirected graph with edges (row[i], col[i]): equal for
-    the nodes of one connected component, different between components.
-
-    Every node points to a parent (at first itself); each round hooks the root of every edge's
-    larger-rooted end to the smaller root and then shortens every path to its root (pointer
-    jumping), until no edge joins two roots: a few rounds for the chains of a scan line.
-    """
-    parent = np.arange(n, dtype=np.intp)
-    while True:
-        a, b = parent[row], parent[col]
-        joins = a != b
-        if not np.any(joins):
-            return parent
-        low, high = np.minimum(a[joins], b[joins]), np.maximum(a[joins], b[joins])
-        np.minimum.at(parent, high, low)
-        while True:
-            jumped = parent[parent]
-            if np.array_equal(jumped, parent):
-                break
-            parent = jumped
-
-
 def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
     """Connected pieces of a scan line, bridging up to ``MAX_BRIDGED_POINTS`` stray points.
 
@@ -232,7 +211,9 @@ def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
         near = np.flatnonzero(np.linalg.norm(p[k:] - p[:-k], axis=1) <= max_gap_m)
         rows.append(near)
         cols.append(near + k)
-    labels = connected_components(n, np.concatenate(rows), np.concatenate(cols))
+    row, col = np.concatenate(rows), np.concatenate(cols)
+    graph = coo_matrix((np.ones(len(row)), (row, col)), shape=(n, n))
+    _, labels = connected_components(graph, directed=False)
     _, first, component = np.unique(labels, return_index=True, return_inverse=True)
     rank = np.empty(len(first), dtype=np.intp)
     rank[np.argsort(first)] = np.arange(len(first))

@@ -46,3 +46,8 @@ def get_target(name: str) -> Target[Any]:
 def all_targets() -> list[Target[Any]]:
     """Every registered target (imports them all)."""
     return [get_target(name) for name in REGISTRY]
+
+
+def plannable_target_names() -> tuple[str, ...]:
+    """The targets whose poses can be planned (those with a ``planner``; imports them all)."""
+    return tuple(t.name for t in all_targets() if getattr(t, "planner", None) is not None)

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import ArrayLike
 
 from ...geometry import orthonormal_basis
@@ -181,7 +182,6 @@ def cylinder_identifiability(
         *HAND_EYE_NAMES,
         *(name + tag for tag in suffix for name in CYLINDER_NAMES),
     )
-    import scipy.linalg  # only here: its import costs every calibration 0.2 s
 
     _, R, pivots = scipy.linalg.qr(J, mode="economic", pivoting=True)
     diagonal = np.abs(np.diag(R))

@@ -70,6 +70,7 @@ from typing import Literal, Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.optimize import least_squares, minimize
 
 from linelaser_calib.core.errors import DegenerateError, InputError, SolverError
 from linelaser_calib.core.geometry import matrix_from_rotvec, orthonormal_basis
@@ -262,10 +263,6 @@ def galm(
             if np.max(np.abs(z)) > config.divergence_x:
                 raise _Diverged(z.copy())
             return phi, g - J.T @ lam_k + sigma_k * (J.T @ hz)
-
-        # scipy.optimize only here: importing it costs a calibration about 0.3 s, and the
-        # default method's seed rarely needs a GALM run (it accepts a polished particle).
-        from scipy.optimize import minimize
 
         try:
             with np.errstate(over="ignore", invalid="ignore"):
@@ -770,53 +767,6 @@ def _hybrid(
     return g_best, f_best, early
 
 
-#: Relative step of the central differences of :func:`_levenberg_marquardt`: about the cube
-#: root of the machine epsilon, where truncation and rounding errors balance.
-_DIFFERENCE_STEP = 6e-6
-#: Iterations of :func:`_levenberg_marquardt`; it stops long before on every polish measured.
-_LM_MAX_ITERATIONS = 200
-
-
-def _levenberg_marquardt(
-    residuals: Callable[[FloatArray], FloatArray], p0: FloatArray
-) -> FloatArray:
-    """Minimise |residuals(p)|² from ``p0``: Levenberg–Marquardt with Marquardt's scaling
-    (damping times the diagonal) and a central-difference Jacobian, to a relative change of
-    the cost or of the step of 1e-15, or until no damping lowers the cost any more."""
-    p = np.asarray(p0, dtype=np.float64).copy()
-    r = residuals(p)
-    cost = float(r @ r)
-    damping = 1e-3
-    for _ in range(_LM_MAX_ITERATIONS):
-        h = _DIFFERENCE_STEP * np.maximum(np.abs(p), 1.0)
-        J = np.empty((len(r), len(p)))
-        for k in range(len(p)):
-            e = np.zeros_like(p)
-            e[k] = h[k]
-            J[:, k] = (residuals(p + e) - residuals(p - e)) / (2.0 * h[k])
-        A, g = J.T @ J, J.T @ r
-        diagonal = np.maximum(np.diag(A), 1e-300)
-        while True:
-            try:
-                step = np.linalg.solve(A + damping * np.diag(diagonal), -g)
-                trial = residuals(p + step)
-                trial_cost = float(trial @ trial)
-            except np.linalg.LinAlgError:  # singular at this damping: damp more
-                trial_cost = np.inf
-            if np.isfinite(trial_cost) and trial_cost < cost:
-                break
-            damping *= 10.0
-            if damping > 1e16:
-                return p
-        decrease = cost - trial_cost
-        p, r, cost = p + step, trial, trial_cost
-        damping = max(damping / 10.0, 1e-12)
-        small_step = float(np.linalg.norm(step)) <= 1e-15 * (float(np.linalg.norm(p)) + 1e-15)
-        if decrease <= 1e-15 * cost or small_step:
-            break
-    return p
-
-
 def _polish(problem: CentreAxisProblem, x: FloatArray) -> tuple[FloatArray, float]:
     """Levenberg-Marquardt on a minimal parametrisation from x (departure 4).
 
@@ -852,6 +802,7 @@ def _polish(problem: CentreAxisProblem, x: FloatArray) -> tuple[FloatArray, floa
         return np.asarray((W - np.outer(W @ n, n)).ravel())
 
     p0 = np.concatenate([np.zeros(3), T0[:3, 3], np.zeros(4)])
-    R, t, n, point = unpack(_levenberg_marquardt(residuals, p0))
+    solution = least_squares(residuals, p0, method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    R, t, n, point = unpack(solution.x)
     polished = np.concatenate([R[:, 0], R[:, 2], t, point, n])
     return polished, _rms(problem, polished)

@@ -81,6 +81,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch, SolverError
 from ...geometry import (
@@ -97,7 +98,6 @@ from ...observability import (
     analyse_observability,
     pose_geometry,
 )
-from ...quantiles import chi2_upper_quantile
 from ...robot.joint_calibration import JointOutcome, KinematicSetup, MultiScanProblem, solve_joint
 from ...robot.kinematics import forward_kinematics
 from ...solver import (
@@ -994,7 +994,7 @@ def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[Flag]:
     prior_chi2 = result.sample_prior_chi2
     z_prior = _robust_zscore(np.sqrt(prior_chi2))
     # P(chi2 > limit) = outlier_prior_probability
-    chi2_limit = float(chi2_upper_quantile(N_LOCAL, config.outlier_prior_probability))
+    chi2_limit = float(chdtri(N_LOCAL, config.outlier_prior_probability))
     median_rms = float(np.median(rms))
     flagged = []
     for j in range(len(rms)):

@@ -95,11 +95,11 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample
-from ...quantiles import chi2_upper_quantile
 from ...solver import Flag, solve_with_rejection
 from ...types import Rejection, Sample
 from ..base import (
@@ -357,7 +357,7 @@ def _default_result(
     estimate_point = taught is None or config.point_sigma_m > 0.0
     c, cov, T = _stack(corners)
     X, point = solve_linear(c, T, taught, prior, config.robot_sigma_t_m)
-    limit = float(chi2_upper_quantile(3, config.outlier_probability))  # P(chi2 with 3 dof > limit)
+    limit = float(chdtri(3, config.outlier_probability))  # P(chi2 with 3 dof > limit)
 
     def solve_subset(
         keep: list[int], previous: KnownPointRefinement | None

@@ -25,10 +25,10 @@ from dataclasses import replace
 from typing import Any
 
 import numpy as np
+from scipy.special import chdtri
 
 from ...errors import DegenerateError, ModelMismatch
 from ...profile.corner import CornerSample
-from ...quantiles import chi2_upper_quantile
 from ...solver import Flag, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
@@ -214,7 +214,7 @@ class LineTarget:
         X0 = context.initial_T_flange_sensor
         c, cov, T = _stack(features)
         X_start, line_start = _start(features, X0)
-        limit = float(chi2_upper_quantile(2, config.outlier_probability))
+        limit = float(chdtri(2, config.outlier_probability))
 
         def solve_subset(kept: list[int], previous: LineRefinement | None) -> LineRefinement:
             X, line = (
