@@ -943,14 +943,16 @@ def test_collector_reloads_the_latest_session_into_a_new_one_and_republishes_it(
         node.destroy_node()
 
 
-def test_readme_parameter_reference_matches_the_declarations() -> None:
+def test_reference_doc_parameter_tables_match_the_declarations() -> None:
     from linelaser_calib.nodes import calibration_service, collector
     from linelaser_calib.nodes.common import markdown_parameter_table
 
-    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    reference = (Path(__file__).resolve().parent.parent / "docs" / "reference.md").read_text()
     for module in (collector, calibration_service):
         table = markdown_parameter_table(module.PARAMETERS)
-        assert table in readme, f"README parameter table of {module.__name__} is out of date"
+        assert table in reference, (
+            f"docs/reference.md parameter table of {module.__name__} is out of date"
+        )
 
 
 def test_service_sets_the_along_line_scale_as_the_command_line_does() -> None:
