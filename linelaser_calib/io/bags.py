@@ -88,7 +88,7 @@ JOINT_STATE_TOPIC = "/joint_states"
 SESSION_MARKER = "linelaser_calib_session.txt"
 #: The MCAP file of a session's samples (see :class:`SessionBagWriter`).
 SESSION_FILE = "session.mcap"
-_SAMPLE_PREFIX = "sample_"
+SAMPLE_PREFIX = "sample_"
 
 #: The first bytes of every MCAP file.
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -185,7 +185,7 @@ class BagInfo:
 
 
 @functools.cache
-def _typestore() -> Typestore:
+def jazzy_typestore() -> Typestore:
     """The ROS 2 Jazzy typestore that serialises every message written."""
     return get_typestore(Stores.ROS2_JAZZY)
 
@@ -199,23 +199,23 @@ def _store_from_definitions(definitions: tuple[tuple[str, str], ...]) -> Typesto
     return store
 
 
-def reading_store(connections: Sequence[Connection | _SessionConnection]) -> Typestore:
+def reading_store(connections: Sequence[Connection | SessionConnection]) -> Typestore:
     """The typestore that decodes the messages of ``connections``.
 
     Built from the message definitions the recording carries (rosbag2 >= 8, MCAP) when each
     connection has one in ``.msg`` form: ~30 ms, against ~0.25 s for every type of Jazzy
-    (:func:`_typestore`, the fallback), which would be most of a calibration's start-up.
+    (:func:`jazzy_typestore`, the fallback), which would be most of a calibration's start-up.
     """
     definitions = set()
     for connection in connections:
         msgdef = getattr(connection, "msgdef", None)  # session files carry no definitions
         if msgdef is None or msgdef.format != MessageDefinitionFormat.MSG or not msgdef.data:
-            return _typestore()
+            return jazzy_typestore()
         definitions.add((connection.msgtype, msgdef.data))
     try:
         return _store_from_definitions(tuple(sorted(definitions)))
     except TypesysError:  # a definition rosbags cannot parse, or two that disagree
-        return _typestore()
+        return jazzy_typestore()
 
 
 def _fsync_tree(directory: Path) -> None:
@@ -224,10 +224,10 @@ def _fsync_tree(directory: Path) -> None:
         if path.is_file():
             with path.open("rb") as stream:
                 os.fsync(stream.fileno())
-    _fsync_directory(directory)
+    fsync_directory(directory)
 
 
-def _fsync_directory(directory: Path) -> None:
+def fsync_directory(directory: Path) -> None:
     fd = os.open(directory, os.O_RDONLY)
     try:
         os.fsync(fd)
@@ -239,7 +239,7 @@ class _ProfilePoseWriter:
     """A rosbags MCAP writer with one profile and one pose connection."""
 
     def __init__(self, writer: Writer, profile_topic: str, pose_topic: str) -> None:
-        store = _typestore()
+        store = jazzy_typestore()
         self._writer = writer
         self._types = rosbags_types(store)
         self._profiles = writer.add_connection(profile_topic, PROFILE_TYPE, typestore=store)
@@ -251,7 +251,7 @@ class _ProfilePoseWriter:
         self, topic: str, stamp_ns: int, transforms: Sequence[StampedTransform]
     ) -> None:
         """One ``tf2_msgs/msg/TFMessage`` holding ``transforms`` on ``topic``."""
-        store = _typestore()
+        store = jazzy_typestore()
         if topic not in self._tf:
             self._tf[topic] = self._writer.add_connection(topic, TF_TYPE, typestore=store)
         msg = self._types(TF_TYPE)(
@@ -283,16 +283,20 @@ class _ProfilePoseWriter:
             organised=organised,
             padding_bytes=padding_bytes,
         )
-        self._writer.write(self._profiles, stamp_ns, _typestore().serialize_cdr(msg, PROFILE_TYPE))
+        self._writer.write(
+            self._profiles, stamp_ns, jazzy_typestore().serialize_cdr(msg, PROFILE_TYPE)
+        )
 
     def write_pose(self, pose: FlangePose) -> None:
         msg = pose_stamped_from_flange_pose(pose, types=self._types)
-        self._writer.write(self._poses, pose.stamp_ns, _typestore().serialize_cdr(msg, POSE_TYPE))
+        self._writer.write(
+            self._poses, pose.stamp_ns, jazzy_typestore().serialize_cdr(msg, POSE_TYPE)
+        )
 
     def write_joint_state(
         self, topic: str, stamp_ns: int, names: Sequence[str], positions: NDArray[np.float64]
     ) -> None:
-        store = _typestore()
+        store = jazzy_typestore()
         if topic not in self._joint_states:
             self._joint_states[topic] = self._writer.add_connection(
                 topic, JOINT_STATE_TYPE, typestore=store
@@ -328,7 +332,7 @@ def _new_bag(path: Path, profile_topic: str, pose_topic: str) -> Iterator[_Profi
             yield _ProfilePoseWriter(writer, profile_topic, pose_topic)
         _fsync_tree(staging / path.name)
         (staging / path.name).rename(path)
-        _fsync_directory(path.parent)
+        fsync_directory(path.parent)
     except OSError as err:
         raise BagError(f"cannot write bag {path}: {err}") from err
     finally:
@@ -483,7 +487,7 @@ class SessionBagWriter:
             self._stream: BufferedWriter | None = (self.path / SESSION_FILE).open("wb")
             self._writer = McapWriter(self._stream, use_chunking=False)
             self._writer.start(profile="ros2", library="linelaser_calib")
-            store = _typestore()
+            store = jazzy_typestore()
             channels = {}
             for topic, msgtype in ((pose_topic, POSE_TYPE), (profile_topic, PROFILE_TYPE)):
                 text, _ = store.generate_msgdef(msgtype, ros_version=2)
@@ -494,7 +498,7 @@ class SessionBagWriter:
             self._pose_channel, self._profile_channel = channels[POSE_TYPE], channels[PROFILE_TYPE]
             self._types = rosbags_types(store)
             self.flush()
-            _fsync_directory(self.path)
+            fsync_directory(self.path)
         except OSError as err:
             raise BagError(f"cannot create session {self.path}: {err}") from err
 
@@ -533,7 +537,7 @@ class SessionBagWriter:
         cloud = pointcloud2_from_points(
             profile.points, stamp, profile.frame_id, types=self._types, organised=self.organised
         )
-        store = _typestore()
+        store = jazzy_typestore()
         messages = [
             (self._pose_channel, store.serialize_cdr(pose, POSE_TYPE)),
             (self._profile_channel, store.serialize_cdr(cloud, PROFILE_TYPE)),
@@ -553,7 +557,7 @@ class SessionBagWriter:
     def _joint_channel(self) -> int:
         """The ``/joint_states`` channel, registered with the first joint vector."""
         if self._joints is None:
-            text, _ = _typestore().generate_msgdef(JOINT_STATE_TYPE, ros_version=2)
+            text, _ = jazzy_typestore().generate_msgdef(JOINT_STATE_TYPE, ros_version=2)
             schema = self._writer.register_schema(
                 JOINT_STATE_TYPE, SchemaEncoding.ROS2, text.encode()
             )
@@ -598,7 +602,7 @@ class SessionBagWriter:
         self.close()
 
 
-class _SessionConnection(NamedTuple):
+class SessionConnection(NamedTuple):
     """One channel of a session file, shaped like the rosbags connections read_bag uses."""
 
     topic: str
@@ -606,7 +610,7 @@ class _SessionConnection(NamedTuple):
     msgcount: int
 
 
-class _SessionReader:
+class SessionReader:
     """Reads a session file, complete or not (see :class:`SessionBagWriter`).
 
     It walks the records from the start and stops at the first incomplete one (the torn
@@ -616,11 +620,11 @@ class _SessionReader:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        self.connections: list[_SessionConnection] = []
+        self.connections: list[SessionConnection] = []
         self.start_time = 0
         self.end_time = 0
         self._messages: list[tuple[int, int, bytes]] = []  # (channel, log ns, data)
-        self._by_key: dict[int, _SessionConnection] = {}
+        self._by_key: dict[int, SessionConnection] = {}
 
     def open(self) -> None:
         data = self.path.read_bytes()
@@ -647,7 +651,7 @@ class _SessionReader:
                 self._messages.append((message.channel_id, message.log_time, message.data))
             position = body + length
         self._by_key = {
-            key: _SessionConnection(topic, msgtype, sum(m[0] == key for m in self._messages))
+            key: SessionConnection(topic, msgtype, sum(m[0] == key for m in self._messages))
             for key, (topic, msgtype) in channels.items()
         }
         self.connections = list(self._by_key.values())
@@ -655,8 +659,8 @@ class _SessionReader:
         self.start_time, self.end_time = min(stamps, default=0), max(stamps, default=-1) + 1
 
     def messages(
-        self, connections: Sequence[_SessionConnection]
-    ) -> Iterator[tuple[_SessionConnection, int, bytes]]:
+        self, connections: Sequence[SessionConnection]
+    ) -> Iterator[tuple[SessionConnection, int, bytes]]:
         wanted = set(connections)
         for key, log_ns, data in self._messages:
             conn = self._by_key.get(key)
@@ -684,7 +688,7 @@ def bag_parts(path: Path) -> list[Path]:
         return [path / SESSION_FILE]
     if (path / SESSION_MARKER).is_file():  # a session written one bag per sample
         samples = sorted(
-            p for p in path.glob(f"{_SAMPLE_PREFIX}*") if (p / "metadata.yaml").is_file()
+            p for p in path.glob(f"{SAMPLE_PREFIX}*") if (p / "metadata.yaml").is_file()
         )
         if not samples:
             raise BagError(f"session {path} holds no samples yet; record some first")
@@ -703,17 +707,17 @@ def bag_parts(path: Path) -> list[Path]:
     raise BagError(f"{path} is not a rosbag2 bag (it has no metadata.yaml){hint}")
 
 
-def _is_session_file(path: Path) -> bool:
+def is_session_file(path: Path) -> bool:
     """True for the MCAP file of a :class:`SessionBagWriter` session."""
     return path.name == SESSION_FILE and (path.parent / SESSION_MARKER).is_file()
 
 
 @contextmanager
-def open_part(part: Path, bag: Path) -> Iterator[Reader | _SessionReader]:
+def open_part(part: Path, bag: Path) -> Iterator[Reader | SessionReader]:
     """Open one bag (rosbags) or session file; any failure to parse it becomes a
     :class:`BagError`."""
     try:
-        reader = _SessionReader(part) if _is_session_file(part) else Reader(part)
+        reader = SessionReader(part) if is_session_file(part) else Reader(part)
         reader.open()
     # A damaged file makes the parsers raise almost anything (seen: UnicodeDecodeError,
     # KeyError, MemoryError, rosbags' own errors); all mean the same to the user.
@@ -734,13 +738,15 @@ def _unreadable(bag: Path, part: Path, err: Exception) -> str:
     )
 
 
-class _Summary(NamedTuple):
+class BagSummary(NamedTuple):
+    """The topics of a bag (or session) and the log times of its first and last message, ns."""
+
     topics: list[TopicSummary]
     start_ns: int | None
     end_ns: int | None
 
 
-def _summarise(bag: Path, parts: Sequence[Path]) -> _Summary:
+def summarise(bag: Path, parts: Sequence[Path]) -> BagSummary:
     counts: dict[tuple[str, str], int] = {}
     starts: list[int] = []
     ends: list[int] = []
@@ -753,7 +759,7 @@ def _summarise(bag: Path, parts: Sequence[Path]) -> _Summary:
                 starts.append(reader.start_time)
                 ends.append(reader.end_time - 1)
     topics = [TopicSummary(t, m, n) for (t, m), n in sorted(counts.items())]
-    return _Summary(topics, min(starts, default=None), max(ends, default=None))
+    return BagSummary(topics, min(starts, default=None), max(ends, default=None))
 
 
 def _listing(topics: Sequence[TopicSummary]) -> str:
@@ -794,7 +800,7 @@ def _choose_topic(
 
 
 def raw_messages(
-    reader: Reader | _SessionReader, connections: Sequence[Any], bag: Path, part: Path
+    reader: Reader | SessionReader, connections: Sequence[Any], bag: Path, part: Path
 ) -> Iterator[tuple[Any, int, Any]]:
     """``reader.messages(connections)``, with a damaged chunk turned into :class:`BagError`."""
     iterator = iter(reader.messages(connections))
@@ -887,7 +893,7 @@ def _parse_pose_stamped(raws: Sequence[bytes]) -> _PoseRecords:
     return _PoseRecords(parsed, stamps, frame_ids, values)
 
 
-def _flange_poses(
+def flange_poses(
     topic: str, raws: Sequence[bytes], log_ns: Sequence[int]
 ) -> list[FlangePose | SkippedMessage]:
     """Flange poses of serialised PoseStamped messages, parsed and converted in one batch.
@@ -920,7 +926,7 @@ def _flange_poses(
         if good[k]:
             out.append(FlangePose(int(records.stamps_ns[k]), T[k], records.frame_ids[k]))
             continue
-        msg = decode_message(_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
+        msg = decode_message(jazzy_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
         if isinstance(msg, SkippedMessage):
             out.append(msg)
             continue
@@ -973,9 +979,9 @@ def read_bag(
     """
     bag = Path(path)
     parts = bag_parts(bag)
-    summary = _summarise(bag, parts)
+    summary = summarise(bag, parts)
     if summary.start_ns is None or summary.end_ns is None:
-        if any(_is_session_file(part) for part in parts):
+        if any(is_session_file(part) for part in parts):
             raise BagError(f"session {bag} holds no samples yet; record some first")
         raise BagError(
             f"bag {bag} is empty (topics: {_listing(summary.topics)}); record the profile "
@@ -1011,7 +1017,7 @@ def read_bag(
                 done += 1
                 if progress is not None:
                     progress(done, total)
-    converted = iter(_flange_poses(chosen_pose, pose_raws, pose_log_ns))
+    converted = iter(flange_poses(chosen_pose, pose_raws, pose_log_ns))
     profiles: list[Profile] = []
     poses: list[FlangePose] = []
     skipped: list[SkippedMessage] = []
@@ -1109,7 +1115,7 @@ def read_joint_states(path: str | Path, *, topic: str | None = None) -> JointSta
     """
     bag = Path(path)
     parts = bag_parts(bag)
-    topics = _summarise(bag, parts).topics
+    topics = summarise(bag, parts).topics
     found = [t for t in topics if t.msgtype == JOINT_STATE_TYPE and t.msgcount > 0]
     if topic is None:
         default = [t for t in found if t.topic == JOINT_STATE_TOPIC]
@@ -1163,7 +1169,7 @@ def bag_info(
         If the bag does not exist or cannot be opened at all.
     """
     bag = Path(path)
-    summary = _summarise(bag, bag_parts(bag))
+    summary = summarise(bag, bag_parts(bag))
     try:
         contents: BagContents | None = read_bag(
             bag, profile_topic=profile_topic, pose_topic=pose_topic
