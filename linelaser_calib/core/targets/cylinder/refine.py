@@ -458,9 +458,9 @@ class CylinderProblem:
     def step_scale(self) -> FloatArray:
         """Rotations and the along-line scale times the lever, lengths as they are."""
         scale = np.ones(self.n_global)
-        scale[:3] = _lever(self)
+        scale[:3] = lever_arm_m(self)
         if self.scale_index is not None:
-            scale[self.scale_index] = _lever(self)
+            scale[self.scale_index] = lever_arm_m(self)
         return scale
 
     def with_flange_poses(self, T_base_flange: FloatArray) -> CylinderProblem:
@@ -535,7 +535,7 @@ class CylinderProblem:
             tau=state.tau + step_local[:, 3:],
             scale=state.scale + (0.0 if s is None else float(step_global[s])),
         )
-        return moved if self.centroid is None else _recentred(moved, self.centroid)
+        return moved if self.centroid is None else recentred(moved, self.centroid)
 
 
 @dataclass(frozen=True)
@@ -586,7 +586,7 @@ def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def _data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray:
+def data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray:
     """Mean of the profiles' centroids in the base frame (3,), m."""
     RE, offset = _sample_transforms(problem, state)
     means = np.sum(problem.points * problem.mask[..., None], axis=1) / problem.counts[:, None]
@@ -594,7 +594,7 @@ def _data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray
     return np.asarray(np.mean(np.einsum("mij,mj->mi", RE, y) + offset, axis=0))
 
 
-def _recentred(state: CylinderState, centroid: FloatArray) -> CylinderState:
+def recentred(state: CylinderState, centroid: FloatArray) -> CylinderState:
     """Slide the axis point along the axis to the point nearest ``centroid`` (same cylinder)."""
     point = state.point + float((centroid - state.point) @ state.direction) * state.direction
     return replace(state, point=point)
@@ -725,7 +725,7 @@ def _robust_zscore(values: FloatArray) -> FloatArray:
     return np.asarray((values - median) / max(mad, 1e-3 * abs(median), 1e-300))
 
 
-def _lever(problem: CylinderProblem) -> float:
+def lever_arm_m(problem: CylinderProblem) -> float:
     """Median distance of the profile points from the sensor origin, m."""
     lever = problem.config.observability.lever_m
     if lever is not None:
@@ -743,7 +743,7 @@ def _observability(
     T_base_flange[:, 3, 3] = 1.0
     return analyse_observability(
         _marginal_hand_eye(information),
-        _lever(problem),
+        lever_arm_m(problem),
         pose_geometry(T_base_flange, T, state.point, state.direction),
         problem.config.observability,
     )
@@ -808,12 +808,12 @@ def refine(
     geometric = normal_equations(problem.linearise(state), cfg.solver, np.ones_like(problem.mask))
     _observability(problem, state, geometric.schur_information()).raise_if_unobservable()
 
-    centroid = _data_centroid(problem, state)
+    centroid = data_centroid(problem, state)
     problem = replace(problem, centroid=centroid)
-    solution = solve(problem, _recentred(state, centroid), cfg.solver)
+    solution = solve(problem, recentred(state, centroid), cfg.solver)
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError("the refinement produced non-finite values: check the initial estimate")
-    return _summarise(problem, solution)
+    return summarise(problem, solution)
 
 
 #: Step tolerance of :func:`refine_subset`, m: 10 nm, a thousandth of the smallest 1σ this
@@ -886,10 +886,10 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
     )
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError("the refinement of a subset produced non-finite values")
-    return _summarise(problem, solution)
+    return summarise(problem, solution)
 
 
-def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> RefineResult:
+def summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> RefineResult:
     """Covariance, observability and per-sample statistics at the solution."""
     cfg = problem.config
     state, normal = solution.state, solution.normal
@@ -1207,8 +1207,8 @@ def kinematic_problem(
     state = initial_state(
         problem, T_flange_sensor0, cylinder0, cylinder0.radius if radius_m is None else radius_m
     )
-    centroid = _data_centroid(problem, state)
-    return replace(problem, centroid=centroid), _recentred(state, centroid)
+    centroid = data_centroid(problem, state)
+    return replace(problem, centroid=centroid), recentred(state, centroid)
 
 
 @dataclass(frozen=True)
@@ -1297,7 +1297,7 @@ def refine_kinematics(
             iterations=joint.iterations,
             converged=joint.converged,
         )
-        results.append(_summarise(corrected, inner))
+        results.append(summarise(corrected, inner))
     _check_kinematic_fit(max(r.robot_sigma_scale for r in results), outcome, setup)
     sigma = np.sqrt(np.diag(outcome.covariance)[:N_HAND_EYE])
     for result in results:
