@@ -15,11 +15,7 @@ from rosbags.typesys.store import Typestore
 from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE, matrices_from_quaternions_xyzw
 from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io.bags.records import POSE_TYPE, SessionConnection, SkippedMessage
-from msg_adapters import (
-    MessageError,
-    flange_pose_from_pose_stamped,
-    stamp_ns_from_msg,
-)
+from msg_adapters import MessageError, flange_pose_from_pose_stamped, stamp_ns_from_msg
 from msg_adapters.message_types import NS_PER_S
 
 
