@@ -375,7 +375,7 @@ class PsoResult:
     history: list[float]
 
 
-class _Swarm:
+class Swarm:
     """Positions, velocities and personal bests of a swarm in a box (eq. 15)."""
 
     def __init__(
@@ -416,7 +416,7 @@ class _Swarm:
         self.v[hit] = 0.0
 
 
-class _Stagnation:
+class Stagnation:
     """Counts consecutive generations without relative progress of the best fitness."""
 
     def __init__(self, generations: int, tol: float) -> None:
@@ -456,8 +456,8 @@ def pso(
     PsoResult
     """
     lo, hi = _check_box(lower, upper)
-    swarm = _Swarm(lo, hi, config, rng)
-    stagnation = _Stagnation(config.stagnation_generations, config.stagnation_tol)
+    swarm = Swarm(lo, hi, config, rng)
+    stagnation = Stagnation(config.stagnation_generations, config.stagnation_tol)
     F = fitness(swarm.x)
     swarm.record(F)
     g = int(np.argmin(F))
@@ -737,8 +737,8 @@ def _hybrid(
         polished = _polish(problem, x)
         return polished if polished[1] <= config.accept_rms_m else None
 
-    swarm = _Swarm(lower, upper, config.pso, rng)
-    stagnation = _Stagnation(config.pso.stagnation_generations, config.pso.stagnation_tol)
+    swarm = Swarm(lower, upper, config.pso, rng)
+    stagnation = Stagnation(config.pso.stagnation_generations, config.pso.stagnation_tol)
     F = fitness(swarm.x)  # step 1: g_best and f_best from the initial swarm
     swarm.record(F)
     g_best, f_best = swarm.x[int(np.argmin(F))].copy(), float(np.min(F))
