@@ -343,7 +343,7 @@ def ellipse_geometry(conic: ArrayLike) -> EllipseGeometry:
     )
 
 
-def _value_and_gradient_sq(
+def value_and_gradient_sq(
     conic: FloatArray, points_xz: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
     """Q and |grad Q|^2 of conics (K, 6) or (6,) at points (N, 2); shapes (K, N) or (N,)."""
@@ -372,7 +372,7 @@ def sampson_distance(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
     -------
     distance : ndarray, shape (N,) or (K, N)
     """
-    q, gradient_sq = _value_and_gradient_sq(
+    q, gradient_sq = value_and_gradient_sq(
         np.asarray(conic, dtype=np.float64), np.asarray(points_xz, dtype=np.float64)
     )
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -708,7 +708,7 @@ def _window_samples(order: IntArray, count: int, rng: np.random.Generator) -> In
 
 def _msac_costs(conics: FloatArray, u: FloatArray, threshold_sq: float) -> FloatArray:
     """Truncated squared Sampson distances min(d^2, t^2), shape (K, N)."""
-    q, gradient_sq = _value_and_gradient_sq(conics, u)
+    q, gradient_sq = value_and_gradient_sq(conics, u)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.asarray(np.fmin(q * q / gradient_sq, threshold_sq), dtype=np.float64)
 
