@@ -28,15 +28,10 @@ from _common import MM, axis_errors, paper_setup, synthetic_centres
 from linelaser_calib.core.geometry import rotation_angle, rpy_from_matrix, transform_error
 from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.cylinder.galm import GalmConfig, galm
 from linelaser_calib.core.targets.cylinder.model import CentreAxisProblem, Cylinder
-from linelaser_calib.core.targets.cylinder.pso_alm import (
-    GalmConfig,
-    HybridConfig,
-    PsoConfig,
-    galm,
-    search_box,
-    solve_pso_galm,
-)
+from linelaser_calib.core.targets.cylinder.pso import PsoConfig
+from linelaser_calib.core.targets.cylinder.pso_alm import HybridConfig, search_box, solve_pso_galm
 from linelaser_calib.sim import scenario_from_preset, simulate
 
 PAPER = HybridConfig(faithful=True, box="paper")

@@ -35,8 +35,9 @@ from linelaser_calib.core.geometry import (
     rotvec_from_matrix,
     transform_from_rotation_translation,
 )
+from linelaser_calib.core.targets.cylinder.config import RefineConfig
 from linelaser_calib.core.targets.cylinder.model import Cylinder
-from linelaser_calib.core.targets.cylinder.refine import RefineConfig, RefineResult, refine
+from linelaser_calib.core.targets.cylinder.refine import RefineResult, refine
 
 RADIUS = 0.02
 #: Plain least squares: the pose corrections pinned to zero by a negligible prior σ.

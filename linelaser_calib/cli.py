@@ -161,7 +161,7 @@ def simulate_to_bag(
     from linelaser_calib.core.targets.line import Line, LineSection
     from linelaser_calib.core.targets.sphere import SphereSection
     from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
-    from linelaser_calib.sim.scenario import scenario_from_preset
+    from linelaser_calib.sim.presets import scenario_from_preset
     from linelaser_calib.sim.simulate import simulate
     from linelaser_calib.sim.sphere import (
         SPHERE_PRESETS,
@@ -906,7 +906,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 def _preset_motion(name: object) -> str | None:
     """The motion (``step``, ``continuous``) of a simulator preset; None for another name."""
     from linelaser_calib.sim.line import LINE_PRESETS
-    from linelaser_calib.sim.scenario import PRESETS
+    from linelaser_calib.sim.presets import PRESETS
     from linelaser_calib.sim.sphere import SPHERE_PRESETS
     from linelaser_calib.sim.weld import WELD_PRESETS
 

@@ -469,7 +469,8 @@ def test_fast_pose_decoding_equals_the_message_adapter() -> None:
     """The batch PoseStamped parser against rosbags + flange_pose_from_pose_stamped."""
     from rosbags.typesys import Stores, get_typestore
 
-    from linelaser_calib.io.bags import SkippedMessage, _flange_poses
+    from linelaser_calib.io.bags import SkippedMessage
+    from linelaser_calib.io.bags.cdr import flange_poses
     from msg_adapters import MessageError, flange_pose_from_pose_stamped
 
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -505,7 +506,7 @@ def test_fast_pose_decoding_equals_the_message_adapter() -> None:
         if k % 31 == 13:
             raw = raw + b"\0" * 8  # trailing bytes: left to the generic decoder
         raws.append(raw)
-    fast = _flange_poses("/pose", raws, list(range(len(raws))))
+    fast = flange_poses("/pose", raws, list(range(len(raws))))
     assert len(fast) == len(raws)
     skipped = 0
     for k, (raw, got) in enumerate(zip(raws, fast, strict=True)):

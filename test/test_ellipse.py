@@ -9,14 +9,16 @@ import pytest
 from _compare import assert_floats_close
 
 from linelaser_calib.core.errors import InputError, ProfileRejected
-from linelaser_calib.core.targets.cylinder.ellipse import (
-    EllipseConfig,
+from linelaser_calib.core.targets.cylinder.conic import (
     centre_from_conic,
     centre_from_gradient,
     ellipse_geometry,
+    sampson_distance,
+)
+from linelaser_calib.core.targets.cylinder.ellipse import (
+    EllipseConfig,
     fit_ellipse_direct,
     fit_ellipse_ransac,
-    sampson_distance,
 )
 
 RADIUS = 0.02  # m, the paper's 40 mm shaft

@@ -12,7 +12,7 @@ from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.types import Profile
 from linelaser_calib.io.bags import read_bag, write_bag
 from linelaser_calib.io.results import read_result_yaml
-from linelaser_calib.sim.scenario import scenario_from_preset
+from linelaser_calib.sim.presets import scenario_from_preset
 from linelaser_calib.sim.simulate import simulate
 
 KEYENCE_NO_RETURN_M = -0.999999

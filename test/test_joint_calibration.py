@@ -30,11 +30,8 @@ from linelaser_calib.core.robot.kinematics import (
 )
 from linelaser_calib.core.targets.base import SolveContext, TargetSolution
 from linelaser_calib.core.targets.cylinder import TARGET, CylinderConfig
-from linelaser_calib.core.targets.cylinder.refine import (
-    build_problem,
-    initial_state,
-    kinematic_problem,
-)
+from linelaser_calib.core.targets.cylinder.joint import kinematic_problem
+from linelaser_calib.core.targets.cylinder.problem import build_problem, initial_state
 from linelaser_calib.core.types import FloatArray
 from linelaser_calib.export import UR_SEGMENTS, ur_kinematics_yaml
 from linelaser_calib.io.kinematics import model_from_urdf, read_kinematics

@@ -48,6 +48,7 @@ from linelaser_calib.core.targets.known_point import KnownPoint, KnownPointConfi
 from linelaser_calib.core.types import FlangePose, Profile, Rejection, Sample, SampleFit
 from linelaser_calib.io import ResultFileError, SessionBagWriter, read_bag, read_result_yaml
 from linelaser_calib.nodes import calibration_service, collector
+from linelaser_calib.nodes.clock_offset import ClockOffsetTracker
 from linelaser_calib.nodes.collection import (
     KEY_PROFILES_BEFORE,
     KEY_PROFILES_LOST,
@@ -58,7 +59,6 @@ from linelaser_calib.nodes.collection import (
     SKIP_NOT_CAPTURED,
     SKIP_RATE,
     SKIP_SAMPLED,
-    ClockOffsetTracker,
     CollectorConfig,
     LiveCollector,
     Mode,

@@ -11,16 +11,10 @@ from _synthetic_centres import MM, axis_errors, paper_setup, random_setup, synth
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.targets.cylinder.galm import GalmConfig, galm
 from linelaser_calib.core.targets.cylinder.model import CentreAxisProblem, x_from_calibration
-from linelaser_calib.core.targets.cylinder.pso_alm import (
-    GalmConfig,
-    HybridConfig,
-    PsoConfig,
-    galm,
-    pso,
-    search_box,
-    solve_pso_galm,
-)
+from linelaser_calib.core.targets.cylinder.pso import PsoConfig, pso
+from linelaser_calib.core.targets.cylinder.pso_alm import HybridConfig, search_box, solve_pso_galm
 
 
 @dataclass(frozen=True)

@@ -12,12 +12,11 @@ from _cylinder_points import Scene, make_scene, perturbed_start
 from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
 from linelaser_calib.core.solver import normal_equations, solve_damped
+from linelaser_calib.core.targets.cylinder.config import RefineConfig
 from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.targets.cylinder.problem import build_problem, initial_state
 from linelaser_calib.core.targets.cylinder.refine import (
-    RefineConfig,
     RefineResult,
-    build_problem,
-    initial_state,
     refine,
     refine_with_outlier_rejection,
 )

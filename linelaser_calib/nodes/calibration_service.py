@@ -75,7 +75,7 @@ from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.io import write_result_yaml
 from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info, read_joint_states
 from linelaser_calib.io.initial import read_initial_hand_eye
-from linelaser_calib.nodes.collection import DRIFT_FLOOR_S
+from linelaser_calib.nodes.clock_offset import DRIFT_FLOOR_S
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
     CLOCK_OFFSET_TOPIC,

@@ -44,7 +44,6 @@ from collections.abc import Generator
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -63,16 +62,9 @@ from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.tf import base_frame_warning
 from linelaser_calib.core.types import FlangePose, Profile
-from linelaser_calib.io import BagError, SessionBagWriter, read_bag
-from linelaser_calib.io.bags import JOINT_STATE_TYPE, SESSION_MARKER, bag_info, read_joint_states
-from linelaser_calib.nodes.collection import (
-    ClockOffsetTracker,
-    CollectorConfig,
-    LiveCollector,
-    Mode,
-    OffsetEstimate,
-    PendingSample,
-)
+from linelaser_calib.io import BagError, SessionBagWriter
+from linelaser_calib.nodes.clock_offset import ClockOffsetTracker, OffsetEstimate, offset_values
+from linelaser_calib.nodes.collection import CollectorConfig, LiveCollector, Mode, PendingSample
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
     CLOCK_OFFSET_TOPIC,
@@ -86,6 +78,7 @@ from linelaser_calib.nodes.common import (
     run_node,
 )
 from linelaser_calib.nodes.joint_state_input import JointStatePoseInput, live_kinematic_model
+from linelaser_calib.nodes.sessions import find_latest_session, new_session_path, session_samples
 from linelaser_calib.nodes.tf_input import TfPoseInput
 from msg_adapters import (
     MessageError,
@@ -97,13 +90,22 @@ from msg_adapters import (
 )
 
 NODE_NAME = "collector"
+
+
 #: ``continuous``: at most one live check of a stored sample per period, s (a check costs a
 #: few ms of CPU; the calibration checks every sample anyway).
 LIVE_CHECK_PERIOD_S = 0.2
+
+
 #: Diagnostic value: samples on disk in the session file.
 KEY_STORED = "samples stored"
+
+
 _PAIRING = PairingConfig()
+
+
 _COLLECTOR = CollectorConfig()
+
 
 #: Every parameter (all read at start-up); config/collector.yaml repeats the defaults.
 PARAMETERS = (
@@ -314,54 +316,6 @@ PARAMETERS = (
         read_only=True,
     ),
 )
-
-
-def find_latest_session(root: Path) -> Path:
-    """The newest session directory under ``root`` (names sort by start time).
-
-    Raises
-    ------
-    BagError
-        When ``root`` holds no session.
-    """
-    sessions = sorted(p for p in root.glob("session_*") if (p / SESSION_MARKER).is_file())
-    if not sessions:
-        raise BagError(f"reload_session is 'latest' but {root} holds no session to reload")
-    return sessions[-1]
-
-
-def new_session_path(root: Path, now: datetime.datetime) -> Path:
-    """``root/session_YYYYmmdd_HHMMSS``, with a numeric suffix if that exists already."""
-    base = root / now.strftime("session_%Y%m%d_%H%M%S")
-    path, k = base, 1
-    while path.exists():
-        k += 1
-        path = base.with_name(f"{base.name}_{k}")
-    return path
-
-
-#: A stored sample: the profile, the flange pose at its stamp and, with joint states, the
-#: joint vector (names, positions) that pose came from.
-StoredSample = tuple[Profile, FlangePose, tuple[tuple[str, ...], np.ndarray] | None]
-
-
-def session_samples(path: Path) -> list[StoredSample]:
-    """The samples of a session: each profile with the flange pose (and the joint vector,
-    where the session holds joint states) of identical stamp."""
-    contents = read_bag(path)
-    poses = {pose.stamp_ns: pose for pose in contents.poses}
-    joints = {}
-    if any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(path).topics):
-        states = read_joint_states(path)
-        joints = {
-            int(stamp): (states.names, states.positions[i])
-            for i, stamp in enumerate(states.stamps_ns)
-        }
-    return [
-        (p, poses[p.stamp_ns], joints.get(p.stamp_ns))
-        for p in contents.profiles
-        if p.stamp_ns in poses
-    ]
 
 
 class CollectorNode(Node):
@@ -853,17 +807,6 @@ class CollectorNode(Node):
         except BagError as err:
             self.get_logger().error(str(err))
         super().destroy_node()
-
-
-def offset_values(estimate: OffsetEstimate) -> dict[str, str]:
-    """Diagnostic values of the live clock offset (ms, labelled)."""
-    sigma = "n/a (needs 2 batches)" if estimate.sigma_s is None else f"{estimate.sigma_s * 1e3:.3f}"
-    return {
-        "clock offset (ms)": f"{estimate.offset_s * 1e3:+.3f}",
-        "clock offset 1 sigma (ms)": sigma,
-        "clock offset batches": str(estimate.batches),
-        "clock offset latest batch (ms)": f"{estimate.latest_s * 1e3:+.3f}",
-    }
 
 
 class _NextWake:

@@ -52,9 +52,10 @@ import numpy as np
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import invert_transform, matrix_from_rotvec
 from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
+from linelaser_calib.sim.presets import rig_scene_from_preset
 from linelaser_calib.sim.profiler import Measurement, measure
 from linelaser_calib.sim.robot import draw_errors, plan_motion, reported_flange
-from linelaser_calib.sim.scenario import Scenario, rig_scene_from_preset
+from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import Int8Array, Int64Array
 from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
 from linelaser_calib.sim.weld import (

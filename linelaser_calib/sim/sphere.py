@@ -46,8 +46,9 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.types import BoolArray, FloatArray
+from linelaser_calib.sim.presets import PRESETS, rig_scene_from_preset
 from linelaser_calib.sim.profiler import Trace, ray_directions, returns_seen
-from linelaser_calib.sim.scenario import PRESETS, Scenario, rig_scene_from_preset
+from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
 from linelaser_calib.sim.simulate import RigSimulatedData, step_and_shoot
 

@@ -67,8 +67,9 @@ from linelaser_calib.core.geometry import (
     transform_from_rotvec_translation,
 )
 from linelaser_calib.core.types import BoolArray, FloatArray
+from linelaser_calib.sim.presets import rig_scene_from_preset
 from linelaser_calib.sim.profiler import Trace, ray_directions
-from linelaser_calib.sim.scenario import Scenario, rig_scene_from_preset
+from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
 from linelaser_calib.sim.simulate import RigSimulatedData, step_and_shoot
 

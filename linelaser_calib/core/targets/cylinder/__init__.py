@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from .config import CylinderConfig
+from .config import CylinderConfig, RefineConfig
 from .features import FittedSample, fit_sample
-from .refine import RefineConfig, RefineResult, refine, refine_with_outlier_rejection
+from .refine import RefineResult, refine, refine_with_outlier_rejection
 from .section import CylinderSection
 from .target import TARGET, CylinderTarget
 

@@ -31,14 +31,8 @@ from ...errors import ProfileRejected
 from ...profile.cleaning import MAD_TO_SIGMA
 from ...profile.segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
 from ...types import BoolArray, FloatArray
-from .ellipse import (
-    EllipseConfig,
-    EllipseFit,
-    centre_from_conic,
-    fit_ellipse_ransac,
-    refine_conic,
-    sampson_distance,
-)
+from .conic import centre_from_conic, sampson_distance
+from .ellipse import EllipseConfig, EllipseFit, fit_ellipse_ransac, refine_conic
 
 #: RANSAC inlier threshold in measured noise sigmas (a hypothesis from five noisy points
 #: must still collect the whole arc).

@@ -7,16 +7,144 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...errors import InputError
+from ...observability import ObservabilityConfig
 from ...profile.cleaning import CleaningConfig
+from ...solver import LOSSES, SolverConfig
 from .arc import ArcConfig
 from .ellipse import EllipseConfig
 from .pso_alm import HybridConfig
-from .refine import RefineConfig
 
 #: Fewest fitted samples the hand-eye plus axis can be solved from with any margin.
 MIN_SAMPLES = 8
 #: How the default method treats the sensor's along-line scale (``CylinderConfig.scale``).
 SCALE_MODES = ("auto", "fixed", "free")
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    """Settings of the maximum-likelihood refinement.
+
+    Attributes
+    ----------
+    sensor_sigma_m : float
+        1σ of a profile point's distance to the surface, m. Default 5 µm: the paper's
+        SR6130 (±5 µm) and a scanCONTROL-class profiler at 0.1 m stand-off.
+    robot_sigma_t_m : float
+        1σ per axis of the flange position error, m. Default 0.1 mm: a UR5 (repeatability
+        ±0.1 mm; e-series ±0.03 mm) as in the paper.
+    robot_sigma_r_rad : float
+        1σ per axis of the flange orientation error, rad. Default 0.01 deg.
+    loss : str
+        ``huber`` (default: quadratic, hence fully efficient, for the 99.7 % of Gaussian
+        residuals inside 3σ, linear beyond), ``soft_l1`` or ``linear`` (least squares).
+    loss_scale : float
+        Where the robust loss turns from quadratic to linear, in units of σ_s. Default 3.
+    max_points_per_profile : int
+        Profiles with more points are subsampled evenly along the line (0 keeps all).
+        Default 200: at the paper's noise the robot error dominates, and 200 of 800 points
+        cost no measurable accuracy (bench/refine_study.py) for a 5× faster solve.
+    estimate_radius : bool
+        Estimate the radius even when ``radius_m`` is given (it is then the start value).
+        Without a ``radius_m`` the radius is always estimated.
+    estimate_scale : bool
+        Estimate the sensor's along-line scale error s (the profiler reports x as (1 + s)
+        times the true value; a point (x, z) is taken as (x / (1 + s), z)) as one more global
+        parameter. Default False: s = 0.
+    max_iterations : int
+        Levenberg–Marquardt iterations (linearisations). Default 50.
+    tolerance : float
+        Stop when an accepted step lowers the cost by less than this fraction. Default 1e-10.
+    step_tolerance_m : float
+        Stop when no global parameter moves by more than this, m (rotations times the
+        lever). Default 1e-12 m.
+    min_samples : int
+        Fewest samples accepted. Default 6.
+    min_points_per_profile : int
+        Fewest points a profile must have. Default 10.
+    estimate_variance_factors : bool
+        Form the covariance with the sensor and robot noise levels re-estimated from the
+        residuals (see the module docstring), not the configured ones. Default True.
+    observability : ObservabilityConfig
+    outlier_zscore : float
+        A sample is an outlier when its RMS residual lies this many robust standard deviations
+        (1.4826 · MAD) above the median, or its pose correction's prior χ² does. Default 6.
+    outlier_min_rms_sigma : float
+        ... and its RMS residual also exceeds this many σ_s (so that clean data, whose RMS
+        values all equal σ_s, never loses a sample to a tiny MAD). Default 3.
+    outlier_prior_probability : float
+        A pose correction whose χ² (6 degrees of freedom) has a smaller upper-tail probability
+        than this is implausible for the robot's stated σ. Default 1e-6.
+    max_outlier_fraction : float
+        :func:`.refine.refine_with_outlier_rejection` drops at most this share of the samples.
+        Default 0.2.
+    point_outlier_sigmas : float
+        :func:`.refine.refine_with_outlier_rejection` removes points whose residual after the first
+        solve exceeds this many sensor σ (the re-estimated one, if larger), then solves
+        again: spikes that passed the ellipse RANSAC otherwise bias their sample's pose
+        correction. 0 disables. Default 6.
+    """
+
+    sensor_sigma_m: float = 5e-6
+    robot_sigma_t_m: float = 1e-4
+    robot_sigma_r_rad: float = float(np.deg2rad(0.01))
+    loss: str = "huber"
+    loss_scale: float = 3.0
+    max_points_per_profile: int = 200
+    estimate_radius: bool = False
+    estimate_scale: bool = False
+    max_iterations: int = 50
+    tolerance: float = 1e-10
+    step_tolerance_m: float = 1e-12
+    min_samples: int = 6
+    min_points_per_profile: int = 10
+    estimate_variance_factors: bool = True
+    observability: ObservabilityConfig = field(default_factory=ObservabilityConfig)
+    outlier_zscore: float = 6.0
+    outlier_min_rms_sigma: float = 3.0
+    outlier_prior_probability: float = 1e-6
+    max_outlier_fraction: float = 0.2
+    point_outlier_sigmas: float = 6.0
+
+    def __post_init__(self) -> None:
+        positive = {
+            "sensor_sigma_m": self.sensor_sigma_m,
+            "robot_sigma_t_m": self.robot_sigma_t_m,
+            "robot_sigma_r_rad": self.robot_sigma_r_rad,
+            "loss_scale": self.loss_scale,
+            "tolerance": self.tolerance,
+            "step_tolerance_m": self.step_tolerance_m,
+            "outlier_zscore": self.outlier_zscore,
+        }
+        for name, value in positive.items():
+            if not (np.isfinite(value) and value > 0.0):
+                raise InputError(f"RefineConfig.{name} must be positive and finite, got {value}")
+        if self.loss not in LOSSES:
+            raise InputError(f"RefineConfig.loss must be one of {LOSSES}, got {self.loss!r}")
+        if self.max_points_per_profile < 0 or self.max_iterations < 1:
+            raise InputError(
+                "RefineConfig.max_points_per_profile must be >= 0 and max_iterations >= 1, got "
+                f"{self.max_points_per_profile} and {self.max_iterations}"
+            )
+        if self.min_samples < 3 or self.min_points_per_profile < 3:
+            raise InputError("RefineConfig.min_samples and min_points_per_profile must be >= 3")
+        if not 0.0 <= self.max_outlier_fraction < 1.0:
+            raise InputError(
+                "RefineConfig.max_outlier_fraction must be in [0, 1), got "
+                f"{self.max_outlier_fraction}"
+            )
+        if not 0.0 < self.outlier_prior_probability < 1.0:
+            raise InputError("RefineConfig.outlier_prior_probability must be in (0, 1)")
+
+    @property
+    def solver(self) -> SolverConfig:
+        """The shared solver's settings."""
+        return SolverConfig(
+            loss=self.loss,
+            loss_scale=self.loss_scale,
+            max_iterations=self.max_iterations,
+            tolerance=self.tolerance,
+            step_tolerance_m=self.step_tolerance_m,
+        )
 
 
 @dataclass(frozen=True)

@@ -44,6 +44,15 @@ from numpy.typing import ArrayLike, NDArray
 from ...errors import InputError, ProfileRejected
 from ...profile.cleaning import MAD_TO_SIGMA
 from ...types import BoolArray, FloatArray
+from .conic import (
+    EllipseGeometry,
+    conic_from_matrix,
+    conic_matrix,
+    ellipse_geometry,
+    normalise_conic,
+    sampson_distance,
+    value_and_gradient_sq,
+)
 
 
 @dataclass(frozen=True)
@@ -77,23 +86,32 @@ class EllipseFit:
 
 #: Points in a minimal sample: five points fix a conic.
 SAMPLE_SIZE = 5
-#: An F smaller than this times the conic's size at the points counts as ~0 (see
-#: :func:`normalise_conic`): the ellipse then passes within ~1e-9 of the origin.
-F_ZERO_TOLERANCE = 1e-9
+
+
 #: Rounds of "refit on the inliers, recompute the inliers" after RANSAC.
 MAX_REFIT_ROUNDS = 10
+
+
 #: Levenberg-Marquardt iterations of the geometric refinement, and its stopping rule on the
 #: relative decrease of the cost.
 LM_MAX_ITERATIONS = 50
+
+
 LM_RELATIVE_TOLERANCE = 1e-10
+
+
 #: ... and on the step length, in normalised units (the points' RMS spread is 1).
 LM_STEP_TOLERANCE = 1e-12
 
+
 #: Floor of the noise-adapted inlier threshold, m (see ``noise_threshold_sigmas``).
 MIN_NOISE_THRESHOLD_M = 1e-6
+
+
 #: Smallest window of the scan line that a RANSAC sample is spread over, as a fraction of
 #: the points.
 MIN_WINDOW_FRACTION = 0.05
+
 
 IntArray = NDArray[np.intp]
 
@@ -200,210 +218,6 @@ class EllipseConfig:
             )
 
 
-# --------------------------------------------------------------------------- conic algebra
-
-
-def conic_matrix(conic: ArrayLike) -> FloatArray:
-    """Symmetric 3 x 3 matrix of a conic, so that Q(x, z) = [x z 1] M [x z 1]^T.
-
-    Parameters
-    ----------
-    conic : array-like, shape (..., 6)
-        (A, B, C, D, E, F).
-
-    Returns
-    -------
-    M : ndarray, shape (..., 3, 3)
-    """
-    a, b, c, d, e, f = np.moveaxis(np.asarray(conic, dtype=np.float64), -1, 0)
-    rows = [[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]]
-    return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
-
-
-def conic_from_matrix(M: ArrayLike) -> FloatArray:
-    """Inverse of :func:`conic_matrix`: (A, B, C, D, E, F), shape (..., 6)."""
-    M = np.asarray(M, dtype=np.float64)
-    return np.stack(
-        [
-            M[..., 0, 0],
-            2 * M[..., 0, 1],
-            M[..., 1, 1],
-            2 * M[..., 0, 2],
-            2 * M[..., 1, 2],
-            M[..., 2, 2],
-        ],
-        axis=-1,
-    )
-
-
-def centre_from_conic(conic: ArrayLike) -> FloatArray:
-    """Centre of a central conic by the paper's eq. 5.
-
-    ``x_c = (B E - 2 C D) / (4 A C - B^2)``, ``z_c = (B D - 2 A E) / (4 A C - B^2)``.
-    Numerator and denominator are both quadratic in the coefficients, so the formula holds
-    for any scaling of the conic, not only for F = 1. It is Cramer's rule on grad Q = 0
-    (:func:`centre_from_gradient`).
-
-    Parameters
-    ----------
-    conic : array-like, shape (..., 6)
-
-    Returns
-    -------
-    centre_xz : ndarray, shape (..., 2)
-        NaN/Inf where 4AC - B^2 = 0 (a parabola has no centre).
-    """
-    a, b, c, d, e, _ = np.moveaxis(np.asarray(conic, dtype=np.float64), -1, 0)
-    det = 4 * a * c - b * b
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.stack([(b * e - 2 * c * d) / det, (b * d - 2 * a * e) / det], axis=-1)
-
-
-def centre_from_gradient(conic: ArrayLike) -> FloatArray:
-    """Centre of a central conic as the point where grad Q = 0.
-
-    Solves ``[[2A, B], [B, 2C]] [x, z]^T = -[D, E]^T``; the general form of eq. 5.
-
-    Parameters
-    ----------
-    conic : array-like, shape (6,)
-
-    Returns
-    -------
-    centre_xz : ndarray, shape (2,)
-    """
-    a, b, c, d, e, _ = np.asarray(conic, dtype=np.float64)
-    return np.asarray(np.linalg.solve([[2 * a, b], [b, 2 * c]], [-d, -e]), dtype=np.float64)
-
-
-@dataclass(frozen=True)
-class EllipseGeometry:
-    """Geometric form of ellipses (batched: leading shape ``...``).
-
-    Attributes
-    ----------
-    valid : ndarray of bool, shape (...)
-        True where the conic is a real, non-degenerate ellipse.
-    centre : ndarray, shape (..., 2)
-    semi_axes : ndarray, shape (..., 2)
-        Semi-major, semi-minor.
-    major_axis : ndarray, shape (..., 2)
-        Unit direction of the major axis.
-    """
-
-    valid: BoolArray
-    centre: FloatArray
-    semi_axes: FloatArray
-    major_axis: FloatArray
-
-
-def ellipse_geometry(conic: ArrayLike) -> EllipseGeometry:
-    """Centre, semi-axes and orientation of conics; flags those that are not ellipses.
-
-    A conic is a real ellipse when 4AC - B^2 > 0 and Q at the centre has the sign opposite
-    to A + C (otherwise it is empty or a point).
-
-    Parameters
-    ----------
-    conic : array-like, shape (..., 6)
-
-    Returns
-    -------
-    EllipseGeometry
-        Entries of invalid conics are NaN.
-    """
-    k = np.asarray(conic, dtype=np.float64)
-    a, b, c, d, e, f = np.moveaxis(k, -1, 0)
-    det = 4 * a * c - b * b
-    centre = centre_from_conic(k)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q_centre = f + 0.5 * (d * centre[..., 0] + e * centre[..., 1])
-        half_trace = 0.5 * (a + c)
-        root = np.hypot(0.5 * (a - c), 0.5 * b)
-        # Eigenvalues of [[A, B/2], [B/2, C]]; for an ellipse both share the sign of A + C.
-        lam_small = half_trace - np.sign(half_trace) * root
-        lam_large = half_trace + np.sign(half_trace) * root
-        semi_major = np.sqrt(-q_centre / lam_small)
-        semi_minor = np.sqrt(-q_centre / lam_large)
-        # Eigenvector of lam_small: (B/2, lam_small - A), or (lam_small - C, B/2).
-        v1 = np.stack([0.5 * b, lam_small - a], axis=-1)
-        v2 = np.stack([lam_small - c, 0.5 * b], axis=-1)
-        use_v2 = np.linalg.norm(v2, axis=-1) > np.linalg.norm(v1, axis=-1)
-        axis = np.where(use_v2[..., None], v2, v1)
-        norm = np.linalg.norm(axis, axis=-1, keepdims=True)
-        axis = np.where(norm > 0, axis / norm, np.array([1.0, 0.0]))
-    valid = (det > 0) & (q_centre * half_trace < 0) & np.isfinite(semi_major)
-    semi_axes = np.stack([semi_major, semi_minor], axis=-1)
-    nan = np.nan
-    return EllipseGeometry(
-        valid=np.asarray(valid, dtype=np.bool_),
-        centre=np.where(valid[..., None], centre, nan),
-        semi_axes=np.where(valid[..., None], semi_axes, nan),
-        major_axis=np.where(valid[..., None], axis, nan),
-    )
-
-
-def _value_and_gradient_sq(
-    conic: FloatArray, points_xz: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Q and |grad Q|^2 of conics (K, 6) or (6,) at points (N, 2); shapes (K, N) or (N,)."""
-    x, z = points_xz[:, 0], points_xz[:, 1]
-    ones = np.ones_like(x)
-    q = conic @ np.stack([x * x, x * z, z * z, x, z, ones])
-    linear = np.stack([x, z, ones])
-    a, b, c, d, e = (conic[..., i, None] for i in range(5))
-    gx = np.concatenate([2 * a, b, d], axis=-1) @ linear
-    gz = np.concatenate([b, 2 * c, e], axis=-1) @ linear
-    return np.asarray(q, dtype=np.float64), np.asarray(gx * gx + gz * gz, dtype=np.float64)
-
-
-def sampson_distance(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
-    """Signed Sampson distance Q / |grad Q| of points to conics.
-
-    It is the first-order approximation of the geometric (orthogonal) distance, in the
-    points' units.
-
-    Parameters
-    ----------
-    conic : array-like, shape (6,) or (K, 6)
-    points_xz : array-like, shape (N, 2)
-
-    Returns
-    -------
-    distance : ndarray, shape (N,) or (K, N)
-    """
-    q, gradient_sq = _value_and_gradient_sq(
-        np.asarray(conic, dtype=np.float64), np.asarray(points_xz, dtype=np.float64)
-    )
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.asarray(q / np.sqrt(gradient_sq), dtype=np.float64)
-
-
-def normalise_conic(conic: ArrayLike, length_scale_m: float) -> FloatArray:
-    """Scale a conic so that F = 1, or to unit norm with A + C > 0 when F is ~0.
-
-    F counts as ~0 when ``|F| <= F_ZERO_TOLERANCE * (|A| + |B| + |C|) * L^2`` with L the
-    length scale of the data: the conic then passes within about 1e-9 L of the origin,
-    which never happens for a profiler, whose origin is its own optical centre.
-
-    Parameters
-    ----------
-    conic : array-like, shape (6,)
-    length_scale_m : float
-        Typical distance of the points from the origin, m.
-
-    Returns
-    -------
-    conic : ndarray, shape (6,)
-    """
-    k = np.asarray(conic, dtype=np.float64)
-    quadratic_size = float(np.sum(np.abs(k[:3]))) * length_scale_m**2
-    if abs(k[5]) > F_ZERO_TOLERANCE * quadratic_size:
-        return np.asarray(k / k[5], dtype=np.float64)
-    k = k / np.linalg.norm(k)
-    return np.asarray(k if k[0] + k[2] > 0 else -k, dtype=np.float64)
-
-
 # ----------------------------------------------------------------------------- the fits
 
 
@@ -504,7 +318,7 @@ def fit_ellipse_direct(points_xz: ArrayLike) -> FloatArray:
     Returns
     -------
     conic : ndarray, shape (6,)
-        (A, B, C, D, E, F), normalised by :func:`normalise_conic`.
+        (A, B, C, D, E, F), normalised by :func:`.conic.normalise_conic`.
 
     Raises
     ------
@@ -625,7 +439,7 @@ def refine_conic(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
     Returns
     -------
     conic : ndarray, shape (6,)
-        Normalised by :func:`normalise_conic`; the start if the optimum is no ellipse.
+        Normalised by :func:`.conic.normalise_conic`; the start if the optimum is no ellipse.
     """
     p = _check_points(points_xz, SAMPLE_SIZE + 1)
     norm = _Normalisation.of(p)
@@ -708,7 +522,7 @@ def _window_samples(order: IntArray, count: int, rng: np.random.Generator) -> In
 
 def _msac_costs(conics: FloatArray, u: FloatArray, threshold_sq: float) -> FloatArray:
     """Truncated squared Sampson distances min(d^2, t^2), shape (K, N)."""
-    q, gradient_sq = _value_and_gradient_sq(conics, u)
+    q, gradient_sq = value_and_gradient_sq(conics, u)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.asarray(np.fmin(q * q / gradient_sq, threshold_sq), dtype=np.float64)
 

@@ -47,7 +47,7 @@ from ...planning import UP, PlanConstraints, per_sample_information, required_ra
 from .config import CylinderConfig
 from .features import FittedSample
 from .model import Cylinder
-from .refine import build_problem, initial_state
+from .problem import build_problem, initial_state
 
 #: Cut-angle ranges of long-axis (α) and short-axis (β) profiles, rad (paper appendix).
 LONG_AXIS_CUT_RAD = (math.radians(50.0), math.radians(75.0))

@@ -2,10 +2,10 @@
 
 Faithful parts (the cylinder paper, §3.3, Fig. 4):
 
-- :func:`galm` is the generalized Lagrange multiplier method of §3.3.1: BFGS minimises
+- :func:`~.galm.galm` is the generalized Lagrange multiplier method of §3.3.1: BFGS minimises
   φ(x, λ, σ) = f(x) − λᵀh(x) + σ/2 ‖h(x)‖² (eq. 14); stop when ‖h‖ ≤ ε; σ ← ησ when
   ‖h_k‖ > α‖h_{k−1}‖; λ ← λ − σ_k h(x_k).
-- :func:`pso` is plain PSO with the update of eq. 15.
+- :func:`~.pso.pso` is plain PSO with the update of eq. 15.
 - :func:`solve_pso_galm` is the 7-step hybrid of §3.3.3: particles are GALM initial points,
   g_best and f_best are initialised from the first swarm; each generation the best and the
   worst particle are found; if the generation's best beats f_best it becomes g_best,
@@ -64,16 +64,16 @@ norm) makes them scale-free.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Literal, Protocol
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.optimize import least_squares, minimize
+from scipy.optimize import least_squares
 
 from linelaser_calib.core.errors import DegenerateError, InputError, SolverError
 from linelaser_calib.core.geometry import matrix_from_rotvec, orthonormal_basis
+from linelaser_calib.core.targets.cylinder.galm import GalmConfig, galm
 from linelaser_calib.core.targets.cylinder.model import (
     DIRECTION,
     N_PARAMS,
@@ -84,404 +84,14 @@ from linelaser_calib.core.targets.cylinder.model import (
     calibration_from_x,
     x_from_calibration,
 )
+from linelaser_calib.core.targets.cylinder.pso import PsoConfig, Stagnation, Swarm
 from linelaser_calib.core.types import FloatArray
 
-#: The paper's ψ for the noisy simulation (0.5 mm²), in m².
-PAPER_PSI_M2 = 0.5e-6
 #: Table 2 box: a_ij, m, l, n in [-1, 1]; t and the axis point in [0, 300] mm.
 PAPER_BOX_MM = (
     np.array([-1.0] * 6 + [0.0] * 6 + [-1.0] * 3),
     np.array([1.0] * 6 + [300.0] * 6 + [1.0] * 3),
 )
-
-
-class ConstrainedProblem(Protocol):
-    """An equality-constrained problem min f(x) s.t. h(x) = 0 (eq. 13), as GALM needs it."""
-
-    def cost(self, x: ArrayLike) -> FloatArray:
-        """f for a batch (K, n) -> (K,)."""
-        ...
-
-    def cost_and_gradient(self, x: ArrayLike) -> tuple[float, FloatArray]:
-        """f and its gradient (n,) for one x (n,)."""
-        ...
-
-    def constraints(self, x: ArrayLike) -> FloatArray:
-        """h, shape (l,) for x (n,) or (K, l) for (K, n)."""
-        ...
-
-    def constraints_jacobian(self, x: ArrayLike) -> FloatArray:
-        """dh/dx, shape (l, n), for one x (n,)."""
-        ...
-
-
-@dataclass(frozen=True)
-class GalmConfig:
-    """Generalized Lagrange multiplier method (§3.3.1). Lengths in the problem's unit.
-
-    Attributes
-    ----------
-    sigma0 : float
-        Initial penalty σ0 > 0, in f units (unit²).
-    eta : float
-        Penalty growth η > 1.
-    alpha : float
-        Required constraint reduction ratio α ∈ (0, 1).
-    epsilon : float
-        Stop when ‖h(x_k)‖ ≤ ε (h is unitless).
-    max_outer : int
-        Most outer (multiplier) iterations.
-    bfgs_gtol : float
-        BFGS stop on the gradient's max-norm, f units per x unit.
-    bfgs_max_iter : int
-        Most BFGS iterations per inner solve.
-    divergence_cost : float
-        Abandon the run as diverged when φ or f falls below −divergence_cost (f units).
-        On the constraint surface f ≥ 0, so only the unbounded literal cost gets there
-        (the paper calls a result beyond 1e3 (mm²) diverged).
-    divergence_x : float
-        Abandon the run as diverged when max |x_i| exceeds this (x units): overflow guard.
-    """
-
-    sigma0: float = 10.0
-    eta: float = 4.0
-    alpha: float = 0.25
-    epsilon: float = 1e-10
-    max_outer: int = 30
-    bfgs_gtol: float = 1e-8
-    bfgs_max_iter: int = 400
-    divergence_cost: float = 1e3
-    divergence_x: float = 1e6
-
-    def __post_init__(self) -> None:
-        if not (self.sigma0 > 0.0 and self.eta > 1.0 and 0.0 < self.alpha < 1.0):
-            raise InputError(
-                f"GALM needs sigma0 > 0, eta > 1 and 0 < alpha < 1, got sigma0={self.sigma0}, "
-                f"eta={self.eta}, alpha={self.alpha}"
-            )
-        if self.epsilon <= 0.0 or self.max_outer < 1 or self.bfgs_max_iter < 1:
-            raise InputError("GALM needs epsilon > 0, max_outer >= 1 and bfgs_max_iter >= 1")
-
-
-@dataclass(frozen=True)
-class GalmResult:
-    """Outcome of one GALM run (problem units).
-
-    Attributes
-    ----------
-    x : ndarray, shape (n,)
-        Last iterate.
-    f : float
-        f(x).
-    phi : float
-        φ(x, λ_k, σ_k) with the multipliers and penalty the last inner solve used.
-    h_norm : float
-        ‖h(x)‖.
-    iterations : int
-        Outer iterations run.
-    inner_iterations : int
-        BFGS iterations summed over the outer ones.
-    multipliers : ndarray, shape (l,)
-        λ after the last update.
-    sigma : float
-        Penalty after the last update.
-    converged : bool
-        ‖h‖ ≤ ε was reached.
-    diverged : bool
-        f fell below −divergence_cost, x grew beyond divergence_x or became non-finite.
-    history_phi, history_f : list of float
-        φ and f after each outer iteration.
-    """
-
-    x: FloatArray
-    f: float
-    phi: float
-    h_norm: float
-    iterations: int
-    inner_iterations: int
-    multipliers: FloatArray
-    sigma: float
-    converged: bool
-    diverged: bool
-    history_phi: list[float]
-    history_f: list[float]
-
-
-class _Diverged(Exception):
-    """Raised inside the BFGS objective to abandon a run that is running away."""
-
-    def __init__(self, x: FloatArray) -> None:
-        super().__init__("diverged")
-        self.x = x
-
-
-def galm(
-    x0: ArrayLike,
-    problem: ConstrainedProblem,
-    config: GalmConfig = GalmConfig(),
-    multipliers0: ArrayLike | None = None,
-) -> GalmResult:
-    """Minimise f subject to h = 0 by the generalized Lagrange multiplier method (§3.3.1).
-
-    Parameters
-    ----------
-    x0 : array-like, shape (n,)
-        Initial point.
-    problem : ConstrainedProblem
-        For example a :class:`~linelaser_calib.core.targets.cylinder.model.CentreAxisProblem`.
-    config : GalmConfig
-    multipliers0 : array-like, shape (l,), optional
-        λ0; zeros by default.
-
-    Returns
-    -------
-    GalmResult
-    """
-    x = np.array(x0, dtype=np.float64)
-    h = problem.constraints(x)
-    lam = np.zeros(h.shape) if multipliers0 is None else np.array(multipliers0, dtype=float)
-    sigma = config.sigma0
-    h_prev = float(np.linalg.norm(h))
-    history_phi: list[float] = []
-    history_f: list[float] = []
-    inner = 0
-    converged = diverged = False
-    k = 0
-    while k < config.max_outer:
-        k += 1
-        lam_used, sigma_used = lam.copy(), sigma
-
-        def phi_and_grad(
-            z: FloatArray, lam_k: FloatArray = lam_used, sigma_k: float = sigma_used
-        ) -> tuple[float, FloatArray]:
-            f, g = problem.cost_and_gradient(z)
-            hz = problem.constraints(z)
-            J = problem.constraints_jacobian(z)
-            phi = f - float(lam_k @ hz) + 0.5 * sigma_k * float(hz @ hz)
-            if not np.isfinite(phi) or phi < -config.divergence_cost:
-                raise _Diverged(z.copy())
-            if np.max(np.abs(z)) > config.divergence_x:
-                raise _Diverged(z.copy())
-            return phi, g - J.T @ lam_k + sigma_k * (J.T @ hz)
-
-        try:
-            with np.errstate(over="ignore", invalid="ignore"):
-                res = minimize(
-                    phi_and_grad,
-                    x,
-                    jac=True,
-                    method="BFGS",
-                    options={"gtol": config.bfgs_gtol, "maxiter": config.bfgs_max_iter},
-                )
-            x = np.asarray(res.x, dtype=np.float64)
-            inner += int(res.nit)
-        except _Diverged as stop:
-            x = stop.x
-            diverged = True
-        f = float(problem.cost(x[None])[0])
-        h = problem.constraints(x)
-        history_f.append(f)
-        history_phi.append(f - float(lam_used @ h) + 0.5 * sigma_used * float(h @ h))
-        h_norm = float(np.linalg.norm(h))
-        if diverged or not np.isfinite(f) or f < -config.divergence_cost:
-            diverged = True
-            break
-        if h_norm <= config.epsilon:
-            converged = True
-            break
-        if h_norm > config.alpha * h_prev:
-            sigma *= config.eta
-        lam = lam - sigma_used * h
-        h_prev = h_norm
-    return GalmResult(
-        x=x,
-        f=history_f[-1],
-        phi=history_phi[-1],
-        h_norm=float(np.linalg.norm(problem.constraints(x))),
-        iterations=k,
-        inner_iterations=inner,
-        multipliers=lam,
-        sigma=sigma,
-        converged=converged,
-        diverged=diverged,
-        history_phi=history_phi,
-        history_f=history_f,
-    )
-
-
-@dataclass(frozen=True)
-class PsoConfig:
-    """Particle swarm (eq. 15) and the hybrid's generation loop.
-
-    Attributes
-    ----------
-    n_particles : int
-        Swarm size (the paper uses 20).
-    inertia : float
-        w (not given by the paper).
-    c1, c2 : float
-        Cognitive and social acceleration (not given by the paper).
-    max_generations : int
-        n_max.
-    psi : float
-        Stop when the best fitness is below ψ, in the fitness's units; m² for
-        :func:`solve_pso_galm` (the paper's 0.5 mm² by default).
-    stagnation_generations : int
-        Stop after this many generations without a relative improvement of the best
-        fitness larger than ``stagnation_tol`` (0 disables).
-    stagnation_tol : float
-        Relative improvement that counts as progress.
-    velocity_clamp : float
-        Largest velocity component as a fraction of the box width.
-    """
-
-    n_particles: int = 20
-    inertia: float = 0.729
-    c1: float = 1.494
-    c2: float = 1.494
-    max_generations: int = 30
-    psi: float = PAPER_PSI_M2
-    stagnation_generations: int = 6
-    stagnation_tol: float = 1e-6
-    velocity_clamp: float = 0.2
-
-    def __post_init__(self) -> None:
-        if self.n_particles < 2 or self.max_generations < 1:
-            raise InputError("PSO needs at least 2 particles and 1 generation")
-        if not 0.0 < self.velocity_clamp <= 1.0:
-            raise InputError(f"velocity_clamp must be in (0, 1], got {self.velocity_clamp}")
-
-
-@dataclass(frozen=True)
-class PsoResult:
-    """Outcome of :func:`pso`.
-
-    Attributes
-    ----------
-    x : ndarray, shape (n,)
-        Global best position.
-    fitness : float
-    generations : int
-    history : list of float
-        Best fitness after each generation (the initial swarm first).
-    """
-
-    x: FloatArray
-    fitness: float
-    generations: int
-    history: list[float]
-
-
-class _Swarm:
-    """Positions, velocities and personal bests of a swarm in a box (eq. 15)."""
-
-    def __init__(
-        self,
-        lower: FloatArray,
-        upper: FloatArray,
-        config: PsoConfig,
-        rng: np.random.Generator,
-    ) -> None:
-        self.lower, self.upper, self.config, self.rng = lower, upper, config, rng
-        shape = (config.n_particles, lower.size)
-        self.v_max = config.velocity_clamp * (upper - lower)
-        self.x = rng.uniform(lower, upper, shape)
-        self.v = rng.uniform(-self.v_max, self.v_max, shape)
-        self.p_best = self.x.copy()
-        self.p_fitness = np.full(config.n_particles, np.inf)
-
-    def record(self, fitness: FloatArray) -> None:
-        """Update the personal bests with the fitness (K,) of the current positions."""
-        better = fitness < self.p_fitness
-        self.p_best[better] = self.x[better]
-        self.p_fitness[better] = fitness[better]
-
-    def step(self, g_best: FloatArray) -> None:
-        """Move every particle by eq. 15 towards its own best and the global best."""
-        c = self.config
-        r1 = self.rng.uniform(size=self.x.shape)
-        r2 = self.rng.uniform(size=self.x.shape)
-        self.v = (
-            c.inertia * self.v
-            + c.c1 * r1 * (self.p_best - self.x)
-            + c.c2 * r2 * (g_best[None] - self.x)
-        )
-        self.v = np.clip(self.v, -self.v_max, self.v_max)
-        x = self.x + self.v
-        hit = (x < self.lower) | (x > self.upper)
-        self.x = np.clip(x, self.lower, self.upper)
-        self.v[hit] = 0.0
-
-
-class _Stagnation:
-    """Counts consecutive generations without relative progress of the best fitness."""
-
-    def __init__(self, generations: int, tol: float) -> None:
-        self.generations, self.tol, self.count = generations, tol, 0
-        self.last = np.inf
-
-    def stalled(self, best: float) -> bool:
-        if self.last - best > self.tol * abs(self.last) or not np.isfinite(self.last):
-            self.count = 0
-        else:
-            self.count += 1
-        self.last = min(self.last, best)
-        return 0 < self.generations <= self.count
-
-
-def pso(
-    fitness: Callable[[FloatArray], FloatArray],
-    lower: ArrayLike,
-    upper: ArrayLike,
-    config: PsoConfig,
-    rng: np.random.Generator,
-) -> PsoResult:
-    """Minimise a function over a box with plain PSO (eq. 15).
-
-    Parameters
-    ----------
-    fitness : callable
-        Maps positions (K, n) to fitness (K,).
-    lower, upper : array-like, shape (n,)
-        Search box.
-    config : PsoConfig
-        ``psi`` is in the fitness's units.
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    PsoResult
-    """
-    lo, hi = _check_box(lower, upper)
-    swarm = _Swarm(lo, hi, config, rng)
-    stagnation = _Stagnation(config.stagnation_generations, config.stagnation_tol)
-    F = fitness(swarm.x)
-    swarm.record(F)
-    g = int(np.argmin(F))
-    g_best, f_best = swarm.x[g].copy(), float(F[g])
-    history = [f_best]
-    while len(history) <= config.max_generations:
-        if f_best < config.psi or stagnation.stalled(f_best):
-            break
-        swarm.step(g_best)
-        F = fitness(swarm.x)
-        swarm.record(F)
-        g = int(np.argmin(F))
-        if F[g] < f_best:
-            g_best, f_best = swarm.x[g].copy(), float(F[g])
-        history.append(f_best)
-    return PsoResult(x=g_best, fitness=f_best, generations=len(history) - 1, history=history)
-
-
-def _check_box(lower: ArrayLike, upper: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """Validate a search box: finite 1-D bounds of equal shape with lower < upper."""
-    lo = np.asarray(lower, dtype=np.float64)
-    hi = np.asarray(upper, dtype=np.float64)
-    if lo.ndim != 1 or lo.shape != hi.shape or not np.all(np.isfinite(lo) & np.isfinite(hi)):
-        raise InputError(f"search box bounds must be finite vectors of equal length: {lo}, {hi}")
-    if not np.all(lo < hi):
-        raise InputError(f"search box lower bounds must be below the upper ones: {lo}, {hi}")
-    return lo, hi
 
 
 @dataclass(frozen=True)
@@ -734,8 +344,8 @@ def _hybrid(
         polished = _polish(problem, x)
         return polished if polished[1] <= config.accept_rms_m else None
 
-    swarm = _Swarm(lower, upper, config.pso, rng)
-    stagnation = _Stagnation(config.pso.stagnation_generations, config.pso.stagnation_tol)
+    swarm = Swarm(lower, upper, config.pso, rng)
+    stagnation = Stagnation(config.pso.stagnation_generations, config.pso.stagnation_tol)
     F = fitness(swarm.x)  # step 1: g_best and f_best from the initial swarm
     swarm.record(F)
     g_best, f_best = swarm.x[int(np.argmin(F))].copy(), float(np.min(F))

@@ -13,7 +13,7 @@ from ...geometry import FloatArray, apply_transform
 from ...types import SampleFit
 from ..base import Shape, mm_text, plain_floats, read_vector
 from .model import Cylinder
-from .refine import measured_to_true
+from .problem import measured_to_true
 from .residuals import axis_extent
 
 

@@ -13,7 +13,7 @@ Methods
     :func:`estimates_scale`). With joint states and a
     robot model (``SolveContext.kinematics``) it then estimates the identifiable kinematic
     corrections together with the hand-eye and the cylinder
-    (:func:`.refine.refine_kinematics`), from the other placements of the cylinder in
+    (:func:`.joint.refine_kinematics`), from the other placements of the cylinder in
     ``SolveContext.placements`` too (each refined on its own first, from the paper's solve on
     its ellipse centres).
 
@@ -50,15 +50,14 @@ from ..base import (
 from .arc import radius_mismatch
 from .config import CylinderConfig
 from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
+from .joint import JointScan, refine_kinematics
 from .model import Cylinder, centre_distances
 from .plan import CylinderPlanner
 from .pso_alm import PaperSolution, solve_pso_galm
 from .refine import (
-    JointScan,
     RefineResult,
     SolvedProblem,
     refine,
-    refine_kinematics,
     refine_subset,
     refine_with_outlier_rejection,
 )

@@ -1,0 +1,408 @@
+"""The cylinder's refinement problem in the shared solver's block form: residuals, Jacobians.
+
+Model
+-----
+Sample j has profile points p_jk (sensor frame, m) and a reported flange pose T_j =
+``T_base_flange[j]``. The robot's pose error is a per-sample nuisance δ_j = (ω_j, τ_j): a
+rotation vector ω_j (rad) and a translation τ_j (m), both in the **flange frame** (right
+perturbation), so that the true flange pose is
+
+    T_j · D(δ_j),   D(δ) = [[Exp(ω), τ], [0, 1]],
+
+i.e. the flange's true orientation is R_j·Exp(ω_j) (a rotation about the flange origin) and
+its true position t_j + R_j·τ_j. For an isotropic robot error this is the same distribution as
+an error stated in the base frame, and it keeps rotation and translation errors decoupled
+(a base-frame rotation would swing the flange about the robot base). A point maps into the
+base frame as
+
+    x_jk = T_j · D(δ_j) · T_flange_sensor · S⁻¹ · p_jk,   S = diag(1 + s, 1, 1),
+
+where s is the sensor's along-line scale error (dimensionless; 0 unless estimated): a
+profiler that reports x as (1 + s) times the true value (s = 0.005 reads 0.5 % long)
+stretches each arc across the line and shifts its centre by s times its along-line
+position.
+
+The cylinder has an axis point c, a unit direction d and a radius R. The residuals are
+
+- per point: (‖(I − d dᵀ)(x_jk − c)‖ − R) / σ_s, under a robust loss (Huber or soft-L1 with
+  a scale of ``loss_scale`` σ) against spikes;
+- per sample: the Gaussian priors ω_j / σ_r and τ_j / σ_t (no robust loss).
+
+Minimising their sum (``½ Σ loss + ½ Σ prior²``) is the joint maximum a-posteriori estimate of
+the hand-eye, axis, radius and pose corrections; in the linearised (Gaussian) model the
+hand-eye part equals the maximum-likelihood estimate with the corrections integrated out.
+
+Parametrisation and solver
+--------------------------
+Every iteration linearises around the current estimate in local coordinates:
+
+- hand-eye: ``R = R̂ · Exp(θ)`` (θ about the **sensor** axes), ``t = t̂ + ρ`` (ρ in the
+  **flange** frame);
+- axis: ``d = normalise(d̂ + a₁u + a₂v)``, ``c = ĉ + b₁u + b₂v`` with (u, v) ⟂ d̂ (4 numbers,
+  no singularity; the point is kept nearest to the data's centroid, which only slides it
+  along the axis);
+- radius: R = R̂ + r (only when estimated);
+- along-line scale: s = ŝ + σ (only when estimated; ``estimate_scale``);
+- corrections: ω_j, τ_j additively (exact right Jacobian of Exp).
+
+The Jacobian is analytic and block-sparse: a point depends on the G = 10 to 12 global
+numbers and on its sample's 6. The shared block solver
+(:mod:`linelaser_calib.core.solver`: Levenberg–Marquardt with Marquardt scaling, Nielsen's
+damping update and iteratively re-weighted robust weights) solves the normal equations by a
+Schur complement: each sample's 6×6 block is inverted on its own and eliminated, leaving a
+G×G system. Cost and time grow linearly with the number of samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from ...errors import DegenerateError, InputError
+from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
+from ...solver import N_HAND_EYE, Linearisation, Residuals
+from .config import RefineConfig
+from .model import Cylinder
+
+#: Axis parameters (a, b) in the global block, after the hand-eye's 6.
+N_AXIS = 4
+
+
+# --------------------------------------------------------------------------------------
+# The problem in the shared solver's block form
+
+
+@dataclass(frozen=True)
+class CylinderState:
+    """Current estimate (absolute values, not increments).
+
+    Attributes
+    ----------
+    R_fs : ndarray, shape (3, 3)
+    t_fs : ndarray, shape (3,)
+        Hand-eye, m.
+    point : ndarray, shape (3,)
+        On the axis, base frame, m.
+    direction : ndarray, shape (3,)
+        Unit axis direction.
+    radius : float
+        m.
+    omega, tau : ndarray, shape (M, 3)
+        Pose corrections, rad and m, flange frame.
+    scale : float
+        The sensor's along-line scale error s (dimensionless).
+    """
+
+    R_fs: FloatArray
+    t_fs: FloatArray
+    point: FloatArray
+    direction: FloatArray
+    radius: float
+    omega: FloatArray
+    tau: FloatArray
+    scale: float = 0.0
+
+
+class _Geometry(NamedTuple):
+    """Per-point intermediate quantities at one state."""
+
+    p: FloatArray  # (M, K, 3) sensor point with the along-line scale removed, S⁻¹ p
+    y: FloatArray  # (M, K, 3) point in the nominal flange frame, R_fs S⁻¹ p + t_fs
+    RE: FloatArray  # (M, 3, 3) R_bf·Exp(ω) per sample
+    distance: FloatArray  # (M, K) distance to the axis, m
+    normal: FloatArray  # (M, K, 3) unit radial direction in the base frame
+    along: FloatArray  # (M, K) d · (x − c)
+
+
+@dataclass(frozen=True)
+class CylinderProblem:
+    """Validated, subsampled data in a padded (samples × points) layout; a
+    :class:`~linelaser_calib.core.solver.BlockProblem`.
+
+    Sample j's points fill ``points[j, :counts[j]]``; the rest repeat its first point and are
+    masked out (residual and Jacobian rows zero), so that every per-point operation is a
+    batched array operation without gathers. Global step: θ (3), ρ (3), a (2), b (2) and,
+    when estimated, the radius and then the along-line scale (see the module docstring).
+    With ``centroid`` set, a retraction slides the axis point along the axis to the point
+    nearest it (same cylinder).
+    """
+
+    points: FloatArray  # (M, K, 3) sensor frame, m
+    mask: FloatArray  # (M, K) 1 for a real point, 0 for padding
+    counts: np.ndarray  # (M,) real points per sample
+    R_bf: FloatArray  # (M, 3, 3)
+    t_bf: FloatArray  # (M, 3)
+    estimate_radius: bool
+    config: RefineConfig
+    centroid: FloatArray | None = None
+    estimate_scale: bool = False
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.R_bf.shape[0])
+
+    @property
+    def n_global(self) -> int:
+        return N_HAND_EYE + N_AXIS + int(self.estimate_radius) + int(self.estimate_scale)
+
+    @property
+    def radius_index(self) -> int | None:
+        """Position of the radius in the global step, when estimated."""
+        return N_HAND_EYE + N_AXIS if self.estimate_radius else None
+
+    @property
+    def scale_index(self) -> int | None:
+        """Position of the along-line scale in the global step, when estimated."""
+        return self.n_global - 1 if self.estimate_scale else None
+
+    @property
+    def step_scale(self) -> FloatArray:
+        """Rotations and the along-line scale times the lever, lengths as they are."""
+        scale = np.ones(self.n_global)
+        scale[:3] = lever_arm_m(self)
+        if self.scale_index is not None:
+            scale[self.scale_index] = lever_arm_m(self)
+        return scale
+
+    def with_flange_poses(self, T_base_flange: FloatArray) -> CylinderProblem:
+        """The same problem at other flange poses (M, 4, 4)."""
+        return replace(
+            self,
+            R_bf=np.ascontiguousarray(T_base_flange[:, :3, :3]),
+            t_bf=np.ascontiguousarray(T_base_flange[:, :3, 3]),
+        )
+
+    def pose_corrections(self, state: CylinderState) -> FloatArray:
+        """``[ω (rad), τ (m)]`` (M, 6) of every sample."""
+        return np.hstack([state.omega, state.tau])
+
+    def _prior_sqrt_information(self) -> FloatArray:
+        cfg = self.config
+        return np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
+
+    def residuals(self, state: CylinderState) -> Residuals:
+        """Normalised point residuals (M, K), zero on padding, and pose priors (M, 6)."""
+        return self._residuals(state, _geometry(self, state))
+
+    def _residuals(self, state: CylinderState, geo: _Geometry) -> Residuals:
+        cfg = self.config
+        e = (geo.distance - state.radius) * (self.mask / cfg.sensor_sigma_m)
+        prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
+        return Residuals(e, prior)
+
+    def linearise(self, state: CylinderState) -> Linearisation:
+        """Residuals and their analytic Jacobians.
+
+        ``J_global`` (M, K, G) has the columns θ (3), ρ (3), a (2), b (2) and, when
+        estimated, the radius and the along-line scale; ``J_local`` (M, K, 6) the columns
+        ω (3), τ (3) of the point's own sample; both zero on padding.
+        """
+        geo = _geometry(self, state)
+        scale = (self.mask / self.config.sensor_sigma_m)[..., None]
+        n_base = geo.normal * scale
+        n_corrected = n_base @ self.R_bf  # rows R_bfᵀ n: d r / d τ
+        n_flange = n_base @ geo.RE  # rows Exp(ω)ᵀ R_bfᵀ n: d r / d ρ
+        n_sensor = n_flange @ state.R_fs  # rows R_fsᵀ n_flange
+        u, v = orthonormal_basis(state.direction)
+        n_uv = n_base @ np.column_stack([u, v])
+        columns = [_cross(geo.p, n_sensor), n_flange, -geo.along[..., None] * n_uv, -n_uv]
+        if self.estimate_radius:
+            columns.append(-scale)
+        if self.estimate_scale:
+            # d (x / (1 + s)) / d s = −x / (1 + s)² = −(x / (1 + s)) / (1 + s)
+            columns.append((-n_sensor[..., 0] * geo.p[..., 0] / (1.0 + state.scale))[..., None])
+        J_omega = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
+        return Linearisation(
+            residuals=self._residuals(state, geo),
+            J_global=np.concatenate(columns, axis=2),
+            J_local=np.concatenate([J_omega, n_corrected], axis=2),
+            pose_prior_sqrt_information=self._prior_sqrt_information(),
+        )
+
+    def retract(
+        self, state: CylinderState, step_global: FloatArray, step_local: FloatArray
+    ) -> CylinderState:
+        """Apply increments in the local coordinates of :meth:`linearise`."""
+        u, v = orthonormal_basis(state.direction)
+        direction = state.direction + step_global[6] * u + step_global[7] * v
+        r, s = self.radius_index, self.scale_index
+        moved = CylinderState(
+            R_fs=state.R_fs @ exp_so3(step_global[None, :3])[0],
+            t_fs=state.t_fs + step_global[3:6],
+            point=state.point + step_global[8] * u + step_global[9] * v,
+            direction=direction / np.linalg.norm(direction),
+            radius=state.radius + (0.0 if r is None else float(step_global[r])),
+            omega=state.omega + step_local[:, :3],
+            tau=state.tau + step_local[:, 3:],
+            scale=state.scale + (0.0 if s is None else float(step_global[s])),
+        )
+        return moved if self.centroid is None else recentred(moved, self.centroid)
+
+
+def _sample_transforms(
+    problem: CylinderProblem, state: CylinderState
+) -> tuple[FloatArray, FloatArray]:
+    """Per-sample rotation R_bf·Exp(ω) (M, 3, 3) and the base position of the flange-frame
+    origin after correction, t_bf + R_bf·τ (M, 3)."""
+    RE = problem.R_bf @ exp_so3(state.omega)
+    offset = problem.t_bf + np.einsum("mij,mj->mi", problem.R_bf, state.tau)
+    return RE, offset
+
+
+def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
+    """Base-frame points and their relation to the axis."""
+    RE, offset = _sample_transforms(problem, state)
+    p = measured_to_true(problem.points, state.scale)
+    y = p @ state.R_fs.T + state.t_fs
+    w = y @ RE.transpose(0, 2, 1) + (offset - state.point)[:, None, :]
+    along = w @ state.direction
+    radial = w - along[..., None] * state.direction
+    distance = np.sqrt(np.sum(radial**2, axis=2))
+    normal = radial / np.maximum(distance, 1e-300)[..., None]
+    return _Geometry(p, y, RE, distance, normal, along)
+
+
+def measured_to_true(points: ArrayLike, scale: float) -> FloatArray:
+    """Sensor points (..., 3) with the along-line scale error s removed: x → x / (1 + s), m."""
+    if scale == 0.0:
+        return np.asarray(points, dtype=np.float64)
+    p = np.array(points, dtype=np.float64)
+    p[..., 0] /= 1.0 + scale
+    return p
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Cross products of (..., 3) arrays (cheaper than numpy.cross on small last axes)."""
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+
+
+def data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray:
+    """Mean of the profiles' centroids in the base frame (3,), m."""
+    RE, offset = _sample_transforms(problem, state)
+    means = np.sum(problem.points * problem.mask[..., None], axis=1) / problem.counts[:, None]
+    y = measured_to_true(means, state.scale) @ state.R_fs.T + state.t_fs
+    return np.asarray(np.mean(np.einsum("mij,mj->mi", RE, y) + offset, axis=0))
+
+
+def recentred(state: CylinderState, centroid: FloatArray) -> CylinderState:
+    """Slide the axis point along the axis to the point nearest ``centroid`` (same cylinder)."""
+    point = state.point + float((centroid - state.point) @ state.direction) * state.direction
+    return replace(state, point=point)
+
+
+# --------------------------------------------------------------------------------------
+# Input handling
+
+
+def _subsample(points: FloatArray, limit: int) -> FloatArray:
+    """At most ``limit`` points (0: all), evenly spaced along the profile order."""
+    if limit == 0 or len(points) <= limit:
+        return points
+    return np.asarray(points[np.round(np.linspace(0, len(points) - 1, limit)).astype(int)])
+
+
+def build_problem(
+    samples_points: list[FloatArray],
+    T_base_flange: ArrayLike,
+    config: RefineConfig,
+    estimate_radius: bool,
+) -> CylinderProblem:
+    """Validate the input (InputError/DegenerateError with advice) and stack it.
+
+    Parameters are those of :func:`.refine.refine`; ``estimate_radius`` adds the radius to the
+    global parameters, ``config.estimate_scale`` the along-line scale.
+    """
+    T_all = np.asarray(T_base_flange, dtype=np.float64)
+    M = len(samples_points)
+    if T_all.shape != (M, 4, 4):
+        raise InputError(
+            f"T_base_flange must have shape ({M}, 4, 4), one pose per profile, got {T_all.shape}"
+        )
+    if config.min_samples > M:
+        raise DegenerateError(
+            f"{M} samples given, but the refinement needs at least {config.min_samples}: "
+            "scan the cylinder from more flange poses (20-50 diverse poses are typical)"
+        )
+    for j, T in enumerate(T_all):
+        try:
+            check_transform(T, tolerance=1e-4)
+        except ValueError as exc:
+            raise InputError(f"T_base_flange[{j}] is not a rigid transform: {exc}") from exc
+    stacked: list[FloatArray] = []
+    for j, p in enumerate(samples_points):
+        q = np.asarray(p, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != 3:
+            raise InputError(f"profile {j} must be an (N, 3) array of points, got shape {q.shape}")
+        if len(q) < config.min_points_per_profile:
+            raise InputError(
+                f"profile {j} has {len(q)} points, fewer than {config.min_points_per_profile}: "
+                "drop it or check the profile cleaning"
+            )
+        if not np.all(np.isfinite(q)):
+            raise InputError(f"profile {j} contains NaN or Inf: clean the profiles first")
+        stacked.append(_subsample(q, config.max_points_per_profile))
+    counts = np.array([len(q) for q in stacked])
+    K = int(counts.max())
+    points = np.empty((M, K, 3))
+    mask = np.zeros((M, K))
+    for j, q in enumerate(stacked):
+        points[j, : len(q)] = q
+        points[j, len(q) :] = q[0]
+        mask[j, : len(q)] = 1.0
+    return CylinderProblem(
+        points=points,
+        mask=mask,
+        counts=counts,
+        R_bf=np.ascontiguousarray(T_all[:, :3, :3]),
+        t_bf=np.ascontiguousarray(T_all[:, :3, 3]),
+        estimate_radius=estimate_radius,
+        config=config,
+        estimate_scale=config.estimate_scale,
+    )
+
+
+def initial_state(
+    problem: CylinderProblem, T_flange_sensor0: ArrayLike, cylinder0: Cylinder, radius: float
+) -> CylinderState:
+    """The start of the solve: the given hand-eye and axis, zero pose corrections.
+
+    Raises
+    ------
+    InputError
+        A start that is not a rigid transform, a degenerate axis or a bad radius.
+    """
+    try:
+        T0 = check_transform(T_flange_sensor0, tolerance=1e-4)
+    except ValueError as exc:
+        raise InputError(f"the initial hand-eye is not a rigid transform: {exc}") from exc
+    d = np.asarray(cylinder0.direction, dtype=np.float64)
+    c = np.asarray(cylinder0.point, dtype=np.float64)
+    if d.shape != (3,) or c.shape != (3,) or not np.all(np.isfinite(np.concatenate([c, d]))):
+        raise InputError("the initial cylinder needs a finite point (3,) and direction (3,)")
+    if not np.linalg.norm(d) > 0.0:
+        raise InputError("the initial cylinder direction is zero")
+    if not (np.isfinite(radius) and radius > 0.0):
+        raise InputError(f"the cylinder radius must be a positive length in m, got {radius}")
+    M = problem.n_samples
+    return CylinderState(
+        R_fs=T0[:3, :3].copy(),
+        t_fs=T0[:3, 3].copy(),
+        point=c,
+        direction=d / np.linalg.norm(d),
+        radius=float(radius),
+        omega=np.zeros((M, 3)),
+        tau=np.zeros((M, 3)),
+    )
+
+
+def lever_arm_m(problem: CylinderProblem) -> float:
+    """Median distance of the profile points from the sensor origin, m."""
+    lever = problem.config.observability.lever_m
+    if lever is not None:
+        return lever
+    return float(np.median(np.linalg.norm(problem.points, axis=2)[problem.mask > 0.0]))

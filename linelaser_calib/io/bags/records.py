@@ -1,0 +1,95 @@
+"""The names and records every part of the bag I/O shares: message types, topics, what was read."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import NamedTuple
+
+from linelaser_calib.core.types import FlangePose, Profile
+
+PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
+
+
+POSE_TYPE = "geometry_msgs/msg/PoseStamped"
+
+
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+
+
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+
+
+TF_TOPIC = "/tf"
+
+
+TF_STATIC_TOPIC = "/tf_static"
+
+
+#: The joint-state topic of a session (and the default one read from any bag).
+JOINT_STATE_TOPIC = "/joint_states"
+
+
+#: Called as ``progress(done, total)`` while messages are decoded.
+Progress = Callable[[int, int], None]
+
+
+class TopicSummary(NamedTuple):
+    """One topic of a bag: name, message type and message count."""
+
+    topic: str
+    msgtype: str
+    msgcount: int
+
+
+class SkippedMessage(NamedTuple):
+    """A message that could not be used: topic, stamp (header, else log time) ns, reason."""
+
+    topic: str
+    stamp_ns: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class BagContents:
+    """Profiles and flange poses read from a bag, sorted by stamp.
+
+    Attributes
+    ----------
+    path : Path
+        The bag (or session) directory or MCAP file read.
+    profiles : list of Profile
+        Points (N, 3) in m with invalid (NaN/Inf) points dropped.
+    poses : list of FlangePose
+    profile_topic, pose_topic : str
+        Topics the profiles and poses came from.
+    sensor_frame, base_frame : str
+        Header frame ids of the first profile and the first pose.
+    topics : list of TopicSummary
+        Every topic of the bag, sorted by name.
+    start_ns, end_ns : int
+        Log times of the first and last message of the bag, ns.
+    skipped : list of SkippedMessage
+        Messages on the two topics that were malformed or undecodable.
+    """
+
+    path: Path
+    profiles: list[Profile]
+    poses: list[FlangePose]
+    profile_topic: str
+    pose_topic: str
+    sensor_frame: str
+    base_frame: str
+    topics: list[TopicSummary]
+    start_ns: int
+    end_ns: int
+    skipped: list[SkippedMessage]
+
+
+class SessionConnection(NamedTuple):
+    """One channel of a session file, shaped like the rosbags connections read_bag uses."""
+
+    topic: str
+    msgtype: str
+    msgcount: int
