@@ -179,10 +179,11 @@ def test_right_jacobian_and_point_jacobians_match_finite_differences() -> None:
 
     data = _simulated(-1)
     T = data.truth.T_base_flange_recorded[:3]
-    points = np.concatenate(
+    points = np.stack(
         [p.points[np.all(np.isfinite(p.points), axis=1)][:20] for p in data.profiles[:3]]
     )
-    sample = np.repeat(np.arange(3), 20)
+    valid = np.ones((3, 20), dtype=bool)
+    valid[2, 15:] = False  # padding: no residual, no Jacobian
     state = SphereState(
         data.truth.T_flange_sensor,
         data.truth.centre_m,
@@ -190,7 +191,9 @@ def test_right_jacobian_and_point_jacobians_match_finite_differences() -> None:
         rng.normal(size=(3, 6)) * 1e-3,
     )
     sigma = 5e-6
-    r0, J_global, J_local = point_residuals(state, T, points, sample, sigma)
+    r0, J_global, J_local = point_residuals(state, T, points, valid, sigma)
+    assert J_global is not None and J_local is not None
+    assert not r0[~valid].any() and not J_global[~valid].any() and not J_local[~valid].any()
     h = 1e-7
     for k in range(10):
         step = np.zeros(10)
@@ -204,14 +207,14 @@ def test_right_jacobian_and_point_jacobians_match_finite_differences() -> None:
             state.radius_m + step[9],
             state.corrections,
         )
-        numeric = (point_residuals(moved, T, points, sample, sigma)[0] - r0) / h
-        np.testing.assert_allclose(J_global[:, k], numeric, rtol=1e-4, atol=1e-2)
+        numeric = (point_residuals(moved, T, points, valid, sigma)[0] - r0) / h
+        np.testing.assert_allclose(J_global[..., k], numeric, rtol=1e-4, atol=1e-2)
     for k in range(6):
         corrections = state.corrections.copy()
         corrections[:, k] += h
         moved = SphereState(state.T_flange_sensor, state.centre_m, state.radius_m, corrections)
-        numeric = (point_residuals(moved, T, points, sample, sigma)[0] - r0) / h
-        np.testing.assert_allclose(J_local[:, k], numeric, rtol=1e-4, atol=1e-2)
+        numeric = (point_residuals(moved, T, points, valid, sigma)[0] - r0) / h
+        np.testing.assert_allclose(J_local[..., k], numeric, rtol=1e-4, atol=1e-2)
 
 
 def _config(method: Method, **settings: object) -> PipelineConfig:

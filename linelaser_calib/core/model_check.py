@@ -50,6 +50,9 @@ LINE_PAIR_BREAKS = 24
 #: (profiles that agree to a few per cent would otherwise make every small difference an
 #: outlier).
 MIN_SPREAD_SHARE = 0.1
+#: σ per median absolute deviation for Gaussian values (scipy.stats.median_abs_deviation's
+#: "normal" scale; its per-call cost, some ms, would dominate the fits here).
+MAD_TO_SIGMA = 1.0 / float(stats.norm.ppf(0.75))
 
 
 @dataclass(frozen=True)
@@ -79,7 +82,8 @@ class ShapeFit:
 def robust_scale_m(residuals_m: ArrayLike) -> float:
     """1.4826 · median absolute deviation of residuals (N,), m: σ for Gaussian residuals,
     unmoved by a minority of outliers."""
-    return float(stats.median_abs_deviation(np.asarray(residuals_m), scale="normal"))
+    r = np.asarray(residuals_m, dtype=np.float64)
+    return MAD_TO_SIGMA * float(np.median(np.abs(r - np.median(r))))
 
 
 def effective_count(residuals_m: ArrayLike) -> float:
@@ -177,7 +181,8 @@ def line_pair_fit(points_xz: ArrayLike) -> ShapeFit:
     """Two straight lines meeting at a break in scan order (a V seam, an edge); 5 numbers.
 
     The break is tried at :data:`LINE_PAIR_BREAKS` places over the middle 80 % of the
-    profile; at the best, each point is then given to the nearer line and both are refitted.
+    profile; at the one of least squared distances, each point is then given to the nearer
+    line and both are refitted.
     """
     p = _check_points(points_xz, 8)
     n = len(p)
@@ -185,10 +190,11 @@ def line_pair_fit(points_xz: ArrayLike) -> ShapeFit:
     for split in np.unique(np.linspace(0.1 * n, 0.9 * n, LINE_PAIR_BREAKS).astype(int)):
         if split < 3 or n - split < 3:
             continue
-        r = np.concatenate([_line_distances(p[:split])[1], _line_distances(p[split:])[1]])
-        scale = robust_scale_m(r)
-        if best is None or scale < best[0]:
-            best = (scale, int(split))
+        cost = sum(
+            float(d @ d) for d in (_line_distances(p[:split])[1], _line_distances(p[split:])[1])
+        )
+        if best is None or cost < best[0]:
+            best = (cost, int(split))
     if best is None:
         return ShapeFit("line pair", _line_distances(p)[1], 5)
     split = best[1]
@@ -278,5 +284,5 @@ def recording_scale(values_m: ArrayLike) -> RecordingScale:
     if v.ndim != 1 or len(v) == 0 or not np.all(np.isfinite(v)):
         raise ValueError(f"the recording scale needs finite per-profile values, got {v!r}")
     median = float(np.median(v))
-    spread = float(stats.median_abs_deviation(v, scale="normal"))
+    spread = robust_scale_m(v)
     return RecordingScale(median, max(spread, MIN_SPREAD_SHARE * median, 1e-300))

@@ -52,7 +52,6 @@ from linelaser_calib.core.errors import InputError, SolverError
 from linelaser_calib.core.geometry import (
     matrix_from_rotvec,
     right_jacobian_so3,
-    skews,
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.solver import (
@@ -63,7 +62,7 @@ from linelaser_calib.core.solver import (
     variance_factors,
 )
 from linelaser_calib.core.solver.lm import Residuals
-from linelaser_calib.core.types import FloatArray
+from linelaser_calib.core.types import BoolArray, FloatArray
 
 IntArray = NDArray[np.int64]
 
@@ -95,55 +94,65 @@ def point_residuals(
     state: SphereState,
     T_base_flange: FloatArray,
     points: FloatArray,
-    sample: ArrayLike,
+    valid: BoolArray,
     sensor_sigma_m: float,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
+    *,
+    jacobians: bool = True,
+) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
     """Point-to-sphere residuals and their Jacobian blocks, at ``state`` (θ = 0).
+
+    The points are held per sample, padded (row j holds sample j's points), so that every
+    product is a batched 3 × 3 one per sample.
 
     Parameters
     ----------
     state : SphereState
     T_base_flange : ndarray, shape (K, 4, 4)
-    points : ndarray, shape (N, 3)
-        Sensor-frame points of every sample, m.
-    sample : array-like of int, shape (N,)
-        The sample each point belongs to.
+    points : ndarray, shape (K, M, 3)
+        Sensor-frame points of every sample, m, padded.
+    valid : ndarray of bool, shape (K, M)
+        The slots that hold a point (the others give zero residuals and Jacobians).
     sensor_sigma_m : float
+    jacobians : bool
+        Also the Jacobians (otherwise None for both).
 
     Returns
     -------
-    residuals : ndarray, shape (N,)
+    residuals : ndarray, shape (K, M)
         (‖x − c‖ − R) / σ_s.
-    J_global : ndarray, shape (N, 10)
+    J_global : ndarray, shape (K, M, 10), or None
         Against [θ (3), ρ (3), c (3), R].
-    J_local : ndarray, shape (N, 6)
+    J_local : ndarray, shape (K, M, 6), or None
         Against the own sample's [ω (3), τ (3)].
     """
-    j = np.asarray(sample, dtype=np.int64)
     X = state.T_flange_sensor
     omega, tau = state.corrections[:, :3], state.corrections[:, 3:]
     E = np.stack([matrix_from_rotvec(w) for w in omega]) if len(omega) else np.zeros((0, 3, 3))
     Rj = T_base_flange[:, :3, :3]
+    RE = Rj @ E
     s = points @ X[:3, :3].T + X[:3, 3]
-    x = np.einsum("nij,nj->ni", (Rj @ E)[j], s) + np.einsum("nij,nj->ni", Rj, tau)[j]
-    x += T_base_flange[j, :3, 3]
-    d = x - state.centre_m
-    dist = np.linalg.norm(d, axis=1)
-    n = d / np.maximum(dist, 1e-300)[:, None]
-    residuals = (dist - state.radius_m) / sensor_sigma_m
-    nR = np.einsum("ni,nij->nj", n, Rj[j])
-    nRE = np.einsum("nj,njk->nk", nR, E[j])
-    J_global = np.empty((len(points), 10))
-    # θ at 0: J_r = I; -R_X [q]x.
-    J_global[:, :3] = -np.einsum("nk,kl,nlm->nm", nRE, X[:3, :3], skews(points))
-    J_global[:, 3:6] = nRE
-    J_global[:, 6:9] = -n
-    J_global[:, 9] = -1.0
-    Jr = right_jacobian_so3(omega)
-    J_local = np.empty((len(points), N_LOCAL))
-    J_local[:, :3] = -np.einsum("nk,nkl,nlm->nm", nRE, skews(s), Jr[j])
-    J_local[:, 3:] = nR
-    return residuals, J_global / sensor_sigma_m, J_local / sensor_sigma_m
+    # Per sample: x = R_j E_j s + (R_j τ_j + t_j).
+    offset = np.einsum("kij,kj->ki", Rj, tau) + T_base_flange[:, :3, 3]
+    d = s @ RE.transpose(0, 2, 1) + (offset - state.centre_m)[:, None, :]
+    dist = np.linalg.norm(d, axis=2)
+    weight = valid / sensor_sigma_m
+    residuals = (dist - state.radius_m) * weight
+    if not jacobians:
+        return residuals, None, None
+    n = d / np.maximum(dist, 1e-300)[..., None]
+    nR = n @ Rj
+    nRE = n @ RE
+    w = weight[..., None]
+    J_global = np.empty((*valid.shape, 10))
+    # θ at 0 (J_r = I): −nᵀ R_j E_j R_X [q]ₓ, and aᵀ[q]ₓ = (a × q)ᵀ.
+    J_global[..., :3] = -np.cross(nRE @ X[:3, :3], points) * w
+    J_global[..., 3:6] = nRE * w
+    J_global[..., 6:9] = -n * w
+    J_global[..., 9] = -weight
+    J_local = np.empty((*valid.shape, N_LOCAL))
+    J_local[..., :3] = -(np.cross(nRE, s) @ right_jacobian_so3(omega)) * w
+    J_local[..., 3:] = nR * w
+    return residuals, J_global, J_local
 
 
 @dataclass(frozen=True)
@@ -217,11 +226,12 @@ class SphereProblem:
         self.config = config
         used = [subsample(p, config.max_points_per_profile) for p in points]
         self.counts = np.array([len(p) for p in used])
-        self.points = np.concatenate(used)
         self.sample = np.repeat(np.arange(len(used)), self.counts)
-        width = int(self.counts.max())
         self.slot = np.concatenate([np.arange(n) for n in self.counts])
-        self.shape = (len(used), width)
+        self.valid = np.zeros((len(used), int(self.counts.max())), dtype=bool)
+        self.valid[self.sample, self.slot] = True
+        self.points = np.zeros((*self.valid.shape, 3))
+        self.points[self.valid] = np.concatenate(used)
         self._G = 10 if config.estimate_radius else 9
         self._scale = np.array([lever_m] * 3 + [1.0] * (self._G - 3))
         self.sqrt_prior = np.array(
@@ -241,29 +251,30 @@ class SphereProblem:
     @property
     def n_points(self) -> int:
         """Point residuals (padding excluded)."""
-        return len(self.points)
-
-    def _pad(self, values: FloatArray) -> FloatArray:
-        out = np.zeros(self.shape + values.shape[1:])
-        out[self.sample, self.slot] = values
-        return out
+        return len(self.sample)
 
     def residuals(self, state: SphereState) -> Residuals:
         """Normalised point-to-sphere residuals and pose priors."""
         r, _, _ = point_residuals(
-            state, self.T_base_flange, self.points, self.sample, self.config.sensor_sigma_m
+            state,
+            self.T_base_flange,
+            self.points,
+            self.valid,
+            self.config.sensor_sigma_m,
+            jacobians=False,
         )
-        return Residuals(self._pad(r), state.corrections * self.sqrt_prior)
+        return Residuals(r, state.corrections * self.sqrt_prior)
 
     def linearise(self, state: SphereState) -> Linearisation:
         """Residuals and Jacobians (see the module docstring)."""
         r, Jg, Jl = point_residuals(
-            state, self.T_base_flange, self.points, self.sample, self.config.sensor_sigma_m
+            state, self.T_base_flange, self.points, self.valid, self.config.sensor_sigma_m
         )
+        assert Jg is not None and Jl is not None
         return Linearisation(
-            residuals=Residuals(self._pad(r), state.corrections * self.sqrt_prior),
-            J_global=self._pad(Jg[:, : self._G]),
-            J_local=self._pad(Jl),
+            residuals=Residuals(r, state.corrections * self.sqrt_prior),
+            J_global=Jg[..., : self._G],
+            J_local=Jl,
             pose_prior_sqrt_information=self.sqrt_prior,
         )
 

@@ -64,6 +64,7 @@ from linelaser_calib.core.targets.sphere.config import SphereConfig
 from linelaser_calib.core.targets.sphere.model import (
     SIDE_LABELS,
     FixedPointSolution,
+    centres_in_sensor,
     estimate_radius,
     fixed_point_information,
     fixed_point_residuals,
@@ -438,27 +439,66 @@ class SphereTarget:
     def solve_default(
         self, features: list[Any], config: SphereConfig, context: SolveContext
     ) -> TargetSolution:
-        """Maximum likelihood on every point, outlier samples dropped, 1σ and diagnosis."""
+        """Maximum likelihood on every point, outlier samples dropped, 1σ and diagnosis.
+
+        Started at the fixed-point solve, or at the context's warm start (the self-check's
+        solves of subsets), whose noise levels then weight the points and poses from the
+        first round on.
+        """
         self._require(features, config, context)
-        fixed, warnings = self._fixed_point(features, config)
         refine_config = replace(config.refine, estimate_radius=config.radius_m is None)
+        warm = context.warm_start
+        if warm is not None and isinstance(warm.section, SphereSection):
+            section = warm.section
+            T_start, centre, radius, side = (
+                warm.T_flange_sensor,
+                section.centre_m,
+                section.radius_m,
+                section.centre_side,
+            )
+            warnings: list[str] = []
+            levels = section.noise_levels or {}
+            stated = refine_config
+            refine_config = replace(
+                refine_config,
+                variance_rounds=1,
+                sensor_sigma_m=levels.get("sensor_sigma_m", stated.sensor_sigma_m),
+                # The robot's prior is only ever tightened (see refine_sphere).
+                robot_sigma_t_m=min(
+                    levels.get("robot_sigma_t_m", stated.robot_sigma_t_m), stated.robot_sigma_t_m
+                ),
+                robot_sigma_r_rad=min(
+                    levels.get("robot_sigma_r_rad", stated.robot_sigma_r_rad),
+                    stated.robot_sigma_r_rad,
+                ),
+            )
+        else:
+            fixed, warnings = self._fixed_point(features, config)
+            T_start, centre, radius, side = (
+                fixed.T_flange_sensor,
+                fixed.centre_base,
+                fixed.radius_m,
+                fixed.side,
+            )
+        circles = np.stack([f.circle.centre_xz for f in features])
+        circle_radii = np.array([f.circle.radius_m for f in features])
+        lever = float(
+            np.median(
+                np.linalg.norm(centres_in_sensor(circles, circle_radii, radius, side), axis=1)
+            )
+        )
 
         def solve(kept: list[int], previous: SphereRefinement | None) -> SphereRefinement:
             chosen = [features[k] for k in kept]
-            if previous is None:
-                start = SphereState(
-                    fixed.T_flange_sensor,
-                    fixed.centre_base,
-                    fixed.radius_m,
-                    np.zeros((len(kept), N_LOCAL)),
-                )
-            else:
-                start = SphereState(
+            if previous is not None:
+                T_start_k, centre_k, radius_k = (
                     previous.state.T_flange_sensor,
                     previous.state.centre_m,
                     previous.state.radius_m,
-                    np.zeros((len(kept), N_LOCAL)),
                 )
+            else:
+                T_start_k, centre_k, radius_k = T_start, centre, radius
+            start = SphereState(T_start_k, centre_k, radius_k, np.zeros((len(kept), N_LOCAL)))
             return refine_sphere(
                 np.stack([f.T_base_flange for f in chosen]),
                 [f.points for f in chosen],
@@ -489,7 +529,6 @@ class SphereTarget:
         kept = [features[k] for k in run.kept]
         state = outcome.state
         sigma = np.sqrt(np.maximum(np.diag(outcome.covariance), 0.0))
-        lever = float(np.median(np.linalg.norm(fixed.centres_sensor, axis=1)))
         noise = float(np.median([f.circle.rms_m for f in kept]))
         if self._misfit(outcome.rms_m, noise, outcome.robot_sigma_t_m, config) is None:
             # A model that does not fit is refused by check_fit, not called degenerate.
@@ -500,7 +539,7 @@ class SphereTarget:
         section = SphereSection(
             state.centre_m,
             state.radius_m,
-            fixed.side,
+            side,
             radius_estimated=config.radius_m is None,
             side_estimated=config.centre_side is None,
             centre_sigma_m=sigma[6:9],
