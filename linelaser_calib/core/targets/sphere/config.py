@@ -34,7 +34,7 @@ class SphereConfig:
         at least a tenth of the median) above the median over the recording's profiles is
         set aside. Default 6.
     max_residual_ratio : float
-        The default method's result is refused when its RMS point-to-sphere residual is this
+        The default method's result is refused when its RMS residual (in the laser plane) is this
         many times the median RMS the profiles' circles leave. Default 4.
     refine : SphereRefineConfig
         The default method's noise levels and solver settings.

@@ -300,7 +300,7 @@ class SphereProblem:
         return len(self.sample)
 
     def residuals(self, state: SphereState) -> Residuals:
-        """Normalised point-to-sphere residuals and pose priors."""
+        """Normalised in-plane residuals and pose priors."""
         r, _, _ = point_residuals(
             state,
             self.T_base_flange,
@@ -351,7 +351,7 @@ class SphereRefinement:
         Of the global numbers [θ (rad, sensor axes), ρ (m, flange axes), c (m), R (m, when
         estimated)], pose corrections marginalised, with the re-estimated noise levels.
     residuals_m : ndarray, shape (N,)
-        Point-to-sphere distances of the points used, m.
+        Distances of the points used from the sphere, in the laser plane, m.
     sample : ndarray of int, shape (N,)
         Sample of each point.
     sensor_sigma_m, robot_sigma_t_m, robot_sigma_r_rad : float
@@ -372,11 +372,11 @@ class SphereRefinement:
 
     @property
     def rms_m(self) -> float:
-        """RMS point-to-sphere distance, m."""
+        """RMS distance from the sphere in the laser plane, m."""
         return float(np.sqrt(np.mean(self.residuals_m**2)))
 
     def sample_rms_m(self) -> FloatArray:
-        """RMS point-to-sphere distance of each sample (K,), m."""
+        """RMS distance from the sphere in the laser plane of each sample (K,), m."""
         sums = np.bincount(self.sample, weights=self.residuals_m**2)
         return np.asarray(np.sqrt(sums / np.bincount(self.sample)))
 

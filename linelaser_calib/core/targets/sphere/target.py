@@ -218,10 +218,10 @@ class SphereSection:
         )
 
     def residual_kind(self, method: str) -> str:
-        """Point-to-sphere distance (default) or sphere-centre distance (paper)."""
+        """In-plane distance from the sphere (default) or sphere-centre distance (paper)."""
         if method == "paper":
             return "distance of the profile's sphere centre from the common centre"
-        return "point-to-sphere distance"
+        return "distance from the sphere, in the laser plane"
 
     def shapes(self, points_base: FloatArray) -> list[Shape]:
         """The sphere."""
@@ -515,7 +515,7 @@ class SphereTarget:
                 Flag(
                     float(value / limit),
                     k,
-                    f"RMS point-to-sphere distance {value * 1e6:.1f} um, above the "
+                    f"RMS distance from the sphere {value * 1e6:.1f} um, above the "
                     f"{limit * 1e6:.1f} um the other profiles allow",
                 )
                 for k, value in enumerate(rms)
