@@ -1,9 +1,9 @@
 """The sphere target: a tooling ball scanned from many flange poses (see :mod:`.target`).
 
-Modules: :mod:`.circle` (per-profile RANSAC circle and the profile's own noise),
-:mod:`.model` (sphere centres from circles, side, fixed-point linear solve and polish),
-:mod:`.refine` (point-to-sphere maximum likelihood on the shared solver), :mod:`.config`,
-:mod:`.target` (the protocol implementation, the result section).
+Modules: :mod:`.circle` (per-profile RANSAC circle), :mod:`.shape` (rival shapes and the
+recording's own scale), :mod:`.model` (sphere centres from circles, side, fixed-point linear
+solve and polish), :mod:`.refine` (point-to-sphere maximum likelihood on the shared solver),
+:mod:`.config`, :mod:`.target` (the protocol implementation, the result section).
 """
 
 from __future__ import annotations

@@ -15,9 +15,8 @@ circle in a profile that may also hold spikes, a table or a holder:
    threshold repeat until the inliers settle. The threshold thus follows the profiler's own
    noise, whatever it is.
 
-:func:`local_noise_m` measures the profiler's noise without a model of the whole profile
-(parabolas over short runs of points), so that a circle whose residual lies well
-above it can be recognised as the wrong model (an ellipse, a V, a plane).
+Whether the circle is the right model for the profile is judged apart, against rival
+shapes and the recording's other profiles (:mod:`.shape`).
 
 A profile that gives no trustworthy circle raises
 :class:`~linelaser_calib.core.errors.ProfileRejected` with the reason and the numbers.
@@ -42,8 +41,6 @@ GEOMETRIC_ITERATIONS = 20
 #: How every rejection for the profile's shape begins (the target counts them to tell a
 #: wrong target from a few bad profiles).
 NOT_A_CIRCLE = "not a circular arc"
-#: Consecutive points per run in :func:`local_noise_m`.
-NOISE_RUN = 50
 
 
 @dataclass(frozen=True)
@@ -70,10 +67,6 @@ class CircleConfig:
     window_fraction : float
         Width of the window the three sample points are drawn from, as a share of the
         profile's points. Default 0.5.
-    max_noise_ratio : float
-        A circle whose RMS residual exceeds this many times the profile's own noise
-        (:func:`local_noise_m`) is the wrong model for the profile. Default 4 (real
-        profilers show some ripple: about 1.5 on a tooling ball).
     """
 
     iterations: int = 300
@@ -84,7 +77,6 @@ class CircleConfig:
     min_inlier_fraction: float = 0.3
     min_arc_rad: float = math.radians(10.0)
     window_fraction: float = 0.5
-    max_noise_ratio: float = 4.0
 
     def __post_init__(self) -> None:
         positive = {
@@ -93,7 +85,6 @@ class CircleConfig:
             "min_threshold_m": self.min_threshold_m,
             "min_arc_rad": self.min_arc_rad,
             "window_fraction": self.window_fraction,
-            "max_noise_ratio": self.max_noise_ratio,
         }
         for name, value in positive.items():
             if not (np.isfinite(value) and value > 0.0):
@@ -118,8 +109,6 @@ class CircleFit:
         Inlier mask over the points handed to the fit.
     rms_m : float
         RMS geometric residual of the inliers, m.
-    noise_m : float
-        The profiler's noise measured without a model (:func:`local_noise_m`), m.
     arc_rad : float
         Angle the inlier arc spans, seen from the centre, rad.
     """
@@ -128,7 +117,6 @@ class CircleFit:
     radius_m: float
     inliers: BoolArray
     rms_m: float
-    noise_m: float
     arc_rad: float
 
 
@@ -172,31 +160,6 @@ def fit_circle_geometric(
         if float(np.max(np.abs(step))) < 1e-13:
             break
     return c, r
-
-
-def local_noise_m(points_xz: ArrayLike) -> float:
-    """The profiler's noise, 1σ, m, measured without a model of the whole profile.
-
-    The profile (in scan order) is cut into runs of :data:`NOISE_RUN` consecutive points;
-    each run is fitted by a parabola in its own principal axes, which follows any smooth
-    surface over so short a stretch, and leaves the noise (with the ripple of the profiler
-    at wavelengths shorter than the run). The median over the runs of the RMS residual
-    (corrected for the three fitted numbers) is robust to runs holding a spike or an edge.
-    Returns 0 for fewer than 10 points.
-    """
-    p = np.asarray(points_xz, dtype=np.float64)
-    run = min(NOISE_RUN, len(p) // 2)
-    if run < 5:
-        return 0.0
-    rms = []
-    for lo in range(0, len(p) - run + 1, run):
-        q = p[lo : lo + run] - p[lo : lo + run].mean(axis=0)
-        _, _, Vt = np.linalg.svd(q, full_matrices=False)
-        t, n = q @ Vt[0], q @ Vt[1]
-        A = np.column_stack([np.ones(run), t, t * t])
-        residual = n - A @ np.linalg.lstsq(A, n, rcond=None)[0]
-        rms.append(math.sqrt(float(residual @ residual) / (run - 3)))
-    return float(np.median(rms))
 
 
 def _arc_span(points_xz: FloatArray, centre_xz: FloatArray) -> float:
@@ -306,18 +269,10 @@ def fit_circle_ransac(
             f"{radius * 1e3:.2f} mm), needs {math.degrees(config.min_arc_rad):.0f} deg"
         )
     residual = circle_residuals(p[inliers], centre, radius)
-    rms = float(np.sqrt(np.mean(residual**2)))
-    noise = local_noise_m(p[inliers])
-    if rms > config.max_noise_ratio * max(noise, config.min_threshold_m):
-        raise ProfileRejected(
-            f"{NOT_A_CIRCLE}: the circle leaves {rms * 1e6:.1f} um RMS, {rms / noise:.0f} times "
-            f"the profile's own noise ({noise * 1e6:.1f} um)"
-        )
     return CircleFit(
         centre_xz=np.asarray(centre),
         radius_m=float(radius),
         inliers=inliers,
-        rms_m=rms,
-        noise_m=noise,
+        rms_m=float(np.sqrt(np.mean(residual**2))),
         arc_rad=arc,
     )

@@ -29,8 +29,13 @@ class SphereConfig:
         Fewest usable profiles. Default 6 (the linear solve needs 5).
     cleaning : CleaningConfig
     circle : CircleConfig
-        Its ``max_noise_ratio`` also bounds the calibration's point residual against the
-        profiles' noise.
+    profile_outlier_sigmas : float
+        A profile whose circle's RMS residual lies this many robust spreads (1.4826 · MAD,
+        at least a tenth of the median) above the median over the recording's profiles is
+        set aside. Default 6.
+    max_residual_ratio : float
+        The default method's result is refused when its RMS residual (in the laser plane) is this
+        many times the median RMS the profiles' circles leave. Default 4.
     refine : SphereRefineConfig
         The default method's noise levels and solver settings.
     observability : ObservabilityConfig
@@ -52,6 +57,8 @@ class SphereConfig:
     min_samples: int = 6
     cleaning: CleaningConfig = field(default_factory=CleaningConfig)
     circle: CircleConfig = field(default_factory=CircleConfig)
+    profile_outlier_sigmas: float = 6.0
+    max_residual_ratio: float = 4.0
     refine: SphereRefineConfig = field(default_factory=SphereRefineConfig)
     observability: ObservabilityConfig = field(default_factory=ObservabilityConfig)
     max_robot_ratio: float = 10.0
@@ -70,7 +77,13 @@ class SphereConfig:
             )
         if self.min_samples < 5:
             raise InputError(f"the sphere target needs min_samples >= 5, got {self.min_samples}")
-        for name in ("max_robot_ratio", "max_scatter_ratio", "outlier_sigmas"):
+        for name in (
+            "max_robot_ratio",
+            "max_scatter_ratio",
+            "outlier_sigmas",
+            "profile_outlier_sigmas",
+            "max_residual_ratio",
+        ):
             if not getattr(self, name) > 1.0:
                 raise InputError(f"SphereConfig.{name} must be > 1, got {getattr(self, name)}")
         if not 0.0 <= self.max_outlier_fraction < 1.0:

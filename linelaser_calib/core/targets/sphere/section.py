@@ -100,10 +100,10 @@ class SphereSection:
         )
 
     def residual_kind(self, method: str) -> str:
-        """Point-to-sphere distance (default) or sphere-centre distance (paper)."""
+        """In-plane distance from the sphere (default) or sphere-centre distance (paper)."""
         if method == "paper":
             return "distance of the profile's sphere centre from the common centre"
-        return "point-to-sphere distance"
+        return "distance from the sphere, in the laser plane"
 
     def shapes(self, points_base: FloatArray) -> list[Shape]:
         """The sphere."""

@@ -1,8 +1,11 @@
 """The sphere target: a tooling ball seen from many flange poses.
 
 Per profile (:func:`extract_feature`): cleaning, then a RANSAC circle (centre, radius r) in
-the laser plane; a profile whose circle leaves much more than its own noise is no circular
-arc and is rejected. The sphere centre lies √(R² − r²) off the plane on one side.
+the laser plane; a profile that a rival shape (a line, a V, an ellipse) fits clearly better
+is no circular arc and is rejected (:mod:`.shape`). Per recording (:meth:`SphereTarget.extract`):
+a profile whose circle leaves far more than the recording's other profiles is set aside, and a
+recording most of whose profiles a rival fits better is refused, naming what it shows. The
+sphere centre lies √(R² − r²) off the plane on one side.
 
 - ``paper``: the fixed-point linear solve of the tools that calibrate profilers on a
   sphere, projected onto SO(3) and polished (:mod:`.model`); the side resolved from the
@@ -15,7 +18,8 @@ arc and is rejected. The sphere centre lies √(R² − r²) off the plane on on
   weak or undetermined named.
 
 :meth:`SphereTarget.check_fit` refuses a result whose residual lies far above the noise
-(the profiles' own noise for ``default``; what the robot's σ explains for ``paper``) or
+(the circles' median RMS residual over the recording's profiles for ``default``; what the
+robot's σ explains for ``paper``) or
 whose pose corrections lie far above the robot's σ.
 """
 
@@ -46,11 +50,17 @@ from linelaser_calib.core.targets.base import (
     mismatch_message,
     rejection_digest,
 )
-from linelaser_calib.core.targets.sphere.circle import NOT_A_CIRCLE, CircleFit, fit_circle_ransac
+from linelaser_calib.core.targets.sphere.circle import (
+    CircleFit,
+    fit_circle_algebraic,
+    fit_circle_geometric,
+    fit_circle_ransac,
+)
 from linelaser_calib.core.targets.sphere.config import SphereConfig
 from linelaser_calib.core.targets.sphere.model import (
     SIDE_LABELS,
     FixedPointSolution,
+    centres_in_sensor,
     estimate_radius,
     fixed_point_information,
     fixed_point_residuals,
@@ -67,6 +77,12 @@ from linelaser_calib.core.targets.sphere.refine import (
     refine_sphere,
 )
 from linelaser_calib.core.targets.sphere.section import SphereSection, read_sphere_section
+from linelaser_calib.core.targets.sphere.shape import (
+    compare_circle,
+    rival_rejection,
+    rival_verdict,
+    set_aside_outliers,
+)
 from linelaser_calib.core.types import Rejection, Sample, SampleFit
 
 #: Circle radii may exceed a given sphere radius by this share plus
@@ -105,7 +121,8 @@ class SphereFeature:
 def extract_feature(
     sample: Sample, config: SphereConfig, rng: np.random.Generator
 ) -> SphereFeature | Rejection:
-    """Clean one profile and fit its circle; a rejection says why it failed."""
+    """Clean one profile, fit its circle and weigh it against the rival shapes; a rejection
+    says why it failed (a :class:`~.shape.RivalRejection` when a rival fits clearly better)."""
     try:
         cleaned = clean_profile(sample.points, config.cleaning)
     except ProfileRejected as exc:
@@ -113,10 +130,24 @@ def extract_feature(
     largest = None
     if config.radius_m is not None:
         largest = config.radius_m * (1.0 + RADIUS_MARGIN) + RADIUS_MARGIN_M
+    xz = cleaned.points_xz
     try:
-        circle = fit_circle_ransac(cleaned.points_xz, config.circle, rng, largest)
+        circle: CircleFit | ProfileRejected = fit_circle_ransac(xz, config.circle, rng, largest)
     except ProfileRejected as exc:
-        return Rejection(sample.index, sample.stamp_ns, "circle", str(exc))
+        circle = exc
+    if isinstance(circle, CircleFit):
+        centre, radius = circle.centre_xz, circle.radius_m
+    else:
+        # No usable arc: the least-squares circle of the whole profile meets the rivals.
+        try:
+            centre, radius = fit_circle_geometric(xz, *fit_circle_algebraic(xz))
+        except ValueError:
+            return Rejection(sample.index, sample.stamp_ns, "circle", str(circle))
+    comparison = compare_circle(xz, centre, radius)
+    if comparison.rival_wins:
+        return rival_rejection(sample.index, sample.stamp_ns, comparison)
+    if isinstance(circle, ProfileRejected):
+        return Rejection(sample.index, sample.stamp_ns, "circle", str(circle))
     points = cleaned.points[circle.inliers]
     return SphereFeature(sample.index, sample.stamp_ns, sample.T_base_flange, circle, points)
 
@@ -183,24 +214,36 @@ class SphereTarget:
         progress: Progress,
         workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
-        """The circles of all samples and the rejections."""
-        return extract_each(samples, config, seed, extract_feature, progress, "circle", workers)
+        """The circles of all samples and the rejections; profiles whose circle is an outlier
+        among the recording's are set aside.
+
+        Raises
+        ------
+        ModelMismatch
+            When a rival shape fits most profiles clearly better (it names what they show).
+        """
+        features, rejections = extract_each(
+            samples, config, seed, extract_feature, progress, "circle", workers
+        )
+        verdict = rival_verdict(rejections, len(features))
+        if verdict is not None:
+            raise ModelMismatch(verdict)
+        aside = set_aside_outliers(
+            np.array([f.circle.rms_m for f in features]), config.profile_outlier_sigmas
+        )
+        rejections += [
+            Rejection(features[k].index, features[k].stamp_ns, "circle", reason)
+            for k, reason in aside
+        ]
+        dropped = {k for k, _ in aside}
+        return [f for k, f in enumerate(features) if k not in dropped], rejections
 
     def _require(
         self, features: list[SphereFeature], config: SphereConfig, context: SolveContext
     ) -> None:
-        """Refuse too few circles; when most profiles are no circles, say it is another target."""
+        """Refuse too few circles (a recording of another target is refused by extract)."""
         if len(features) >= config.min_samples:
             return
-        shape = [r for r in context.rejections if r.reason.startswith(NOT_A_CIRCLE)]
-        if len(shape) >= max(1, len(features)):
-            raise ModelMismatch(
-                f"the sphere model does not fit these data: {len(shape)} of "
-                f"{max(context.n_samples, len(shape) + len(features))} profiles are no circular "
-                f"arc ({shape[0].reason}). Likely causes: the scans show another target (a "
-                "cylinder's elliptical arcs: --target cylinder; a seam's V: --target "
-                "known_point or line); or the profiles are not in metres. No result was written."
-            )
         raise DegenerateError(
             f"only {len(features)} profiles show a usable circle; the sphere target needs "
             f"{config.min_samples}. {rejection_digest(context.rejections)}Scan the ball from "
@@ -285,27 +328,66 @@ class SphereTarget:
     def solve_default(
         self, features: list[Any], config: SphereConfig, context: SolveContext
     ) -> TargetSolution:
-        """Maximum likelihood on every point, outlier samples dropped, 1σ and diagnosis."""
+        """Maximum likelihood on every point, outlier samples dropped, 1σ and diagnosis.
+
+        Started at the fixed-point solve, or at the context's warm start (the self-check's
+        solves of subsets), whose noise levels then weight the points and poses from the
+        first round on.
+        """
         self._require(features, config, context)
-        fixed, warnings = self._fixed_point(features, config)
         refine_config = replace(config.refine, estimate_radius=config.radius_m is None)
+        warm = context.warm_start
+        if warm is not None and isinstance(warm.section, SphereSection):
+            section = warm.section
+            T_start, centre, radius, side = (
+                warm.T_flange_sensor,
+                section.centre_m,
+                section.radius_m,
+                section.centre_side,
+            )
+            warnings: list[str] = []
+            levels = section.noise_levels or {}
+            stated = refine_config
+            refine_config = replace(
+                refine_config,
+                variance_rounds=1,
+                sensor_sigma_m=levels.get("sensor_sigma_m", stated.sensor_sigma_m),
+                # The robot's prior is only ever tightened (see refine_sphere).
+                robot_sigma_t_m=min(
+                    levels.get("robot_sigma_t_m", stated.robot_sigma_t_m), stated.robot_sigma_t_m
+                ),
+                robot_sigma_r_rad=min(
+                    levels.get("robot_sigma_r_rad", stated.robot_sigma_r_rad),
+                    stated.robot_sigma_r_rad,
+                ),
+            )
+        else:
+            fixed, warnings = self._fixed_point(features, config)
+            T_start, centre, radius, side = (
+                fixed.T_flange_sensor,
+                fixed.centre_base,
+                fixed.radius_m,
+                fixed.side,
+            )
+        circles = np.stack([f.circle.centre_xz for f in features])
+        circle_radii = np.array([f.circle.radius_m for f in features])
+        lever = float(
+            np.median(
+                np.linalg.norm(centres_in_sensor(circles, circle_radii, radius, side), axis=1)
+            )
+        )
 
         def solve(kept: list[int], previous: SphereRefinement | None) -> SphereRefinement:
             chosen = [features[k] for k in kept]
-            if previous is None:
-                start = SphereState(
-                    fixed.T_flange_sensor,
-                    fixed.centre_base,
-                    fixed.radius_m,
-                    np.zeros((len(kept), N_LOCAL)),
-                )
-            else:
-                start = SphereState(
+            if previous is not None:
+                T_start_k, centre_k, radius_k = (
                     previous.state.T_flange_sensor,
                     previous.state.centre_m,
                     previous.state.radius_m,
-                    np.zeros((len(kept), N_LOCAL)),
                 )
+            else:
+                T_start_k, centre_k, radius_k = T_start, centre, radius
+            start = SphereState(T_start_k, centre_k, radius_k, np.zeros((len(kept), N_LOCAL)))
             return refine_sphere(
                 np.stack([f.T_base_flange for f in chosen]),
                 [f.points for f in chosen],
@@ -322,7 +404,7 @@ class SphereTarget:
                 Flag(
                     float(value / limit),
                     k,
-                    f"RMS point-to-sphere distance {value * 1e6:.1f} um, above the "
+                    f"RMS distance from the sphere {value * 1e6:.1f} um, above the "
                     f"{limit * 1e6:.1f} um the other profiles allow",
                 )
                 for k, value in enumerate(rms)
@@ -336,8 +418,7 @@ class SphereTarget:
         kept = [features[k] for k in run.kept]
         state = outcome.state
         sigma = np.sqrt(np.maximum(np.diag(outcome.covariance), 0.0))
-        lever = float(np.median(np.linalg.norm(fixed.centres_sensor, axis=1)))
-        noise = float(np.median([f.circle.noise_m for f in kept]))
+        noise = float(np.median([f.circle.rms_m for f in kept]))
         if self._misfit(outcome.rms_m, noise, outcome.robot_sigma_t_m, config) is None:
             # A model that does not fit is refused by check_fit, not called degenerate.
             warnings += self._diagnose(outcome.covariance[:6, :6], lever, config)
@@ -347,7 +428,7 @@ class SphereTarget:
         section = SphereSection(
             state.centre_m,
             state.radius_m,
-            fixed.side,
+            side,
             radius_estimated=config.radius_m is None,
             side_estimated=config.centre_side is None,
             centre_sigma_m=sigma[6:9],
@@ -404,16 +485,21 @@ class SphereTarget:
         ]
 
     def check_features(self, features: list[Any], config: SphereConfig) -> None:
-        """Nothing beyond extraction: each profile's shape is checked there (its circle's
-        residual against the profile's own noise), and the solve refuses data in which most
-        profiles are no circles (it knows the rejections)."""
+        """Nothing beyond extraction: each profile's shape is checked there, against rival
+        shapes and against the recording's other profiles."""
 
     def _misfit(
         self, rms_m: float, noise_m: float, robot_sigma_t_m: float | None, config: SphereConfig
     ) -> str | None:
-        """Why the default method's sphere does not explain the data, or None."""
-        if rms_m > config.circle.max_noise_ratio * noise_m:
-            return mismatch_message("sphere", rms_m, noise_m)
+        """Why the default method's sphere does not explain the data, or None (``noise_m``:
+        the circles' median RMS residual over the profiles, what a sphere could leave)."""
+        if rms_m > config.max_residual_ratio * noise_m:
+            return mismatch_message(
+                "sphere",
+                rms_m,
+                noise_m,
+                "the noise figure is the median RMS the profiles' circles leave",
+            )
         stated = config.refine.robot_sigma_t_m
         if robot_sigma_t_m is not None and robot_sigma_t_m > config.max_robot_ratio * stated:
             return (

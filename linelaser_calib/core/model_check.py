@@ -1,0 +1,288 @@
+"""Is this profile the target's shape? Rival shape models, and a scale learned per recording.
+
+A real profiler shows a few µm of local noise over tens of µm of smooth shape error (lens
+distortion, laser-line curvature, surface form). A model residual measured against the
+local noise therefore flags good profiles; this module judges a profile by two other
+questions, and knows no target:
+
+1. **Does a rival shape fit clearly better?** The target's own model of one profile (a
+   circle, an ellipse, a V ...) and its rivals are fitted to the same points; each leaves a
+   robust scale s (1.4826 · MAD of its residuals). The Bayesian information criterion
+
+       BIC = n_eff · ln s² + k · ln n_eff
+
+   (k the model's numbers) trades fit against complexity. Smooth shape error makes the
+   residuals of neighbouring points alike, so the information a profile holds is that of
+   n_eff = N (1 − ρ) / (1 + ρ) independent points (ρ the lag-1 autocorrelation of the best
+   fit's residuals, in scan order), not of its N points: a more flexible rival that only
+   follows some of the shape error gains little. A rival whose BIC lies
+   :data:`CLEAR_BIC` below the model's fits clearly better (Kass & Raftery's "very strong"
+   evidence).
+2. **Is the profile an outlier among its recording's profiles?** The residual of the
+   target's model on every profile of one recording (one sensor) gives the recording's
+   scale: its median and robust spread across the profiles (:class:`RecordingScale`). A
+   profile far above it is set aside; one within it is used, whatever its local noise.
+
+Shapes fitted here (points (N, 2) in scan order, m): :func:`line_fit` (2 numbers),
+:func:`line_pair_fit` (a V or a step's two lines, 5 with the break), :func:`conic_fit` (a
+general conic, 5). A target adds its own model (its circle, ellipse ...) as a
+:class:`ShapeFit`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy import stats
+
+from linelaser_calib.core.types import FloatArray
+
+#: A rival whose BIC lies this much below the model's fits clearly better.
+CLEAR_BIC = 10.0
+#: Break positions tried by :func:`line_pair_fit`, spread over the middle of the profile.
+LINE_PAIR_BREAKS = 24
+#: The recording's spread across profiles is taken as at least this share of its median
+#: (profiles that agree to a few per cent would otherwise make every small difference an
+#: outlier).
+MIN_SPREAD_SHARE = 0.1
+#: σ per median absolute deviation for Gaussian values (scipy.stats.median_abs_deviation's
+#: "normal" scale; its per-call cost, some ms, would dominate the fits here).
+MAD_TO_SIGMA = 1.0 / float(stats.norm.ppf(0.75))
+
+
+@dataclass(frozen=True)
+class ShapeFit:
+    """One shape model fitted to one profile.
+
+    Attributes
+    ----------
+    name : str
+        What the shape is, in words (``circle``, ``line pair``, ...).
+    residuals_m : ndarray, shape (N,)
+        Signed distances of the profile's points from the shape, in scan order, m.
+    n_params : int
+        The numbers the shape is fitted with.
+    """
+
+    name: str
+    residuals_m: FloatArray
+    n_params: int
+
+    @property
+    def scale_m(self) -> float:
+        """Robust scale of the residuals (1.4826 · MAD), m."""
+        return robust_scale_m(self.residuals_m)
+
+
+def robust_scale_m(residuals_m: ArrayLike) -> float:
+    """1.4826 · median absolute deviation of residuals (N,), m: σ for Gaussian residuals,
+    unmoved by a minority of outliers."""
+    r = np.asarray(residuals_m, dtype=np.float64)
+    return MAD_TO_SIGMA * float(np.median(np.abs(r - np.median(r))))
+
+
+def effective_count(residuals_m: ArrayLike) -> float:
+    """Independent points the residuals (N,) of a fit, in scan order, are worth.
+
+    N (1 − ρ) / (1 + ρ) with ρ the lag-1 autocorrelation (the variance of the mean of an
+    AR(1) series), over the points within 3 robust σ (spikes left out); at least 2 and at
+    most N.
+    """
+    r = np.asarray(residuals_m, dtype=np.float64)
+    inside = r[np.abs(r) <= 3.0 * max(robust_scale_m(r), 1e-300)]
+    if len(inside) < 3 or float(np.std(inside)) == 0.0:
+        return float(len(r))
+    rho = float(np.clip(np.corrcoef(inside[:-1], inside[1:])[0, 1], 0.0, 1.0))
+    return float(np.clip(len(inside) * (1.0 - rho) / (1.0 + rho), 2.0, len(r)))
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """A model against its rivals on one profile (:func:`compare_models`).
+
+    Attributes
+    ----------
+    model : ShapeFit
+        The target's model.
+    rival : ShapeFit or None
+        The rival with the lowest BIC (None without rivals).
+    delta_bic : float
+        The model's BIC minus that rival's: positive when the rival fits better.
+    n_effective : float
+        Independent points the profile is worth (:func:`effective_count`).
+    """
+
+    model: ShapeFit
+    rival: ShapeFit | None
+    delta_bic: float
+    n_effective: float
+
+    @property
+    def rival_wins(self) -> bool:
+        """Whether the rival fits clearly better (its BIC :data:`CLEAR_BIC` lower)."""
+        return self.rival is not None and self.delta_bic > CLEAR_BIC
+
+    def describe(self) -> str:
+        """Both scales in µm and the BIC margin, for messages."""
+        if self.rival is None:
+            return f"a {self.model.name} leaves {self.model.scale_m * 1e6:.1f} um"
+        return (
+            f"a {self.rival.name} leaves {self.rival.scale_m * 1e6:.1f} um where a "
+            f"{self.model.name} leaves {self.model.scale_m * 1e6:.1f} um (robust scale; BIC "
+            f"{abs(self.delta_bic):.0f} {'lower' if self.delta_bic > 0 else 'higher'}, over "
+            f"{self.n_effective:.0f} effective of {len(self.model.residuals_m)} points)"
+        )
+
+
+def bic(fit: ShapeFit, n_effective: float) -> float:
+    """n_eff · ln s² + k · ln n_eff of a fit (s its robust scale, floored at 1e-12 m)."""
+    scale = max(fit.scale_m, 1e-12)
+    return n_effective * math.log(scale * scale) + fit.n_params * math.log(n_effective)
+
+
+def compare_models(model: ShapeFit, rivals: Sequence[ShapeFit]) -> Comparison:
+    """The model against the rivals fitted to the same points (see the module docstring)."""
+    if not rivals:
+        return Comparison(model, None, 0.0, effective_count(model.residuals_m))
+    fits = [model, *rivals]
+    best = min(fits, key=lambda f: f.scale_m)
+    n_effective = effective_count(best.residuals_m)
+    rival = min(rivals, key=lambda f: bic(f, n_effective))
+    return Comparison(model, rival, bic(model, n_effective) - bic(rival, n_effective), n_effective)
+
+
+def _check_points(points_xz: ArrayLike, least: int) -> FloatArray:
+    p = np.asarray(points_xz, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) < least:
+        raise ValueError(f"a shape fit needs points of shape (N >= {least}, 2), got {p.shape}")
+    return p
+
+
+def _line_distances(points_xz: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The least-squares line through points (cv2.fitLine): its unit normal and the signed
+    distances (N,) of the points, m."""
+    vx, vz, x0, z0 = cv2.fitLine(points_xz.astype(np.float32), cv2.DIST_L2, 0, 0.01, 0.01).ravel()
+    normal = np.array([-vz, vx], dtype=np.float64)
+    return normal, (points_xz - np.array([x0, z0], dtype=np.float64)) @ normal
+
+
+def line_fit(points_xz: ArrayLike) -> ShapeFit:
+    """A straight line (a plane's profile) fitted by least squares; 2 numbers."""
+    p = _check_points(points_xz, 3)
+    return ShapeFit("line", _line_distances(p)[1], 2)
+
+
+def line_pair_fit(points_xz: ArrayLike) -> ShapeFit:
+    """Two straight lines meeting at a break in scan order (a V seam, an edge); 5 numbers.
+
+    The break is tried at :data:`LINE_PAIR_BREAKS` places over the middle 80 % of the
+    profile; at the one of least squared distances, each point is then given to the nearer
+    line and both are refitted.
+    """
+    p = _check_points(points_xz, 8)
+    n = len(p)
+    best: tuple[float, int] | None = None
+    for split in np.unique(np.linspace(0.1 * n, 0.9 * n, LINE_PAIR_BREAKS).astype(int)):
+        if split < 3 or n - split < 3:
+            continue
+        cost = sum(
+            float(d @ d) for d in (_line_distances(p[:split])[1], _line_distances(p[split:])[1])
+        )
+        if best is None or cost < best[0]:
+            best = (cost, int(split))
+    if best is None:
+        return ShapeFit("line pair", _line_distances(p)[1], 5)
+    split = best[1]
+    # Distances of every point from both lines, then each point to the nearer one.
+    both = []
+    for part in (p[:split], p[split:]):
+        normal, d = _line_distances(part)
+        anchor = part[0] - d[0] * normal
+        both.append((p - anchor) @ normal)
+    nearer = np.abs(both[0]) <= np.abs(both[1])
+    if 3 <= int(nearer.sum()) <= n - 3:
+        residuals = np.empty(n)
+        residuals[nearer] = _line_distances(p[nearer])[1]
+        residuals[~nearer] = _line_distances(p[~nearer])[1]
+    else:
+        residuals = np.where(nearer, both[0], both[1])
+    return ShapeFit("line pair", residuals, 5)
+
+
+@dataclass(frozen=True)
+class ConicFit(ShapeFit):
+    """A conic fitted to one profile (:func:`conic_fit`).
+
+    Attributes
+    ----------
+    axis_ratio : float
+        Minor over major axis of the conic when it is an ellipse (1 for a circle), 0 for a
+        hyperbola or parabola (a V, a corner).
+    """
+
+    axis_ratio: float = 0.0
+
+
+def conic_fit(points_xz: ArrayLike) -> ConicFit:
+    """A general conic (ellipse, hyperbola, parabola) by algebraic least squares; 5 numbers.
+
+    The points are centred and scaled to unit spread; the conic is the design matrix's
+    singular vector of least singular value, and a point's residual its Sampson distance
+    (the algebraic value over the gradient's length, to first order the geometric one).
+    """
+    p = _check_points(points_xz, 6)
+    centre = p.mean(axis=0)
+    length = float(np.sqrt(np.mean(np.sum((p - centre) ** 2, axis=1))))
+    u = (p - centre) / length
+    x, z = u[:, 0], u[:, 1]
+    design = np.column_stack([x * x, x * z, z * z, x, z, np.ones(len(u))])
+    a, b, c, d, e, f = np.linalg.svd(design, full_matrices=False)[2][-1]
+    value = a * x * x + b * x * z + c * z * z + d * x + e * z + f
+    gradient = np.hypot(2.0 * a * x + b * z + d, b * x + 2.0 * c * z + e)
+    # The quadratic part's eigenvalues: one sign for an ellipse, whose semi-axes go as
+    # 1 / sqrt(|eigenvalue|).
+    eigen = np.linalg.eigvalsh(np.array([[a, 0.5 * b], [0.5 * b, c]]))
+    magnitude = np.sort(np.abs(eigen))
+    ratio = math.sqrt(magnitude[0] / magnitude[1]) if eigen[0] * eigen[1] > 0.0 else 0.0
+    residuals = length * value / np.maximum(gradient, 1e-300)
+    return ConicFit("conic", residuals, 5, axis_ratio=float(ratio))
+
+
+@dataclass(frozen=True)
+class RecordingScale:
+    """How far a model's residual lies from the profile across one recording's profiles.
+
+    Attributes
+    ----------
+    median_m : float
+        Median over the profiles of the per-profile residual (e.g. RMS), m.
+    spread_m : float
+        Its robust spread across the profiles (1.4826 · MAD), at least
+        :data:`MIN_SPREAD_SHARE` of the median, m.
+    """
+
+    median_m: float
+    spread_m: float
+
+    def limit_m(self, sigmas: float) -> float:
+        """The residual ``sigmas`` spreads above the median, m."""
+        return self.median_m + sigmas * self.spread_m
+
+    def sigmas_above(self, value_m: float) -> float:
+        """How many spreads a residual lies above the median."""
+        return (value_m - self.median_m) / self.spread_m
+
+
+def recording_scale(values_m: ArrayLike) -> RecordingScale:
+    """The recording's scale from one residual per profile (K ≥ 1,), m."""
+    v = np.asarray(values_m, dtype=np.float64)
+    if v.ndim != 1 or len(v) == 0 or not np.all(np.isfinite(v)):
+        raise ValueError(f"the recording scale needs finite per-profile values, got {v!r}")
+    median = float(np.median(v))
+    spread = robust_scale_m(v)
+    return RecordingScale(median, max(spread, MIN_SPREAD_SHARE * median, 1e-300))
