@@ -1,8 +1,10 @@
 """Simulation scenarios: every knob of the simulator in one frozen dataclass, plus presets.
 
-A :class:`Scenario` holds plain numbers, strings and tuples only (no arrays), so that it can
-be written to and read from YAML by the I/O layer and compared with ``==``. Lists given for
-tuple fields (as YAML readers produce them) are converted to tuples.
+A :class:`Scenario` holds plain numbers, strings, tuples and the frozen
+:class:`~linelaser_calib.sim.sensor_models.SensorModel` record only (no arrays), so that it
+can be written to and read from YAML by the I/O layer and compared with ``==``. Lists given for
+tuple fields (as YAML readers produce them) are converted to tuples, a mapping given for
+``sensor`` to a ``SensorModel``.
 
 Units are SI throughout: metres, radians, seconds, hertz and integer nanoseconds; the unit is
 in each field name or its description. Degrees appear only in descriptions, labelled.
@@ -59,6 +61,9 @@ Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
     stop), joint states and flange poses at 125 Hz, and profiles stamped 15 ms late, as a
     profiler driver stamping with the host's receive time does. ``simulate --tf`` adds the
     robot_state_publisher-style ``/tf`` chain and ``/tf_static``.
+``cylinder_keyence``, ``cylinder_scancontrol``, ``cylinder_gocator``
+    ``ur_scancontrol``'s cell with a real profiler's datasheet geometry and shape errors
+    (:mod:`~linelaser_calib.sim.sensor_models`), see :func:`_real_profiler_scenario`.
 
 Bag size: a streamed pose costs ~120 bytes and a point 12-16 bytes in a rosbag2 MCAP file,
 so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` and
@@ -71,7 +76,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Protocol, TypeVar
 
 import numpy as np
@@ -87,6 +92,12 @@ from linelaser_calib.core.geometry import (
 )
 from linelaser_calib.core.kinematics import UR_DH
 from linelaser_calib.core.types import Cylinder, FloatArray
+from linelaser_calib.sim.sensor_models import (
+    PROFILERS,
+    SensorModel,
+    profiler_fields,
+    sensor_model_from_mapping,
+)
 
 Vec3 = tuple[float, float, float]
 Range = tuple[float, float]
@@ -193,6 +204,10 @@ class Scenario:
         Relative error of the sensor's along-line scale: measured x = (1 + this) x.
     depth_quantum_m : float
         Depth resolution: measured z is rounded to multiples of this, m; 0 disables it.
+    sensor : SensorModel
+        A real profiler's shape errors beyond the white noise above (linearity bow, smooth
+        per-profile error, correlated speckle, x/z output steps, weak returns on steep or
+        dark surfaces); the default has none (see :mod:`~linelaser_calib.sim.sensor_models`).
 
     Pose sampler
     ------------
@@ -345,6 +360,7 @@ class Scenario:
     edge_bias_m: float = 0.0
     lateral_scale_error: float = 0.0
     depth_quantum_m: float = 0.0
+    sensor: SensorModel = field(default_factory=SensorModel)
 
     n_poses: int = 30
     pose_mode: str = "paper"
@@ -400,6 +416,8 @@ class Scenario:
             value = getattr(self, f.name)
             if isinstance(value, list):
                 object.__setattr__(self, f.name, tuple(float(v) for v in value))
+        if isinstance(self.sensor, Mapping):
+            object.__setattr__(self, "sensor", sensor_model_from_mapping(self.sensor))
         self._validate()
 
     @property
@@ -465,6 +483,7 @@ class Scenario:
         non_negative("cluster_spread_m", "cluster_spread_rad")
         positive("robot_field_length_m")
         fraction("sigma_spread")
+        require(isinstance(self.sensor, SensorModel), "sensor must be a SensorModel")
         require(
             abs(self.lateral_scale_error) < 0.5,
             f"lateral_scale_error must be within +-0.5, got {self.lateral_scale_error}",
@@ -735,6 +754,44 @@ PRESETS: dict[str, Scenario] = {
     "ur5e_kinematic": _ur5e_kinematic_scenario(),
     "ur5e_cell": _ur5e_cell_scenario(),
 }
+
+
+def _real_profiler_scenario(
+    name: str, profiler: str, radius_m: float, cut_range_deg: tuple[float, float]
+) -> Scenario:
+    """``ur_scancontrol``'s cell and arm scanning a shaft with a real profiler's datasheet
+    geometry and shape errors (:data:`~linelaser_calib.sim.sensor_models.PROFILERS`).
+
+    The shaft's radius and the cut angles (``general`` views, any in-plane direction) are
+    chosen so that the visible arc fits the profiler's narrower line.
+    """
+    return replace(
+        _ur_scancontrol_scenario(),
+        name=name,
+        **profiler_fields(PROFILERS[profiler]),
+        cylinder_radius_m=radius_m,
+        pose_mode="general",
+        general_cut_range_rad=(_deg(cut_range_deg[0]), _deg(cut_range_deg[1])),
+    )
+
+
+# Real profilers on a shaft (datasheet figures and their sources: sim/sensor_models.py).
+# ``cylinder_keyence``: Keyence LJ-X8080 (35 mm line), Ø16 mm shaft, cut angles 10-35 deg;
+# ``cylinder_scancontrol``: scanCONTROL 3010-50 (50 mm line), Ø30 mm, 10-40 deg;
+# ``cylinder_gocator``: Gocator 2330 (47-85 mm line), Ø40 mm, 10-45 deg.
+PRESETS.update(
+    {
+        "cylinder_keyence": _real_profiler_scenario(
+            "cylinder_keyence", "keyence_lj_x8080", 0.008, (10.0, 35.0)
+        ),
+        "cylinder_scancontrol": _real_profiler_scenario(
+            "cylinder_scancontrol", "scancontrol_3010_50", 0.015, (10.0, 40.0)
+        ),
+        "cylinder_gocator": _real_profiler_scenario(
+            "cylinder_gocator", "gocator_2330", 0.020, (10.0, 45.0)
+        ),
+    }
+)
 
 
 def scenario_from_preset(name: str, **overrides: Any) -> Scenario:
