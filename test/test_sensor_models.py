@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import asdict, replace
+from typing import Any
 
 import numpy as np
 import pytest
@@ -106,8 +107,8 @@ def test_the_default_sensor_model_adds_only_white_noise() -> None:
 
 def test_scenario_takes_a_sensor_model_from_plain_values() -> None:
     s = replace(PRESETS["paper"], sensor=SensorModel(shape_sigma_m=1e-5))
-    values = {"shape_sigma_m": 1e-5}
-    assert replace(PRESETS["paper"], sensor=values) == s
+    values: dict[str, Any] = {**asdict(PRESETS["paper"]), "sensor": {"shape_sigma_m": 1e-5}}
+    assert Scenario(**values) == s
     with pytest.raises(InputError, match="unknown field"):
         sensor_model_from_mapping({"bow": 1.0})
     with pytest.raises(InputError, match="shape_length_m"):
