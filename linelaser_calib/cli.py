@@ -1143,7 +1143,8 @@ def build_parser() -> argparse.ArgumentParser:
         default="paper",
         help=(
             "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, ur5e_cell, "
-            "cluttered_camera, weld_seam, weld_seam_general, sphere, line, line_features"
+            "cluttered_camera, cylinder_keyence, cylinder_scancontrol, cylinder_gocator, "
+            "weld_seam, weld_seam_general, sphere, sphere_sszn, line, line_features"
         ),
     )
     sim.add_argument("--seed", type=_seed, default=0)

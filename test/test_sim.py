@@ -31,6 +31,7 @@ from linelaser_calib.sim import (
     scenario_from_preset,
     simulate,
 )
+from linelaser_calib.sim.sensor_models import SensorModel
 
 PRESET_NAMES = sorted(PRESETS)
 
@@ -58,7 +59,14 @@ def run(scenario: Scenario, seed: int) -> SimulatedData:
 
 
 def quiet(scenario: Scenario) -> Scenario:
-    return replace(scenario, sigma_depth_m=0.0, sigma_lateral_m=0.0, spike_fraction=0.0)
+    """No noise: no white noise, no spikes, no real profiler's shape errors."""
+    return replace(
+        scenario,
+        sigma_depth_m=0.0,
+        sigma_lateral_m=0.0,
+        spike_fraction=0.0,
+        sensor=SensorModel(),
+    )
 
 
 def plane_of(scenario: Scenario) -> tuple[np.ndarray, np.ndarray] | None:
@@ -115,7 +123,12 @@ def sensor_poses(data: SimulatedData) -> np.ndarray:
 
 
 def sigma_3d(s: Scenario) -> float:
-    return math.sqrt(s.sigma_depth_m**2 + s.sigma_lateral_m**2 + s.sigma_y_m**2)
+    """The white noise's 3-D σ, with a real profiler's shape errors (bow, smooth error,
+    speckle, output steps) counted as one more σ each, so that 6 of them bound a point."""
+    m = s.sensor
+    shape = (m.linearity_m / 3.0) ** 2 + m.shape_sigma_m**2 + m.speckle_sigma_m**2
+    steps = (m.x_step_m**2 + m.z_step_m**2) / 12.0
+    return math.sqrt(s.sigma_depth_m**2 + s.sigma_lateral_m**2 + s.sigma_y_m**2 + shape + steps)
 
 
 def check_on_surfaces(data: SimulatedData, tolerance: float) -> int:

@@ -52,6 +52,9 @@ Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
     stop), joint states and flange poses at 125 Hz, and profiles stamped 15 ms late, as a
     profiler driver stamping with the host's receive time does. ``simulate --tf`` adds the
     robot_state_publisher-style ``/tf`` chain and ``/tf_static``.
+``cylinder_keyence``, ``cylinder_scancontrol``, ``cylinder_gocator``
+    ``ur_scancontrol``'s cell with a real profiler's datasheet geometry and shape errors
+    (:mod:`~linelaser_calib.sim.sensor_models`), see :func:`_real_profiler_scenario`.
 
 Bag size: a streamed pose costs ~120 bytes and a point 12-16 bytes in a rosbag2 MCAP file,
 so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` and
@@ -74,6 +77,7 @@ from scipy.spatial.transform import Rotation
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import project_to_so3, quaternion_xyzw_from_matrix
 from linelaser_calib.sim.scenario import Scenario, Vec3
+from linelaser_calib.sim.sensor_models import PROFILERS, profiler_fields
 
 
 def _paper_hand_eye() -> tuple[Vec3, tuple[float, float, float, float]]:
@@ -264,6 +268,44 @@ PRESETS: dict[str, Scenario] = {
     "ur5e_kinematic": _ur5e_kinematic_scenario(),
     "ur5e_cell": _ur5e_cell_scenario(),
 }
+
+
+def _real_profiler_scenario(
+    name: str, profiler: str, radius_m: float, cut_range_deg: tuple[float, float]
+) -> Scenario:
+    """``ur_scancontrol``'s cell and arm scanning a shaft with a real profiler's datasheet
+    geometry and shape errors (:data:`~linelaser_calib.sim.sensor_models.PROFILERS`).
+
+    The shaft's radius and the cut angles (``general`` views, any in-plane direction) are
+    chosen so that the visible arc fits the profiler's narrower line.
+    """
+    return replace(
+        _ur_scancontrol_scenario(),
+        name=name,
+        **profiler_fields(PROFILERS[profiler]),
+        cylinder_radius_m=radius_m,
+        pose_mode="general",
+        general_cut_range_rad=(_deg(cut_range_deg[0]), _deg(cut_range_deg[1])),
+    )
+
+
+# Real profilers on a shaft (datasheet figures and their sources: sim/sensor_models.py).
+# ``cylinder_keyence``: Keyence LJ-X8080 (35 mm line), Ø16 mm shaft, cut angles 10-35 deg;
+# ``cylinder_scancontrol``: scanCONTROL 3010-50 (50 mm line), Ø30 mm, 10-40 deg;
+# ``cylinder_gocator``: Gocator 2330 (47-85 mm line), Ø40 mm, 10-45 deg.
+PRESETS.update(
+    {
+        "cylinder_keyence": _real_profiler_scenario(
+            "cylinder_keyence", "keyence_lj_x8080", 0.008, (10.0, 35.0)
+        ),
+        "cylinder_scancontrol": _real_profiler_scenario(
+            "cylinder_scancontrol", "scancontrol_3010_50", 0.015, (10.0, 40.0)
+        ),
+        "cylinder_gocator": _real_profiler_scenario(
+            "cylinder_gocator", "gocator_2330", 0.020, (10.0, 45.0)
+        ),
+    }
+)
 
 
 def scenario_from_preset(name: str, **overrides: Any) -> Scenario:

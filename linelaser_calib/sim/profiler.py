@@ -16,9 +16,12 @@ The model, in the sensor frame (laser plane x-z, z = depth):
    ``spike_max_m``).
 5. Gates on the measured point: depth in [``z_min_m``, ``z_max_m``]; then a
    ``dropout_fraction`` of the remaining rays lost at random.
+6. With an active ``sensor`` model (:mod:`~linelaser_calib.sim.sensor_models`), before the
+   gates: the profiler's shape errors (linearity bow, smooth per-profile error, correlated
+   speckle), x/z output steps, and weak returns lost on steep or dark surfaces.
 
 :func:`trace` does steps 1-3 without randomness (it also serves the pose sampler);
-:func:`measure` adds steps 4-5 from a generator.
+:func:`measure` adds steps 4-6 from a generator.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import numpy as np
 from linelaser_calib.core.types import BoolArray, FloatArray
 from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import Int8Array, Scene, Surface
+from linelaser_calib.sim.sensor_models import apply_sensor_model
 
 #: Smallest ray parameter of the camera visibility rays (in units of the point-camera
 #: distance), so a point does not occlude itself.
@@ -167,7 +171,8 @@ class Measurement:
     spike : ndarray of bool, shape (K, N)
         Valid points displaced by a reflection spike.
     dropout : ndarray of bool, shape (K, N)
-        Rays that would have been valid but were dropped at random.
+        Rays that would have been valid but were dropped (at random, or as weak returns of
+        the scenario's sensor model).
     """
 
     points: FloatArray
@@ -181,7 +186,9 @@ def measure(rng: np.random.Generator, scenario: Scenario, traced: Trace) -> Meas
     """Add sensor noise, spikes, gates and dropouts to a noise-free :class:`Trace`.
 
     The random draws do not depend on the geometry or on the output format, so the same
-    seed gives the same noise for organised and dense output.
+    seed gives the same noise for organised and dense output. A scenario's
+    :class:`~linelaser_calib.sim.sensor_models.SensorModel` (step 6 of the module docstring)
+    draws from generators spawned from ``rng``, which leaves ``rng``'s own draws unchanged.
     """
     shape = traced.seen.shape
     noise = rng.normal(size=(3, *shape))
@@ -199,20 +206,32 @@ def measure(rng: np.random.Generator, scenario: Scenario, traced: Trace) -> Meas
     dirs = ray_directions(scenario)
     spiked = seen & spike_draw
     p = p + np.where(spiked, spike_sign * spike_size, 0.0)[..., None] * dirs
+    reflectance = np.where(
+        traced.surface == Surface.BACKGROUND,
+        scenario.background_reflectance,
+        scenario.cylinder_reflectance,
+    )
+    lost = np.zeros(shape, dtype=np.bool_)
+    if scenario.sensor.active:
+        p, lost = apply_sensor_model(
+            rng,
+            scenario.sensor,
+            p,
+            traced.points_sensor,
+            (scenario.z_min_m, scenario.z_max_m),
+            traced.cos_incidence,
+            reflectance,
+        )
     in_range = (p[..., 2] >= scenario.z_min_m) & (p[..., 2] <= scenario.z_max_m)
     returned = seen & in_range
-    valid = returned & ~drop_draw
+    dropped = drop_draw | lost
+    valid = returned & ~dropped
     points = np.where(valid[..., None], p, np.nan)
 
     intensity: FloatArray | None = None
     if scenario.intensity:
-        reflectance = np.where(
-            traced.surface == Surface.BACKGROUND,
-            scenario.background_reflectance,
-            scenario.cylinder_reflectance,
-        )
         diffuse = reflectance * np.nan_to_num(traced.cos_incidence)
         diffuse = diffuse * (1.0 + scenario.intensity_noise * intensity_noise)
         value = np.clip(np.where(spiked, glint, diffuse), 0.0, 1.0)
         intensity = np.asarray(np.where(valid, value, 0.0))
-    return Measurement(points, intensity, valid, valid & spiked, returned & drop_draw)
+    return Measurement(points, intensity, valid, valid & spiked, returned & dropped)

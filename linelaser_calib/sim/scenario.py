@@ -1,8 +1,10 @@
 """Simulation scenarios: every knob of the simulator in one frozen dataclass, validated.
 
-A :class:`Scenario` holds plain numbers, strings and tuples only (no arrays), so that it can
-be written to and read from YAML by the I/O layer and compared with ``==``. Lists given for
-tuple fields (as YAML readers produce them) are converted to tuples.
+A :class:`Scenario` holds plain numbers, strings, tuples and the frozen
+:class:`~linelaser_calib.sim.sensor_models.SensorModel` record only (no arrays), so that it
+can be written to and read from YAML by the I/O layer and compared with ``==``. Lists given for
+tuple fields (as YAML readers produce them) are converted to tuples, a mapping given for
+``sensor`` to a ``SensorModel``.
 
 Units are SI throughout: metres, radians, seconds, hertz and integer nanoseconds; the unit is
 in each field name or its description. Degrees appear only in descriptions, labelled.
@@ -13,7 +15,8 @@ The named presets and random scenes are in :mod:`~linelaser_calib.sim.presets`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -26,6 +29,7 @@ from linelaser_calib.core.geometry import (
 from linelaser_calib.core.robot.kinematics import UR_DH
 from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.types import FloatArray
+from linelaser_calib.sim.sensor_models import SensorModel, sensor_model_from_mapping
 
 Vec3 = tuple[float, float, float]
 
@@ -139,6 +143,10 @@ class Scenario:
         Relative error of the sensor's along-line scale: measured x = (1 + this) x.
     depth_quantum_m : float
         Depth resolution: measured z is rounded to multiples of this, m; 0 disables it.
+    sensor : SensorModel
+        A real profiler's shape errors beyond the white noise above (linearity bow, smooth
+        per-profile error, correlated speckle, x/z output steps, weak returns on steep or
+        dark surfaces); the default has none (see :mod:`~linelaser_calib.sim.sensor_models`).
 
     Pose sampler
     ------------
@@ -291,6 +299,7 @@ class Scenario:
     edge_bias_m: float = 0.0
     lateral_scale_error: float = 0.0
     depth_quantum_m: float = 0.0
+    sensor: SensorModel = field(default_factory=SensorModel)
 
     n_poses: int = 30
     pose_mode: str = "paper"
@@ -346,6 +355,8 @@ class Scenario:
             value = getattr(self, f.name)
             if isinstance(value, list):
                 object.__setattr__(self, f.name, tuple(float(v) for v in value))
+        if isinstance(self.sensor, Mapping):
+            object.__setattr__(self, "sensor", sensor_model_from_mapping(self.sensor))
         self._validate()
 
     @property
@@ -411,6 +422,7 @@ class Scenario:
         non_negative("cluster_spread_m", "cluster_spread_rad")
         positive("robot_field_length_m")
         fraction("sigma_spread")
+        require(isinstance(self.sensor, SensorModel), "sensor must be a SensorModel")
         require(
             abs(self.lateral_scale_error) < 0.5,
             f"lateral_scale_error must be within +-0.5, got {self.lateral_scale_error}",

@@ -26,7 +26,11 @@ the table.
 Presets (:data:`SPHERE_PRESETS`): ``sphere``: a Ø50.8 mm (2 in) tooling ball, a
 scanCONTROL-class profiler (70-150 mm, ±25 deg, 640 points, σ 8/6 µm, spikes, dropouts,
 camera shadowing), a UR-class arm (0.03 mm, 0.003 deg), 30 views tilted up to 35 deg, the
-centre on the sensor's −y side.
+centre on the sensor's −y side. ``sphere_sszn``: a FANUC-like cell, a 40 mm-radius ball
+scanned by an SSZN-class profiler with its measured local noise and smooth shape error
+(``sszn_fanuc`` in :mod:`~linelaser_calib.sim.sensor_models`; 0.05 mm pitch, dense
+profiles), robot σ 0.03 mm and 0.005 deg, 20 views tilted up to 20 deg, the centre
+20-30 mm beyond the middle of the range, the laser plane up to 0.5 R from the centre.
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ from linelaser_calib.sim.presets import PRESETS, rig_scene_from_preset
 from linelaser_calib.sim.profiler import Trace, ray_directions, returns_seen
 from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import T_MIN_M, Int8Array, Int64Array, Surface
+from linelaser_calib.sim.sensor_models import PROFILERS, profiler_fields
 from linelaser_calib.sim.simulate import RigSimulatedData, step_and_shoot
 
 Vec3 = tuple[float, float, float]
@@ -383,9 +388,44 @@ def _sphere_rig() -> Scenario:
     )
 
 
+def _sphere_sszn() -> SphereScenario:
+    """A FANUC-like cell with an SSZN-class profiler (``sszn_fanuc``) and a 40 mm-radius ball."""
+    R = Rotation.from_euler("xyz", [math.radians(-8.0), math.radians(5.0), math.radians(90.0)])
+    q = quaternion_xyzw_from_matrix(R.as_matrix())
+    spec = PROFILERS["sszn_fanuc"]
+    rig = replace(
+        _sphere_rig(),
+        name="sphere_sszn",
+        **profiler_fields(spec),
+        hand_eye_translation_m=(0.05, -0.03, 0.09),
+        hand_eye_rotation_xyzw=(float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+        spike_fraction=0.0,
+        dropout_fraction=0.0,
+        camera_baseline_m=0.0,
+        intensity=False,
+        organised=False,
+        n_poses=20,
+        robot_sigma_translation_m=3e-5,
+        robot_sigma_rotation_rad=math.radians(0.005),
+    )
+    middle = 0.5 * (rig.z_min_m + rig.z_max_m)
+    return SphereScenario(
+        name="sphere_sszn",
+        rig=rig,
+        radius_m=0.040,
+        centre_side=-1,
+        tilt_rad=math.radians(20.0),
+        offset_range=(0.05, 0.5),
+        depth_range_m=(middle + 0.02, middle + 0.03),
+        lateral_fraction=0.1,
+        min_arc_points=500,
+    )
+
+
 #: Named sphere scenarios; see the module docstring and :func:`sphere_scenario_from_preset`.
 SPHERE_PRESETS: dict[str, SphereScenario] = {
     "sphere": SphereScenario(name="sphere", rig=_sphere_rig()),
+    "sphere_sszn": _sphere_sszn(),
 }
 
 
