@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from linelaser_calib.cli import _pipeline_config, build_parser, main
+from linelaser_calib.cli import build_parser, main
+from linelaser_calib.cli.calibrate import _pipeline_config
 from linelaser_calib.core.errors import InputError, ModelMismatch
 from linelaser_calib.core.pairing import pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples

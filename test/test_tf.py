@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linelaser_calib.cli import main, simulate_to_bag
+from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import (
     interpolate_transform,
     invert_transform,
@@ -25,6 +25,7 @@ from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io.bags import read_bag, write_bag
 from linelaser_calib.io.pose_sources import PoseRequest, poses_from_tf
 from linelaser_calib.io.results import read_result_yaml
+from linelaser_calib.sim.bag_writer import simulate_to_bag
 from linelaser_calib.sim.tf_chain import ur_tf_tree
 
 MS = 1_000_000
