@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from linelaser_calib.cli.common import SETTING_FLAGS
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
@@ -18,27 +19,44 @@ from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.io.results import read_reference_yaml, read_result_yaml, truth_beside
 from linelaser_calib.offline import calibrate_bag
+from linelaser_calib.sim.recording import preset_motion
 from linelaser_calib.summary import format_summary, hand_eye_seen
 
-
-def preset_motion(name: object) -> str | None:
-    """The motion (``step``, ``continuous``) of a simulator preset; None for another name."""
-    from linelaser_calib.sim.line import LINE_PRESETS
-    from linelaser_calib.sim.scenario import PRESETS
-    from linelaser_calib.sim.sphere import SPHERE_PRESETS
-    from linelaser_calib.sim.weld import WELD_PRESETS
-
-    rigs = {
-        **PRESETS,
-        **{k: v.rig for k, v in WELD_PRESETS.items()},
-        **{k: v.rig for k, v in LINE_PRESETS.items()},
-        **{k: v.rig for k, v in SPHERE_PRESETS.items()},
-    }
-    rig = rigs.get(name) if isinstance(name, str) else None
-    return None if rig is None else rig.motion
+#: A row of the demo's table: bag, method and reference, rotation error (deg), translation
+#: error (mm), calibration time (s).
+DemoRow = tuple[str, str, float, float, float]
 
 
-def demo_runs(bag: Path, seed: int, rows: list[tuple[str, str, float, float, float]]) -> None:
+def run_demo(root: Path, seed: int) -> list[DemoRow]:
+    """Calibrate every bag under ``root`` (:func:`demo_runs`) and return the table's rows.
+
+    Raises
+    ------
+    InputError
+        No bag under ``root``.
+    """
+    bags = sorted(p.parent for p in root.glob("*/metadata.yaml"))
+    if not bags:
+        raise InputError(f"no rosbag2 bags found under {root}; run from the repository root")
+    rows: list[DemoRow] = []
+    for bag in bags:
+        demo_runs(bag, seed, rows)
+    return rows
+
+
+def format_demo_table(rows: list[DemoRow]) -> str:
+    """The demo's table: each hand-eye's difference to the truth or reference (deg, mm)."""
+    lines = [
+        "Difference of the hand-eye T_flange_sensor to the truth (simulated bags) or to the",
+        "reference (real scans: another tool's published hand-eye, not ground truth):",
+        f"  {'bag':<24}{'method':<22}{'rotation deg':>14}{'translation mm':>16}{'time s':>9}",
+    ]
+    for name, label, rot_deg, trans_mm, seconds in rows:
+        lines.append(f"  {name:<24}{label:<22}{rot_deg:>14.4f}{trans_mm:>16.4f}{seconds:>9.2f}")
+    return "\n".join(lines)
+
+
+def demo_runs(bag: Path, seed: int, rows: list[DemoRow]) -> None:
     """Calibrate one committed bag with both methods, print the summaries, add table rows.
 
     A simulated bag is compared with its ``truth.yaml`` (and, with ``initial.yaml``,
