@@ -9,16 +9,15 @@ from pathlib import Path
 
 import numpy as np
 
-from linelaser_calib.cli.common import SETTING_FLAGS
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig
+from linelaser_calib.core.pipeline import Method
 from linelaser_calib.core.targets import get_target
-from linelaser_calib.core.targets.base import configure
 from linelaser_calib.io.results import read_reference_yaml, read_result_yaml, truth_beside
 from linelaser_calib.offline import calibrate_bag
+from linelaser_calib.settings import Front, pipeline_config, render_warnings
 from linelaser_calib.sim.recording import preset_motion
 from linelaser_calib.summary import format_summary, hand_eye_seen
 
@@ -97,17 +96,18 @@ def demo_runs(bag: Path, seed: int, rows: list[DemoRow]) -> None:
         else PairingConfig()
     )
     for method in (Method.PAPER, Method.DEFAULT):
-        config = PipelineConfig(
-            method=method,
-            target=target.name,
-            target_config=configure(target, method.value, settings, SETTING_FLAGS),
+        config = pipeline_config(
+            target.name,
+            method,
+            settings,
+            Front.CLI,
             seed=seed,
             pairing=pairing,
-            initial_T_flange_sensor=None if initial is None else initial.T_flange_sensor,
             workers=available_workers(),
         )
         started = time.perf_counter()
         run = calibrate_bag(bag, config, estimate_offset=continuous)
+        render_warnings(run.result, Front.CLI)
         seconds = time.perf_counter() - started
         print(f"=== {bag.name} ({label}), method {method.value} ({seconds:.2f} s) ===")
         print(format_summary(run.result, truth))

@@ -23,6 +23,7 @@ from linelaser_calib.core.targets.base import SETTINGS, configure
 from linelaser_calib.core.types import FlangePose, Sample
 from linelaser_calib.io import read_bag, write_bag
 from linelaser_calib.nodes import calibration_service
+from linelaser_calib.settings import Front, render
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 WELD_BAG = REPO_ROOT / "bags" / "weld_seam"
@@ -241,7 +242,7 @@ def test_profiles_taken_in_motion_are_counted_together_with_advice() -> None:
         Rejection(k, k, "pairing", f"robot moving at {30 + k:.1f} mm/s during the profile")
         for k in range(5)
     ] + [Rejection(9, 9, "pairing", "robot rotating at 0.71 deg/s during the profile")]
-    digest = rejection_digest(rejections)
+    digest = render(rejection_digest(rejections), Front.CLI)
     assert digest.startswith("Rejected: 6 x pairing: robot moving or turning during the profile.")
     assert "--max-speed 0 --max-angular-speed 0 and --clock-offset auto" in digest
     assert "--max-speed" not in rejection_digest([Rejection(1, 1, "ellipse", "x")])

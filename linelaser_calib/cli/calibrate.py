@@ -8,10 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-import numpy as np
-
 from linelaser_calib.cli.common import (
-    SETTING_FLAGS,
     StderrProgress,
     check_output,
     initial_hand_eye,
@@ -22,33 +19,20 @@ from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
-from linelaser_calib.core.targets import get_target
-from linelaser_calib.core.targets.base import configure
 from linelaser_calib.io.results import result_to_dict, truth_beside, write_result_yaml
-from linelaser_calib.offline import OfflineRun, calibrate_bag
+from linelaser_calib.offline import OfflineRun, Recording, calibrate_bag
+from linelaser_calib.settings import Front, given_from_arguments, pipeline_config, render_warnings
 from linelaser_calib.summary import format_summary
 
 
 def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
     initial = None if args.initial is None else initial_hand_eye(args.initial)
-    given = {
-        "radius_m": args.radius,
-        "point_m": None if args.point is None else np.array(args.point),
-        "centre_side": args.centre_side,
-        "sensor_sigma_m": args.sensor_sigma,
-        "robot_sigma_t_m": args.robot_sigma_t,
-        "robot_sigma_r_rad": args.robot_sigma_r,
-        "min_samples": args.min_samples,
-        "scale": args.scale,
-        "initial": initial,
-    }
-    target = get_target(args.target)
-    settings = {name: value for name, value in given.items() if value is not None}
-    return PipelineConfig(
-        method=Method(args.method),
-        target=target.name,
-        target_config=configure(target, args.method, settings, SETTING_FLAGS),
+    return pipeline_config(
+        args.target,
+        Method(args.method),
+        given_from_arguments(args, initial),
+        Front.CLI,
         seed=args.seed,
         pairing=PairingConfig(
             sync_tolerance_s=args.sync_tolerance,
@@ -56,7 +40,6 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
             max_linear_speed_m_s=args.max_speed,
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
-        initial_T_flange_sensor=initial,
         workers=available_workers(),
     )
 
@@ -89,19 +72,22 @@ def run(args: argparse.Namespace) -> int:
             "--kinematics MODEL or leave --nominal-kinematics out"
         )
     try:
-        run = calibrate_bag(
+        recording = Recording(
             args.bag,
-            config,
             profile_topic=args.profile_topic,
             pose_topic=args.pose_topic,
-            flange_frame=args.flange_frame,
-            estimate_offset=args.clock_offset == "auto",
-            progress=StderrProgress(progress),
             pose_source=source,
             base_frame=args.base_frame,
-            invalid_values_m=tuple(args.invalid_value),
+            flange_frame=args.flange_frame,
             joint_state_topic=args.joint_state_topic,
             model=model,
+            invalid_values_m=tuple(args.invalid_value),
+        )
+        run = calibrate_bag(
+            recording,
+            config,
+            estimate_offset=args.clock_offset == "auto",
+            progress=StderrProgress(progress),
             kinematic_calibration=(
                 None if model is None or args.nominal_kinematics else JointCalibrationConfig()
             ),
@@ -111,6 +97,7 @@ def run(args: argparse.Namespace) -> int:
         raise PairingError(
             f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
+    render_warnings(run.result, Front.CLI)
     truth, note = truth_beside(args.bag)
     if note:
         print(note, file=sys.stderr)

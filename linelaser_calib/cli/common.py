@@ -19,19 +19,6 @@ from linelaser_calib.io.kinematics import load_model
 
 PROG = "linelaser-calib"
 
-#: The calibrate flag behind each shared target setting (for refusals).
-SETTING_FLAGS = {
-    "radius_m": "--radius",
-    "point_m": "--point x,y,z",
-    "centre_side": "--centre-side",
-    "sensor_sigma_m": "--sensor-sigma",
-    "robot_sigma_t_m": "--robot-sigma-t",
-    "robot_sigma_r_rad": "--robot-sigma-r",
-    "min_samples": "--min-samples",
-    "scale": "--scale",
-    "initial": "--initial FILE.yaml",
-}
-
 
 def initial_hand_eye(text: str) -> np.ndarray:
     """The hand-eye (4, 4) of ``--initial``; its warnings go to stderr."""

@@ -30,6 +30,7 @@ from linelaser_calib.core.planning import PlanConstraints
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.targets import DEFAULT_TARGET, target_names
 from linelaser_calib.io.initial import FORMS
+from linelaser_calib.settings import Front, render
 
 #: Numeric options of ``calibrate`` for the pairing gate: (flag, parser, default, help).
 CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = (
@@ -421,7 +422,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args.func(args))
     except CalibrationError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        print(f"{PROG}: error: {render(str(exc), Front.CLI)}", file=sys.stderr)
         return 1
     except OSError as exc:
         print(f"{PROG}: error: {exc.strerror or exc} ({exc.filename or ''})", file=sys.stderr)

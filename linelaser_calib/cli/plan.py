@@ -5,10 +5,11 @@ from __future__ import annotations
 
 import argparse
 import time
+from typing import Any
 
 import numpy as np
 
-from linelaser_calib.cli.common import SETTING_FLAGS, check_output, initial_hand_eye
+from linelaser_calib.cli.common import check_output, initial_hand_eye
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.planning import (
@@ -19,13 +20,13 @@ from linelaser_calib.core.planning import (
     plannable,
     predicted_curve,
 )
-from linelaser_calib.core.targets import get_target
-from linelaser_calib.core.targets.base import ResultSection, configure
-from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.targets import all_targets, get_target
+from linelaser_calib.core.targets.base import ResultSection, Target, placement_adviser
 from linelaser_calib.core.types import Sample
 from linelaser_calib.io.kinematics import load_model, read_kinematics
 from linelaser_calib.io.results import read_result_yaml, write_plan_yaml
-from linelaser_calib.offline import advise_placements, bag_samples
+from linelaser_calib.offline import bag_samples
+from linelaser_calib.settings import Front, given_from_arguments, spelling, target_config
 
 
 def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
@@ -51,20 +52,21 @@ def run(args: argparse.Namespace) -> int:
     section = None
     achieved: list[SigmaPoint] = []
     planner = plannable(target)
+    numbers_flag = spelling(planner.numbers_setting, Front.CLI)
     placed = {"--cylinder": args.cylinder, "--sphere": args.sphere}
     given_numbers = {flag: value for flag, value in placed.items() if value is not None}
     for flag in given_numbers:
-        if flag != planner.numbers_flag:
+        if flag != numbers_flag:
             raise InputError(
                 f"{flag} does not apply to the {target.title} target and would be ignored; "
-                f"give its placement with {planner.numbers_flag} ({planner.numbers_help})"
+                f"give its placement with {numbers_flag} ({planner.numbers_help})"
             )
-    numbers = given_numbers.get(planner.numbers_flag)
+    numbers = given_numbers.get(numbers_flag)
     if args.from_result is not None:
         if args.initial is not None or numbers is not None:
             raise InputError(
                 "--from gives the hand-eye and the target's placement; omit --initial and "
-                f"{planner.numbers_flag}"
+                f"{numbers_flag}"
             )
         result = read_result_yaml(args.from_result)
         if result.target.key != target.name:
@@ -89,18 +91,10 @@ def run(args: argparse.Namespace) -> int:
     if section is None and numbers is None and args.bag is None:
         raise InputError(
             f"plan needs the target's placement: give --from RESULT.yaml, "
-            f"{planner.numbers_flag} {planner.numbers_help}, or a bag of 3 or more exploratory "
+            f"{numbers_flag} {planner.numbers_help}, or a bag of 3 or more exploratory "
             "scans"
         )
-    given = {
-        "radius_m": args.radius,
-        "centre_side": args.centre_side,
-        "sensor_sigma_m": args.sensor_sigma,
-        "robot_sigma_t_m": args.robot_sigma_t,
-        "robot_sigma_r_rad": args.robot_sigma_r,
-    }
-    settings = {name: value for name, value in given.items() if value is not None}
-    config = configure(target, "default", settings, SETTING_FLAGS)
+    config = target_config(target.name, "default", given_from_arguments(args), Front.CLI)
     samples = (
         []
         if args.bag is None
@@ -120,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
     advice = (
         None
         if args.kinematics is None
-        else _placement_advice(args, samples, T_flange_sensor, section, numbers)
+        else _placement_advice(args, target, samples, T_flange_sensor, section, numbers)
     )
     started = time.monotonic()
     plan = plan_for_target(
@@ -152,30 +146,35 @@ def run(args: argparse.Namespace) -> int:
 
 def _placement_advice(
     args: argparse.Namespace,
+    target: Target[Any],
     samples: list[Sample],
     T_flange_sensor: np.ndarray,
     section: ResultSection | None,
     numbers: list[float] | None,
 ) -> str:
-    """``plan --kinematics``: whether another placement of the cylinder would determine more
-    of the robot's kinematics, from the bag's scans and joint states."""
-    from linelaser_calib.core.targets.cylinder import CylinderSection
+    """``plan --kinematics``: whether another placement of the target would determine more
+    of the robot's kinematics, from the bag's scans and joint states (the target's
+    :class:`~linelaser_calib.core.targets.base.PlacementAdviser`)."""
     from linelaser_calib.io.bags import read_joint_states
 
-    if args.bag is None or args.target != "cylinder":
+    adviser = placement_adviser(target)
+    if args.bag is None or adviser is None:
+        able = [t.name for t in all_targets() if placement_adviser(t) is not None]
         raise InputError(
-            "plan --kinematics judges the placements of a cylinder from the scans so far: give "
-            "the bag (with /joint_states) and --target cylinder"
+            "plan --kinematics judges the placements of a target from the scans so far: give "
+            "the bag (with /joint_states) and a target it judges: "
+            + ", ".join(f"--target {name}" for name in able)
         )
-    if isinstance(section, CylinderSection):
-        cylinder = section.cylinder
-    elif numbers is not None and args.radius is not None:
-        direction = np.array(numbers[3:6]) / np.linalg.norm(numbers[3:6])
-        cylinder = Cylinder(np.array(numbers[:3]), direction, args.radius)
-    else:
+    placement = None
+    if section is not None:
+        placement = adviser.placement_of(section)
+    elif numbers is not None:
+        placement = adviser.placement_from_numbers(numbers, args.radius)
+    if placement is None:
         raise InputError(
-            "plan --kinematics needs the cylinder's placement: give --from RESULT.yaml (e.g. "
-            "of calibrate --kinematics) or --cylinder with --radius"
+            f"plan --kinematics needs the {target.title}'s placement: give --from RESULT.yaml "
+            "(e.g. of calibrate --kinematics) or "
+            f"{spelling(plannable(target).numbers_setting, Front.CLI)} with --radius"
         )
     model = load_model(args.kinematics)
     if args.from_result is not None:
@@ -183,7 +182,7 @@ def _placement_advice(
         if corrections is not None:
             model = corrections.apply(model)
     states = read_joint_states(args.bag)
-    return advise_placements(samples, states, model, T_flange_sensor, cylinder)
+    return adviser.advise([(samples, states, placement)], model, T_flange_sensor)
 
 
 def format_plan(plan: Plan, elapsed_s: float) -> str:

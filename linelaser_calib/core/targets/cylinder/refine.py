@@ -921,7 +921,8 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
             "%"
             + ("" if correlation is None else f", correlated {correlation:+.2f} with the radius")
             + "): these profiles barely tell a profile stretched along the line from a larger "
-            "cylinder or a shifted hand-eye. Give the measured radius (--radius), or scan with "
+            "cylinder or a shifted hand-eye. Give the measured radius ({setting:radius_m}), or "
+            "scan with "
             "the arc at several positions along the laser line"
         )
     history = solution.cost_history
@@ -933,7 +934,8 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
             f"{cfg.robot_sigma_t_m * robot_scale * 1e3:.3f} mm and "
             f"{np.degrees(cfg.robot_sigma_r_rad) * robot_scale:.4f} deg per pose (1 sigma, from "
             f"the pose corrections) against {cfg.robot_sigma_t_m * 1e3:.3f} mm and "
-            f"{np.degrees(cfg.robot_sigma_r_rad):.4f} deg (--robot-sigma-t, --robot-sigma-r)"
+            f"{np.degrees(cfg.robot_sigma_r_rad):.4f} deg "
+            "({setting:robot_sigma_t_m}, {setting:robot_sigma_r_rad})"
         )
         warnings.append(
             prior_note + "; the 1 sigma above is formed with the larger error, and the arm is "
@@ -945,7 +947,7 @@ def _summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> R
             f"(cost {history[-1]:.6g}); the result may be inaccurate"
             + (
                 f". A likely reason: {prior_note}; give the larger values with "
-                "--robot-sigma-t and --robot-sigma-r"
+                "{setting:robot_sigma_t_m} and {setting:robot_sigma_r_rad}"
                 if prior_note
                 else ""
             )
@@ -1176,9 +1178,9 @@ def _check_kinematic_fit(scale: float, outcome: JointOutcome[Any], setup: Kinema
         f"{setup.config.repeatability_t_m * 1e3:.3f} mm and "
         f"{np.rad2deg(setup.config.repeatability_r_rad):.4f} deg, and the largest kinematic "
         f"correction ({worst}) is {float(np.max(ratio)):.0f} times its prior 1 sigma. "
-        "Likely causes: the model is not the recorded robot's (--kinematics), the joint "
+        "Likely causes: the model is not the recorded robot's ({setting:kinematics}), the joint "
         "states are not the robot's encoders, or the arm's error is not kinematic "
-        "(elasticity, heat). Calibrate with --nominal-kinematics to keep the model "
+        "(elasticity, heat). Calibrate with {setting:nominal_kinematics} to keep the model "
         "nominal. No result was written."
     )
 
