@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from linelaser_calib.cli import build_parser, main
-from linelaser_calib.cli.calibrate import _pipeline_config
+from linelaser_calib.cli.calibrate import calibrate_config
 from linelaser_calib.core.errors import InputError, ModelMismatch
 from linelaser_calib.core.pairing import pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
@@ -70,7 +70,7 @@ def test_a_flag_that_would_be_ignored_is_refused(
     initial = ["--initial", INITIAL] if target == "known_point" else []
     args = calibrate_args("--target", target, "--method", method, *flags, *initial)
     with pytest.raises(InputError, match=rf"^{refused}\b.* would be ignored"):
-        _pipeline_config(args)
+        calibrate_config(args)
 
 
 #: (target, flags, config field, value) of settings that were ignored before and act now.
@@ -86,15 +86,15 @@ ACTING = [
 def test_a_flag_that_applies_reaches_the_target_config(
     target: str, flags: list[str], field: str, value: float
 ) -> None:
-    config = _pipeline_config(calibrate_args("--target", target, *flags))
+    config = calibrate_config(calibrate_args("--target", target, *flags))
     assert getattr(config.target_config, field) == value
-    untouched = _pipeline_config(calibrate_args("--target", target))
+    untouched = calibrate_config(calibrate_args("--target", target))
     assert getattr(untouched.target_config, field) != value
 
 
 def test_cylinder_noise_levels_reach_the_refinement() -> None:
     flags = ["--sensor-sigma", "2e-6", "--robot-sigma-t", "3e-5", "--robot-sigma-r", "1e-5"]
-    refine = _pipeline_config(calibrate_args(*flags)).target_config.refine
+    refine = calibrate_config(calibrate_args(*flags)).target_config.refine
     assert (refine.sensor_sigma_m, refine.robot_sigma_t_m, refine.robot_sigma_r_rad) == (
         2e-6,
         3e-5,
@@ -103,10 +103,10 @@ def test_cylinder_noise_levels_reach_the_refinement() -> None:
 
 
 def test_scale_reaches_the_cylinder_config_and_a_bad_one_is_refused() -> None:
-    assert _pipeline_config(calibrate_args("--scale", "free")).target_config.scale == "free"
-    assert _pipeline_config(calibrate_args()).target_config.scale == "auto"
+    assert calibrate_config(calibrate_args("--scale", "free")).target_config.scale == "free"
+    assert calibrate_config(calibrate_args()).target_config.scale == "auto"
     with pytest.raises(InputError, match="along-line scale must be one of auto, fixed, free"):
-        _pipeline_config(calibrate_args("--scale", "on"))
+        calibrate_config(calibrate_args("--scale", "on"))
 
 
 def test_refusal_exits_1_on_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:

@@ -25,7 +25,7 @@ from linelaser_calib.settings import Front, given_from_arguments, pipeline_confi
 from linelaser_calib.summary import format_summary
 
 
-def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+def calibrate_config(args: argparse.Namespace) -> PipelineConfig:
     """The pipeline configuration of ``calibrate``; a flag that does not act is refused."""
     initial = None if args.initial is None else initial_hand_eye(args.initial)
     return pipeline_config(
@@ -63,7 +63,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     _check_outputs(args)
-    config = _pipeline_config(args)
+    config = calibrate_config(args)
     progress = sys.stderr.isatty() if args.progress is None else args.progress
     source, model = pose_source(args)
     if args.nominal_kinematics and model is None:

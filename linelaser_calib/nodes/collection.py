@@ -48,6 +48,7 @@ from linelaser_calib.core.geometry import rotation_angle
 from linelaser_calib.core.pairing import NS_PER_S, PairingConfig, PoseBuffer
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset
 from linelaser_calib.core.types import FlangePose, Profile, Rejection, Sample
+from linelaser_calib.settings import Front, render
 
 #: Called with (reason key, full first message) the first time a reason key is counted.
 ReasonLogger = Callable[[str, str], None]
@@ -759,7 +760,7 @@ class ClockOffsetTracker:
         try:
             return float(estimate_clock_offset(profiles, poses, self.config, self.half_range_s))
         except CalibrationError as err:
-            return str(err)
+            return render(str(err), Front.NODE)
 
     def add_estimate(self, outcome: float | str) -> str | None:
         """Record one batch's outcome; returns a warning when the offset drifts.
