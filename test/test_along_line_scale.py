@@ -9,6 +9,7 @@ import numpy as np
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.settings import Front, render
 from linelaser_calib.sim import SimulatedData, scenario_from_preset, simulate
 from linelaser_calib.summary import truth_error
 
@@ -69,7 +70,7 @@ def test_a_fixed_scale_leaves_the_given_radius_contradicted_and_says_how_to_free
     section = result.target
     assert isinstance(section, CylinderSection) and section.scale is None
     (warning,) = [w for w in result.warnings if "against the given 20.00 mm" in w]
-    assert "--scale free estimates it" in warning
+    assert "--scale free estimates it" in render(warning, Front.CLI)
     # The stretched profiles cannot fit the given radius: the hand-eye takes the misfit
     # (0.31 mm off here, against 0.03 mm with the scale estimated).
     error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)

@@ -15,7 +15,7 @@ from rclpy.context import Context
 from rclpy.parameter import Parameter
 from ros_helpers import init_context, new_domain_id, reliable_qos
 
-from linelaser_calib.cli import main, simulate_to_bag
+from linelaser_calib.cli import main
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.geometry import invert_transform, rotvec_from_matrix
 from linelaser_calib.core.robot.kinematics import UR_JOINT_NAMES, forward_kinematics
@@ -26,6 +26,7 @@ from linelaser_calib.io.results import read_result_yaml
 from linelaser_calib.nodes import collector
 from linelaser_calib.nodes.joint_state_input import JointStatePoseInput, live_kinematic_model
 from linelaser_calib.sim import scenario_from_preset, simulate
+from linelaser_calib.sim.bag_writer import simulate_to_bag
 from msg_adapters import joint_state_msg, pose_stamped_from_flange_pose, rclpy_types
 
 SEED = 4

@@ -22,7 +22,7 @@ import yaml
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from linelaser_calib.cli import main, simulate_to_bag
+from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import (
     apply_transform,
     invert_transform,
@@ -44,6 +44,7 @@ from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.report import write_report
 from linelaser_calib.report.figures import report_data
 from linelaser_calib.sim import scenario_from_preset, simulate
+from linelaser_calib.sim.bag_writer import simulate_to_bag
 from linelaser_calib.summary import format_summary
 
 CHROMIUM = Path("/usr/bin/chromium")

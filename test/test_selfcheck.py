@@ -22,6 +22,7 @@ from linelaser_calib.core.selfcheck import (
 )
 from linelaser_calib.core.targets.base import TargetSolution
 from linelaser_calib.core.types import FloatArray, SampleFit
+from linelaser_calib.settings import Front, render
 from linelaser_calib.sim import scenario_from_preset, simulate
 from linelaser_calib.summary import truth_error
 
@@ -303,7 +304,8 @@ def test_robot_less_accurate_than_the_prior_is_named() -> None:
     """Robot noise 0.5 mm against the default 0.1 mm prior: the warning gives the number."""
     _, result = calibrated("paper", 1, 0, robot_sigma_translation_m=5e-4, n_poses=30)
     warning = next(w for w in result.warnings if "times the prior assumed" in w)
-    assert "mm and" in warning and "--robot-sigma-t" in warning
+    shown = render(warning, Front.CLI)
+    assert "mm and" in shown and "--robot-sigma-t" in shown
 
 
 def test_a_continuous_sweep_counts_by_its_extent_not_as_one_cluster() -> None:

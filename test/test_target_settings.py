@@ -13,7 +13,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from linelaser_calib.cli import _pipeline_config, build_parser, main
+from linelaser_calib.cli import build_parser, main
+from linelaser_calib.cli.calibrate import calibrate_config
 from linelaser_calib.core.errors import InputError, ModelMismatch
 from linelaser_calib.core.pairing import pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
@@ -22,6 +23,7 @@ from linelaser_calib.core.targets.base import SETTINGS, configure
 from linelaser_calib.core.types import FlangePose, Sample
 from linelaser_calib.io import read_bag, write_bag
 from linelaser_calib.nodes import calibration_service
+from linelaser_calib.settings import Front, render
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 WELD_BAG = REPO_ROOT / "bags" / "weld_seam"
@@ -68,7 +70,7 @@ def test_a_flag_that_would_be_ignored_is_refused(
     initial = ["--initial", INITIAL] if target == "known_point" else []
     args = calibrate_args("--target", target, "--method", method, *flags, *initial)
     with pytest.raises(InputError, match=rf"^{refused}\b.* would be ignored"):
-        _pipeline_config(args)
+        calibrate_config(args)
 
 
 #: (target, flags, config field, value) of settings that were ignored before and act now.
@@ -84,15 +86,15 @@ ACTING = [
 def test_a_flag_that_applies_reaches_the_target_config(
     target: str, flags: list[str], field: str, value: float
 ) -> None:
-    config = _pipeline_config(calibrate_args("--target", target, *flags))
+    config = calibrate_config(calibrate_args("--target", target, *flags))
     assert getattr(config.target_config, field) == value
-    untouched = _pipeline_config(calibrate_args("--target", target))
+    untouched = calibrate_config(calibrate_args("--target", target))
     assert getattr(untouched.target_config, field) != value
 
 
 def test_cylinder_noise_levels_reach_the_refinement() -> None:
     flags = ["--sensor-sigma", "2e-6", "--robot-sigma-t", "3e-5", "--robot-sigma-r", "1e-5"]
-    refine = _pipeline_config(calibrate_args(*flags)).target_config.refine
+    refine = calibrate_config(calibrate_args(*flags)).target_config.refine
     assert (refine.sensor_sigma_m, refine.robot_sigma_t_m, refine.robot_sigma_r_rad) == (
         2e-6,
         3e-5,
@@ -101,10 +103,10 @@ def test_cylinder_noise_levels_reach_the_refinement() -> None:
 
 
 def test_scale_reaches_the_cylinder_config_and_a_bad_one_is_refused() -> None:
-    assert _pipeline_config(calibrate_args("--scale", "free")).target_config.scale == "free"
-    assert _pipeline_config(calibrate_args()).target_config.scale == "auto"
+    assert calibrate_config(calibrate_args("--scale", "free")).target_config.scale == "free"
+    assert calibrate_config(calibrate_args()).target_config.scale == "auto"
     with pytest.raises(InputError, match="along-line scale must be one of auto, fixed, free"):
-        _pipeline_config(calibrate_args("--scale", "on"))
+        calibrate_config(calibrate_args("--scale", "on"))
 
 
 def test_refusal_exits_1_on_the_command_line(capsys: pytest.CaptureFixture[str]) -> None:
@@ -240,7 +242,7 @@ def test_profiles_taken_in_motion_are_counted_together_with_advice() -> None:
         Rejection(k, k, "pairing", f"robot moving at {30 + k:.1f} mm/s during the profile")
         for k in range(5)
     ] + [Rejection(9, 9, "pairing", "robot rotating at 0.71 deg/s during the profile")]
-    digest = rejection_digest(rejections)
+    digest = render(rejection_digest(rejections), Front.CLI)
     assert digest.startswith("Rejected: 6 x pairing: robot moving or turning during the profile.")
     assert "--max-speed 0 --max-angular-speed 0 and --clock-offset auto" in digest
     assert "--max-speed" not in rejection_digest([Rejection(1, 1, "ellipse", "x")])

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linelaser_calib.cli import main, simulate_to_bag
+from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import (
     interpolate_transform,
     invert_transform,
@@ -25,6 +25,8 @@ from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io.bags import read_bag, write_bag
 from linelaser_calib.io.pose_sources import PoseRequest, poses_from_tf
 from linelaser_calib.io.results import read_result_yaml
+from linelaser_calib.settings import Front, render
+from linelaser_calib.sim.bag_writer import simulate_to_bag
 from linelaser_calib.sim.tf_chain import ur_tf_tree
 
 MS = 1_000_000
@@ -91,7 +93,7 @@ def test_missing_static_transform_names_frames_gap_and_the_tf2_echo_command() ->
     poses_tree.extend(dynamic, static=False)
     with pytest.raises(TfChainError) as err:
         poses_tree.chain("base_link", "tool0")
-    text = str(err.value)
+    text = render(str(err.value), Front.CLI)
     assert "tool0 -> flange -> wrist_3_link" in text
     assert "no transform gives base_link_inertia a parent" in text
     assert "shoulder_link <- base_link_inertia (dynamic, 2 stamps)" in text

@@ -205,7 +205,7 @@ def calibrate_samples(
         raise InputError(
             f"{len(placements) + 1} recordings are calibrated together only by the joint "
             "kinematic calibration (the default method with the robot's kinematic model and "
-            "joint states, --kinematics): calibrate one recording at a time otherwise"
+            "joint states, {setting:kinematics}): calibrate one recording at a time otherwise"
         )
     check_units(samples)
     features, feature_rejections = target.extract(
@@ -372,7 +372,7 @@ def estimate_clock_offset(
     if cost_of_poses is None:
         raise InputError(
             f"the clock offset cannot be estimated from {target.title} scans; give it with "
-            "--clock-offset SECONDS"
+            "{setting:clock_offset_s} SECONDS"
         )
     buffer = PoseBuffer()
     buffer.extend(poses)

@@ -73,6 +73,7 @@ import numpy as np
 
 from .errors import DegenerateError, InputError
 from .geometry import FloatArray, invert_transform
+from .settings_text import setting
 from .solver import N_HAND_EYE, Linearisation, Residuals, SolverConfig, normal_equations
 from .targets.base import Shape, Target
 from .types import BoolArray, Sample
@@ -178,7 +179,7 @@ class Plannable(Protocol):
     points of the samples then. A target offers a planner through its ``planner`` attribute.
     """
 
-    numbers_flag: str
+    numbers_setting: str
     numbers_help: str
 
     def placement_from_section(
@@ -190,7 +191,8 @@ class Plannable(Protocol):
     def placement_from_numbers(
         self, numbers: list[float], config: Any, extent: Any, points_base: FloatArray | None
     ) -> Any:
-        """The placement from numbers the user typed (``numbers_flag``, SI units)."""
+        """The placement from numbers the user typed (the user setting
+        ``numbers_setting``, SI units)."""
         ...
 
     def placement_from_features(
@@ -314,7 +316,8 @@ def required_radius(radius_m: float | None, title: str) -> float:
     """
     if radius_m is None:
         raise InputError(
-            f"the planner needs the {title}'s radius: give --radius (m) or a result YAML (--from)"
+            f"the planner needs the {title}'s radius: give "
+            "{setting:radius_m} (m) or a result YAML ({setting:from_result})"
         )
     return radius_m
 
@@ -682,7 +685,7 @@ def plan_for_target(
     """Plan poses for a target from its rough placement and the samples taken so far.
 
     The placement comes from ``section`` (a result's target section), else from ``numbers``
-    (the target's ``numbers_flag``), else from the samples' features (exploratory scans)
+    (the target's ``numbers_setting``), else from the samples' features (exploratory scans)
     with ``T_flange_sensor`` as the initial hand-eye.
 
     Parameters
@@ -729,7 +732,8 @@ def plan_for_target(
             raise DegenerateError(
                 f"none of the {len(samples or [])} exploratory scans shows the {target.title}: "
                 f"scan it from 3 or more poses first, or give its placement with "
-                f"{planner.numbers_flag} or --from RESULT.yaml"
+                f"{setting(planner.numbers_setting)} or "
+                "{setting:from_result} RESULT.yaml"
             )
         placement = planner.placement_from_features(features, T_flange_sensor, config, extent)
     return plan_poses(

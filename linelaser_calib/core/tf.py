@@ -200,8 +200,9 @@ class TransformTree:
             f"{base_line[-1]}. Static transforms (/tf_static, published once and latched) are "
             "often missing from a recording: record /tf and /tf_static from the start "
             "(ros2 bag record /tf /tf_static ...), pass the frames that are linked "
-            "(--base-frame, --flange-frame), or use a PoseStamped flange pose topic "
-            f"(--pose-source pose). Check the live system with "
+            "({setting:base_frame}, {setting:flange_frame}), or use a PoseStamped flange pose "
+            "topic "
+            "({setting:pose_source} pose). Check the live system with "
             f"`ros2 run tf2_ros tf2_echo {base_frame} {flange_frame}`"
         )
 
@@ -330,6 +331,6 @@ def base_frame_warning(pose_frame: str, expected_base: str) -> str | None:
         f"'{expected_base}': the hand-eye is unaffected, but the cylinder or point is in "
         f"'{UR_BASE_FRAME}', and a point taught in {expected_base} must have x and y negated. "
         "The pose is also the TCP set on the pendant: set the TCP to zero (the flange), or "
-        "the hand-eye is the sensor's pose in that TCP frame. --pose-source tf reads the "
+        "the hand-eye is the sensor's pose in that TCP frame. {setting:pose_source} tf reads the "
         "flange from /tf instead"
     )

@@ -70,8 +70,7 @@ from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
-from linelaser_calib.core.targets.base import configure
-from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.targets.base import placement_adviser
 from linelaser_calib.io import write_result_yaml
 from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info, read_joint_states
 from linelaser_calib.io.initial import read_initial_hand_eye
@@ -92,7 +91,9 @@ from linelaser_calib.nodes.common import (
 )
 from linelaser_calib.nodes.joint_state_input import live_kinematic_model
 from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
-from linelaser_calib.offline import advise_placements, bag_samples, calibrate_bag
+from linelaser_calib.offline import Recording, bag_samples, calibrate_bag
+from linelaser_calib.settings import Front, given_from_parameters, render, render_warnings
+from linelaser_calib.settings import pipeline_config as settings_pipeline_config
 from linelaser_calib.summary import one_line_summary, self_check_rows
 from msg_adapters import (
     MessageError,
@@ -120,16 +121,6 @@ PLANNED_POSES_TOPIC = "linelaser_calib/planned_poses"
 PLANNED_FANS_TOPIC = "linelaser_calib/planned_fans"
 #: Most profile points drawn in the markers (evenly subsampled over the used samples).
 MAX_MARKER_POINTS = 5000
-_PIPELINE = PipelineConfig()
-#: How the shared target settings are named as parameters (for refusals).
-SETTING_LABELS = {
-    "radius_m": "radius",
-    "point_m": "known_point",
-    "min_samples": "min_samples",
-    "initial": "initial_hand_eye_path",
-    "scale": "scale",
-}
-
 #: Every parameter; all but the read-only ones are read at each calibration, so
 #: ``ros2 param set`` applies to the next one. config/calibration_service.yaml repeats the defaults.
 PARAMETERS = (
@@ -178,7 +169,7 @@ PARAMETERS = (
     ),
     ParamSpec(
         "method",
-        _PIPELINE.method.value,
+        PipelineConfig.method.value,
         "default: the paper's solve refined by maximum likelihood with covariance; paper: "
         "the method of the target's paper as published.",
         choices=tuple(m.value for m in Method),
@@ -200,7 +191,7 @@ PARAMETERS = (
     ),
     ParamSpec(
         "seed",
-        _PIPELINE.seed,
+        PipelineConfig.seed,
         "Seed of the random stages (RANSAC, PSO): equal inputs give equal results.",
         bounds=(0, 2**31 - 1),
     ),
@@ -282,7 +273,6 @@ def pipeline_config(
         or the method needs a setting that is not given (e.g. paper with known_point).
     """
     settings: dict[str, Any] = {}
-    initial = None
     if values["initial_hand_eye_path"]:
         try:
             initial, warnings = read_initial_hand_eye(values["initial_hand_eye_path"])
@@ -293,22 +283,13 @@ def pipeline_config(
         for line in warnings:
             warn(f"initial_hand_eye_path: {line}")
         settings["initial"] = initial
-    if values["radius"]:
-        settings["radius_m"] = float(values["radius"])
-    if values["known_point"]:
-        settings["point_m"] = np.array(values["known_point"], dtype=np.float64)
-    if values["min_samples"]:
-        settings["min_samples"] = int(values["min_samples"])
-    if values["scale"]:
-        settings["scale"] = values["scale"]
-    method = Method(values["method"])
-    target = get_target(values["target"])
-    return PipelineConfig(
-        method=method,
-        target=target.name,
-        target_config=configure(target, method.value, settings, SETTING_LABELS),
+    settings.update(given_from_parameters(values))
+    return settings_pipeline_config(
+        values["target"],
+        Method(values["method"]),
+        settings,
+        Front.NODE,
         seed=values["seed"],
-        initial_T_flange_sensor=initial,
     )
 
 
@@ -340,14 +321,15 @@ def calibrate_session(
             "vector), or set kinematics to '' for the hand-eye alone"
         )
     model = live_kinematic_model(model_spec, values["base_frame"], values["flange_frame"])
-    run = calibrate_bag(
+    recording = Recording(
         session,
-        pipeline_config(values, warn),
-        flange_frame=values["flange_frame"],
         pose_source=PoseSource.JOINT_STATES,
         base_frame=values["base_frame"],
+        flange_frame=values["flange_frame"],
         model=model,
-        kinematic_calibration=JointCalibrationConfig(),
+    )
+    run = calibrate_bag(
+        recording, pipeline_config(values, warn), kinematic_calibration=JointCalibrationConfig()
     )
     return run.result
 
@@ -359,7 +341,9 @@ def session_placement_advice(
     determine more of the robot's kinematics, from the session's samples and joint states
     and the last calibration (its cylinder and corrections); a clause saying what is
     missing otherwise."""
-    if result is None or not isinstance(result.target, CylinderSection):
+    adviser = None if result is None else placement_adviser(get_target(result.target.key))
+    placement = None if result is None or adviser is None else adviser.placement_of(result.target)
+    if result is None or adviser is None or placement is None:
         return "placements: calibrate the cylinder first to learn how many are needed"
     if session is None or not any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(session).topics):
         return "placements: the session holds no joint states (collector pose_source joint_states)"
@@ -370,8 +354,8 @@ def session_placement_advice(
         model = result.kinematics.apply(model)
     samples = bag_samples(session, PairingConfig())
     states = read_joint_states(session)
-    return "placements: " + advise_placements(
-        samples, states, model, result.T_flange_sensor, result.target.cylinder
+    return "placements: " + adviser.advise(
+        [(samples, states, placement)], model, result.T_flange_sensor
     )
 
 
@@ -603,7 +587,8 @@ class CalibrationServiceNode(Node):
             )
             return response
         try:
-            response.success, response.message = work()
+            response.success, message = work()
+            response.message = render(message, Front.NODE)
         # The service must outlive a bug in the pipeline: log it in full and say so.
         except Exception as err:
             self.get_logger().error(f"{what} crashed (a bug):\n{traceback.format_exc()}")
@@ -641,6 +626,7 @@ class CalibrationServiceNode(Node):
                 result = calibrate_samples(samples, pipeline_config(p, self._warn))
         except CalibrationError as err:
             return False, str(err)
+        render_warnings(result, Front.NODE)
         result.parent_frame = p["flange_frame"]
         result.child_frame = p["sensor_frame"]
         result.base_frame = p["base_frame"]

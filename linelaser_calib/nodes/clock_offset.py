@@ -17,6 +17,7 @@ from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.pairing import NS_PER_S
 from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset
 from linelaser_calib.core.types import FlangePose, Profile
+from linelaser_calib.settings import Front, render
 
 #: 1σ of one batch estimate's rounding (its search stops at 0.1 ms), s: the least scatter.
 OFFSET_RESOLUTION_S = 1e-4 / np.sqrt(12.0)
@@ -142,7 +143,7 @@ class ClockOffsetTracker:
         try:
             return float(estimate_clock_offset(profiles, poses, self.config, self.half_range_s))
         except CalibrationError as err:
-            return str(err)
+            return render(str(err), Front.NODE)
 
     def add_estimate(self, outcome: float | str) -> str | None:
         """Record one batch's outcome; returns a warning when the offset drifts.

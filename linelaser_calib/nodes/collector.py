@@ -56,10 +56,9 @@ from std_srvs.srv import Trigger
 
 from linelaser_calib.core.errors import CalibrationError, InputError
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig, validate_sample
+from linelaser_calib.core.pipeline import Method, validate_sample
 from linelaser_calib.core.pose_source import PoseSource
-from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
-from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.targets import DEFAULT_TARGET
 from linelaser_calib.core.tf import base_frame_warning
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter
@@ -80,6 +79,7 @@ from linelaser_calib.nodes.common import (
 from linelaser_calib.nodes.joint_state_input import JointStatePoseInput, live_kinematic_model
 from linelaser_calib.nodes.sessions import find_latest_session, new_session_path, session_samples
 from linelaser_calib.nodes.tf_input import TfPoseInput
+from linelaser_calib.settings import Front, given_from_parameters, pipeline_config, render
 from msg_adapters import (
     MessageError,
     flange_pose_from_pose_stamped,
@@ -349,11 +349,11 @@ class CollectorNode(Node):
             if pose_source is PoseSource.JOINT_STATES
             else None
         )
-        target = get_target(p["target"])
-        settings = {"radius_m": float(p["radius"])} if p["radius"] else {}
-        self._pipeline = PipelineConfig(
-            target=target.name,
-            target_config=configure(target, Method.DEFAULT.value, settings, {"radius_m": "radius"}),
+        self._pipeline = pipeline_config(
+            p["target"],
+            Method.DEFAULT,
+            given_from_parameters({"radius": p["radius"]}),
+            Front.NODE,
             seed=p["seed"],
             pairing=pairing,
         )
@@ -489,7 +489,7 @@ class CollectorNode(Node):
             try:
                 old.close()
             except BagError as err:
-                self.get_logger().error(str(err))
+                self.get_logger().error(render(str(err), Front.NODE))
             for publisher in (self._profile_pub, self._pose_pub):
                 self.destroy_publisher(publisher)
             self._profile_pub = self.create_publisher(
@@ -522,7 +522,7 @@ class CollectorNode(Node):
             profile = profile_from_pointcloud2(msg, invalid_values_m=self._invalid_values_m)
         except MessageError as err:
             with self._collector.lock:
-                self._collector.reject_profile(str(err), sequence)
+                self._collector.reject_profile(render(str(err), Front.NODE), sequence)
             return
         with self._collector.lock:
             self._collector.add_profile(profile, now, sequence)
@@ -536,7 +536,7 @@ class CollectorNode(Node):
         try:
             pose = flange_pose_from_pose_stamped(msg)
         except MessageError as err:
-            self._reject_pose(str(err))
+            self._reject_pose(render(str(err), Front.NODE))
             return
         warning = base_frame_warning(pose.frame_id, self._base_frame)
         if warning is not None and not self._base_frame_warned:
@@ -600,10 +600,10 @@ class CollectorNode(Node):
             ]
             self._session.flush()
         except BagError as err:
-            self.get_logger().error(str(err))
+            self.get_logger().error(render(str(err), Front.NODE))
             with self._collector.lock:
                 for _ in samples:
-                    self._collector.revoke("session", str(err))
+                    self._collector.revoke("session", render(str(err), Front.NODE))
             return
         for profile, pose, _ in samples:
             if not self.context.ok():
@@ -805,7 +805,7 @@ class CollectorNode(Node):
         try:
             self._session.close()
         except BagError as err:
-            self.get_logger().error(str(err))
+            self.get_logger().error(render(str(err), Front.NODE))
         super().destroy_node()
 
 

@@ -35,6 +35,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.utilities import try_shutdown
 
 from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.settings import Front, render
 
 #: History of each input subscription (profiles, flange poses): a burst this long is absorbed.
 INPUT_DEPTH = 1000
@@ -245,7 +246,7 @@ def run_node(
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except (CalibrationError, ParameterException) as err:
-        print(f"error: {err}", file=sys.stderr)
+        print(f"error: {render(str(err), Front.NODE)}", file=sys.stderr)
         status = 1
     finally:
         if node is not None:

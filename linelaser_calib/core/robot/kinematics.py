@@ -173,7 +173,7 @@ def flange_poses_from_joint_states(
             f"the joint states do not name the joints {missing} of the kinematic model "
             f"{model.name!r}; the states name {list(states.names)}, the model needs "
             f"{list(model.joint_names)}. Choose the model of the robot that published them "
-            "(--kinematics, or the collector's kinematics parameter)"
+            "({setting:kinematics})"
         )
     columns = [states.names.index(name) for name in model.joint_names]
     T = forward_kinematics(model, states.positions[:, columns])

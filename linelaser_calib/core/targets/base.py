@@ -57,7 +57,7 @@ from ..errors import CalibrationError, InputError
 from ..forked import map_forked
 from ..geometry import FloatArray
 from ..robot.joint_calibration import KinematicIdentifiability, KinematicSetup
-from ..robot.kinematics import KinematicCorrections
+from ..robot.kinematics import JointStates, KinematicCorrections, KinematicModel
 from ..types import Rejection, Sample, SampleFit
 
 #: Progress callback: (stage name, done, total).
@@ -396,6 +396,49 @@ class Target(Protocol[ConfigT]):
         ...
 
 
+#: One placement of the target for :class:`PlacementAdviser`: the profiles (or samples) of
+#: its recording used (stamps, sensor-frame points in m), the recording's joint states, and
+#: the target's placement there (the adviser's own object, e.g. the cylinder).
+AdviceScan = tuple[Sequence[Any], JointStates, Any]
+
+
+class PlacementAdviser(Protocol):
+    """Optional capability of a target, its ``placement_adviser`` attribute (see
+    :func:`placement_adviser`): whether another placement of the target would determine more
+    of the robot's kinematics in a joint kinematic calibration."""
+
+    def placement_of(self, section: ResultSection) -> Any | None:
+        """The target's placement in the base frame held by a result section; None for a
+        section of another target."""
+        ...
+
+    def placement_from_numbers(
+        self, numbers: Sequence[float], radius_m: float | None
+    ) -> Any | None:
+        """The placement from the numbers of the planner's placement option (SI units) and
+        the radius setting; None when they do not give one."""
+        ...
+
+    def advise(
+        self,
+        scans: Sequence[AdviceScan],
+        model: KinematicModel,
+        T_flange_sensor: FloatArray,
+        clock_offset_s: float = 0.0,
+    ) -> str:
+        """The advice in words, from the placements scanned so far (the first is the main
+        recording); ``model`` is the robot model (corrected where a joint calibration gave
+        corrections), ``clock_offset_s`` is added to profile stamps to reach the joint
+        states' clock, s."""
+        ...
+
+
+def placement_adviser(target: Target[Any]) -> PlacementAdviser | None:
+    """The target's placement adviser; None (the default) for a target without one."""
+    adviser: PlacementAdviser | None = getattr(target, "placement_adviser", None)
+    return adviser
+
+
 def _set_path(config: Any, path: str, value: Any) -> Any:
     """``config`` (a frozen dataclass) with the dotted field ``path`` set to ``value``."""
     head, _, rest = path.partition(".")
@@ -541,8 +584,9 @@ def rejection_digest(rejections: Sequence[Rejection]) -> str:
     if moving:
         digest += (
             f"{moving} profiles were taken while the flange moved faster than the speed gate: "
-            "for a scan in motion give --max-speed 0 --max-angular-speed 0 and --clock-offset "
-            "auto (live: the collector's continuous mode). "
+            "for a scan in motion give {setting:max_linear_speed_m_s} 0 "
+            "{setting:max_angular_speed_rad_s} 0 and {setting:clock_offset_s} auto (live: the "
+            "collector's continuous mode). "
         )
     return digest
 
@@ -576,8 +620,9 @@ def mismatch_message(title: str, rms_m: float, noise_m: float, detail: str = "")
         f"the {title} model does not fit these data: the residual is {rms_m * 1e3:.3f} mm RMS, "
         f"{rms_m / noise_m:.0f} times the {noise_m * 1e3:.4f} mm the noise explains"
         + (f"; {detail}" if detail else "")
-        + ". Likely causes: the scans show another target (choose it with --target); the "
+        + ". Likely causes: the scans show another target (choose it with {setting:target}); the "
         "profiles or poses are not in metres; the profile and pose clocks are not "
-        "synchronised (--clock-offset); or the robot moved during the scans. No result was "
+        "synchronised ({setting:clock_offset_s}); or the robot moved during the scans. No result "
+        "was "
         "written."
     )

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -31,11 +32,14 @@ from ...geometry import FloatArray, exp_so3
 from ...robot.joint_calibration import (
     JointCalibrationConfig,
     KinematicIdentifiability,
+    KinematicSetup,
     kinematic_identifiability,
 )
 from ...robot.kinematics import KinematicModel, forward_kinematics, inverse_kinematics
+from ..base import AdviceScan, ResultSection
 from .identifiability import CylinderScan, cylinder_scan_jacobian
 from .model import Cylinder
+from .section import CylinderSection
 
 #: Share of the views that the arm must reach for a move to be proposed.
 MIN_REACHED = 0.6
@@ -135,13 +139,13 @@ class PlacementAdvice:
                 f"again (the arm reaches {best.reached:.0%} of these views there), which "
                 f"determines {best.added} more and the worst-determined of the others "
                 f"{best.gain:.1f} times better (the same placement recorded again: 1.4 times); "
-                "calibrate the recordings together (calibrate BAG1 BAG2 ... --kinematics MODEL)"
+                "calibrate the recordings together, with the robot model ({setting:kinematics})"
             )
         return (
             f"{now}; another placement determines no further one: the "
             f"{self.n_parameters - self.identifiable} left free are what no cylinder of "
             "unknown placement fixes (the base's turn and height: add a reference with known "
-            "base coordinates, e.g. --target known_point; the last link's: the hand-eye "
+            "base coordinates, e.g. {setting:target} known_point; the last link's: the hand-eye "
             "absorbs them; lengths along parallel joint axes: only their sum counts). Another "
             f"placement makes the worst-determined parameter {best.gain:.1f} times better "
             f"({best.move.label}; the same placement recorded again: 1.4 times)"
@@ -309,3 +313,67 @@ def thinned(scan: CylinderScan, per_profile: int) -> CylinderScan:
     """The scan with at most ``per_profile`` evenly spaced points per profile (for speed)."""
     points = [p[:: max(1, len(p) // per_profile)][:per_profile] for p in scan.points_sensor]
     return replace(scan, points_sensor=points)
+
+
+def _advice_scan(
+    profiles: Sequence[Any],
+    setup: KinematicSetup,
+    T_flange_sensor: FloatArray,
+    cylinder: Cylinder,
+) -> CylinderScan:
+    """One placement for the advice: its joint vectors and up to 30 points of each profile
+    (objects with ``stamp_ns`` and sensor-frame ``points`` (N, 3), m) within 0.5 mm of its
+    cylinder (mapped with ``setup``'s model)."""
+    q = setup.joint_positions([p.stamp_ns for p in profiles])
+    T = forward_kinematics(setup.model, q) @ T_flange_sensor
+    points = []
+    for profile, T_bs in zip(profiles, T, strict=True):
+        x = profile.points[np.all(np.isfinite(profile.points), axis=1)]
+        v = x @ T_bs[:3, :3].T + T_bs[:3, 3] - cylinder.point
+        radial = v - np.outer(v @ cylinder.direction, cylinder.direction)
+        points.append(x[np.abs(np.linalg.norm(radial, axis=1) - cylinder.radius) < 5e-4])
+    return thinned(CylinderScan(q, points, cylinder), 30)
+
+
+class CylinderPlacementAdviser:
+    """:class:`~linelaser_calib.core.targets.base.PlacementAdviser` of the cylinder: the
+    placement is the :class:`~.model.Cylinder` (base frame, m)."""
+
+    def placement_of(self, section: ResultSection) -> Cylinder | None:
+        """The cylinder of a cylinder result section; None for another section."""
+        return section.cylinder if isinstance(section, CylinderSection) else None
+
+    def placement_from_numbers(
+        self, numbers: Sequence[float], radius_m: float | None
+    ) -> Cylinder | None:
+        """From ``px,py,pz,dx,dy,dz`` (a point on the axis and its direction, m) and the
+        radius; None without the radius."""
+        if radius_m is None:
+            return None
+        direction = np.array(numbers[3:6]) / np.linalg.norm(numbers[3:6])
+        return Cylinder(np.array(numbers[:3]), direction, radius_m)
+
+    def advise(
+        self,
+        scans: Sequence[AdviceScan],
+        model: KinematicModel,
+        T_flange_sensor: FloatArray,
+        clock_offset_s: float = 0.0,
+    ) -> str:
+        """:func:`placement_advice` in words, on up to 30 points of each profile within
+        0.5 mm of its placement's cylinder.
+
+        Raises
+        ------
+        InputError
+            A model joint the states do not name, or a profile outside the joint-state
+            stream.
+        """
+        setup = KinematicSetup(model, scans[0][1], clock_offset_s)
+        taken = [
+            _advice_scan(
+                profiles, KinematicSetup(model, states, clock_offset_s), T_flange_sensor, placed
+            )
+            for profiles, states, placed in scans
+        ]
+        return placement_advice(model, taken, T_flange_sensor, setup.config).text()

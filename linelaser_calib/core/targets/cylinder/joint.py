@@ -54,9 +54,9 @@ def _check_kinematic_fit(scale: float, outcome: JointOutcome[Any], setup: Kinema
         f"{setup.config.repeatability_t_m * 1e3:.3f} mm and "
         f"{np.rad2deg(setup.config.repeatability_r_rad):.4f} deg, and the largest kinematic "
         f"correction ({worst}) is {float(np.max(ratio)):.0f} times its prior 1 sigma. "
-        "Likely causes: the model is not the recorded robot's (--kinematics), the joint "
+        "Likely causes: the model is not the recorded robot's ({setting:kinematics}), the joint "
         "states are not the robot's encoders, or the arm's error is not kinematic "
-        "(elasticity, heat). Calibrate with --nominal-kinematics to keep the model "
+        "(elasticity, heat). Calibrate with {setting:nominal_kinematics} to keep the model "
         "nominal. No result was written."
     )
 

@@ -44,6 +44,7 @@ import numpy as np
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, orthonormal_basis
 from ...planning import UP, PlanConstraints, per_sample_information, required_radius
+from ...settings_text import setting
 from .config import CylinderConfig
 from .features import FittedSample
 from .model import Cylinder
@@ -119,7 +120,8 @@ def placement(
         if points_base is None:
             raise InputError(
                 "the planner needs the span of the shaft that can be scanned: give "
-                "--axial-range LO,HI (m along the axis, upwards, from its point nearest the "
+                "{setting:axial_range_m} LO,HI (m along the axis, upwards, from its point "
+                "nearest the "
                 "base origin) or scans of the shaft"
             )
         along = (points_base - c) @ d
@@ -130,7 +132,7 @@ def placement(
 class CylinderPlanner:
     """:class:`~linelaser_calib.core.planning.Plannable` for the cylinder (module docstring)."""
 
-    numbers_flag = "--cylinder"
+    numbers_setting = "cylinder_placement"
     numbers_help = "px,py,pz,dx,dy,dz: a point on the axis and its direction (base frame, m)"
 
     def placement_from_section(
@@ -145,7 +147,8 @@ class CylinderPlanner:
         """From ``px,py,pz,dx,dy,dz`` (m) and the configured radius."""
         if len(numbers) != 6:
             raise InputError(
-                f"{self.numbers_flag} takes 6 numbers, {self.numbers_help}; got {len(numbers)}"
+                f"{setting(self.numbers_setting)} takes 6 numbers, {self.numbers_help}; "
+                f"got {len(numbers)}"
             )
         values = np.asarray(numbers, dtype=np.float64)
         return placement(

@@ -404,7 +404,8 @@ def summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> Re
             "%"
             + ("" if correlation is None else f", correlated {correlation:+.2f} with the radius")
             + "): these profiles barely tell a profile stretched along the line from a larger "
-            "cylinder or a shifted hand-eye. Give the measured radius (--radius), or scan with "
+            "cylinder or a shifted hand-eye. Give the measured radius ({setting:radius_m}), or "
+            "scan with "
             "the arc at several positions along the laser line"
         )
     history = solution.cost_history
@@ -416,7 +417,8 @@ def summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> Re
             f"{cfg.robot_sigma_t_m * robot_scale * 1e3:.3f} mm and "
             f"{np.degrees(cfg.robot_sigma_r_rad) * robot_scale:.4f} deg per pose (1 sigma, from "
             f"the pose corrections) against {cfg.robot_sigma_t_m * 1e3:.3f} mm and "
-            f"{np.degrees(cfg.robot_sigma_r_rad):.4f} deg (--robot-sigma-t, --robot-sigma-r)"
+            f"{np.degrees(cfg.robot_sigma_r_rad):.4f} deg "
+            "({setting:robot_sigma_t_m}, {setting:robot_sigma_r_rad})"
         )
         warnings.append(
             prior_note + "; the 1 sigma above is formed with the larger error, and the arm is "
@@ -428,7 +430,7 @@ def summarise(problem: CylinderProblem, solution: Solution[CylinderState]) -> Re
             f"(cost {history[-1]:.6g}); the result may be inaccurate"
             + (
                 f". A likely reason: {prior_note}; give the larger values with "
-                "--robot-sigma-t and --robot-sigma-r"
+                "{setting:robot_sigma_t_m} and {setting:robot_sigma_r_rad}"
                 if prior_note
                 else ""
             )

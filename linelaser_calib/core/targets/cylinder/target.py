@@ -47,6 +47,7 @@ from ..base import (
     mismatch_message,
     rejection_digest,
 )
+from .advice import CylinderPlacementAdviser
 from .arc import radius_mismatch
 from .config import CylinderConfig
 from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
@@ -104,15 +105,15 @@ def scale_verdict(refined: RefineResult) -> str:
     """Whether the estimated along-line scale explains a radius gap, in words."""
     if refined.sigma_scale is None:
         return (
-            ". The scale was held fixed (--scale fixed); --scale free estimates it with the "
-            "hand-eye"
+            ". The scale was held fixed ({setting:scale} fixed); {setting:scale} free "
+            "estimates it with the hand-eye"
         )
     text = scale_text(refined.scale, refined.sigma_scale)
     if abs(refined.scale) > PLAUSIBLE_SCALE_ERROR:
         return (
             f". Estimated with the hand-eye, the {text} would explain the gap, but a scale "
             f"error beyond {100.0 * PLAUSIBLE_SCALE_ERROR:.0f} % is implausible: the cylinder "
-            "is likely not the given size (measure it, or omit --radius)"
+            "is likely not the given size (measure it, or omit {setting:radius_m})"
         )
     return f". Estimated with the hand-eye, the {text} explains the gap"
 
@@ -176,6 +177,8 @@ class CylinderTarget:
     }
     #: Pose planning (:mod:`linelaser_calib.core.planning`).
     planner = CylinderPlanner()
+    #: Whether another placement would determine more of the robot's kinematics.
+    placement_adviser = CylinderPlacementAdviser()
 
     def validate(
         self, sample: Sample, config: CylinderConfig, rng: np.random.Generator
@@ -440,7 +443,8 @@ class CylinderTarget:
                 f"these ellipses' semi-minor axes range from {np.min(minor) * 1e3:.2f} to "
                 f"{np.max(minor) * 1e3:.2f} mm (robust spread {spread * 100:.0f} % of the "
                 f"median {median * 1e3:.2f} mm). Likely causes: the scans show another target "
-                "(a sphere's cuts are circles of varying radius; choose it with --target), or "
+                "(a sphere's cuts are circles of varying radius; choose it with "
+                "{setting:target}), or "
                 "the profiles are not in metres. No result was written."
             )
 

@@ -39,6 +39,7 @@ import numpy as np
 from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import FloatArray, matrix_from_rotvec
 from linelaser_calib.core.planning import PlanConstraints, per_sample_information, required_radius
+from linelaser_calib.core.settings_text import setting
 from linelaser_calib.core.targets.sphere.config import SphereConfig
 from linelaser_calib.core.targets.sphere.model import side_from_label
 from linelaser_calib.core.targets.sphere.refine import SphereProblem, SphereState
@@ -84,14 +85,15 @@ def _side(config: SphereConfig) -> int | None:
 def _no_extent(extent: Any) -> None:
     if extent is not None:
         raise InputError(
-            "--axial-range does not apply to the sphere target and would be ignored; omit it"
+            "{setting:axial_range_m} does not apply to the sphere target and would be ignored; "
+            "omit it"
         )
 
 
 class SpherePlanner:
     """:class:`~linelaser_calib.core.planning.Plannable` for the sphere (module docstring)."""
 
-    numbers_flag = "--sphere"
+    numbers_setting = "sphere_placement"
     numbers_help = "cx,cy,cz: the centre of the ball (base frame, m)"
 
     def placement_from_section(
@@ -112,7 +114,8 @@ class SpherePlanner:
         _no_extent(extent)
         if len(numbers) != 3:
             raise InputError(
-                f"{self.numbers_flag} takes 3 numbers, {self.numbers_help}; got {len(numbers)}"
+                f"{setting(self.numbers_setting)} takes 3 numbers, {self.numbers_help}; "
+                f"got {len(numbers)}"
             )
         side = _side(config)
         return SpherePlacement(

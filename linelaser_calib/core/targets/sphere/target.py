@@ -506,10 +506,12 @@ class SphereTarget:
                 f"the sphere model fits the profiles only with flange-pose corrections of "
                 f"{robot_sigma_t_m * 1e3:.3f} mm (1 sigma), {robot_sigma_t_m / stated:.0f} times "
                 f"the robot's stated {stated * 1e3:.3f} mm. Likely causes: the sphere centre is "
-                "on the other side of the laser plane (--centre-side); the profile and pose "
-                "clocks are not synchronised (--clock-offset); the robot moved during the scans; "
+                "on the other side of the laser plane ({setting:centre_side}); the profile and "
+                "pose "
+                "clocks are not synchronised ({setting:clock_offset_s}); the robot moved during "
+                "the scans; "
                 "the scans show another target; or the robot is less accurate than stated "
-                "(--robot-sigma-t). No result was written."
+                "({setting:robot_sigma_t_m}). No result was written."
             )
         return None
 
