@@ -37,9 +37,9 @@ from linelaser_calib.core.types import FloatArray, Rejection
 MAX_AXIS_DIFFERENCE = 0.02
 #: What each rival shape says the scans show instead, with the target to choose.
 RIVAL_TARGETS = {
-    "line pair": "a seam's V or an edge (--target known_point or line)",
-    "conic": "a cylinder's elliptical arcs (--target cylinder)",
-    "line": "a plane: no curved target in the line (--target line for a straight edge)",
+    "line pair": "a seam's V or an edge ({setting:target} known_point or line)",
+    "conic": "a cylinder's elliptical arcs ({setting:target} cylinder)",
+    "line": "a plane: no curved target in the line ({setting:target} line for a straight edge)",
 }
 
 
