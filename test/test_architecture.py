@@ -181,3 +181,15 @@ def test_every_imported_dependency_is_declared_and_every_declared_one_imported()
     }
     missing = {pypi for _, pypi in DEPENDENCIES.values() if pypi is not None} - pinned
     assert not missing, f"not pinned in requirements.txt: {sorted(missing)}"
+
+
+def test_a_target_imports_no_sibling_target() -> None:
+    """What two targets share lives in core (profile/, seam_grid.py, ...), not in one of them."""
+    prefix = "linelaser_calib.core.targets."
+    for name, imports in import_graph().items():
+        if not name.startswith(prefix) or name.count(".") < 4:
+            continue
+        own = name.split(".")[3]
+        siblings = {m for m in imports if m.startswith(prefix) and m.split(".")[3] != own}
+        siblings -= {"linelaser_calib.core.targets.base"}
+        assert not siblings, f"{name} imports {sorted(siblings)}"

@@ -148,7 +148,9 @@ def test_paper_correction_finds_the_truth_on_its_grid() -> None:
         matrix_from_rotvec(r_true + np.array([0.04, -0.02, 0.06])),
         truth[:3, 3] + np.array([0.002, -0.001, 0.0015]),
     )
-    corrected = paper_correction(corners, T, X0, data.truth.weld_point_m, CONFIG)
+    corrected = paper_correction(
+        corners, T, X0, data.truth.weld_point_m, CONFIG.grid_coarse, CONFIG.grid_fine
+    )
     rotation, translation = transform_error(corrected.T_flange_sensor, truth)
     assert rotation < 1e-9 and translation < 1e-11
     assert corrected.delta_r_m[0] > 1e-4 and corrected.delta_r_m[2] < 1e-9
@@ -159,7 +161,9 @@ def test_paper_correction_is_arbitrary_about_the_stepping_line() -> None:
     data = run("weld_seam", 3)
     corners, T = exact(data)
     X0 = bumped(data.truth.T_flange_sensor, *BUMP)
-    corrected = paper_correction(corners, T, X0, data.truth.weld_point_m, CONFIG)
+    corrected = paper_correction(
+        corners, T, X0, data.truth.weld_point_m, CONFIG.grid_coarse, CONFIG.grid_fine
+    )
     residual = weld_points_base(corners, T, corrected.T_flange_sensor) - data.truth.weld_point_m
     # In-sample every view is right to the grid's resolution ...
     assert np.mean(np.linalg.norm(residual, axis=1)) < 5e-5

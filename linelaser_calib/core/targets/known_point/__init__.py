@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from ...profile.corner import CornerSample
-from .config import GridStep, KnownPointConfig
+from ...seam_grid import GridStep, paper_correction, scatter_delta_r, weld_points_base
+from .config import KnownPointConfig
 from .features import extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
 from .observability import KnownPointObservability, analyse_known_point
-from .paper import paper_correction, scatter_delta_r, weld_points_base
 from .refine import KnownPointRefinement, refine_known_point
 from .section import KnownPoint
 from .target import TARGET, KnownPointResult, KnownPointTarget, calibrate_known_point

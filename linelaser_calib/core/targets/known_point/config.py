@@ -11,38 +11,7 @@ from ...errors import InputError
 from ...geometry import FloatArray
 from ...profile.cleaning import CleaningConfig
 from ...profile.corner import CornerConfig
-
-
-@dataclass(frozen=True)
-class GridStep:
-    """One step of the paper's grid search on the rotation vector.
-
-    Attributes
-    ----------
-    half_width_rad : float
-        Each component is searched over ± this around the centre, rad.
-    points_per_axis : int
-        Evenly spaced values per component, ends included (step = 2·half_width/(points−1)).
-    """
-
-    half_width_rad: float
-    points_per_axis: int
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.half_width_rad) and self.half_width_rad > 0.0):
-            raise InputError(f"GridStep.half_width_rad must be > 0 rad, got {self.half_width_rad}")
-        if self.points_per_axis < 2:
-            raise InputError(f"GridStep.points_per_axis must be >= 2, got {self.points_per_axis}")
-
-    @property
-    def step_rad(self) -> float:
-        """Spacing of the grid values, rad."""
-        return 2.0 * self.half_width_rad / (self.points_per_axis - 1)
-
-    def offsets(self) -> FloatArray:
-        """All candidate offsets, shape (points_per_axis³, 3), rad."""
-        g = np.linspace(-self.half_width_rad, self.half_width_rad, self.points_per_axis)
-        return np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+from ...seam_grid import PAPER_GRID_COARSE, PAPER_GRID_FINE, GridStep
 
 
 @dataclass(frozen=True)
@@ -105,8 +74,8 @@ class KnownPointConfig:
     initial_sigma_rotation_rad: float = math.radians(5.0)
     initial_sigma_translation_m: float = 0.01
     point_sigma_m: float = 0.0
-    grid_coarse: GridStep = field(default_factory=lambda: GridStep(0.4, 41))
-    grid_fine: GridStep = field(default_factory=lambda: GridStep(0.02, 9))
+    grid_coarse: GridStep = PAPER_GRID_COARSE
+    grid_fine: GridStep = PAPER_GRID_FINE
     min_samples: int = 6
     max_iterations: int = 50
     tolerance: float = 1e-12

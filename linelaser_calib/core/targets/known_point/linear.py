@@ -13,7 +13,7 @@ from numpy.typing import ArrayLike
 
 from ...errors import DegenerateError
 from ...geometry import FloatArray, project_to_so3, transform_from_rotation_translation
-from .paper import corners_3d
+from ...seam_grid import corners_3d
 
 #: Relative singular value below which the closed form's system counts as rank-deficient.
 RANK_TOLERANCE = 1e-9

@@ -28,10 +28,10 @@ from ...geometry import (
     skews,
     transform_from_rotation_translation,
 )
+from ...seam_grid import corners_3d
 from ...solver import Linearisation, Residuals, SolverConfig, normal_equations, solve
 from .config import KnownPointConfig
 from .linear import HandEyePrior
-from .paper import corners_3d
 
 #: 1σ with which a pinned hand-eye direction keeps its initial value, m (rotations times the
 #: lever): tight against the data, loose enough for a well-conditioned solve.

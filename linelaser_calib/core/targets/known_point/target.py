@@ -100,6 +100,7 @@ from scipy.special import chdtri
 from ...errors import DegenerateError, InputError, ModelMismatch
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample
+from ...seam_grid import paper_correction, weld_points_base
 from ...solver import Flag, solve_with_rejection
 from ...types import Rejection, Sample
 from ..base import (
@@ -115,7 +116,6 @@ from .config import KnownPointConfig
 from .features import extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
 from .observability import KnownPointObservability, analyse_known_point
-from .paper import paper_correction, weld_points_base
 from .refine import KnownPointRefinement, paper_information, refine_known_point
 from .section import KnownPoint, read_known_point_section
 
@@ -310,7 +310,7 @@ def _paper_result(
     config: KnownPointConfig,
 ) -> KnownPointResult:
     c, _, T = _stack(corners)
-    corrected = paper_correction(c, T, X0, point, config)
+    corrected = paper_correction(c, T, X0, point, config.grid_coarse, config.grid_fine)
     X = corrected.T_flange_sensor
     observability = analyse_known_point(
         paper_information(c, T, X, point, config), c, T, X, False, config

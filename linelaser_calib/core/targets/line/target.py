@@ -10,7 +10,7 @@ Methods
 ``paper``
     The weld-seam paper's correction of an existing hand-eye (two-step grid search on the
     rotation vector, then the shift by the mean offset; :func:`~linelaser_calib.core.
-    known_point.paper_correction`) with the line's closest point as the taught point: the line
+    seam_grid.paper_correction`) with the line's closest point as the taught point: the line
     is fitted through the corners reconstructed with the initial hand-eye, and the corners
     may slide along it.
 
@@ -29,6 +29,7 @@ from scipy.special import chdtri
 
 from ...errors import DegenerateError, ModelMismatch
 from ...profile.corner import CornerSample
+from ...seam_grid import paper_correction, weld_points_base
 from ...solver import Flag, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
@@ -41,7 +42,6 @@ from ..base import (
     read_vector,
     rejection_digest,
 )
-from ..known_point import KnownPointConfig, paper_correction, weld_points_base
 from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
@@ -186,9 +186,7 @@ class LineTarget:
             raise DegenerateError("the paper's method corrects an initial hand-eye: give one")
         c, _, T = _stack(features)
         reference = line_from_points(weld_points_base(c, T, X0))
-        corrected = paper_correction(
-            c, T, X0, reference.point, KnownPointConfig(), free_direction=reference.direction
-        )
+        corrected = paper_correction(c, T, X0, reference.point, free_direction=reference.direction)
         X = corrected.T_flange_sensor
         warnings = []
         if corrected.on_grid_edge:

@@ -1,23 +1,66 @@
 """The weld-seam paper's correction: a two-step grid search on the hand-eye rotation vector
 that minimises the scatter ΔR of the point reconstructed through every view (eq. 11-16), then
-a translation shift by the mean offset. See :mod:`.target` for the reading of the equations.
+a translation shift by the mean offset. See :mod:`.targets.known_point.target` for the
+reading of the equations.
+
+Shared by the targets whose feature is one seam corner per profile: the known point (a taught
+point) and the straight line (the seam's line, along which the points may slide).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ...geometry import (
+from .errors import InputError
+from .geometry import (
     FloatArray,
     exp_so3,
     matrix_from_rotvec,
     rotvec_from_matrix,
     transform_from_rotation_translation,
 )
-from .config import GridStep, KnownPointConfig
+
+
+@dataclass(frozen=True)
+class GridStep:
+    """One step of the paper's grid search on the rotation vector.
+
+    Attributes
+    ----------
+    half_width_rad : float
+        Each component is searched over ± this around the centre, rad.
+    points_per_axis : int
+        Evenly spaced values per component, ends included (step = 2·half_width/(points−1)).
+    """
+
+    half_width_rad: float
+    points_per_axis: int
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.half_width_rad) and self.half_width_rad > 0.0):
+            raise InputError(f"GridStep.half_width_rad must be > 0 rad, got {self.half_width_rad}")
+        if self.points_per_axis < 2:
+            raise InputError(f"GridStep.points_per_axis must be >= 2, got {self.points_per_axis}")
+
+    @property
+    def step_rad(self) -> float:
+        """Spacing of the grid values, rad."""
+        return 2.0 * self.half_width_rad / (self.points_per_axis - 1)
+
+    def offsets(self) -> FloatArray:
+        """All candidate offsets, shape (points_per_axis³, 3), rad."""
+        g = np.linspace(-self.half_width_rad, self.half_width_rad, self.points_per_axis)
+        return np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
+#: The paper's two grid steps: ±0.4 rad in 41 values per axis (step 0.02 rad), then ±0.02 rad
+#: in 9 values (step 0.005 rad); see :mod:`.targets.known_point.target` for the reading.
+PAPER_GRID_COARSE = GridStep(0.4, 41)
+PAPER_GRID_FINE = GridStep(0.02, 9)
 
 #: Candidates evaluated at once in the grid search (memory: candidates × views × 3 floats).
 GRID_CHUNK = 20000
@@ -138,7 +181,8 @@ def paper_correction(
     T_base_flange: ArrayLike,
     T_flange_sensor_initial: ArrayLike,
     point_base: ArrayLike,
-    config: KnownPointConfig | None = None,
+    grid_coarse: GridStep = PAPER_GRID_COARSE,
+    grid_fine: GridStep = PAPER_GRID_FINE,
     free_direction: ArrayLike | None = None,
 ) -> PaperCorrection:
     """The weld-seam paper's two-step grid search and translation shift (eq. 11-16).
@@ -157,12 +201,11 @@ def paper_correction(
         The old hand-eye to correct.
     point_base : array-like, shape (3,)
         The taught point (X_R, Y_R, Z_R), m.
-    config : KnownPointConfig, optional
-        Only the grid steps are used.
+    grid_coarse, grid_fine : GridStep
+        The two steps of the search (default: the paper's).
     free_direction : array-like, shape (3,), optional
         Unit direction of the reference line, base frame; None for a point.
     """
-    cfg = KnownPointConfig() if config is None else config
     across = np.eye(3)
     if free_direction is not None:
         d = np.asarray(free_direction, dtype=np.float64)
@@ -174,8 +217,8 @@ def paper_correction(
     t_fs = X0[:3, 3].copy()
     r0 = rotvec_from_matrix(X0[:3, :3])
     start = float(scatter_delta_r(weld_points_base(corners_xz, T, X0) @ across, p @ across))
-    r1, score1, edge = _grid_best(r0, cfg.grid_coarse, s, T, t_fs, p, across)
-    r2, score2, _ = _grid_best(r1, cfg.grid_fine, s, T, t_fs, p, across)
+    r1, score1, edge = _grid_best(r0, grid_coarse, s, T, t_fs, p, across)
+    r2, score2, _ = _grid_best(r1, grid_fine, s, T, t_fs, p, across)
     R = matrix_from_rotvec(r2)
     rotated = transform_from_rotation_translation(R, t_fs)
     offsets = (weld_points_base(corners_xz, T, rotated) - p) @ across
