@@ -32,7 +32,7 @@ general conic, 5). A target adds its own model (its circle, ellipse ...) as a
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy import stats
 
-from linelaser_calib.core.types import FloatArray
+from linelaser_calib.core.types import FloatArray, Rejection
 
 #: A rival whose BIC lies this much below the model's fits clearly better.
 CLEAR_BIC = 10.0
@@ -286,3 +286,61 @@ def recording_scale(values_m: ArrayLike) -> RecordingScale:
     median = float(np.median(v))
     spread = robust_scale_m(v)
     return RecordingScale(median, max(spread, MIN_SPREAD_SHARE * median, 1e-300))
+
+
+@dataclass(frozen=True)
+class RivalRejection(Rejection):
+    """A profile a rival shape fits clearly better than the target's model.
+
+    Attributes
+    ----------
+    rival : str
+        The rival's name (:attr:`ShapeFit.name`).
+    detail : str
+        The comparison in words (:meth:`Comparison.describe`).
+    """
+
+    rival: str = ""
+    detail: str = ""
+
+
+def rival_rejection(
+    index: int, stamp_ns: int, stage: str, not_the_shape: str, comparison: Comparison
+) -> RivalRejection:
+    """The rejection of a profile whose rival fits clearly better: ``not_the_shape`` (what
+    the profile is not, e.g. "no circular arc") and the comparison's numbers."""
+    assert comparison.rival is not None
+    detail = comparison.describe()
+    return RivalRejection(
+        index, stamp_ns, stage, f"{not_the_shape}: {detail}", comparison.rival.name, detail
+    )
+
+
+def rival_verdict(
+    title: str,
+    shape: str,
+    rejections: Sequence[Rejection],
+    n_features: int,
+    rival_targets: Mapping[str, str],
+) -> str | None:
+    """The refusal of a recording in which a rival fits at least as many profiles clearly
+    better as the target's model fits, naming the rival seen most often and the target it
+    points to (``rival_targets``: rival name -> what the scans show, in words); None
+    otherwise.
+
+    ``title`` names the target's model ("sphere"), ``shape`` what one profile of it shows
+    ("circular arc").
+    """
+    rivals = [r for r in rejections if isinstance(r, RivalRejection)]
+    if not rivals or len(rivals) < n_features:
+        return None
+    names = [r.rival for r in rivals]
+    rival = max(sorted(set(names)), key=names.count)
+    example = next(r for r in rivals if r.rival == rival)
+    return (
+        f"the {title} model does not fit these data: {len(rivals)} of "
+        f"{len(rivals) + n_features} profiles are no {shape}, and {names.count(rival)} "
+        f"of them are fitted clearly better by a {rival} (profile {example.index}: "
+        f"{example.detail}). The scans show {rival_targets[rival]}; or the profiles are not "
+        "in metres. No result was written."
+    )

@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...errors import InputError, ProfileRejected
+from ...model_check import effective_count, robust_scale_m
 from ...profile.cleaning import MAD_TO_SIGMA
 from ...types import BoolArray, FloatArray
 from .conic import (
@@ -106,6 +107,11 @@ LM_STEP_TOLERANCE = 1e-12
 
 #: Floor of the noise-adapted inlier threshold, m (see ``noise_threshold_sigmas``).
 MIN_NOISE_THRESHOLD_M = 1e-6
+
+
+#: Standard errors of a fitted ellipse's semi-axes by which the plausibility bounds widen
+#: (:func:`_axis_slack_m`), and the step of their numerical gradient by the unit conic.
+AXIS_SLACK_SIGMAS, AXIS_GRADIENT_STEP = 3.0, 1e-7
 
 
 #: Smallest window of the scan line that a RANSAC sample is spread over, as a fraction of
@@ -473,17 +479,59 @@ def _minimal_conics(u: FloatArray, samples: IntArray) -> FloatArray:
 
 
 def _plausible(
-    geometry: EllipseGeometry, scale_m: float, config: EllipseConfig, radius_m: float | None
+    geometry: EllipseGeometry,
+    scale_m: float,
+    config: EllipseConfig,
+    radius_m: float | None,
+    slack_m: tuple[float, float] = (0.0, 0.0),
 ) -> BoolArray:
-    """Ellipses whose size and shape fit a cylinder cut; ``scale_m`` maps lengths to m."""
+    """Ellipses whose size and shape fit a cylinder cut; ``scale_m`` maps lengths to m.
+
+    ``slack_m`` (semi-major, semi-minor, m) widens every bound by that much of each axis:
+    the axes' uncertainty (:func:`_axis_slack_m`), so that a short arc whose axes the points
+    hardly fix is judged by what they allow, not by its best-fitting values.
+    """
     major, minor = geometry.semi_axes[..., 0] * scale_m, geometry.semi_axes[..., 1] * scale_m
+    major_low, minor_high = major - slack_m[0], minor + slack_m[1]
     with np.errstate(invalid="ignore"):
-        ok = geometry.valid & (minor >= config.min_semi_axis_m)
-        ok &= (major <= config.max_semi_axis_m) & (major <= config.max_axis_ratio * minor)
+        ok = geometry.valid & (minor_high >= config.min_semi_axis_m)
+        ok &= (major_low <= config.max_semi_axis_m) & (
+            major_low <= config.max_axis_ratio * minor_high
+        )
         if radius_m is not None:
-            ok &= np.abs(minor - radius_m) <= config.radius_tolerance * radius_m
-            ok &= major >= (1.0 - config.radius_tolerance) * radius_m
+            tolerance = config.radius_tolerance * radius_m
+            ok &= np.abs(minor - radius_m) <= tolerance + slack_m[1]
+            ok &= major + slack_m[0] >= radius_m - tolerance
     return np.asarray(ok, dtype=np.bool_)
+
+
+def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[float, float]:
+    """:data:`AXIS_SLACK_SIGMAS` standard errors of the semi-axes (major, minor) of an ellipse
+    fitted to points ``u`` (normalised), m.
+
+    The conic's covariance is s² (JᵀJ)⁺ with J the Sampson distances' Jacobian and s their
+    robust scale, inflated by N / n_eff for the smooth shape error that makes neighbouring
+    residuals alike (:func:`~linelaser_calib.core.model_check.effective_count`); it is
+    carried to the semi-axes by their central-difference gradient. A partial arc leaves its
+    axes loosely fixed: a 20 deg arc of a 12.5 mm radius with 20 um of shape error allows
+    semi-minor axes several mm apart.
+    """
+    conic = conic_u / np.linalg.norm(conic_u)
+    residual, jacobian = _sampson_jacobian(conic, u, _design(u))
+    scale_sq = robust_scale_m(residual) ** 2 * len(u) / effective_count(residual)
+    covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
+    gradient = np.empty((2, 6))
+    for k in range(6):
+        step = np.zeros(6)
+        step[k] = AXIS_GRADIENT_STEP
+        forward = ellipse_geometry(conic + step).semi_axes
+        backward = ellipse_geometry(conic - step).semi_axes
+        gradient[:, k] = (forward - backward) / (2.0 * AXIS_GRADIENT_STEP)
+    sigma = np.sqrt(np.maximum(np.einsum("ik,kl,il->i", gradient, covariance, gradient), 0.0))
+    if not np.all(np.isfinite(sigma)):
+        return 0.0, 0.0
+    major, minor = AXIS_SLACK_SIGMAS * sigma * scale_m
+    return float(major), float(minor)
 
 
 def _required_iterations(p_good: float, confidence: float) -> float:
@@ -621,8 +669,10 @@ def fit_ellipse_ransac(
     rng : numpy.random.Generator
         Source of the random samples; the result is deterministic given its state.
     radius_m : float or None
-        Cylinder radius, m, when known: hypotheses and the result must then have a
-        semi-minor axis within ``config.radius_tolerance`` of it.
+        Cylinder radius, m, when known: hypotheses must then have a semi-minor axis within
+        ``config.radius_tolerance`` of it (when none has, the search runs again without),
+        and the result's semi-minor axis must lie within that tolerance plus its
+        uncertainty of it.
 
     Returns
     -------
@@ -649,6 +699,10 @@ def fit_ellipse_ransac(
     radius_text = "" if radius_m is None else f" with semi-minor axis near {radius_m * 1e3:.2f} mm"
 
     conic_u = _ransac(u, norm, config, rng, radius_m)
+    if conic_u is None and radius_m is not None:
+        # No hypothesis from five points has a semi-minor axis near the radius: on a short
+        # arc they scatter widely; the refitted ellipse is judged with its axes' uncertainty.
+        conic_u = _ransac(u, norm, config, rng, None)
     if conic_u is None:
         raise ProfileRejected(
             f"no plausible ellipse{radius_text} among {config.max_iterations} RANSAC "
@@ -685,11 +739,14 @@ def fit_ellipse_ransac(
             f"{config.min_inliers} and {100.0 * config.min_inlier_fraction:.0f}% are needed"
         )
     geometry_u = ellipse_geometry(conic_u)
-    if not _plausible(geometry_u, norm.scale, config, radius_m):
+    slack = _axis_slack_m(conic_u, u[inliers], norm.scale) if geometry_u.valid else (0.0, 0.0)
+    if not _plausible(geometry_u, norm.scale, config, radius_m, slack):
         major, minor = geometry_u.semi_axes * norm.scale * 1e3
+        sigma_major, sigma_minor = np.asarray(slack) * 1e3 / AXIS_SLACK_SIGMAS
         raise ProfileRejected(
-            f"the refitted ellipse (semi-axes {major:.2f} mm and {minor:.2f} mm) is not a "
-            f"plausible cylinder cut{radius_text}"
+            f"the refitted ellipse (semi-axes {major:.2f} ± {sigma_major:.2f} mm and "
+            f"{minor:.2f} ± {sigma_minor:.2f} mm, 1 sigma) is not a plausible cylinder "
+            f"cut{radius_text}"
         )
     geometry = EllipseGeometry(
         valid=geometry_u.valid,

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import InputError, ProfileRejected
+from ...errors import InputError, ModelMismatch, ProfileRejected
 from ...geometry import FloatArray
 from ...profile.cleaning import clean_profile
 from ...types import Rejection, Sample, SampleFit
@@ -22,6 +22,11 @@ from .arc import (
 )
 from .config import CylinderConfig
 from .ellipse import EllipseFit
+from .shape import arc_rival_rejection, arc_rival_verdict, compare_ellipse, compare_without_arc
+
+#: Fewest cleaned points of a profile without an arc that are weighed against the rivals
+#: (a line pair needs 8).
+MIN_RIVAL_POINTS = 8
 
 
 @dataclass
@@ -72,7 +77,10 @@ def fit_sample(
 ) -> FittedSample | Rejection:
     """Clean one sample's profile and fit its ellipse; a rejection says why it failed.
 
-    ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes.
+    ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes. A profile that a
+    rival shape (a line, a V) fits clearly better than its ellipse, or than any conic when
+    no arc was found, gives a :class:`~linelaser_calib.core.model_check.RivalRejection`
+    (:mod:`.shape`).
     """
     try:
         cleaned = clean_profile(sample.points, config.cleaning)
@@ -81,7 +89,14 @@ def fit_sample(
     try:
         arc = fit_arc_in_scene(cleaned.points_xz, config.ellipse, rng, radius_m, config.arc)
     except ProfileRejected as exc:
+        if len(cleaned.points_xz) >= MIN_RIVAL_POINTS:
+            comparison = compare_without_arc(cleaned.points_xz)
+            if comparison.rival_wins:
+                return arc_rival_rejection(sample.index, sample.stamp_ns, comparison)
         return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
+    comparison = compare_ellipse(arc.points_xz, arc.ellipse.conic)
+    if comparison.rival_wins:
+        return arc_rival_rejection(sample.index, sample.stamp_ns, comparison)
     return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc)
 
 
@@ -99,6 +114,9 @@ def fit_samples(
     ------
     InputError
         When a configured radius disagrees with the profiles (:func:`settle_radius`).
+    ModelMismatch
+        When a rival shape fits at least as many profiles clearly better as give an
+        ellipse (it names what they show).
     """
 
     def fit_bounded(
@@ -109,6 +127,9 @@ def fit_samples(
     fitted, rejections = extract_each(
         samples, config, seed, fit_bounded, progress, "ellipse", workers
     )
+    verdict = arc_rival_verdict(rejections, len(fitted))
+    if verdict is not None:
+        raise ModelMismatch(verdict)
     if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):
         # Most profiles failed with the given radius: fit freely to tell the user why.
         free = [fit_sample(s, config, sample_rng(seed, s.index)) for s in samples]

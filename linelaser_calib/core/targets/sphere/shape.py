@@ -16,18 +16,19 @@ Built on :mod:`linelaser_calib.core.model_check`:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from linelaser_calib.core.model_check import (
     Comparison,
+    RivalRejection,
     ShapeFit,
     compare_models,
     conic_fit,
     line_fit,
     line_pair_fit,
     recording_scale,
+    rival_rejection,
+    rival_verdict,
 )
 from linelaser_calib.core.targets.sphere.circle import NOT_A_CIRCLE, circle_residuals
 from linelaser_calib.core.types import FloatArray, Rejection
@@ -43,19 +44,6 @@ RIVAL_TARGETS = {
 }
 
 
-@dataclass(frozen=True)
-class RivalRejection(Rejection):
-    """A profile a rival shape fits clearly better than a circle.
-
-    Attributes
-    ----------
-    rival : str
-        The rival's name (a key of :data:`RIVAL_TARGETS`).
-    """
-
-    rival: str = ""
-
-
 def compare_circle(points_xz: FloatArray, centre_xz: FloatArray, radius_m: float) -> Comparison:
     """A circle (3 numbers) against the rival shapes on a cleaned profile (N, 2), m, in
     scan order."""
@@ -67,34 +55,15 @@ def compare_circle(points_xz: FloatArray, centre_xz: FloatArray, radius_m: float
     return compare_models(circle, rivals)
 
 
-def rival_rejection(index: int, stamp_ns: int, comparison: Comparison) -> RivalRejection:
-    """The rejection of a profile whose rival fits clearly better."""
-    assert comparison.rival is not None
-    return RivalRejection(
-        index,
-        stamp_ns,
-        "circle",
-        f"{NOT_A_CIRCLE}: {comparison.describe()}",
-        rival=comparison.rival.name,
-    )
+def circle_rival_rejection(index: int, stamp_ns: int, comparison: Comparison) -> RivalRejection:
+    """The rejection of a profile whose rival fits clearly better than its circle."""
+    return rival_rejection(index, stamp_ns, "circle", NOT_A_CIRCLE, comparison)
 
 
-def rival_verdict(rejections: list[Rejection], n_features: int) -> str | None:
-    """The refusal of a recording most of whose profiles a rival fits clearly better, naming
-    the rival seen most often and what it shows; None otherwise."""
-    rivals = [r for r in rejections if isinstance(r, RivalRejection)]
-    if not rivals or len(rivals) < n_features:
-        return None
-    names = [r.rival for r in rivals]
-    rival = max(set(names), key=names.count)
-    example = next(r for r in rivals if r.rival == rival)
-    return (
-        f"the sphere model does not fit these data: {len(rivals)} of "
-        f"{len(rivals) + n_features} profiles are no circular arc, and {names.count(rival)} "
-        f"of them are fitted clearly better by a {rival} (profile {example.index}: "
-        f"{example.reason.removeprefix(NOT_A_CIRCLE + ': ')}). The scans show "
-        f"{RIVAL_TARGETS[rival]}; or the profiles are not in metres. No result was written."
-    )
+def circle_rival_verdict(rejections: list[Rejection], n_features: int) -> str | None:
+    """The refusal of a recording most of whose profiles a rival fits clearly better than a
+    circle (:func:`~linelaser_calib.core.model_check.rival_verdict`)."""
+    return rival_verdict("sphere", "circular arc", rejections, n_features, RIVAL_TARGETS)
 
 
 def set_aside_outliers(rms_m: FloatArray, sigmas: float) -> list[tuple[int, str]]:

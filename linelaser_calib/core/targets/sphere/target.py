@@ -78,9 +78,9 @@ from linelaser_calib.core.targets.sphere.refine import (
 )
 from linelaser_calib.core.targets.sphere.section import SphereSection, read_sphere_section
 from linelaser_calib.core.targets.sphere.shape import (
+    circle_rival_rejection,
+    circle_rival_verdict,
     compare_circle,
-    rival_rejection,
-    rival_verdict,
     set_aside_outliers,
 )
 from linelaser_calib.core.types import Rejection, Sample, SampleFit
@@ -122,7 +122,8 @@ def extract_feature(
     sample: Sample, config: SphereConfig, rng: np.random.Generator
 ) -> SphereFeature | Rejection:
     """Clean one profile, fit its circle and weigh it against the rival shapes; a rejection
-    says why it failed (a :class:`~.shape.RivalRejection` when a rival fits clearly better)."""
+    says why it failed (a :class:`~linelaser_calib.core.model_check.RivalRejection` when a
+    rival fits clearly better)."""
     try:
         cleaned = clean_profile(sample.points, config.cleaning)
     except ProfileRejected as exc:
@@ -145,7 +146,7 @@ def extract_feature(
             return Rejection(sample.index, sample.stamp_ns, "circle", str(circle))
     comparison = compare_circle(xz, centre, radius)
     if comparison.rival_wins:
-        return rival_rejection(sample.index, sample.stamp_ns, comparison)
+        return circle_rival_rejection(sample.index, sample.stamp_ns, comparison)
     if isinstance(circle, ProfileRejected):
         return Rejection(sample.index, sample.stamp_ns, "circle", str(circle))
     points = cleaned.points[circle.inliers]
@@ -225,7 +226,7 @@ class SphereTarget:
         features, rejections = extract_each(
             samples, config, seed, extract_feature, progress, "circle", workers
         )
-        verdict = rival_verdict(rejections, len(features))
+        verdict = circle_rival_verdict(rejections, len(features))
         if verdict is not None:
             raise ModelMismatch(verdict)
         aside = set_aside_outliers(
