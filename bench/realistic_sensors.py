@@ -82,7 +82,8 @@ def _data(preset: str, seed: int, white: bool) -> tuple[Any, FloatArray, str]:
 
 def _error(result: CalibrationResult, truth: FloatArray) -> FloatArray:
     X = result.T_flange_sensor
-    return np.concatenate([rotvec_from_matrix(truth[:3, :3].T @ X[:3, :3]), X[:3, 3] - truth[:3, 3]])
+    rotation = rotvec_from_matrix(truth[:3, :3].T @ X[:3, :3])
+    return np.concatenate([rotation, X[:3, 3] - truth[:3, 3]])
 
 
 def run(preset: str, seeds: int, white: bool) -> dict[str, Tally]:

@@ -192,7 +192,9 @@ def test_cylinder_refuses_arcs_of_varying_radius(tmp_path: Path) -> None:
         for j, s in enumerate(samples)
     ]
     assert calibrate_samples(samples, PipelineConfig()).rms_residual_m < 1e-4
-    with pytest.raises(ModelMismatch, match="not cuts of one cylinder, though each is an elliptical arc"):
+    with pytest.raises(
+        ModelMismatch, match="not cuts of one cylinder, though each is an elliptical arc"
+    ):
         calibrate_samples(scaled, PipelineConfig())
 
 
