@@ -10,11 +10,10 @@ import numpy as np
 import pytest
 
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.regions import pose_clusters, region_groups
 from linelaser_calib.core.selfcheck import (
     DEFAULT_FOLDS,
     neighbour_correlation,
-    pose_clusters,
-    region_groups,
     region_jackknife,
     region_limit,
     region_subsets,
@@ -192,7 +191,8 @@ def test_region_dispersion_rarely_exceeds_its_limit_under_independent_error() ->
         solution = toy_solve(features)
         assert solution.sigma_rotation_rad is not None and solution.sigma_translation_m is not None
         sigma = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
-        solves = [toy_solve(subset) for subset in region_subsets(features, DEFAULT_FOLDS)]
+        label = region_groups(np.stack([f.T_base_flange for f in features]), DEFAULT_FOLDS)
+        solves = [toy_solve(subset) for subset in region_subsets(features, label)]
         region = region_jackknife(solves, solution, sigma)
         assert region is not None and region.regions == DEFAULT_FOLDS
         ratios.append(region.sigma[5] / (sigma_shared / np.sqrt(M)))
