@@ -398,7 +398,21 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         ),
         initial_T_flange_sensor=initial,
         workers=available_workers(),
+        **_arm_accuracy(args),
     )
+
+
+def _arm_accuracy(args: argparse.Namespace) -> dict[str, float]:
+    """``arm_accuracy_m`` of ``--arm-accuracy`` when given; refused with ``--kinematics``
+    (the joint calibration estimates the error it stands for)."""
+    if args.arm_accuracy is None:
+        return {}
+    if args.kinematics is not None:
+        raise InputError(
+            "--arm-accuracy does not act with --kinematics and would be ignored: the joint "
+            "calibration estimates the robot's systematic error itself; omit it"
+        )
+    return {"arm_accuracy_m": args.arm_accuracy}
 
 
 class _StderrProgress:
@@ -1239,6 +1253,15 @@ def build_parser() -> argparse.ArgumentParser:
         "given",
     )
     _add_pose_source_arguments(cal)
+    cal.add_argument(
+        "--arm-accuracy",
+        type=_non_negative_float,
+        metavar="M",
+        help="prior 1 sigma per axis, m, of the robot's error common to the whole scanned "
+        "workspace (its absolute accuracy there), which no subset of the poses can see: part "
+        "of the hand-eye's 1 sigma when the robot's error looks systematic (default 0.0001; "
+        "not with --kinematics)",
+    )
     cal.add_argument(
         "--nominal-kinematics",
         action="store_true",

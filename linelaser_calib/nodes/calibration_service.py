@@ -205,6 +205,15 @@ PARAMETERS = (
         bounds=(0, 2**31 - 1),
     ),
     ParamSpec(
+        "arm_accuracy",
+        _PIPELINE.arm_accuracy_m,
+        "Prior 1 sigma per axis, m, of the robot's error common to the whole scanned "
+        "workspace (its absolute accuracy there), which no subset of the poses can see: part "
+        "of the hand-eye's 1 sigma when the robot's error looks systematic (default method; "
+        "not used with kinematics, whose joint calibration estimates that error).",
+        bounds=(0.0, 1.0),
+    ),
+    ParamSpec(
         "diagnostics_period_s",
         1.0,
         "Period of the /diagnostics status (samples held), s.",
@@ -309,6 +318,7 @@ def pipeline_config(
         target_config=configure(target, method.value, settings, SETTING_LABELS),
         seed=values["seed"],
         initial_T_flange_sensor=initial,
+        arm_accuracy_m=float(values["arm_accuracy"]),
     )
 
 
