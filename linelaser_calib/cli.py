@@ -404,10 +404,10 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
 
 def _arm_accuracy(args: argparse.Namespace) -> dict[str, float]:
     """``arm_accuracy_m`` of ``--arm-accuracy`` when given; refused with ``--kinematics``
-    (the joint calibration estimates the error it stands for)."""
+    unless ``--nominal-kinematics`` (the joint calibration estimates the error it stands for)."""
     if args.arm_accuracy is None:
         return {}
-    if args.kinematics is not None:
+    if args.kinematics is not None and not args.nominal_kinematics:
         raise InputError(
             "--arm-accuracy does not act with --kinematics and would be ignored: the joint "
             "calibration estimates the robot's systematic error itself; omit it"
@@ -1260,7 +1260,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="prior 1 sigma per axis, m, of the robot's error common to the whole scanned "
         "workspace (its absolute accuracy there), which no subset of the poses can see: part "
         "of the hand-eye's 1 sigma when the robot's error looks systematic (default 0.0001; "
-        "not with --kinematics)",
+        "not with --kinematics, whose joint calibration estimates that error)",
     )
     cal.add_argument(
         "--nominal-kinematics",

@@ -5,11 +5,14 @@ systematic robot error and the 1σ at the measuring centre (simulator truth)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 
+from linelaser_calib.cli import main
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.regions import (
     PER_POSE,
@@ -472,3 +475,23 @@ def test_sigma_at_a_point_matches_monte_carlo_and_the_lever() -> None:
         np.eye(4), np.full(3, np.radians(0.1)), np.zeros(3), np.array([0, 0, 1.0])
     )
     np.testing.assert_allclose(at_1m, [1.745e-3, 1.745e-3, 0.0], atol=1e-6)
+
+
+def test_the_arm_accuracy_prior_is_stated_in_the_result_and_refused_with_kinematics(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The committed kinematic-error bag with nominal flange poses: systematic, and the 1σ
+    states the prior given with --arm-accuracy (translation at least that); with --kinematics
+    the joint calibration estimates that error and the flag is refused, nothing written."""
+    bag = Path(__file__).resolve().parent.parent / "bags" / "ur5e_kinematic"
+    out = tmp_path / "result.yaml"
+    assert main(["calibrate", str(bag), "--arm-accuracy", "0.0005", "--output", str(out)]) == 0
+    data = yaml.safe_load(out.read_text())
+    assert data["quality"]["self_check"]["systematic_robot_error"]
+    assert data["quality"]["self_check"]["arm_accuracy_m"] == pytest.approx(5e-4)
+    assert min(data["hand_eye"]["uncertainty"]["translation_m"]) >= 5e-4
+    refused = tmp_path / "refused.yaml"
+    argv = ["calibrate", str(bag), "--kinematics", "ur5e", "--arm-accuracy", "0.0005"]
+    assert main([*argv, "--output", str(refused)]) == 1
+    assert "--arm-accuracy does not act with --kinematics" in capsys.readouterr().err
+    assert not refused.exists()
