@@ -7,7 +7,8 @@ arc's inliers), mapped into the base frame with the recorded flange poses (the r
 included, as a user's scans are) and the hand-eye calibrated *without* that region (its
 along-line scale correction applied), measured against the TRUE cylinder surface; RMS over all
 held-out points. The self-check's figure (``quality.accuracy_in_use_m``) measures the same
-points against the cylinder fitted without the region, which is all a user has. The part of
+points against the cylinder fitted without the region, which is all a user has, plus how far
+that cylinder moves at them when the region joins the fit (its own error there). The part of
 the arm's error common to the whole scanned workspace moves every scan alike and no
 held-out check can see it, so the user's error is also given against the cylinder where the
 recorded poses put it (``rel_um``: fitted to all points mapped with the recorded poses and the

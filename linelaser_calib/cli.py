@@ -38,6 +38,7 @@ from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.robot.kinematics import KinematicModel
+from linelaser_calib.core.selfcheck import DEFAULT_ARM_ACCURACY_M
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, configure
 from linelaser_calib.core.targets.cylinder.model import Cylinder
@@ -398,21 +399,21 @@ def _pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         ),
         initial_T_flange_sensor=initial,
         workers=available_workers(),
-        **_arm_accuracy(args),
+        arm_accuracy_m=_arm_accuracy(args),
     )
 
 
-def _arm_accuracy(args: argparse.Namespace) -> dict[str, float]:
-    """``arm_accuracy_m`` of ``--arm-accuracy`` when given; refused with ``--kinematics``
+def _arm_accuracy(args: argparse.Namespace) -> float:
+    """``arm_accuracy_m``: ``--arm-accuracy``, or the default; refused with ``--kinematics``
     unless ``--nominal-kinematics`` (the joint calibration estimates the error it stands for)."""
     if args.arm_accuracy is None:
-        return {}
+        return DEFAULT_ARM_ACCURACY_M
     if args.kinematics is not None and not args.nominal_kinematics:
         raise InputError(
             "--arm-accuracy does not act with --kinematics and would be ignored: the joint "
             "calibration estimates the robot's systematic error itself; omit it"
         )
-    return {"arm_accuracy_m": args.arm_accuracy}
+    return float(args.arm_accuracy)
 
 
 class _StderrProgress:

@@ -442,7 +442,7 @@ def test_a_region_off_on_its_own_is_what_the_blocked_accuracy_sees() -> None:
 
 def blocked(region_rms: list[float]) -> BlockedAccuracy:
     values = np.array(region_rms)
-    return BlockedAccuracy(float(np.sqrt(np.mean(values**2))), values)
+    return BlockedAccuracy(float(np.sqrt(np.mean(values**2))), values, 0.0)
 
 
 def test_the_plain_model_is_chosen_only_when_it_does_better_region_by_region() -> None:

@@ -27,13 +27,16 @@ Each region is left out in turn; the rest are solved; the held-out region's prof
 are mapped into the base frame with their *recorded* flange poses (the robot's error at a new
 pose is unknown to the user) and that solve's hand-eye, and their distances to that solve's
 fitted target (:meth:`~linelaser_calib.core.targets.base.ResultSection.surface_distances`,
-any target) are taken. Their RMS over all held-out points is the **accuracy in use**
+any target) are taken. That target is itself off at the held-out points (the user's part is
+where it is, not where a fit puts it); how far it moves there when the region joins the fit
+is added in quadrature. The RMS over all held-out points is the **accuracy in use**
 (:class:`BlockedAccuracy`).
 
 The model chosen by it
 ----------------------
-Two models are cross-validated alike: the default one (per-pose robot error as nuisance with
-the stated prior σ_t, σ_r) and a plain fit (the same solve with that prior
+Where the robot's error looks systematic (:mod:`.selfcheck`), two models are cross-validated
+alike: the default one (per-pose robot error as nuisance with the stated prior σ_t, σ_r) and
+a plain fit (the same solve with that prior
 :data:`PLAIN_PRIOR_SCALE` times tighter, so that the poses are taken nearly as recorded).
 :func:`choose_model` keeps the per-pose model unless the plain one's held-out mean square is
 lower region by region beyond chance: a one-sided paired t-test on the regions' mean-square
@@ -194,13 +197,18 @@ class BlockedAccuracy:
     Attributes
     ----------
     rms_m : float
-        RMS distance of all held-out points from the target fitted without their region, m.
+        The accuracy in use, m: √(mean over the held-out points of d² + Δ²), d a point's
+        distance from the target fitted without its region and Δ how far that target moves
+        at the point when the region joins the fit.
     region_rms_m : ndarray, shape (G,)
         The same per region, m; NaN where the rest could not be solved.
+    target_move_m : float
+        RMS of Δ over the held-out points, m.
     """
 
     rms_m: float
     region_rms_m: FloatArray
+    target_move_m: float
 
     @property
     def regions(self) -> int:
@@ -211,22 +219,46 @@ class BlockedAccuracy:
 def blocked_accuracy(
     solves: Sequence[TargetSolution | CalibrationError],
     held_sets: Sequence[Sequence[Any]],
+    full: TargetSolution,
     flange_poses: FlangePoses | None = None,
 ) -> BlockedAccuracy | None:
     """The held-out RMS of each region (``held_sets[g]``) under the solve without it
-    (``solves[g]``), and over all; None when fewer than :data:`MIN_REGIONS` were solved."""
-    squares, count = 0.0, 0
+    (``solves[g]``), and over all; None when fewer than :data:`MIN_REGIONS` were solved.
+
+    A point's distance d from the target fitted without its region misses that target's own
+    error there, which a user's scans meet as well (the true part is not the fitted one). Its
+    estimate is Δ, how far the target moves at the point when the region joins the fit
+    (``full``, the solve of all regions, against the one without); d² + Δ² is averaged.
+    """
+    squares = moves = 0.0
+    count = 0
     region_rms = np.full(len(held_sets), np.nan)
     for g, (solve, held) in enumerate(zip(solves, held_sets, strict=True)):
         if isinstance(solve, CalibrationError):
             continue
-        d = np.concatenate(held_out_distances(solve, held, flange_poses))
-        region_rms[g] = float(np.sqrt(np.mean(d**2)))
-        squares += float(np.sum(d**2))
-        count += d.size
+        T_held = (
+            np.stack([f.T_base_flange for f in held])
+            if flange_poses is None
+            else flange_poses(solve, list(held))
+        )
+        d, delta = [], []
+        for f, T_base_flange in zip(held, T_held, strict=True):
+            fit, T_base_sensor = f.record(), T_base_flange @ solve.T_flange_sensor
+            d.append(solve.section.surface_distances(fit, T_base_sensor))
+            delta.append(full.section.surface_distances(fit, T_base_sensor) - d[-1])
+        d2 = np.concatenate(d) ** 2
+        m2 = np.concatenate(delta) ** 2
+        region_rms[g] = float(np.sqrt(np.mean(d2 + m2)))
+        squares += float(np.sum(d2 + m2))
+        moves += float(np.sum(m2))
+        count += d2.size
     if int(np.sum(np.isfinite(region_rms))) < MIN_REGIONS:
         return None
-    return BlockedAccuracy(rms_m=float(np.sqrt(squares / count)), region_rms_m=region_rms)
+    return BlockedAccuracy(
+        rms_m=float(np.sqrt(squares / count)),
+        region_rms_m=region_rms,
+        target_move_m=float(np.sqrt(moves / count)),
+    )
 
 
 @dataclass(frozen=True)

@@ -132,6 +132,9 @@ class SelfCheck:
         Regions of the workspace held out (0 when fewer than 3: no accuracy in use).
     region_rms_m : ndarray, shape (G,) or None
         The chosen model's held-out RMS per region, m.
+    target_move_m : float or None
+        RMS over the held-out points of how far the fitted target moves there when their
+        region joins the fit, m (:class:`~.regions.BlockedAccuracy`; part of the accuracy).
     model : ModelChoice or None
         The model chosen by the region-blocked accuracy and each model's figure; None without
         regions (the per-pose model is kept).
@@ -182,6 +185,7 @@ class SelfCheck:
     accuracy_in_use_m: float | None
     regions: int
     region_rms_m: FloatArray | None
+    target_move_m: float | None
     model: ModelChoice | None
     interleaved_rms_m: float
     held_out_rms_m: FloatArray
@@ -230,6 +234,7 @@ class SelfCheck:
                 "region_rms_m": None
                 if self.region_rms_m is None
                 else [float(v) for v in self.region_rms_m],
+                "target_move_m": None if self.target_move_m is None else float(self.target_move_m),
                 "not_measured_because": self.no_accuracy_reason or None,
                 "model": PER_POSE if self.model is None else self.model.chosen,
                 "model_accuracy_m": None
@@ -551,7 +556,7 @@ def self_check(
     if label is not None:
         G = int(label.max()) + 1
         held_sets = [[f for f, lab in zip(kept, label, strict=True) if lab == g] for g in range(G)]
-        blocked = blocked_accuracy(solved, held_sets, flange_poses)
+        blocked = blocked_accuracy(solved, held_sets, solution, flange_poses)
         region = region_jackknife(solved, solution, sigma_per_pose)
         offset_p = region_offset_p(solution, kept, label, flange_poses)
     region_ratio = None if region is None else region.ratio
@@ -569,7 +574,7 @@ def self_check(
         else:
             plain_solution, plain_solve = tried
             plain_solved = map_forked(plain_solve, region_subsets(kept, label), workers)
-            plain_blocked = blocked_accuracy(plain_solved, held_sets, flange_poses)
+            plain_blocked = blocked_accuracy(plain_solved, held_sets, plain_solution, flange_poses)
             model = choose_model(blocked, plain_blocked)
             sigma_plain = _sigma(plain_solution)
             if model.chosen == PLAIN and sigma_plain is not None:
@@ -599,6 +604,7 @@ def self_check(
         accuracy_in_use_m=None if blocked is None else blocked.rms_m,
         regions=0 if blocked is None else blocked.regions,
         region_rms_m=None if blocked is None else blocked.region_rms_m,
+        target_move_m=None if blocked is None else blocked.target_move_m,
         model=model,
         interleaved_rms_m=float(np.sqrt(squares / max(count, 1))),
         held_out_rms_m=np.array(held_rms),
