@@ -23,6 +23,7 @@ import numpy as np
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.selfcheck import DEFAULT_ARM_ACCURACY_M
 from linelaser_calib.core.settings_text import PLACEHOLDER
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SETTINGS as TARGET_SETTINGS
@@ -79,6 +80,7 @@ SETTINGS: tuple[Setting, ...] = (
     ),
     Setting("kinematics", "--kinematics", "kinematics"),
     Setting("nominal_kinematics", "--nominal-kinematics", None),
+    Setting("arm_accuracy_m", "--arm-accuracy", "arm_accuracy"),
     Setting("pose_source", "--pose-source", "the collector's pose_source"),
     Setting("base_frame", "--base-frame", "base_frame"),
     Setting("flange_frame", "--flange-frame", "flange_frame"),
@@ -146,6 +148,7 @@ def pipeline_config(
     seed: int = 0,
     pairing: PairingConfig | None = None,
     workers: int = 1,
+    arm_accuracy_m: float = DEFAULT_ARM_ACCURACY_M,
 ) -> PipelineConfig:
     """The pipeline configuration from the user's settings.
 
@@ -164,6 +167,8 @@ def pipeline_config(
         Default: the pairing defaults.
     workers : int
         Processes for the per-sample work.
+    arm_accuracy_m : float
+        Prior 1σ per axis of the robot's error common to the whole scanned workspace, m.
 
     Raises
     ------
@@ -180,6 +185,7 @@ def pipeline_config(
         pairing=PairingConfig() if pairing is None else pairing,
         initial_T_flange_sensor=None if initial is None else np.asarray(initial),
         workers=workers,
+        arm_accuracy_m=arm_accuracy_m,
     )
 
 

@@ -21,8 +21,10 @@ from linelaser_calib.core.geometry import (
     rotvec_from_matrix,
     rpy_from_matrix,
 )
+from linelaser_calib.core.regions import PER_POSE, PLAIN
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections, effective_hand_eye
+from linelaser_calib.core.selfcheck import sigma_at_point
 from linelaser_calib.core.targets.base import mm_text
 from linelaser_calib.core.types import Rejection
 from linelaser_calib.io.results import Truth
@@ -99,7 +101,32 @@ def hand_eye_rows(result: CalibrationResult) -> Rows:
         rows.append(("1 sigma translation", f"{mm_text(sigma_t)} (flange x, y, z)"))
     if sigma_r is not None:
         rows.append(("1 sigma rotation", f"{deg_text(sigma_r)} ({ROTATION_AXES})"))
+    depth = result.measuring_centre_depth_m
+    if sigma_t is not None and sigma_r is not None and depth is not None:
+        at_centre = sigma_at_point(T, sigma_r, sigma_t, np.array([0.0, 0.0, depth]))
+        rows.append(
+            (
+                "1 sigma at centre",
+                f"{mm_text(at_centre)} (flange x, y, z) at the measuring centre, "
+                f"{depth * 1e3:.1f} mm along the sensor z (mean depth of the points used)",
+            )
+        )
     return rows
+
+
+def accuracy_in_use_line(result: CalibrationResult) -> str | None:
+    """What a user will see scanning elsewhere in the cell, in one sentence (None without a
+    self-check)."""
+    check = result.self_check
+    if check is None:
+        return None
+    if check.accuracy_in_use_m is None:
+        return f"Accuracy in use: not measured: {check.no_accuracy_reason}."
+    return (
+        f"Accuracy in use: scans elsewhere in the cell will be off by about "
+        f"{check.accuracy_in_use_m * 1e3:.3f} mm RMS (each of {check.regions} regions of the "
+        "workspace held out in turn, calibrated on the others)."
+    )
 
 
 def target_text(result: CalibrationResult) -> str:
@@ -134,16 +161,45 @@ def residual_rows(result: CalibrationResult) -> Rows:
 
 
 def self_check_rows(result: CalibrationResult) -> Rows:
-    """The self-check: cross-validated accuracy in use, halves, and the 1σ before widening."""
+    """The self-check: accuracy in use held out by region, the model it chose, the
+    pose-interleaved consistency check, halves, robot error, and the 1σ before widening."""
     check = result.self_check
     if check is None:
         return []
     poses = "recorded poses" if result.kinematics is None else "corrected kinematics"
+    model_names = {PER_POSE: "per-pose robot error", PLAIN: "plain fit"}
     rows = [
         (
             "accuracy in use",
-            f"{check.accuracy_in_use_m * 1e3:.4f} mm RMS (held-out profiles, {check.folds}-fold "
-            f"cross-validation over poses, {poses})",
+            f"not measured ({check.pose_clusters} pose cluster(s), fewer than 3 regions)"
+            if check.accuracy_in_use_m is None
+            else f"{check.accuracy_in_use_m * 1e3:.4f} mm RMS (held-out regions of the "
+            f"workspace, {check.regions} regions, {poses})",
+        ),
+    ]
+    if check.model is not None:
+        rows.append(
+            (
+                "model",
+                f"{model_names[check.model.chosen]} chosen by the accuracy in use ("
+                + ", ".join(
+                    f"{model_names[name]} {value * 1e3:.4f} mm"
+                    for name, value in check.model.accuracy_m.items()
+                )
+                + (
+                    ""
+                    if PLAIN in check.model.accuracy_m
+                    else "; plain fit not tried: the robot error looks independent per pose"
+                )
+                + ")",
+            )
+        )
+    rows += [
+        (
+            "consistency check",
+            f"{check.interleaved_rms_m * 1e3:.4f} mm RMS (pose-interleaved {check.folds}-fold "
+            "cross-validation: held-out poses keep neighbours in the fit, so this is not the "
+            "accuracy in use)",
         ),
         (
             "halves agreement",
@@ -163,6 +219,11 @@ def self_check_rows(result: CalibrationResult) -> Rows:
                 else f", hand-eye moves {check.region_ratio:.1f}x what the noise model "
                 f"predicts when one of {check.regions} regions of the workspace is left out"
             )
+            + (
+                ""
+                if check.region_offset_p is None
+                else f", regions' offsets differ at p = {check.region_offset_p:.1e}"
+            )
             + ")",
         ),
     ]
@@ -171,7 +232,14 @@ def self_check_rows(result: CalibrationResult) -> Rows:
             (
                 "1 sigma noise model",
                 f"{mm_text(check.sigma_model[3:])}, {deg_text(check.sigma_model[:3])} (widened "
-                "above for the systematic error)",
+                "above for the systematic error"
+                + (
+                    f", with {check.arm_accuracy_m * 1e3:.3f} mm (1 sigma) assumed for the "
+                    "arm's error common to the whole workspace, --arm-accuracy"
+                    if check.arm_accuracy_m > 0.0
+                    else ""
+                )
+                + ")",
             )
         )
     return rows
@@ -278,7 +346,9 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
     def table(rows: Rows) -> list[str]:
         return [f"  {label:<22}{text}" for label, text in rows]
 
+    accuracy = accuracy_in_use_line(result)
     lines = [
+        *([] if accuracy is None else [accuracy]),
         f"Hand-eye T_flange_sensor ({result.parent_frame} -> {result.child_frame}), "
         f"method {result.method}:",
         *table(hand_eye_rows(result)),

@@ -337,3 +337,7 @@ def test_self_check_of_a_joint_calibration_maps_held_out_profiles_through_its_ki
     assert not checks["joint"]["self_check"]["systematic_robot_error"]
     assert checks["nominal"]["accuracy_in_use_m"] > 2 * checks["joint"]["accuracy_in_use_m"]
     assert checks["nominal"]["self_check"]["systematic_robot_error"]
+    # The joint calibration estimates the arm's error common to the workspace: its 1 sigma
+    # needs no prior on the arm's accuracy; the nominal kinematics' 1 sigma states one.
+    assert checks["joint"]["self_check"]["arm_accuracy_m"] == 0.0
+    assert checks["nominal"]["self_check"]["arm_accuracy_m"] > 0.0

@@ -205,6 +205,12 @@ def test_report_states_the_result(
     assert f"{translation * 1e3:.4f} mm" in text
     if result.method == "default":
         assert "1 sigma translation" in text
+        assert result.self_check is not None and result.self_check.accuracy_in_use_m is not None
+        top = text.index("<h1>")
+        assert text.index("scans elsewhere in the cell will be off by about") < text.index(
+            "<table", top
+        )
+        assert f"{result.self_check.accuracy_in_use_m * 1e3:.3f} mm RMS" in text
     else:
         assert "not estimated by the paper method" in text
 

@@ -1,30 +1,45 @@
-"""The self-check: cross-validation over poses, grouped jackknife, halves, pose clusters, and the
-detection of systematic robot error (simulator truth)."""
+"""The self-check: accuracy in use held out by region of the workspace, the model it chooses,
+cross-validation over poses, grouped jackknife, halves, pose clusters, the detection of
+systematic robot error and the 1σ at the measuring centre (simulator truth)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 
+from linelaser_calib.cli import main
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.regions import (
+    PER_POSE,
+    PLAIN,
+    BlockedAccuracy,
+    choose_model,
+    pose_clusters,
+    region_groups,
+    workspace_regions,
+)
+from linelaser_calib.core.robot.kinematics import effective_hand_eye
 from linelaser_calib.core.selfcheck import (
     DEFAULT_FOLDS,
     neighbour_correlation,
-    pose_clusters,
-    region_groups,
     region_jackknife,
     region_limit,
     region_subsets,
     self_check,
+    sigma_at_point,
 )
 from linelaser_calib.core.targets.base import TargetSolution
+from linelaser_calib.core.targets.cylinder.section import CylinderSection
 from linelaser_calib.core.types import FloatArray, SampleFit
+from linelaser_calib.io.results import result_to_dict
 from linelaser_calib.settings import Front, render
 from linelaser_calib.sim import scenario_from_preset, simulate
-from linelaser_calib.summary import truth_error
+from linelaser_calib.summary import accuracy_in_use_line, format_summary, truth_error
 
 POINTS = 40
 POINT_SIGMA = 1e-5
@@ -193,7 +208,8 @@ def test_region_dispersion_rarely_exceeds_its_limit_under_independent_error() ->
         solution = toy_solve(features)
         assert solution.sigma_rotation_rad is not None and solution.sigma_translation_m is not None
         sigma = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
-        solves = [toy_solve(subset) for subset in region_subsets(features, DEFAULT_FOLDS)]
+        label = region_groups(np.stack([f.T_base_flange for f in features]), DEFAULT_FOLDS)
+        solves = [toy_solve(subset) for subset in region_subsets(features, label)]
         region = region_jackknife(solves, solution, sigma)
         assert region is not None and region.regions == DEFAULT_FOLDS
         ratios.append(region.sigma[5] / (sigma_shared / np.sqrt(M)))
@@ -257,14 +273,23 @@ def calibrated(
 
 
 def axis_ratios(result: Any, data: Any) -> FloatArray:
-    error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)
+    """|error| / 1σ per axis against the hand-eye the recorded flange poses can see (with an
+    arm's kinematic error, :func:`effective_hand_eye`; else the true one)."""
+    arm = data.truth.arm
+    T_seen = (
+        data.truth.T_flange_sensor
+        if arm is None
+        else effective_hand_eye(arm.nominal, arm.true, data.truth.T_flange_sensor)
+    )
+    error = truth_error(result.T_flange_sensor, T_seen)
     e = np.concatenate([error.translation_axes_m, error.rotation_axes_rad])
     sigma = np.concatenate([result.uncertainty_translation_m, result.uncertainty_rotation_rad])
     return np.asarray(np.abs(e) / sigma)
 
 
 def test_kinematic_robot_error_is_detected_and_its_sigma_honest() -> None:
-    """ur5e_kinematic (nominal kinematics reported, true ones differ): warned, |e|/σ ≤ 3."""
+    """ur5e_kinematic (nominal kinematics reported, true ones differ): warned, |e|/σ ≤ 3
+    against the hand-eye the nominal flange poses can see."""
     data, result = calibrated("ur5e_kinematic", 4)
     assert result.self_check is not None and result.self_check.systematic
     assert any("looks systematic" in w for w in result.warnings)
@@ -288,6 +313,24 @@ def test_region_dependent_robot_error_is_detected_and_its_sigma_honest() -> None
     e = np.concatenate([error.rotation_axes_rad, error.translation_axes_m])
     assert float(np.max(np.abs(e) / check.sigma_model)) > 3.0, "model 1σ was honest"
     assert check.halves_sigmas is not None and float(np.max(check.halves_sigmas)) <= 3.0
+    # The accuracy in use against the user's error: each held-out region's points, recorded
+    # poses, the hand-eye solved without the region, measured against the TRUE cylinder.
+    assert check.accuracy_in_use_m is not None and check.regions >= 3
+    true_surface = CylinderSection(data.truth.cylinder, False)
+    fits = {fit.index: fit for fit in result.sample_fits}
+    d = []
+    for indices, solution in zip(check.region_indices, check.region_solutions, strict=True):
+        assert solution is not None
+        for i in indices:
+            fit = replace(fits[i], points=solution.section.sensor_points(fits[i].points))
+            T = fit.T_base_flange @ solution.T_flange_sensor
+            d.append(true_surface.surface_distances(fit, T))
+    user_error = float(np.sqrt(np.mean(np.concatenate(d) ** 2)))
+    assert check.accuracy_in_use_m == pytest.approx(user_error, rel=0.3)
+    assert check.interleaved_rms_m < check.accuracy_in_use_m
+    line = accuracy_in_use_line(result)
+    assert line is not None and "scans elsewhere in the cell will be off by about" in line
+    assert format_summary(result).startswith(line)
 
 
 def test_independent_robot_noise_is_not_flagged() -> None:
@@ -297,7 +340,33 @@ def test_independent_robot_noise_is_not_flagged() -> None:
     assert check is not None and not check.systematic
     assert not any("looks systematic" in w for w in result.warnings)
     np.testing.assert_allclose(result.uncertainty_translation_m, check.sigma_model[3:], rtol=1e-12)
-    assert 5e-5 < check.accuracy_in_use_m < 3e-4
+    assert check.accuracy_in_use_m is not None and 5e-5 < check.accuracy_in_use_m < 3e-4
+    assert check.model is not None and check.model.chosen == PER_POSE
+
+
+def test_the_1_sigma_is_given_at_the_measuring_centre() -> None:
+    """The result's measuring centre is the mean depth of the used points (the simulated
+    profiler's points lie within its range); the 1σ there is written and printed, and it
+    adds the rotation's lever: the depth times the tilt 1σ about the sensor x and y axes."""
+    data, result = calibrated("paper", 2, 0)
+    depth = result.measuring_centre_depth_m
+    depths = np.concatenate([fit.points[:, 2] for fit in result.sample_fits])
+    assert depth == pytest.approx(float(np.mean(depths)), rel=1e-9)
+    true_depths = data.truth.points_true_sensor[..., 2]
+    assert np.nanmin(true_depths) < depth < np.nanmax(true_depths)
+    uncertainty = result_to_dict(result)["hand_eye"]["uncertainty"]
+    assert uncertainty["measuring_centre_m"] == pytest.approx([0.0, 0.0, depth])
+    at_centre = np.array(uncertainty["at_measuring_centre_m"])
+    expected = sigma_at_point(
+        result.T_flange_sensor,
+        result.uncertainty_rotation_rad,
+        result.uncertainty_translation_m,
+        np.array([0.0, 0.0, depth]),
+    )
+    np.testing.assert_allclose(at_centre, expected, rtol=1e-9)
+    lever = np.sqrt(np.sum(at_centre**2 - result.uncertainty_translation_m**2))
+    assert lever == pytest.approx(depth * np.hypot(*result.uncertainty_rotation_rad[:2]), rel=1e-6)
+    assert "at the measuring centre" in format_summary(result)
 
 
 def test_robot_less_accurate_than_the_prior_is_named() -> None:
@@ -313,3 +382,118 @@ def test_a_continuous_sweep_counts_by_its_extent_not_as_one_cluster() -> None:
     # the 0.1 m neighbourhoods that count as one cluster each to cover.
     positions = np.column_stack([np.linspace(0.0, 0.39, 196), np.zeros(196)])
     assert pose_clusters(np.stack([flange_pose(*p) for p in positions])) == 4
+
+
+def cluster_positions(rng: np.random.Generator, centres: FloatArray, M: int) -> FloatArray:
+    """M flange positions in tight clusters (±10 mm) about ``centres`` (C, 2), in turn."""
+    return np.asarray(centres[np.arange(M) % len(centres)] + rng.uniform(-0.01, 0.01, (M, 2)))
+
+
+def test_regions_follow_the_pose_clusters_and_never_split_one() -> None:
+    """Six tight clusters give five regions (at most the folds), each cluster in one region;
+    two clusters give none."""
+    rng = np.random.default_rng(29)
+    centres = np.array([[0.0, 0.0], [0.3, 0.0], [0.0, 0.3], [0.3, 0.3], [0.6, 0.0], [0.6, 0.3]])
+    positions = cluster_positions(rng, centres, 60)
+    T = np.stack([flange_pose(*p) for p in positions])
+    label, clusters = workspace_regions(T, DEFAULT_FOLDS)
+    assert clusters == 6 and label is not None and int(label.max()) + 1 == DEFAULT_FOLDS
+    cluster = np.arange(60) % 6
+    for c in range(6):
+        assert len(np.unique(label[cluster == c])) == 1
+    T_two = np.stack([flange_pose(*p) for p in cluster_positions(rng, centres[:2], 40)])
+    assert workspace_regions(T_two, DEFAULT_FOLDS) == (None, 2)
+
+
+def test_fewer_than_three_regions_claim_no_accuracy_in_use() -> None:
+    """Two clusters of poses: no region can be held out with its neighbours; no number is
+    claimed, in the check, the result's quality or the summary, and the reason is given."""
+    rng = np.random.default_rng(31)
+    positions = cluster_positions(rng, np.array([[0.0, 0.0], [0.3, 0.0]]), 40)
+    features = toy_features(rng, np.zeros(40), positions)
+    check = self_check(features, toy_solve(features), toy_solve)
+    assert check is not None and check.accuracy_in_use_m is None and check.regions == 0
+    assert check.model is None and check.sigma_region is None
+    assert "fewer than 3" in check.no_accuracy_reason
+    entries = check.quality_entries()
+    assert entries["accuracy_in_use_m"] is None
+    assert "fewer than 3" in entries["accuracy_in_use"]["not_measured_because"]
+    assert entries["self_check"]["pose_interleaved_rms_m"] == pytest.approx(POINT_SIGMA, rel=0.2)
+
+
+def test_a_region_off_on_its_own_is_what_the_blocked_accuracy_sees() -> None:
+    """Five clusters, each off by its own shared offset: the region-blocked accuracy shows the
+    offsets as a user scanning a region the fit never saw meets them; the pose-interleaved
+    figure, whose held-out poses keep their cluster in the fit, sees less."""
+    rng = np.random.default_rng(37)
+    centres = rng.uniform(-0.3, 0.3, (5, 2))
+    cluster = np.arange(50) // 10  # consecutive poses per cluster, as a robot scans them
+    positions = centres[cluster] + rng.uniform(-0.01, 0.01, (50, 2))
+    offsets = np.array([1.5e-4, -1.0e-4, 0.5e-4, -1.5e-4, 1.0e-4])
+    features = toy_features(rng, offsets[cluster], positions)
+    check = self_check(features, toy_solve(features), toy_solve)
+    assert check is not None and check.accuracy_in_use_m is not None and check.regions == 5
+    # Held out, region g is off by its offset minus the mean of the others' (the fit's plane).
+    truth = np.sqrt(
+        np.mean([(o - np.mean(np.delete(offsets, g))) ** 2 for g, o in enumerate(offsets)])
+    )
+    assert check.accuracy_in_use_m == pytest.approx(np.hypot(truth, POINT_SIGMA), rel=0.1)
+    assert check.interleaved_rms_m < 0.9 * check.accuracy_in_use_m
+    assert check.systematic
+
+
+def blocked(region_rms: list[float]) -> BlockedAccuracy:
+    values = np.array(region_rms)
+    return BlockedAccuracy(float(np.sqrt(np.mean(values**2))), values, 0.0)
+
+
+def test_the_plain_model_is_chosen_only_when_it_does_better_region_by_region() -> None:
+    per_pose = blocked([1.3e-3, 2.0e-3, 0.8e-3, 1.0e-3, 1.2e-3])
+    better = blocked([1.0e-3, 1.3e-3, 0.6e-3, 0.6e-3, 1.0e-3])
+    mixed = blocked([1.0e-3, 2.3e-3, 0.6e-3, 1.2e-3, 1.1e-3])
+    assert choose_model(per_pose, better).chosen == PLAIN
+    assert choose_model(per_pose, mixed).chosen == PER_POSE
+    assert choose_model(per_pose, None).chosen == PER_POSE
+    assert choose_model(better, per_pose).chosen == PER_POSE
+    assert choose_model(per_pose, better).accuracy_m == {
+        PER_POSE: per_pose.rms_m,
+        PLAIN: better.rms_m,
+    }
+
+
+def test_sigma_at_a_point_matches_monte_carlo_and_the_lever() -> None:
+    rng = np.random.default_rng(41)
+    T = np.eye(4)
+    T[:3, :3] = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+    sigma_r, sigma_t = np.array([2e-4, 5e-4, 1e-4]), np.array([2e-5, 3e-5, 4e-5])
+    point = np.array([0.0, 0.0, 0.3])
+    n = 20000
+    theta = rng.normal(0.0, sigma_r, (n, 3))
+    moved = T[:3, :3] @ np.cross(theta, point).T + rng.normal(0.0, sigma_t, (n, 3)).T
+    np.testing.assert_allclose(
+        sigma_at_point(T, sigma_r, sigma_t, point), np.std(moved, axis=1), rtol=0.05
+    )
+    at_1m = sigma_at_point(
+        np.eye(4), np.full(3, np.radians(0.1)), np.zeros(3), np.array([0, 0, 1.0])
+    )
+    np.testing.assert_allclose(at_1m, [1.745e-3, 1.745e-3, 0.0], atol=1e-6)
+
+
+def test_the_arm_accuracy_prior_is_stated_in_the_result_and_refused_with_kinematics(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The committed kinematic-error bag with nominal flange poses: systematic, and the 1σ
+    states the prior given with --arm-accuracy (translation at least that); with --kinematics
+    the joint calibration estimates that error and the flag is refused, nothing written."""
+    bag = Path(__file__).resolve().parent.parent / "bags" / "ur5e_kinematic"
+    out = tmp_path / "result.yaml"
+    assert main(["calibrate", str(bag), "--arm-accuracy", "0.0005", "--output", str(out)]) == 0
+    data = yaml.safe_load(out.read_text())
+    assert data["quality"]["self_check"]["systematic_robot_error"]
+    assert data["quality"]["self_check"]["arm_accuracy_m"] == pytest.approx(5e-4)
+    assert min(data["hand_eye"]["uncertainty"]["translation_m"]) >= 5e-4
+    refused = tmp_path / "refused.yaml"
+    argv = ["calibrate", str(bag), "--kinematics", "ur5e", "--arm-accuracy", "0.0005"]
+    assert main([*argv, "--output", str(refused)]) == 1
+    assert "--arm-accuracy does not act with --kinematics" in capsys.readouterr().err
+    assert not refused.exists()

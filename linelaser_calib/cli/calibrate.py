@@ -19,6 +19,7 @@ from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
+from linelaser_calib.core.selfcheck import DEFAULT_ARM_ACCURACY_M
 from linelaser_calib.io.results import result_to_dict, truth_beside, write_result_yaml
 from linelaser_calib.offline import OfflineRun, Recording, calibrate_bag
 from linelaser_calib.settings import Front, given_from_arguments, pipeline_config, render_warnings
@@ -41,7 +42,21 @@ def calibrate_config(args: argparse.Namespace) -> PipelineConfig:
             max_angular_speed_rad_s=args.max_angular_speed,
         ),
         workers=available_workers(),
+        arm_accuracy_m=arm_accuracy(args),
     )
+
+
+def arm_accuracy(args: argparse.Namespace) -> float:
+    """``arm_accuracy_m``: ``--arm-accuracy``, or the default; refused with ``--kinematics``
+    unless ``--nominal-kinematics`` (the joint calibration estimates the error it stands for)."""
+    if args.arm_accuracy is None:
+        return DEFAULT_ARM_ACCURACY_M
+    if args.kinematics is not None and not args.nominal_kinematics:
+        raise InputError(
+            "--arm-accuracy does not act with --kinematics and would be ignored: the joint "
+            "calibration estimates the robot's systematic error itself; omit it"
+        )
+    return float(args.arm_accuracy)
 
 
 def _check_outputs(args: argparse.Namespace) -> None:

@@ -280,6 +280,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     _add_pose_source_arguments(cal_p)
     cal_p.add_argument(
+        "--arm-accuracy",
+        type=non_negative_float,
+        metavar="M",
+        help="prior 1 sigma per axis, m, of the robot's error common to the whole scanned "
+        "workspace (its absolute accuracy there), which no subset of the poses can see: part "
+        "of the hand-eye's 1 sigma when the robot's error looks systematic (default 0.0001; "
+        "not with --kinematics, whose joint calibration estimates that error)",
+    )
+    cal_p.add_argument(
         "--nominal-kinematics",
         action="store_true",
         help="with --kinematics: keep the robot model nominal (no kinematic corrections)",

@@ -22,17 +22,19 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from enum import Enum
+from functools import reduce
 from typing import Any
 
 import numpy as np
 
-from .errors import DegenerateError, InputError, PairingError
+from .errors import CalibrationError, DegenerateError, InputError, PairingError
 from .geometry import FloatArray, check_transform
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
+from .regions import PLAIN_PRIOR_SCALE
 from .result import CalibrationResult
 from .robot.joint_calibration import KinematicSetup
 from .robot.kinematics import forward_kinematics
-from .selfcheck import DEFAULT_FOLDS, self_check
+from .selfcheck import DEFAULT_ARM_ACCURACY_M, DEFAULT_FOLDS, measuring_centre_depth, self_check
 from .targets import DEFAULT_TARGET, get_target
 from .targets.base import (
     Placement,
@@ -40,6 +42,7 @@ from .targets.base import (
     SolveContext,
     Target,
     TargetSolution,
+    configure,
     rejection_digest,
     sample_rng,
 )
@@ -83,6 +86,10 @@ class PipelineConfig:
     self_check_folds : int
         Folds of the default method's self-check (:mod:`.selfcheck`: cross-validated
         accuracy in use, halves, a 1σ widened for systematic robot error); 0 skips it.
+    arm_accuracy_m : float
+        Prior 1σ per axis of the robot's error common to the whole scanned workspace, m
+        (:mod:`.selfcheck`): part of the 1σ when the robot's error looks systematic and no
+        kinematic model corrects the poses. Default 0.1 mm.
     workers : int
         Processes for the self-check's solves: 1, or 2 to share them with a forked child
         (:mod:`.forked`: same result, less wall time on a second core). Not for a process
@@ -97,6 +104,7 @@ class PipelineConfig:
     initial_T_flange_sensor: FloatArray | None = None
     kinematics: KinematicSetup | None = None
     self_check_folds: int = DEFAULT_FOLDS
+    arm_accuracy_m: float = DEFAULT_ARM_ACCURACY_M
     workers: int = 1
 
     def __post_init__(self) -> None:
@@ -106,6 +114,10 @@ class PipelineConfig:
             )
         if self.self_check_folds < 0 or self.self_check_folds == 1:
             raise InputError(f"self_check_folds must be 0 or >= 2, got {self.self_check_folds}")
+        if not (np.isfinite(self.arm_accuracy_m) and self.arm_accuracy_m >= 0.0):
+            raise InputError(
+                f"the arm accuracy must be a length of 0 m or more, got {self.arm_accuracy_m}"
+            )
         target = get_target(self.target)
         if self.target_config is None:
             object.__setattr__(self, "target_config", target.config_type())
@@ -262,10 +274,15 @@ def calibrate_samples(
             config.self_check_folds,
             None if config.kinematics is None else _corrected_poses(config.kinematics),
             config.workers,
+            None
+            if config.kinematics is not None
+            else lambda: _plain(target, target_config, solution, features, quiet),
+            config.arm_accuracy_m,
         )
         progress("self-check", 1, 1)
     sigma_t, sigma_r = solution.sigma_translation_m, solution.sigma_rotation_rad
     if check is not None:
+        solution = check.solution
         sigma_r, sigma_t = check.sigma_honest[:3], check.sigma_honest[3:]
     return CalibrationResult(
         T_flange_sensor=solution.T_flange_sensor,
@@ -286,7 +303,51 @@ def calibrate_samples(
         kinematics=solution.kinematics,
         identifiability=solution.identifiability,
         placement_sections=list(solution.placement_sections),
+        measuring_centre_depth_m=measuring_centre_depth(solution.sample_fits),
     )
+
+
+def _plain_config(target: Target[Any], target_config: Any) -> Any | None:
+    """The target's config for the plain model (:mod:`.regions`): its per-pose robot-error
+    prior :data:`~.regions.PLAIN_PRIOR_SCALE` times tighter; None when the default method
+    takes no such prior."""
+    settings = {}
+    for name in ("robot_sigma_t_m", "robot_sigma_r_rad"):
+        option = target.options.get(name)
+        if option is None or not option.field or Method.DEFAULT.value not in option.methods:
+            return None
+        value = reduce(getattr, option.field.split("."), target_config)
+        settings[name] = float(value) * PLAIN_PRIOR_SCALE
+    return configure(target, Method.DEFAULT.value, settings, {}, target_config)
+
+
+def _plain(
+    target: Target[Any],
+    target_config: Any,
+    solution: TargetSolution,
+    features: list[Any],
+    context: SolveContext,
+) -> tuple[TargetSolution, Callable[[list[Any]], TargetSolution]] | None:
+    """The plain model (:mod:`.regions`): its solve of all features, started at the default
+    ``solution`` (not at its subset start: the prior differs), and its solve of a subset,
+    started at its own. No model-fit check: the default solve passed it on the same data, and
+    the plain model's residual holds the robot's error by design. None when the target's
+    default method takes no robot prior or the plain solve of all features fails."""
+    plain_config = _plain_config(target, target_config)
+    if plain_config is None:
+        return None
+
+    def solve_from(start: TargetSolution) -> Callable[[list[Any]], TargetSolution]:
+        def solve(subset: list[Any]) -> TargetSolution:
+            return target.solve_default(subset, plain_config, replace(context, warm_start=start))
+
+        return solve
+
+    try:
+        full = solve_from(replace(solution, subset_start=None))(features)
+    except CalibrationError:
+        return None
+    return full, solve_from(full)
 
 
 def _corrected_poses(

@@ -66,6 +66,9 @@ class CalibrationResult:
     placement_sections : list of ResultSection
         The target in each further recording of a joint calibration (same order as given),
         solved with the corrected poses (not written to result files).
+    measuring_centre_depth_m : float or None
+        Mean depth (sensor z, m) of the used profile points: the measuring centre (0, 0, z_c)
+        of the sensor frame, where the hand-eye's 1σ is also given.
     """
 
     T_flange_sensor: FloatArray
@@ -91,3 +94,4 @@ class CalibrationResult:
     identifiability: KinematicIdentifiability | None = None
     self_check: SelfCheck | None = None
     placement_sections: list[ResultSection] = field(default_factory=list)
+    measuring_centre_depth_m: float | None = None

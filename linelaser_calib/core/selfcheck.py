@@ -1,4 +1,4 @@
-"""Self-check of a calibration: cross-validation over poses, halves, and an honest 1σ.
+"""Self-check of a calibration: accuracy in use by region, the model it picks, an honest 1σ.
 
 One machinery for every target, through the target protocol only (it never asks which target
 it is): the target's own default solve is run again on subsets of its features, and the
@@ -7,79 +7,63 @@ ResultSection.surface_distances`.
 
 What is computed
 ----------------
-K-fold cross-validation over poses (``folds`` interleaved folds of the used samples):
-    Each fold is left out in turn; the others are solved; the held-out samples' points are
-    mapped into the base frame with their *recorded* flange poses (no correction: the
-    robot's error at a new pose is unknown) and the fold's hand-eye, and their distances to
-    the fold's fitted target are taken. Their RMS is the **accuracy in use**: what a user
-    sees scanning with this calibration.
-Grouped (per-profile) jackknife covariance of the hand-eye:
-    With the K fold estimates θ_k (each without one group of profiles) the delete-a-group
-    jackknife gives Cov = (K − 1)/K · Σ_k (θ_k − θ̄)(θ_k − θ̄)ᵀ. It is a cluster-robust
-    covariance with the profile as the cluster: the ~100 points of one profile share one pose
-    error, which the point residuals cannot show, but which moves the estimate when the
-    profile leaves the fit. It needs nothing of the noise model, but an error shared by
-    neighbouring poses barely shows in it: every interleaved fold holds every region of the
-    workspace (on the kinematic-error arm its dispersion stayed at 0.5-1.3 times the model's
-    while the hand-eye was up to 30σ off). A jackknife was chosen over a sandwich estimator
-    because the robust point weights and the rejection loop make the scores of the refit
-    differ from those of a linearisation.
-Jackknife over regions of the workspace:
-    The used poses are split into ``folds`` regions by k-means on position and flange
-    direction (:func:`region_groups`) and each region is left out in turn. A robot error that
-    neighbouring poses share moves the estimate when their region leaves the fit, which the
-    interleaved folds (every region in every fold) cannot show. The delete-a-group jackknife
-    of these G estimates about the full one is the region 1σ (:func:`region_jackknife`).
+Accuracy in use, region-blocked (:mod:`.regions`):
+    The used poses are split into regions of the workspace (as many as there are clusters of
+    poses, at most ``folds``); each region is left out in turn, the rest solved, and the
+    held-out region's points, mapped with their recorded flange poses and that solve's
+    hand-eye, are measured against that solve's target. Their RMS is the **accuracy in use**:
+    what a user sees scanning elsewhere in the cell. With fewer than 3 regions it is not
+    claimed. The same is done for the plain model (the per-pose robot-error prior made
+    :data:`~.regions.PLAIN_PRIOR_SCALE` times tighter) when the caller gives its solve, and
+    the model with the better blocked accuracy is chosen (:func:`~.regions.choose_model`).
+Pose-interleaved K-fold (a consistency check only):
+    ``folds`` interleaved folds of the used samples, each left out in turn and judged as
+    above. Every held-out pose keeps neighbours in the fit that share the arm's regional
+    error, so this RMS is what the fit's own poses see, not what a user sees elsewhere.
+Grouped (per-profile) jackknife covariance of the hand-eye over those folds:
+    Cov = (K − 1)/K · Σ_k (θ_k − θ̄)(θ_k − θ̄)ᵀ, a cluster-robust covariance with the profile
+    as the cluster (the points of one profile share one pose error).
+Jackknife over the regions (:func:`region_jackknife`):
+    The delete-a-group jackknife of the region solves about the full one, and what the noise
+    model predicts for it (:class:`RegionJackknife`).
 Disjoint halves:
     Even and odd samples solved apart; their hand-eye difference in units of the combined
-    1σ (√(σ_a² + σ_b²) per axis, each half's own σ), against the noise model and against the
-    widened 1σ (each half's σ times the full solution's widening).
+    1σ, against the noise model and against the reported 1σ.
 
 Systematic robot error
 ----------------------
 Per-pose corrections absorb any robot error, so the fit's residual cannot tell an arm with
-independent per-pose noise from one whose error is systematic (pose-dependent: kinematic
-parameters that differ from the nominal ones). Two statistics can, either one marking the
-error as systematic:
+independent per-pose noise from one whose error is systematic (pose-dependent). Any of these
+marks it as systematic, each at a false-alarm probability derived, not tuned:
 
-- **Region dispersion** √(mean over the axes of (σ_region / σ_expected)²), σ_expected what
-  the noise model predicts for this jackknife from the region solves' own 1σ
-  (:class:`RegionJackknife`; leaving out a region that holds a whole direction of view moves
-  the estimate more, and the model knows it). Under the noise model each axis' ratio squared
-  is about χ²_{G−1}/(G − 1); treating the six axes as one (one region pulls them together)
-  the limit :func:`region_limit` is the χ² quantile at a false-alarm probability of 0.27 %
-  (the 3σ convention): 2.02 for 5 regions. Derived, not tuned.
-- **Neighbour correlation** of the held-out offsets: each held-out profile's mean signed
-  offset from the fitted target is the robot's error at that pose as the target sees it, and
-  its tilt across the profile shows the rotation part. Independent errors leave the 3 nearest
-  poses' residuals uncorrelated; a systematic error makes them alike. Limit
-  :func:`neighbour_limit`, max(0.3, 2.5/√n).
-- Halves that still disagree beyond :data:`HALVES_LIMIT_SIGMAS` mark it too.
+- **Region offsets**: each used profile's mean signed distance from the fitted target (and
+  its tilt across the profile, :func:`tilt`), mapped with the recorded poses, differ between
+  regions more than within them: a one-way analysis of variance
+  (:func:`scipy.stats.f_oneway`) at :data:`REGION_FALSE_ALARM` (halved for the two
+  components).
+- **Region dispersion** above :func:`region_limit` (χ² quantile at
+  :data:`REGION_FALSE_ALARM`).
+- **Neighbour correlation** of the interleaved held-out offsets above :func:`neighbour_limit`.
+- Halves that still disagree beyond :data:`HALVES_LIMIT_SIGMAS`.
 
-bench/robot_error.py prints both statistics per preset (min / max over 20 seeds) beside
-their limits.
+The honest 1σ (:func:`honest_sigma`)
+------------------------------------
+When the error is systematic the hand-eye's 1σ has two parts, added in quadrature:
 
-The widened 1σ (:func:`honest_sigma`) has two parts, added in quadrature:
+- the part that varies over the workspace: the region jackknife's 1σ (each region's shared
+  error moves the estimate when the region leaves the fit), at least the model's;
+- the part common to all regions (e.g. a link length), which no subset of the poses can see:
+  a stated prior, the arm's absolute accuracy ``arm_accuracy_m`` (1σ per axis, m; default
+  :data:`DEFAULT_ARM_ACCURACY_M`), on the translation, and over the lever of the profile
+  points (their median distance from the sensor) on the rotation. A joint calibration of the
+  kinematics (``flange_poses`` given) estimates that part itself and takes no prior.
 
-- the part of the error that varies over the workspace: the region 1σ times the Student-t
-  over normal quantile ratio at 95 % for its G − 1 degrees of freedom (:func:`t_factor`,
-  1.42 for 5 regions: a 1σ from 5 groups is itself uncertain), and at least the model's;
-- the part all poses share, which no subset of the poses can see (for a kinematic error,
-  whatever of the rest of the chain acts like one more constant flange-side transform over
-  the poses scanned; the last link's own error is such a transform at every pose, and
-  belongs to the hand-eye these flange poses see, see
-  :func:`~linelaser_calib.core.robot.kinematics.effective_hand_eye`): a
-  prior of :data:`SYSTEMATIC_FLOOR` times the held-out offsets' RMS for translation, and that
-  over the lever of the profile points (their median distance from the sensor) for
-  rotation. This factor is a prior, not an estimate.
+Halves that still disagree beyond :data:`HALVES_LIMIT_SIGMAS` of that 1σ widen it by their
+excess. Recordings not marked keep the model's 1σ.
 
-When the halves still disagree beyond :data:`HALVES_LIMIT_SIGMAS` of the widened 1σ, it is
-widened further by their excess. Halves that disagree while neither statistic fires mark the
-error as systematic too, and widen the model's 1σ by their excess only. A warning says all
-this in words. Recordings not marked keep the model's 1σ.
-
-The region solves cost as much as the folds' (one solve each), so the self-check solves
-2·folds + 2 times.
+The 1σ is also given where the user's points are: at the measuring centre, the point
+(0, 0, z_c) of the sensor frame at the mean depth z_c of the used profile points
+(:func:`sigma_at_point`): a rotation 1σ of 0.1° moves a point 1 m away by 1.7 mm.
 
 All lengths in m and angles in rad; text in mm and degrees.
 """
@@ -92,45 +76,45 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import chdtri, ndtri, stdtrit
+from scipy.special import chdtri
+from scipy.stats import f_oneway
 
 from .errors import CalibrationError
 from .forked import map_forked
 from .geometry import FloatArray, rotvec_from_matrix
+from .regions import (
+    CLUSTER_ANGLE_RAD,
+    CLUSTER_RADIUS_M,
+    MIN_REGIONS,
+    PER_POSE,
+    PLAIN,
+    FlangePoses,
+    ModelChoice,
+    blocked_accuracy,
+    choose_model,
+    held_out_distances,
+    pose_distances,
+    workspace_regions,
+)
 from .targets.base import TargetSolution
 from .types import SampleFit
 
-#: Folds of the cross-validation.
+#: Folds of the pose-interleaved cross-validation, and the most regions of the workspace.
 DEFAULT_FOLDS = 5
-#: One-sided probability, under the noise model, of a region dispersion above
-#: :func:`region_limit` (the 3σ convention).
+#: False-alarm probability, under independent per-pose noise, of each statistic that marks
+#: the robot's error as systematic (the 3σ convention).
 REGION_FALSE_ALARM = 0.0027
-#: Two-sided coverage at which the region jackknife's few degrees of freedom are corrected
-#: (:func:`t_factor`): its 2σ interval holds what a normal 2σ interval would.
-T_COVERAGE = 0.95
 #: Nearest poses whose mean held-out offset a sample's is correlated with.
 NEIGHBOURS = 3
 #: Neighbour correlation of the held-out offsets above which the robot's error is systematic.
 NEIGHBOUR_LIMIT = 0.3
-#: Prior 1σ of the part of a systematic error that all poses share, as a multiple of the
-#: held-out offsets' RMS (the part that varies): no subset of the poses can see the shared
-#: part, so it is a prior, not an estimate. Set against the physical hand-eye (with 1 the
-#: kinematic-error arm of bench/robot_error.py was up to 5σ off, with 2 within 3σ); against
-#: the hand-eye its flange poses see, the flagged recordings stay within 1.6σ.
-SYSTEMATIC_FLOOR = 2.0
+#: Default prior 1σ per axis of the part of a systematic robot error that all regions share
+#: (the arm's absolute accuracy over the scanned workspace), m: 0.1 mm.
+DEFAULT_ARM_ACCURACY_M = 1e-4
 #: Halves that differ by more than this many combined σ on an axis disagree.
 HALVES_LIMIT_SIGMAS = 3.0
-#: Pose clusters: poses closer than this (m) ...
-CLUSTER_RADIUS_M = 0.05
-#: ... and this (rad) belong to one cluster.
-CLUSTER_ANGLE_RAD = float(np.deg2rad(8.0))
-#: A linked group of poses counts once per neighbourhood of this many times the limits above
-#: that it takes to cover it (a continuous sweep is one linked group).
-CLUSTER_SPAN = 2.0
 #: Warn when the poses fall into at most this many clusters.
 FEW_CLUSTERS = 6
-#: Most Lloyd iterations of :func:`region_groups`.
-LLOYD_ITERATIONS = 50
 
 
 @dataclass
@@ -140,60 +124,78 @@ class SelfCheck:
     Attributes
     ----------
     folds : int
-        Folds solved.
-    accuracy_in_use_m : float
-        RMS distance of the held-out samples' points (recorded poses, fold hand-eye) to the
-        fold's fitted target, m.
+        Pose-interleaved folds solved.
+    accuracy_in_use_m : float or None
+        Region-blocked held-out RMS of the chosen model, m (:mod:`.regions`); None with fewer
+        than 3 regions.
+    regions : int
+        Regions of the workspace held out (0 when fewer than 3: no accuracy in use).
+    region_rms_m : ndarray, shape (G,) or None
+        The chosen model's held-out RMS per region, m.
+    target_move_m : float or None
+        RMS over the held-out points of how far the fitted target moves there when their
+        region joins the fit, m (:class:`~.regions.BlockedAccuracy`; part of the accuracy).
+    model : ModelChoice or None
+        The model chosen by the region-blocked accuracy and each model's figure; None without
+        regions (the per-pose model is kept).
+    interleaved_rms_m : float
+        The pose-interleaved held-out RMS, m: a consistency check, not the accuracy in use.
     held_out_rms_m : ndarray, shape (M,)
-        Per held-out sample RMS distance, m (order of ``indices``).
+        Per held-out sample RMS of the interleaved folds, m (order of ``indices``).
     indices : list of int
-        Profile indices of the held-out samples.
+        Profile indices of the interleaved held-out samples.
     sigma_jackknife : ndarray, shape (6,)
-        Grouped jackknife 1σ of the hand-eye over the interleaved folds: rotation (rad,
-        sensor axes), translation (m, flange axes).
+        Grouped jackknife 1σ over the interleaved folds: rotation (rad, sensor axes),
+        translation (m, flange axes).
     sigma_model : ndarray, shape (6,)
-        The solution's own 1σ, same order.
+        The chosen solution's own 1σ, same order.
     dispersion_ratio : float
         √(mean (σ_jackknife / σ_model)²).
-    regions : int
-        Regions of the workspace solved without (:func:`region_groups`); 0 when fewer than 3
-        could be solved.
     sigma_region : ndarray, shape (6,) or None
-        Jackknife 1σ over the regions (:func:`region_jackknife`), same order; None without
-        regions.
+        Jackknife 1σ of the chosen model over the regions (:func:`region_jackknife`).
     region_ratio : float or None
-        The region dispersion (:attr:`RegionJackknife.ratio`); None without regions.
+        The region dispersion (:attr:`RegionJackknife.ratio`).
+    region_offset_p : float or None
+        Smallest p-value of the region offsets' analysis of variance (offset, tilt).
     neighbour_correlation : float
-        Correlation of the held-out offsets of neighbouring poses (:func:`neighbour_correlation`).
     offset_rms_m : float
-        RMS of the held-out samples' mean signed offsets, m.
+        RMS of the interleaved held-out samples' mean signed offsets, m.
     lever_m : float
-        Median distance of the held-out points from the sensor origin, m.
-    halves_sigmas : ndarray, shape (6,) or None
-        |θ_even − θ_odd| / √(σ_even² + σ_odd²) per axis, each half's model 1σ widened as the
-        full solution's (``sigma_honest / sigma_model``); None when the halves could not be
-        solved apart.
-    halves_model_sigmas : ndarray, shape (6,) or None
-        The same against the halves' model 1σ.
+        Median distance of the profile points from the sensor origin, m.
+    halves_sigmas, halves_model_sigmas : ndarray, shape (6,) or None
+        |θ_even − θ_odd| / √(σ_even² + σ_odd²) per axis, against the reported and the model
+        1σ; None when the halves could not be solved apart.
     pose_clusters : int
-        Groups of nearby poses (:data:`CLUSTER_RADIUS_M`, :data:`CLUSTER_ANGLE_RAD`).
     systematic : bool
-        The robot's error looks systematic (see the module docstring).
+    arm_accuracy_m : float
+        The prior on the error common to all regions that the 1σ assumes, m (0 when none:
+        independent error, or a joint kinematic calibration).
     sigma_honest : ndarray, shape (6,)
         The 1σ to report (the model's, or widened).
+    solution : TargetSolution
+        The chosen model's solve of all features (the result to report).
+    region_indices : list of list of int
+        Profile indices of each region (empty without regions).
+    region_solutions : list of TargetSolution or None
+        The chosen model's solve without each region (None where it failed).
     warnings : list of str
     """
 
     folds: int
-    accuracy_in_use_m: float
+    accuracy_in_use_m: float | None
+    regions: int
+    region_rms_m: FloatArray | None
+    target_move_m: float | None
+    model: ModelChoice | None
+    interleaved_rms_m: float
     held_out_rms_m: FloatArray
     indices: list[int]
     sigma_jackknife: FloatArray
     sigma_model: FloatArray
     dispersion_ratio: float
-    regions: int
     sigma_region: FloatArray | None
     region_ratio: float | None
+    region_offset_p: float | None
     neighbour_correlation: float
     offset_rms_m: float
     lever_m: float
@@ -201,46 +203,78 @@ class SelfCheck:
     halves_model_sigmas: FloatArray | None
     pose_clusters: int
     systematic: bool
+    arm_accuracy_m: float
     sigma_honest: FloatArray
+    solution: TargetSolution = field(repr=False)
+    region_indices: list[list[int]] = field(default_factory=list)
+    region_solutions: list[TargetSolution | None] = field(default_factory=list, repr=False)
     warnings: list[str] = field(default_factory=list)
+
+    @property
+    def no_accuracy_reason(self) -> str:
+        """Why no accuracy in use is claimed (empty when one is)."""
+        if self.accuracy_in_use_m is not None:
+            return ""
+        return (
+            f"the poses fall into {self.pose_clusters} cluster(s) of the workspace (poses within "
+            f"{CLUSTER_RADIUS_M * 1e3:.0f} mm and {np.degrees(CLUSTER_ANGLE_RAD):.0f} deg of "
+            f"each other), fewer than {MIN_REGIONS}: no region can be held out with its "
+            "neighbours, so the error of scans elsewhere in the cell cannot be measured"
+        )
 
     def quality_entries(self) -> dict[str, Any]:
         """Entries of the result's ``quality`` section (SI units)."""
         return {
-            "accuracy_in_use_m": float(self.accuracy_in_use_m),
+            "accuracy_in_use_m": None
+            if self.accuracy_in_use_m is None
+            else float(self.accuracy_in_use_m),
+            "accuracy_in_use": {
+                "held_out": "regions of the workspace",
+                "regions": int(self.regions),
+                "region_rms_m": None
+                if self.region_rms_m is None
+                else [float(v) for v in self.region_rms_m],
+                "target_move_m": None if self.target_move_m is None else float(self.target_move_m),
+                "not_measured_because": self.no_accuracy_reason or None,
+                "model": PER_POSE if self.model is None else self.model.chosen,
+                "model_accuracy_m": None
+                if self.model is None
+                else {k: float(v) for k, v in self.model.accuracy_m.items()},
+            },
             "self_check": {
                 "folds": int(self.folds),
-                "held_out_rms_m": float(self.accuracy_in_use_m),
+                "pose_interleaved_rms_m": float(self.interleaved_rms_m),
                 "halves_agreement_sigmas": None
                 if self.halves_sigmas is None
                 else float(np.max(self.halves_sigmas)),
                 "halves_agreement_model_sigmas": None
                 if self.halves_model_sigmas is None
                 else float(np.max(self.halves_model_sigmas)),
-                "jackknife_sigma": {
-                    "rotation_rad": [float(v) for v in self.sigma_jackknife[:3]],
-                    "translation_m": [float(v) for v in self.sigma_jackknife[3:]],
-                },
-                "model_sigma": {
-                    "rotation_rad": [float(v) for v in self.sigma_model[:3]],
-                    "translation_m": [float(v) for v in self.sigma_model[3:]],
-                },
+                "jackknife_sigma": _axes(self.sigma_jackknife),
+                "model_sigma": _axes(self.sigma_model),
                 "dispersion_ratio": float(self.dispersion_ratio),
                 "regions": int(self.regions),
-                "region_sigma": None
-                if self.sigma_region is None
-                else {
-                    "rotation_rad": [float(v) for v in self.sigma_region[:3]],
-                    "translation_m": [float(v) for v in self.sigma_region[3:]],
-                },
+                "region_sigma": None if self.sigma_region is None else _axes(self.sigma_region),
                 "region_dispersion_ratio": None
                 if self.region_ratio is None
                 else float(self.region_ratio),
+                "region_offset_p": None
+                if self.region_offset_p is None
+                else float(self.region_offset_p),
                 "neighbour_correlation": float(self.neighbour_correlation),
                 "pose_clusters": int(self.pose_clusters),
                 "systematic_robot_error": bool(self.systematic),
+                "arm_accuracy_m": float(self.arm_accuracy_m),
             },
         }
+
+
+def _axes(sigma: FloatArray) -> dict[str, list[float]]:
+    """A (6,) [rotation, translation] vector as the YAML's two lists."""
+    return {
+        "rotation_rad": [float(v) for v in sigma[:3]],
+        "translation_m": [float(v) for v in sigma[3:]],
+    }
 
 
 def hand_eye_difference(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
@@ -255,49 +289,6 @@ def _sigma(solution: TargetSolution) -> FloatArray | None:
     if solution.sigma_rotation_rad is None or solution.sigma_translation_m is None:
         return None
     return np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
-
-
-def pose_clusters(T_base_flange: FloatArray) -> int:
-    """Number of clusters of poses (M, 4, 4): groups linked by steps within
-    :data:`CLUSTER_RADIUS_M` and :data:`CLUSTER_ANGLE_RAD` (single linkage), each counted once
-    per neighbourhood of :data:`CLUSTER_SPAN` times those limits that it takes to cover it
-    (greedily, around the first pose not yet covered).
-
-    A tight group counts once however many poses it holds; a continuous sweep, which steps
-    link into one group across the whole workspace, counts by its extent."""
-    t = T_base_flange[:, :3, 3]
-    z = T_base_flange[:, :3, 2]
-    step = np.linalg.norm(t[:, None] - t[None], axis=2)
-    cosine = np.clip(z @ z.T, -1.0, 1.0)
-    near = (step < CLUSTER_RADIUS_M) & (cosine > np.cos(CLUSTER_ANGLE_RAD))
-    within = (step < CLUSTER_SPAN * CLUSTER_RADIUS_M) & (
-        cosine > np.cos(CLUSTER_SPAN * CLUSTER_ANGLE_RAD)
-    )
-    label = np.arange(len(T_base_flange))
-    changed = True
-    while changed:
-        merged = np.array([label[near[i]].min() for i in range(len(label))])
-        changed = bool(np.any(merged != label))
-        label = merged[merged]
-    count = 0
-    for group in np.unique(label):
-        members = np.flatnonzero(label == group)
-        reach = within[np.ix_(members, members)]
-        covered = np.zeros(len(members), dtype=bool)
-        while not np.all(covered):
-            covered |= reach[int(np.argmin(covered))]
-            count += 1
-    return count
-
-
-def pose_distances(T_base_flange: FloatArray) -> FloatArray:
-    """(M, M) distances between poses (M, 4, 4): position step over :data:`CLUSTER_RADIUS_M`
-    plus the angle between the flange z axes over :data:`CLUSTER_ANGLE_RAD`."""
-    t = T_base_flange[:, :3, 3]
-    z = T_base_flange[:, :3, 2]
-    angle = np.arccos(np.clip(z @ z.T, -1.0, 1.0))
-    step = np.linalg.norm(t[:, None] - t[None], axis=2)
-    return np.asarray(step / CLUSTER_RADIUS_M + angle / CLUSTER_ANGLE_RAD)
 
 
 def tilt(x: FloatArray, d: FloatArray) -> float:
@@ -339,37 +330,6 @@ def neighbour_limit(n: int) -> float:
     return max(NEIGHBOUR_LIMIT, 2.5 / float(np.sqrt(max(n, 1))))
 
 
-def region_groups(T_base_flange: FloatArray, groups: int) -> NDArray[np.int64]:
-    """Labels (M,) of ``groups`` regions of the workspace: k-means of the poses (M, 4, 4) on
-    their position over :data:`CLUSTER_RADIUS_M` and flange z axis over
-    :data:`CLUSTER_ANGLE_RAD` (the scales of :func:`pose_distances`).
-
-    Deterministic: the first centre is the pose nearest the mean, each further one the pose
-    farthest from the centres so far; then Lloyd iterations. Every region keeps at least one
-    pose.
-    """
-    X = np.concatenate(
-        [T_base_flange[:, :3, 3] / CLUSTER_RADIUS_M, T_base_flange[:, :3, 2] / CLUSTER_ANGLE_RAD],
-        axis=1,
-    )
-    first = int(np.argmin(np.linalg.norm(X - X.mean(axis=0), axis=1)))
-    centres = [X[first]]
-    for _ in range(1, groups):
-        gap = np.min(np.linalg.norm(X[:, None] - np.array(centres)[None], axis=2), axis=1)
-        centres.append(X[int(np.argmax(gap))])
-    C = np.array(centres)
-    label = np.zeros(len(X), dtype=np.int64)
-    for iteration in range(LLOYD_ITERATIONS):
-        new = np.argmin(np.linalg.norm(X[:, None] - C[None], axis=2), axis=1)
-        if iteration > 0 and np.array_equal(new, label):
-            break
-        label = new
-        C = np.array(
-            [X[label == g].mean(axis=0) if np.any(label == g) else C[g] for g in range(groups)]
-        )
-    return np.asarray(np.unique(label, return_inverse=True)[1], dtype=np.int64)
-
-
 @dataclass(frozen=True)
 class RegionJackknife:
     """The jackknife over regions of the workspace (:func:`region_jackknife`).
@@ -398,10 +358,9 @@ class RegionJackknife:
         return float(np.sqrt(np.mean((self.sigma / self.expected) ** 2)))
 
 
-def region_subsets(kept: list[Any], groups: int) -> list[list[Any]]:
-    """The features without each of ``groups`` regions of the workspace
-    (:func:`region_groups` of their flange poses), one list per region."""
-    label = region_groups(np.stack([f.T_base_flange for f in kept]), groups)
+def region_subsets(kept: list[Any], label: NDArray[np.int64]) -> list[list[Any]]:
+    """The features without each region of the workspace (``label`` (M,) of
+    :func:`~linelaser_calib.core.regions.workspace_regions`), one list per region."""
     return [
         [f for f, lab in zip(kept, label, strict=True) if lab != g]
         for g in range(int(label.max()) + 1)
@@ -449,29 +408,65 @@ def region_limit(dof: int) -> float:
     return float(np.sqrt(chdtri(dof, REGION_FALSE_ALARM) / dof))
 
 
-def t_factor(dof: int) -> float:
-    """Student-t over normal quantile at :data:`T_COVERAGE` (two-sided) for a 1σ estimated
-    with ``dof`` degrees of freedom (2.78 / 1.96 = 1.42 for 4)."""
-    q = 0.5 + T_COVERAGE / 2.0
-    return float(stdtrit(dof, q) / ndtri(q))
-
-
 def honest_sigma(
     sigma_model: FloatArray,
     sigma_region: FloatArray | None,
-    regions: int,
-    offset_rms_m: float,
+    arm_accuracy_m: float,
     lever_m: float,
 ) -> FloatArray:
     """The 1σ (6,) under a systematic robot error: the part that varies over the workspace
-    (the region jackknife, times :func:`t_factor` for its G − 1 degrees of freedom; at least
-    the model's) and the part all poses share (prior :data:`SYSTEMATIC_FLOOR` times the
-    held-out offsets' RMS, over the lever of the points for rotation), added in quadrature."""
-    varying = sigma_model
-    if sigma_region is not None:
-        varying = np.maximum(sigma_model, t_factor(regions - 1) * sigma_region)
-    shared = SYSTEMATIC_FLOOR * offset_rms_m * np.array([1.0 / lever_m] * 3 + [1.0] * 3)
+    (the region jackknife's 1σ, at least the model's) and the part all regions share (the
+    prior ``arm_accuracy_m`` on the translation, over the lever ``lever_m`` on the
+    rotation), added in quadrature."""
+    varying = sigma_model if sigma_region is None else np.maximum(sigma_model, sigma_region)
+    shared = arm_accuracy_m * np.array([1.0 / lever_m] * 3 + [1.0] * 3)
     return np.asarray(np.sqrt(varying**2 + shared**2))
+
+
+def measuring_centre_depth(fits: Sequence[SampleFit]) -> float | None:
+    """Mean depth (sensor z, m) of the used profile points; None without points."""
+    depths = [fit.points[:, 2] for fit in fits if len(fit.points)]
+    return float(np.mean(np.concatenate(depths))) if depths else None
+
+
+def sigma_at_point(
+    T_flange_sensor: FloatArray,
+    sigma_rotation_rad: FloatArray,
+    sigma_translation_m: FloatArray,
+    point_sensor: FloatArray,
+) -> FloatArray:
+    """1σ (3,) per flange axis, m, of a sensor-frame point (3,) mapped by the hand-eye.
+
+    A rotation δθ about the sensor axes moves the point by δθ × p (sensor axes), rotated into
+    the flange; the translation adds δt (flange axes). The axes are taken as independent (the
+    1σ vectors carry no correlations).
+    """
+    R = T_flange_sensor[:3, :3]
+    p = np.asarray(point_sensor, dtype=float)
+    # δθ × p for a unit δθ about each sensor axis: the columns of the cross-product matrix.
+    lever = np.cross(np.eye(3), p).T
+    variance = (R**2) @ ((lever**2) @ (sigma_rotation_rad**2)) + sigma_translation_m**2
+    return np.asarray(np.sqrt(variance))
+
+
+def region_offset_p(
+    solution: TargetSolution,
+    kept: Sequence[Any],
+    label: NDArray[np.int64],
+    flange_poses: FlangePoses | None = None,
+) -> float:
+    """Smallest p-value of the one-way analysis of variance of the profiles' mean signed
+    offsets and tilts (:func:`tilt`) from ``solution``'s target, grouped by region ``label``
+    (M,): whether regions are off by more than their poses' spread explains."""
+    d = held_out_distances(solution, kept, flange_poses)
+    offsets = np.array([np.mean(di) for di in d])
+    tilts = np.array([tilt(f.record().points[:, 0], di) for f, di in zip(kept, d, strict=True)])
+    p = []
+    for values in (offsets, tilts):
+        groups = [values[label == g] for g in range(int(label.max()) + 1)]
+        if all(len(v) >= 2 for v in groups) and float(np.ptp(values)) > 0.0:
+            p.append(float(f_oneway(*groups).pvalue))
+    return min(p, default=1.0)
 
 
 def self_check(
@@ -479,11 +474,14 @@ def self_check(
     solution: TargetSolution,
     solve: Callable[[list[Any]], TargetSolution],
     folds: int = DEFAULT_FOLDS,
-    flange_poses: Callable[[TargetSolution, list[Any]], FloatArray] | None = None,
+    flange_poses: FlangePoses | None = None,
     workers: int = 1,
+    plain: Callable[[], tuple[TargetSolution, Callable[[list[Any]], TargetSolution]] | None]
+    | None = None,
+    arm_accuracy_m: float = DEFAULT_ARM_ACCURACY_M,
 ) -> SelfCheck | None:
-    """Cross-validate a solution over poses, compare disjoint halves, and widen its 1σ when the
-    robot's error looks systematic (see the module docstring).
+    """Cross-validate a solution by region and by interleaved poses, choose the model, and
+    widen its 1σ when the robot's error looks systematic (see the module docstring).
 
     Parameters
     ----------
@@ -495,105 +493,142 @@ def self_check(
         The solve of all of them (default method, with a 1σ).
     solve : callable
         The target's default solve of a subset of the features; a subset too small for it
-        raises a CalibrationError (the check is then skipped, or the halves left out).
+        raises a CalibrationError (the check is then skipped, or that part left out).
     folds : int
+        Interleaved folds, and the most regions of the workspace.
     flange_poses : callable, optional
         ``flange_poses(fold, held_out)``: the flange poses (K, 4, 4) a fold's solution gives
-        the held-out features, when the solve also corrects the poses themselves (a joint
-        kinematic calibration: forward kinematics with the fold's corrections). Default:
-        the recorded ``T_base_flange`` of each feature.
+        held-out features, when the solve also corrects the poses (a joint kinematic
+        calibration). Default: the recorded ``T_base_flange`` of each feature.
     workers : int
         Processes for the subset solves (:func:`solve_subsets`).
+    plain : callable, optional
+        ``plain()``: the plain model's solve of all features (with a 1σ) and its solve of a
+        subset (:mod:`.regions`), or None when it cannot be solved. Called only when the
+        robot's error looks systematic; the plain model is then cross-validated by region
+        beside the default one and chosen when it does better.
+    arm_accuracy_m : float
+        Prior 1σ per axis of the robot error common to all regions, m (applied to the 1σ of
+        a systematic error; not with ``flange_poses``).
 
     Returns
     -------
     SelfCheck or None
-        None when there is no 1σ to check or the folds cannot be solved.
+        None when there is no 1σ to check or the interleaved folds cannot be solved.
     """
-    sigma_model = _sigma(solution)
+    sigma_per_pose = _sigma(solution)
     used = set(solution.samples_used)
     kept = [f for f in features if f.index in used]
-    if sigma_model is None or len(kept) < 2 * folds:
+    if sigma_per_pose is None or len(kept) < 2 * folds:
+        return None
+    T_kept = np.stack([f.T_base_flange for f in kept])
+    label, clusters = workspace_regions(T_kept, folds)
+    solved = solve_subsets(kept, folds, solve, label, workers)
+    interleaved, solved = solved[:folds], solved[folds:]
+    (even, odd), solved = solved[:2], solved[2:]
+    if any(isinstance(fold, CalibrationError) for fold in interleaved):
         return None
     group = np.arange(len(kept)) % folds
-    estimates, held_rms, offsets, poses, indices, levers = [], [], [], [], [], []
+    estimates, held_rms, offsets, poses, indices = [], [], [], [], []
     tilts: list[float] = []
     squares, count = 0.0, 0
-    solved = solve_subsets(kept, folds, solve, workers)
-    for k in range(folds):
-        fold = solved[k]
-        if isinstance(fold, CalibrationError):
-            return None
+    for k, fold in enumerate(interleaved):
+        assert not isinstance(fold, CalibrationError)
         estimates.append(hand_eye_difference(solution.T_flange_sensor, fold.T_flange_sensor))
         held = [f for f, g in zip(kept, group, strict=True) if g == k]
-        T_held = (
-            np.stack([f.T_base_flange for f in held])
-            if flange_poses is None
-            else flange_poses(fold, held)
-        )
-        for f, T_base_flange in zip(held, T_held, strict=True):
-            fit: SampleFit = f.record()
-            d = fold.section.surface_distances(fit, T_base_flange @ fold.T_flange_sensor)
+        for f, d in zip(held, held_out_distances(fold, held, flange_poses), strict=True):
             held_rms.append(float(np.sqrt(np.mean(d**2))))
             offsets.append(float(np.mean(d)))
-            tilts.append(tilt(fit.points[:, 0], d))
-            levers.append(float(np.median(np.linalg.norm(fit.points, axis=1))))
+            tilts.append(tilt(f.record().points[:, 0], d))
             poses.append(f.T_base_flange)
             indices.append(f.index)
             squares += float(np.sum(d**2))
             count += d.size
     theta = np.array(estimates)
     sigma_jk = np.sqrt((folds - 1) / folds * np.sum((theta - theta.mean(axis=0)) ** 2, axis=0))
-    ratio = float(np.sqrt(np.mean((sigma_jk / sigma_model) ** 2)))
+    ratio = float(np.sqrt(np.mean((sigma_jk / sigma_per_pose) ** 2)))
     correlation = neighbour_correlation(np.stack([offsets, tilts], axis=1), np.stack(poses))
-    region = region_jackknife(solved[folds + 2 :], solution, sigma_model)
-    sigma_region = None if region is None else region.sigma
-    regions = 0 if region is None else region.regions
+    chosen, sigma_model = solution, sigma_per_pose
+    model = blocked = region = None
+    offset_p = None
+    held_sets: list[list[Any]] = []
+    region_solved = solved
+    if label is not None:
+        G = int(label.max()) + 1
+        held_sets = [[f for f, lab in zip(kept, label, strict=True) if lab == g] for g in range(G)]
+        blocked = blocked_accuracy(solved, held_sets, solution, flange_poses)
+        region = region_jackknife(solved, solution, sigma_per_pose)
+        offset_p = region_offset_p(solution, kept, label, flange_poses)
     region_ratio = None if region is None else region.ratio
-    offset_rms = float(np.sqrt(np.mean(np.square(offsets))))
-    lever = float(np.median(levers))
-    systematic = correlation > neighbour_limit(len(offsets)) or (
-        region_ratio is not None and region_ratio > region_limit(regions - 1)
+    systematic = (
+        correlation > neighbour_limit(len(offsets))
+        or (region is not None and region.ratio > region_limit(region.regions - 1))
+        or (offset_p is not None and offset_p < REGION_FALSE_ALARM / 2.0)
     )
+    if blocked is not None and label is not None:
+        # The plain model is tried only where the robot's error looks systematic: with
+        # independent per-pose error the per-pose model is the likelihood of the data.
+        tried = plain() if systematic and plain is not None else None
+        if tried is None:
+            model = choose_model(blocked, None)
+        else:
+            plain_solution, plain_solve = tried
+            plain_solved = map_forked(plain_solve, region_subsets(kept, label), workers)
+            plain_blocked = blocked_accuracy(plain_solved, held_sets, plain_solution, flange_poses)
+            model = choose_model(blocked, plain_blocked)
+            sigma_plain = _sigma(plain_solution)
+            if model.chosen == PLAIN and sigma_plain is not None:
+                chosen, sigma_model, blocked = plain_solution, sigma_plain, plain_blocked
+                region_solved = plain_solved
+                region = region_jackknife(plain_solved, chosen, sigma_model)
+    lever = float(np.median([np.median(np.linalg.norm(f.record().points, axis=1)) for f in kept]))
+    prior = arm_accuracy_m if systematic and flange_poses is None else 0.0
     sigma = (
-        honest_sigma(sigma_model, sigma_region, regions, offset_rms, lever)
+        honest_sigma(sigma_model, None if region is None else region.sigma, prior, lever)
         if systematic
         else sigma_model.copy()
     )
-    split = _halves(solved[folds], solved[folds + 1])
+    split = _halves(even, odd)
     halves = None
     if split is not None:
         difference, combined = split
         halves = difference / (combined * sigma / sigma_model)
-        # Halves that disagree while neither statistic saw a systematic error mark it too,
-        # but widen the 1σ by their excess only (below): the region 1σ and the shared-error
-        # prior stand for an error those statistics saw. With independent noise the halves
-        # cross the limit now and then, and the prior would widen the 1σ some 50 times.
-        systematic = systematic or float(np.max(halves)) > HALVES_LIMIT_SIGMAS
-        if float(np.max(halves)) > HALVES_LIMIT_SIGMAS:
-            sigma = sigma * float(np.max(halves)) / HALVES_LIMIT_SIGMAS
-    clusters = pose_clusters(np.stack([f.T_base_flange for f in kept]))
+        # Halves that disagree while no other statistic saw a systematic error mark it too,
+        # and widen the 1σ by their excess only.
+        excess = float(np.max(halves)) / HALVES_LIMIT_SIGMAS
+        systematic = systematic or excess > 1.0
+        if excess > 1.0:
+            sigma = sigma * excess
     check = SelfCheck(
         folds=folds,
-        accuracy_in_use_m=float(np.sqrt(squares / max(count, 1))),
+        accuracy_in_use_m=None if blocked is None else blocked.rms_m,
+        regions=0 if blocked is None else blocked.regions,
+        region_rms_m=None if blocked is None else blocked.region_rms_m,
+        target_move_m=None if blocked is None else blocked.target_move_m,
+        model=model,
+        interleaved_rms_m=float(np.sqrt(squares / max(count, 1))),
         held_out_rms_m=np.array(held_rms),
         indices=indices,
         sigma_jackknife=sigma_jk,
         sigma_model=sigma_model,
         dispersion_ratio=ratio,
-        regions=regions,
-        sigma_region=sigma_region,
+        sigma_region=None if region is None else region.sigma,
         region_ratio=region_ratio,
+        region_offset_p=offset_p,
         neighbour_correlation=correlation,
-        offset_rms_m=offset_rms,
+        offset_rms_m=float(np.sqrt(np.mean(np.square(offsets)))),
         lever_m=lever,
         halves_sigmas=halves,
         halves_model_sigmas=None if split is None else split[0] / split[1],
         pose_clusters=clusters,
         systematic=systematic,
+        arm_accuracy_m=prior,
         sigma_honest=sigma,
+        solution=chosen,
+        region_indices=[[f.index for f in held] for held in held_sets],
+        region_solutions=[None if isinstance(r, CalibrationError) else r for r in region_solved],
     )
-    check.warnings = _warnings(check, solution)
+    check.warnings = _warnings(check)
     return check
 
 
@@ -601,19 +636,22 @@ def solve_subsets(
     kept: list[Any],
     folds: int,
     solve: Callable[[list[Any]], TargetSolution],
+    label: NDArray[np.int64] | None = None,
     workers: int = 1,
 ) -> list[TargetSolution | CalibrationError]:
     """The solves of the self-check, each a solution or the CalibrationError it raised: every
-    fold's training features (all but every ``folds``-th from k, for each fold k), then the
-    even and the odd features, then the features without each region of the workspace
-    (:func:`region_subsets`, ``folds`` regions). They are independent; with ``workers`` 2 a
-    forked child takes half of them (:func:`~linelaser_calib.core.forked.map_forked`; same
-    outcomes as one process)."""
+    interleaved fold's training features (all but every ``folds``-th from k), the even and
+    the odd features, then the features without each region (``label``, when given).
+    They are independent; with ``workers`` 2 a forked child takes half of them
+    (:func:`~linelaser_calib.core.forked.map_forked`; same outcomes as one process)."""
     group = np.arange(len(kept)) % folds
-    subsets = [[f for f, g in zip(kept, group, strict=True) if g != k] for k in range(folds)]
-    return map_forked(
-        solve, [*subsets, kept[0::2], kept[1::2], *region_subsets(kept, folds)], workers
-    )
+    jobs: list[tuple[Callable[[list[Any]], TargetSolution], list[Any]]] = [
+        (solve, [f for f, g in zip(kept, group, strict=True) if g != k]) for k in range(folds)
+    ]
+    jobs += [(solve, kept[0::2]), (solve, kept[1::2])]
+    if label is not None:
+        jobs += [(solve, subset) for subset in region_subsets(kept, label)]
+    return map_forked(lambda job: job[0](job[1]), jobs, workers)
 
 
 def _halves(
@@ -630,13 +668,18 @@ def _halves(
     return np.abs(difference), np.sqrt(sigma_a**2 + sigma_b**2)
 
 
-def _warnings(check: SelfCheck, solution: TargetSolution) -> list[str]:
+def _warnings(check: SelfCheck) -> list[str]:
     """The self-check's warnings in plain words (mm, degrees)."""
     out = []
     if check.systematic:
         factor_t = float(np.max(check.sigma_honest[3:] / check.sigma_model[3:]))
         factor_r = float(np.max(check.sigma_honest[:3] / check.sigma_model[:3]))
         evidence = [f"the held-out profiles are off by {check.offset_rms_m * 1e3:.3f} mm RMS"]
+        if check.region_offset_p is not None and check.region_offset_p < REGION_FALSE_ALARM / 2:
+            evidence.append(
+                "regions of the workspace are off by more than their poses' spread explains "
+                f"(analysis of variance, p = {check.region_offset_p:.1e})"
+            )
         if check.neighbour_correlation > neighbour_limit(len(check.indices)):
             evidence.append(
                 "neighbouring poses are off alike (correlation "
@@ -656,30 +699,41 @@ def _warnings(check: SelfCheck, solution: TargetSolution) -> list[str]:
                 f"{float(np.max(check.halves_model_sigmas)):.1f} combined sigma of the noise "
                 "model"
             )
-        if check.halves_sigmas is not None and np.max(check.halves_sigmas) > HALVES_LIMIT_SIGMAS:
-            evidence.append(
-                "and by "
-                f"{float(np.max(check.halves_sigmas)):.1f} combined sigma of the widened 1 sigma "
-                "(widened further to cover them)"
-            )
+        basis = (
+            "the spread of the hand-eye over the regions left out"
+            if check.sigma_region is not None
+            else "the noise model (no regions to leave out)"
+        )
+        shared = (
+            f" plus the stated prior of {check.arm_accuracy_m * 1e3:.3f} mm (1 sigma) on the "
+            "arm's error common to the whole workspace, which no subset of the poses can see "
+            "(--arm-accuracy)"
+            if check.arm_accuracy_m > 0.0
+            else ""
+        )
+        use = (
+            f"Scans elsewhere in the cell will be off by about {check.accuracy_in_use_m * 1e3:.3f}"
+            " mm RMS (held out by region). "
+            if check.accuracy_in_use_m is not None
+            else ""
+        )
         out.append(
             "the robot's pose error looks systematic (pose-dependent, e.g. kinematic "
             "parameters that differ from the nominal ones), not independent per pose: "
             + ", ".join(evidence)
-            + ". The per-pose corrections absorb part of that error and part of it goes into "
-            "the hand-eye, so the hand-eye is off by about the robot's absolute error, not by "
-            "its repeatability; the 1 sigma was widened "
-            f"{factor_t:.1f}x (translation) and {factor_r:.1f}x (rotation) to "
+            + ". The hand-eye is off by about the robot's absolute error, not by its "
+            f"repeatability; its 1 sigma comes from {basis}{shared}: "
             f"{', '.join(f'{v * 1e3:.3f}' for v in check.sigma_honest[3:])} mm and "
-            f"{', '.join(f'{np.degrees(v):.4f}' for v in check.sigma_honest[:3])} deg. "
-            f"Scans mapped with it will be off by about {check.accuracy_in_use_m * 1e3:.3f} mm "
-            "RMS (cross-validated); flange poses from a kinematically calibrated robot model "
-            "remove the systematic part"
+            f"{', '.join(f'{np.degrees(v):.4f}' for v in check.sigma_honest[:3])} deg "
+            f"({factor_t:.1f}x and {factor_r:.1f}x the noise model's). "
+            + use
+            + "Flange poses from a kinematically calibrated robot model (--kinematics with "
+            "joint states) remove the systematic part"
         )
     if check.pose_clusters <= FEW_CLUSTERS:
         out.append(
-            f"the {len(solution.samples_used)} poses fall into only {check.pose_clusters} "
-            f"clusters (poses within {CLUSTER_RADIUS_M * 1e3:.0f} mm and "
+            f"the {len(check.solution.samples_used)} poses fall into only "
+            f"{check.pose_clusters} clusters (poses within {CLUSTER_RADIUS_M * 1e3:.0f} mm and "
             f"{np.degrees(CLUSTER_ANGLE_RAD):.0f} deg of each other): the result rests on "
             "a few independent views, and a robot error shared within a cluster counts once "
             "per cluster, not once per pose; add poses between the clusters"

@@ -8,10 +8,14 @@ The result file layout (the README's "Result file")::
       translation: [x, y, z]        # m
       rotation_xyzw: [x, y, z, w]
       matrix: [[...], [...], [...], [0, 0, 0, 1]]
-      uncertainty: {translation_m: [sx, sy, sz], rotation_rad: [rx, ry, rz]}   # 1 sigma, or null
+      uncertainty:                  # 1 sigma, or null
+        translation_m: [sx, sy, sz]   # of the sensor origin, flange axes
+        rotation_rad: [rx, ry, rz]    # about the sensor axes
+        measuring_centre_m: [0, 0, z_c]   # sensor frame: the used points' mean depth
+        at_measuring_centre_m: [sx, sy, sz]   # of that point, flange axes
     cylinder: {frame: base_link, point: [x, y, z], direction: [x, y, z], radius: r}
     quality: {method: ..., samples_used: N, samples_rejected: [...], rms_residual_m: ...,
-              warnings: [...]}
+              warnings: [...], accuracy_in_use_m: ..., accuracy_in_use: {...}, self_check: {...}}
 
 The target's section (``cylinder`` above; ``known_point``, ...) is the target's own: its
 name, content and extra ``quality`` entries (the cylinder's ``radius_estimated``) come from
@@ -52,6 +56,7 @@ from linelaser_calib.core.geometry import (
 from linelaser_calib.core.planning import Plan
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections
+from linelaser_calib.core.selfcheck import sigma_at_point
 from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
 from linelaser_calib.core.types import Rejection
@@ -168,6 +173,22 @@ def kinematics_to_dict(
     return section
 
 
+def _measuring_centre(result: CalibrationResult) -> dict[str, list[float]]:
+    """The uncertainty's ``measuring_centre_m`` (sensor frame, m) and the 1σ there
+    (``at_measuring_centre_m``, flange axes, m), when the result has both 1σ and points."""
+    unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+    depth = result.measuring_centre_depth_m
+    if unc_t is None or unc_r is None or depth is None:
+        return {}
+    centre = np.array([0.0, 0.0, depth])
+    return {
+        "measuring_centre_m": plain_floats(centre),
+        "at_measuring_centre_m": plain_floats(
+            sigma_at_point(result.T_flange_sensor, unc_r, unc_t, centre)
+        ),
+    }
+
+
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     """The result in the contract layout (plain lists and numbers), for YAML and JSON."""
     unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
@@ -178,6 +199,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
         else {
             "translation_m": None if unc_t is None else plain_floats(unc_t),
             "rotation_rad": None if unc_r is None else plain_floats(unc_r),
+            **_measuring_centre(result),
         }
     )
     return {
@@ -459,6 +481,12 @@ def _read_uncertainty(hand_eye: _Fields, key: str) -> FloatArray | None:
     return uncertainty.array(key, (3,)) if uncertainty.has(key) else None
 
 
+def _read_measuring_centre(hand_eye: _Fields) -> float | None:
+    """The depth (m) of the uncertainty's ``measuring_centre_m``, None without one."""
+    centre = _read_uncertainty(hand_eye, "measuring_centre_m")
+    return None if centre is None else float(centre[2])
+
+
 def read_result_yaml(path: str | Path) -> CalibrationResult:
     """Read a result file written by :func:`write_result_yaml` (or by hand, same keys).
 
@@ -507,6 +535,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         sample_residuals_m=residuals,
         uncertainty_translation_m=_read_uncertainty(hand_eye, "translation_m"),
         uncertainty_rotation_rad=_read_uncertainty(hand_eye, "rotation_rad"),
+        measuring_centre_depth_m=_read_measuring_centre(hand_eye),
         clock_offset_s=quality.number("clock_offset_s") if quality.has("clock_offset_s") else 0.0,
         clock_offset_estimated=quality.flag("clock_offset_estimated"),
         clock_offset_live_s=(

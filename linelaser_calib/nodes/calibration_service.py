@@ -69,6 +69,7 @@ from linelaser_calib.core.planning import Plan, PlanConstraints, fan_shape, plan
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
+from linelaser_calib.core.selfcheck import DEFAULT_ARM_ACCURACY_M
 from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
 from linelaser_calib.core.targets.base import placement_adviser
 from linelaser_calib.io import write_result_yaml
@@ -196,6 +197,15 @@ PARAMETERS = (
         bounds=(0, 2**31 - 1),
     ),
     ParamSpec(
+        "arm_accuracy",
+        DEFAULT_ARM_ACCURACY_M,
+        "Prior 1 sigma per axis, m, of the robot's error common to the whole scanned "
+        "workspace (its absolute accuracy there), which no subset of the poses can see: part "
+        "of the hand-eye's 1 sigma when the robot's error looks systematic (default method; "
+        "not used with kinematics, whose joint calibration estimates that error).",
+        bounds=(0.0, 1.0),
+    ),
+    ParamSpec(
         "diagnostics_period_s",
         1.0,
         "Period of the /diagnostics status (samples held), s.",
@@ -290,6 +300,7 @@ def pipeline_config(
         settings,
         Front.NODE,
         seed=values["seed"],
+        arm_accuracy_m=float(values["arm_accuracy"]),
     )
 
 

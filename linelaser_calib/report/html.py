@@ -21,6 +21,7 @@ from linelaser_calib.io.results import Truth
 from linelaser_calib.report.errors import ReportError
 from linelaser_calib.summary import (
     Rows,
+    accuracy_in_use_line,
     hand_eye_rows,
     rejection_lines,
     residual_rows,
@@ -79,6 +80,7 @@ def _page(
 ) -> str:
     """The HTML text; ``figures`` holds (file, title, caption) of the written PNGs."""
     method = "maximum likelihood (default)" if result.method == "default" else result.method
+    accuracy = accuracy_in_use_line(result)
     header: Rows = [
         *inputs,
         ("method", method),
@@ -90,6 +92,7 @@ def _page(
         "<title>linelaser_calib report</title>",
         f"<style>{_STYLE}</style></head><body>",
         "<h1>Line-laser hand-eye calibration</h1>",
+        *([] if accuracy is None else [f'<p class="accuracy">{html.escape(accuracy)}</p>']),
         _table(header),
         f"<h2>Hand-eye T_flange_sensor ({html.escape(result.parent_frame)} &rarr; "
         f"{html.escape(result.child_frame)})</h2>",
