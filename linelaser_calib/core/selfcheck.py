@@ -707,7 +707,7 @@ def _warnings(check: SelfCheck) -> list[str]:
         shared = (
             f" plus the stated prior of {check.arm_accuracy_m * 1e3:.3f} mm (1 sigma) on the "
             "arm's error common to the whole workspace, which no subset of the poses can see "
-            "(--arm-accuracy)"
+            "({setting:arm_accuracy_m})"
             if check.arm_accuracy_m > 0.0
             else ""
         )
@@ -727,7 +727,7 @@ def _warnings(check: SelfCheck) -> list[str]:
             f"{', '.join(f'{np.degrees(v):.4f}' for v in check.sigma_honest[:3])} deg "
             f"({factor_t:.1f}x and {factor_r:.1f}x the noise model's). "
             + use
-            + "Flange poses from a kinematically calibrated robot model (--kinematics with "
+            + "Flange poses from a kinematically calibrated robot model ({setting:kinematics} with "
             "joint states) remove the systematic part"
         )
     if check.pose_clusters <= FEW_CLUSTERS:
