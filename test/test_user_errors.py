@@ -553,3 +553,60 @@ def test_the_pipeline_refuses_a_seed_numpy_cannot_take() -> None:
     for bad in (-1, 2**32, 1.5):
         with pytest.raises(InputError, match="the seed must be a whole number"):
             PipelineConfig(seed=bad)  # type: ignore[arg-type]
+
+
+def millimetre_result(tmp_path: Path) -> Path:
+    """A result file whose hand-eye translation was written in millimetres."""
+    path = tmp_path / "result_mm.yaml"
+    path.write_text(
+        "hand_eye:\n  parent_frame: tool0\n  child_frame: laser\n"
+        "  translation: [80.0, 100.0, 0.0]\n  rotation_xyzw: [0, 0, 0, 1]\n"
+        "cylinder: {frame: base_link, point: [0, 0, 0], direction: [0, 0, 1], radius: 0.02}\n"
+        "quality: {method: default, samples_used: [0, 1, 2], samples_rejected: [], "
+        "rms_residual_m: 5.0e-6, warnings: []}\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+@pytest.mark.parametrize("verb", ["export", "reconstruct", "initial"])
+def test_every_command_refuses_a_result_in_millimetres_alike(
+    verb: str, good_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One reader, one set of checks: export and reconstruct refuse what --initial refuses."""
+    result = millimetre_result(tmp_path)
+    out = tmp_path / "cloud.ply"
+    argv = {
+        "export": ["export", str(result), "--format", "urdf"],
+        "reconstruct": [
+            "reconstruct",
+            str(good_bag),
+            "--calibration",
+            str(result),
+            "--output",
+            str(out),
+        ],
+        "initial": ["calibrate", str(good_bag), "--initial", str(result)],
+    }[verb]
+    expect_error(argv, capsys, str(result), "128.1 m from the flange: are these millimetres?")
+    assert not out.exists()
+
+
+def test_a_yaml_error_names_the_file_and_the_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "broken.yaml"
+    path.write_text("hand_eye:\n  translation: [0.1, 0.2\n  rotation_xyzw: }\n", encoding="utf-8")
+    err = expect_error(
+        ["export", str(path), "--format", "urdf"], capsys, f"{path} is not valid YAML", "line 3"
+    )
+    assert "<unicode string>" not in err
+
+
+def test_a_missing_urdf_is_no_such_file(good_bag: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    err = expect_error(
+        ["calibrate", str(good_bag), "--kinematics", "/nonexistent.urdf"],
+        capsys,
+        "/nonexistent.urdf: no such file",
+    )
+    assert "neither a preset" not in err
