@@ -331,7 +331,23 @@ def test_truncated_bag(tmp_path: Path, good_bag: Path, capsys: pytest.CaptureFix
     shutil.copytree(good_bag, bag)
     storage = next(bag.glob("*.mcap"))
     storage.write_bytes(storage.read_bytes()[: storage.stat().st_size // 2])
-    expect_error(["calibrate", str(bag)], capsys, "truncated or corrupt", "re-record")
+    err = expect_error(["calibrate", str(bag)], capsys, "truncated or corrupt", "re-record")
+    assert ".." not in err
+    if shutil.which("mcap") is None:
+        assert "mcap CLI (not installed on this machine" in err
+
+
+def test_a_storage_file_missing_from_the_bag_is_named(
+    tmp_path: Path, good_bag: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = tmp_path / "bag"
+    shutil.copytree(good_bag, bag)
+    storage = next(bag.glob("*.mcap"))
+    storage.unlink()
+    err = expect_error(
+        ["calibrate", str(bag)], capsys, f"its metadata.yaml names {storage.name}, which is missing"
+    )
+    assert "truncated" not in err
 
 
 # --- dirty data is handled ------------------------------------------------------------------
