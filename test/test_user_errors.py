@@ -626,3 +626,20 @@ def test_a_missing_urdf_is_no_such_file(good_bag: Path, capsys: pytest.CaptureFi
         "/nonexistent.urdf: no such file",
     )
     assert "neither a preset" not in err
+
+
+def test_the_cylinder_on_a_v_seam_names_the_seam_targets(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A straight seam scanned in motion: the cylinder target names known_point and line,
+    not the speed gate (more profiles of a V would not give an arc)."""
+    bag = tmp_path / "seam"
+    assert main(["simulate", str(bag), "--scenario", "line", "--poses", "10"]) == 0
+    capsys.readouterr()
+    err = expect_error(
+        ["calibrate", str(bag)],
+        capsys,
+        "straight pieces and no arc",
+        "--target known_point (a corner point) or line (a straight seam)",
+    )
+    assert "speed gate" not in err and "--max-speed" not in err

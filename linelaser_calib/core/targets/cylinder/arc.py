@@ -103,6 +103,10 @@ class ArcFit:
     grazing_shift_sigmas: float = math.nan
 
 
+#: How a profile rejected for showing only straight pieces (no arc) begins.
+NO_CURVE = "no curved piece"
+
+
 def incidence_cosines(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
     """|cos| of the angle between the ray to each point and the conic's normal there, (M,)."""
     a, b, c, d, e, _ = conic
@@ -211,7 +215,7 @@ def fit_arc_in_scene(
     candidates = [s for s in segmented.curves() if len(s.indices) >= scaled.min_inliers]
     if not candidates:
         raise ProfileRejected(
-            f"no curved piece of at least {scaled.min_inliers} points beside the "
+            f"{NO_CURVE} of at least {scaled.min_inliers} points beside the "
             f"{len(segmented.lines())} straight piece(s) set aside as planes (tables, walls): "
             f"measured noise {sigma * 1e6:.0f} um; the laser line may miss the cylinder"
         )
