@@ -269,7 +269,18 @@ def hand_eye_seen(truth: Truth, corrections: KinematicCorrections | None = None)
 
 def truth_rows(result: CalibrationResult, truth: Truth) -> Rows:
     """The error against the truth (:func:`hand_eye_seen`): totals and per axis, beside the
-    1 sigma when known."""
+    1 sigma when known; only between hand-eyes of the same frames (else one row saying why
+    not)."""
+    ours = (result.parent_frame, result.child_frame)
+    theirs = (truth.parent_frame, truth.child_frame)
+    if ours != theirs:
+        return [
+            (
+                "not compared",
+                f"the result is the hand-eye {ours[0]} -> {ours[1]}, the truth {theirs[0]} -> "
+                f"{theirs[1]}: different frames, so their difference is not an error",
+            )
+        ]
     error = truth_error(result.T_flange_sensor, hand_eye_seen(truth, result.kinematics))
     rows = [
         ("rotation", f"{np.degrees(error.rotation_rad):.4f} deg"),

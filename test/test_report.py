@@ -297,6 +297,17 @@ def test_summary_of_a_thousand_profiles_shows_the_distribution_and_the_worst(
     assert "Samples: 1000 used, 200 rejected" in text
 
 
+def test_truth_in_other_frames_is_not_compared(result: CalibrationResult, truth: Truth) -> None:
+    """Issue 24: --flange-frame flange on a bag whose truth is tool0 -> laser printed a
+    120 deg "error"; hand-eyes of different frames are not compared, and the summary says
+    why."""
+    assert truth.parent_frame == "tool0"
+    text = format_summary(replace(result, parent_frame="flange"), truth)
+    assert "not compared" in text and "flange -> laser" in text and "tool0 -> laser" in text
+    assert "largest error/sigma" not in text and "rotation per axis" not in text
+    assert "rotation per axis" in format_summary(result, truth)
+
+
 def test_json_gives_the_same_result_as_the_yaml(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
