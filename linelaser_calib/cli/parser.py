@@ -215,7 +215,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     for flag, field, kind, text in SIMULATE_OPTIONS:
         sim_p.add_argument(
-            flag, dest=field, type=kind, default=None, help=f"{text} (default: the preset's)"
+            flag,
+            dest=field,
+            metavar=flag.removeprefix("--").upper().replace("-", "_"),
+            type=kind,
+            default=None,
+            help=f"{text} (default: the preset's)",
         )
     layout = sim_p.add_mutually_exclusive_group()
     layout.add_argument(
