@@ -639,7 +639,7 @@ def test_the_cylinder_on_a_v_seam_names_the_seam_targets(
     err = expect_error(
         ["calibrate", str(bag)],
         capsys,
-        "straight pieces and no arc",
+        "straight pieces meeting and no arc",
         "--target known_point (a corner point) or line (a straight seam)",
     )
     assert "speed gate" not in err and "--max-speed" not in err

@@ -22,6 +22,7 @@ If no candidate gives an ellipse, the rejection of the largest candidate is rais
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -103,8 +104,8 @@ class ArcFit:
     grazing_shift_sigmas: float = math.nan
 
 
-#: How a profile rejected for showing only straight pieces (no arc) begins.
-NO_CURVE = "no curved piece"
+#: The number of straight pieces a profile rejected for showing no arc names (its one group).
+STRAIGHT_PIECES = re.compile(r"beside the (\d+) straight piece")
 
 
 def incidence_cosines(conic: FloatArray, points_xz: FloatArray) -> FloatArray:
@@ -215,7 +216,7 @@ def fit_arc_in_scene(
     candidates = [s for s in segmented.curves() if len(s.indices) >= scaled.min_inliers]
     if not candidates:
         raise ProfileRejected(
-            f"{NO_CURVE} of at least {scaled.min_inliers} points beside the "
+            f"no curved piece of at least {scaled.min_inliers} points beside the "
             f"{len(segmented.lines())} straight piece(s) set aside as planes (tables, walls): "
             f"measured noise {sigma * 1e6:.0f} um; the laser line may miss the cylinder"
         )
