@@ -1,10 +1,14 @@
 """ament_python package definition of linelaser_calib."""
 
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from setuptools import find_packages, setup
 
 PACKAGE = "linelaser_calib"
+#: package.xml is the one source of the version; ``linelaser-calib --version`` reads it back
+#: from the installed distribution's metadata.
+VERSION = ET.parse(Path(__file__).parent / "package.xml").getroot().findtext("version")
 
 
 def _share_tree(folder: str) -> list[tuple[str, list[str]]]:
@@ -20,7 +24,7 @@ def _share_tree(folder: str) -> list[tuple[str, list[str]]]:
 
 setup(
     name=PACKAGE,
-    version="0.1.0",
+    version=VERSION,
     packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*", "msg_adapters", "msg_adapters.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),

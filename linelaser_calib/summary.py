@@ -139,8 +139,16 @@ def residual_kind(result: CalibrationResult) -> str:
     return result.target.residual_kind(result.method)
 
 
+#: Percentiles of the per-sample residual shown between its minimum and maximum.
+RESIDUAL_PERCENTILES = (25, 50, 75, 95)
+#: Samples with the largest residual named in a summary (every one is in the result file).
+WORST_SHOWN = 5
+
+
 def residual_rows(result: CalibrationResult) -> Rows:
-    """RMS residual and the per-sample residual statistics, in µm."""
+    """RMS residual, the distribution of the per-sample residual and the worst samples by
+    profile index, in µm (the full list is the result file's
+    ``quality.sample_residuals_m``)."""
     rows = [
         (
             "residual",
@@ -149,12 +157,25 @@ def residual_rows(result: CalibrationResult) -> Rows:
         )
     ]
     if result.sample_residuals_m:
+        indices = np.array(list(result.sample_residuals_m))
         values = np.array(list(result.sample_residuals_m.values())) * 1e6
+        levels = np.percentile(values, RESIDUAL_PERCENTILES)
+        middle = ", ".join(
+            f"{'median' if p == 50 else f'{p}%'} {v:.1f}"
+            for p, v in zip(RESIDUAL_PERCENTILES, levels, strict=True)
+        )
         rows.append(
             (
                 "per-sample residual",
-                f"min {values.min():.1f} um, median {np.median(values):.1f} um, "
-                f"max {values.max():.1f} um",
+                f"min {values.min():.1f}, {middle}, max {values.max():.1f} um",
+            )
+        )
+        worst = np.argsort(-values, kind="stable")[:WORST_SHOWN]
+        rows.append(
+            (
+                "largest residuals",
+                ", ".join(f"#{indices[k]} {values[k]:.1f}" for k in worst)
+                + " um (profile index; every sample's is in the result file)",
             )
         )
     return rows
@@ -316,7 +337,18 @@ def hand_eye_seen(truth: Truth, corrections: KinematicCorrections | None = None)
 
 def truth_rows(result: CalibrationResult, truth: Truth) -> Rows:
     """The error against the truth (:func:`hand_eye_seen`): totals and per axis, beside the
-    1 sigma when known."""
+    1 sigma when known; only between hand-eyes of the same frames (else one row saying why
+    not)."""
+    ours = (result.parent_frame, result.child_frame)
+    theirs = (truth.parent_frame, truth.child_frame)
+    if ours != theirs:
+        return [
+            (
+                "not compared",
+                f"the result is the hand-eye {ours[0]} -> {ours[1]}, the truth {theirs[0]} -> "
+                f"{theirs[1]}: different frames, so their difference is not an error",
+            )
+        ]
     error = truth_error(result.T_flange_sensor, hand_eye_seen(truth, result.kinematics))
     rows = [
         ("rotation", f"{np.degrees(error.rotation_rad):.4f} deg"),
@@ -356,11 +388,6 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
         "Residual:",
         *table(residual_rows(result)),
     ]
-    cells = [f"#{i}:{v * 1e6:.1f}" for i, v in sorted(result.sample_residuals_m.items())]
-    if cells:
-        lines.append("  per-sample residual by profile index, um:")
-    for k in range(0, len(cells), 10):
-        lines.append("    " + " ".join(cells[k : k + 10]))
     if result.self_check is not None:
         lines += ["Self-check:", *table(self_check_rows(result))]
     lines.append(

@@ -18,9 +18,9 @@ from ros_helpers import init_context, new_domain_id, reliable_qos
 from linelaser_calib.cli import main
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.geometry import invert_transform, rotvec_from_matrix
-from linelaser_calib.core.robot.kinematics import UR_JOINT_NAMES, forward_kinematics
+from linelaser_calib.core.robot.kinematics import UR_JOINT_NAMES, JointStates, forward_kinematics
 from linelaser_calib.core.types import FlangePose
-from linelaser_calib.io.bags import read_bag
+from linelaser_calib.io.bags import read_bag, write_bag
 from linelaser_calib.io.pose_sources import read_tf
 from linelaser_calib.io.results import read_result_yaml
 from linelaser_calib.nodes import collector
@@ -95,6 +95,37 @@ def test_each_pose_source_gives_the_same_hand_eye_within_a_tenth_of_its_sigma(
         delta = invert_transform(pose.T_flange_sensor) @ other.T_flange_sensor
         assert np.all(np.abs(delta[:3, 3]) < 0.1 * sigma_t), source
         assert np.all(np.abs(rotvec_from_matrix(delta[:3, :3])) < 0.1 * sigma_r), source
+
+
+def test_joint_states_ending_before_the_last_profile_drop_it_and_say_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A recording stopped by hand: /joint_states ends 5 ms before the last profile. The
+    kinematic calibration leaves that profile out, names it, and calibrates from the rest
+    (translation within 3 sigma of the truth) instead of refusing the recording."""
+    data = simulate(scenario_from_preset("ur5e_cell"), SEED)
+    states = data.joint_states
+    assert states is not None
+    keep = states.stamps_ns <= data.profiles[-1].stamp_ns - 5_000_000
+    short = JointStates(states.names, states.stamps_ns[keep], states.positions[keep])
+    bag = write_bag(tmp_path / "bag", data.profiles, data.poses, joint_states=short)
+    out = tmp_path / "result.yaml"
+    argv = ["calibrate", str(bag), "--kinematics", "ur5e"]
+    assert main([*argv, "--output", str(out)]) == 0
+    printed = capsys.readouterr().out
+    last = len(data.profiles) - 1
+    result = read_result_yaml(out)
+    assert [r.index for r in result.samples_rejected] == [last]
+    assert "after the joint-state stream" in result.samples_rejected[0].reason
+    assert len(result.samples_used) == last
+    assert any(
+        f"outside the joint-state stream and were left out (#{last})" in w for w in result.warnings
+    )
+    assert f"[profiles {last}]" in printed
+    sigma_t = result.uncertainty_translation_m
+    assert sigma_t is not None
+    error = result.T_flange_sensor[:3, 3] - data.truth.T_flange_sensor[:3, 3]
+    assert np.all(np.abs(error) < 3.0 * sigma_t + 1e-4)
 
 
 # -- the collector's live input -------------------------------------------------------------

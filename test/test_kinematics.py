@@ -91,8 +91,10 @@ def test_urdf_file_and_its_errors(tmp_path) -> None:  # type: ignore[no-untyped-
     )
     with pytest.raises(InputError, match=r"no link .flange.*tool0"):
         load_model(str(path), flange_frame="flange")
-    with pytest.raises(InputError, match="neither a preset"):
+    with pytest.raises(InputError, match=r"missing.urdf: no such file"):
         load_model(str(tmp_path / "missing.urdf"))
+    with pytest.raises(InputError, match="neither a preset"):
+        load_model("ur3")
     with pytest.raises(InputError, match="not valid XML"):
         model_from_urdf("<robot>")
     broken = ur_urdf().replace('<parent link="link_2"/>', '<parent link="nowhere"/>')

@@ -345,6 +345,31 @@ def stop_and_go_poses(rng: np.random.Generator) -> tuple[list[FlangePose], list[
     return poses, stops
 
 
+def test_nothing_accepted_says_how_many_and_why_with_the_mode_to_use() -> None:
+    """Poses published only around each shot (+-15 ms, the flange elsewhere between shots):
+    stop_and_go cannot confirm a standstill, and the collector says so with the fix."""
+    c, _ = make_collector(mode=Mode.STOP_AND_GO)
+    assert c.nothing_accepted() is None
+    for k in range(10):
+        T = transform_from_rotvec_translation([0.1, -0.2, 0.3], [0.4 + 0.05 * k, 0.1, 0.5])
+        c.add_pose(FlangePose(ns(k - 0.015), T), now_s=0.0)
+        c.add_profile(profile(float(k)), now_s=0.0)
+        c.add_pose(FlangePose(ns(k + 0.015), T), now_s=0.0)
+    c.release(now_s=100.0)
+    assert drain(c) == []
+    assert_all_counted(c)
+    text = c.nothing_accepted()
+    assert text is not None
+    assert text.startswith("received 10 profiles and set every one aside (10 x skipped: robot")
+    assert "standstill_s (0.1 s)" in text
+    assert "mode:=on_demand" in text and "mode:=continuous" in text
+    c.add_profile(profile(20.5), now_s=0.0)
+    feed_poses(c, resting_poses(20.0, 21.0))
+    c.release(now_s=200.0)
+    assert drain(c) == [10]
+    assert c.nothing_accepted() is None
+
+
 def test_stop_and_go_takes_one_valid_sample_per_standstill_and_counts_the_moving_ones() -> None:
     poses, stops = stop_and_go_poses(np.random.default_rng(3))
     c, logged = make_collector(mode=Mode.STOP_AND_GO, standstill_s=0.3)

@@ -278,6 +278,42 @@ def test_summary_has_everything_issue_6_asks_for(result: CalibrationResult, trut
     assert "Error against truth" in text
 
 
+def test_summary_of_a_thousand_profiles_shows_the_distribution_and_the_worst(
+    result: CalibrationResult, truth: Truth
+) -> None:
+    """Issue 24: a summary lists no residual per profile; a 1,000-profile one fits 80 lines."""
+    rng = np.random.default_rng(24)
+    residuals = {i: float(v) for i, v in enumerate(rng.uniform(3e-6, 6e-6, 1000))}
+    residuals[777] = 50e-6
+    residuals[123] = 40e-6
+    rejected = [Rejection(1000 + k, 0, "pairing", f"reason {k % 3}") for k in range(200)]
+    big = replace(
+        result,
+        samples_used=list(residuals),
+        sample_residuals_m=residuals,
+        samples_rejected=rejected,
+    )
+    text = format_summary(big, truth)
+    assert len(text.splitlines()) <= 80
+    values = np.array(list(residuals.values())) * 1e6
+    assert f"median {np.median(values):.1f}" in text
+    assert f"95% {np.percentile(values, 95):.1f}" in text
+    assert f"min {values.min():.1f}" in text and "max 50.0 um" in text
+    assert "#777 50.0, #123 40.0, " in text
+    assert "Samples: 1000 used, 200 rejected" in text
+
+
+def test_truth_in_other_frames_is_not_compared(result: CalibrationResult, truth: Truth) -> None:
+    """Issue 24: --flange-frame flange on a bag whose truth is tool0 -> laser printed a
+    120 deg "error"; hand-eyes of different frames are not compared, and the summary says
+    why."""
+    assert truth.parent_frame == "tool0"
+    text = format_summary(replace(result, parent_frame="flange"), truth)
+    assert "not compared" in text and "flange -> laser" in text and "tool0 -> laser" in text
+    assert "largest error/sigma" not in text and "rotation per axis" not in text
+    assert "rotation per axis" in format_summary(result, truth)
+
+
 def test_json_gives_the_same_result_as_the_yaml(
     bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -287,6 +287,47 @@ def test_restarted_service_gets_every_sample_again_at_10x(
     check_against_truth(probe.hand_eye(), committed_replay.T_flange_sensor, "after a restart")
 
 
+#: A robot program that publishes the flange pose only when it stops: one pose this long
+#: before and one this long after each shot, s (within the pairing's 20 ms tolerance).
+BRACKET_S = 0.015
+
+
+def test_calibrate_says_why_the_collector_set_every_profile_aside(graph: Graph) -> None:
+    """Issue 24: poses that only bracket each shot (+-15 ms) cannot show the standstill that
+    stop_and_go waits for, so the collector sets every profile aside; /calibrate then says
+    how many it received, why they were set aside and which mode to use, instead of "none
+    received"."""
+    data = simulate(scenario_from_preset("ur_scancontrol", **SHORT_SCAN), seed=2)
+    stamps = np.array([q.stamp_ns for q in data.poses])
+    bracket_ns = round(BRACKET_S * 1e9)
+    poses = []
+    for profile in data.profiles:
+        at = data.poses[int(np.argmin(np.abs(stamps - profile.stamp_ns)))]
+        poses += [
+            FlangePose(profile.stamp_ns + k * bracket_ns, at.T_base_flange, at.frame_id)
+            for k in (-1, 1)
+        ]
+    recording = Recording.from_data(data.profiles, poses)
+    graph.collector(*params(reliable_inputs=True))
+    graph.service()
+    probe = graph.probe
+    player = probe.player()
+    player.wait_matched()
+    sent = player.play(recording, rate=4.0)
+    values = probe.wait_counts(20.0, profiles_received=sent, profiles_pending=0)
+    assert settled(values) == 0
+
+    def answer() -> str | None:
+        message = str(probe.call("/calibrate").message)
+        return message if f"received {sent} profiles" in message else None
+
+    message = wait_for(answer, 10.0, "the collector's reason in /calibrate's answer")
+    assert message.startswith("no samples yet: the collector received")
+    assert f"{sent} x skipped: robot moving or settling" in message
+    assert "mode:=on_demand" in message and "mode:=continuous" in message
+    assert "none received" not in message
+
+
 def test_on_demand_capture_and_clear(graph: Graph, committed_replay: Replay) -> None:
     graph.collector(*params(reliable_inputs=True, mode="on_demand"))
     graph.service()

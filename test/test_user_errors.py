@@ -331,7 +331,23 @@ def test_truncated_bag(tmp_path: Path, good_bag: Path, capsys: pytest.CaptureFix
     shutil.copytree(good_bag, bag)
     storage = next(bag.glob("*.mcap"))
     storage.write_bytes(storage.read_bytes()[: storage.stat().st_size // 2])
-    expect_error(["calibrate", str(bag)], capsys, "truncated or corrupt", "re-record")
+    err = expect_error(["calibrate", str(bag)], capsys, "truncated or corrupt", "re-record")
+    assert ".." not in err
+    if shutil.which("mcap") is None:
+        assert "mcap CLI (not installed on this machine" in err
+
+
+def test_a_storage_file_missing_from_the_bag_is_named(
+    tmp_path: Path, good_bag: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = tmp_path / "bag"
+    shutil.copytree(good_bag, bag)
+    storage = next(bag.glob("*.mcap"))
+    storage.unlink()
+    err = expect_error(
+        ["calibrate", str(bag)], capsys, f"its metadata.yaml names {storage.name}, which is missing"
+    )
+    assert "truncated" not in err
 
 
 # --- dirty data is handled ------------------------------------------------------------------
@@ -553,3 +569,77 @@ def test_the_pipeline_refuses_a_seed_numpy_cannot_take() -> None:
     for bad in (-1, 2**32, 1.5):
         with pytest.raises(InputError, match="the seed must be a whole number"):
             PipelineConfig(seed=bad)  # type: ignore[arg-type]
+
+
+def millimetre_result(tmp_path: Path) -> Path:
+    """A result file whose hand-eye translation was written in millimetres."""
+    path = tmp_path / "result_mm.yaml"
+    path.write_text(
+        "hand_eye:\n  parent_frame: tool0\n  child_frame: laser\n"
+        "  translation: [80.0, 100.0, 0.0]\n  rotation_xyzw: [0, 0, 0, 1]\n"
+        "cylinder: {frame: base_link, point: [0, 0, 0], direction: [0, 0, 1], radius: 0.02}\n"
+        "quality: {method: default, samples_used: [0, 1, 2], samples_rejected: [], "
+        "rms_residual_m: 5.0e-6, warnings: []}\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+@pytest.mark.parametrize("verb", ["export", "reconstruct", "initial"])
+def test_every_command_refuses_a_result_in_millimetres_alike(
+    verb: str, good_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One reader, one set of checks: export and reconstruct refuse what --initial refuses."""
+    result = millimetre_result(tmp_path)
+    out = tmp_path / "cloud.ply"
+    argv = {
+        "export": ["export", str(result), "--format", "urdf"],
+        "reconstruct": [
+            "reconstruct",
+            str(good_bag),
+            "--calibration",
+            str(result),
+            "--output",
+            str(out),
+        ],
+        "initial": ["calibrate", str(good_bag), "--initial", str(result)],
+    }[verb]
+    expect_error(argv, capsys, str(result), "128.1 m from the flange: are these millimetres?")
+    assert not out.exists()
+
+
+def test_a_yaml_error_names_the_file_and_the_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "broken.yaml"
+    path.write_text("hand_eye:\n  translation: [0.1, 0.2\n  rotation_xyzw: }\n", encoding="utf-8")
+    err = expect_error(
+        ["export", str(path), "--format", "urdf"], capsys, f"{path} is not valid YAML", "line 3"
+    )
+    assert "<unicode string>" not in err
+
+
+def test_a_missing_urdf_is_no_such_file(good_bag: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    err = expect_error(
+        ["calibrate", str(good_bag), "--kinematics", "/nonexistent.urdf"],
+        capsys,
+        "/nonexistent.urdf: no such file",
+    )
+    assert "neither a preset" not in err
+
+
+def test_the_cylinder_on_a_v_seam_names_the_seam_targets(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A straight seam scanned in motion: the cylinder target names known_point and line,
+    not the speed gate (more profiles of a V would not give an arc)."""
+    bag = tmp_path / "seam"
+    assert main(["simulate", str(bag), "--scenario", "line", "--poses", "10"]) == 0
+    capsys.readouterr()
+    err = expect_error(
+        ["calibrate", str(bag)],
+        capsys,
+        "straight pieces meeting and no arc",
+        "--target known_point (a corner point) or line (a straight seam)",
+    )
+    assert "speed gate" not in err and "--max-speed" not in err

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Sequence
+from importlib.metadata import PackageNotFoundError, version
+from typing import NoReturn
 
 import numpy as np
 
@@ -22,13 +25,13 @@ from linelaser_calib.cli.arguments import (
     xyz,
 )
 from linelaser_calib.cli.common import PROG
-from linelaser_calib.cli.simulate import SIMULATE_OPTIONS
+from linelaser_calib.cli.simulate import SCENARIO_PRESETS, SIMULATE_OPTIONS
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method
 from linelaser_calib.core.planning import PlanConstraints
 from linelaser_calib.core.pose_source import PoseSource
-from linelaser_calib.core.targets import DEFAULT_TARGET, target_names
+from linelaser_calib.core.targets import DEFAULT_TARGET, plannable_target_names, target_names
 from linelaser_calib.io.initial import FORMS
 from linelaser_calib.settings import Front, render
 
@@ -39,13 +42,14 @@ CALIBRATE_NUMBERS: tuple[tuple[str, Callable[[str], float], float, str], ...] = 
         non_negative_float,
         PairingConfig.max_linear_speed_m_s,
         "reject profiles taken while the flange moved faster, m/s; 0 accepts any "
-        "(continuous scanning with a good clock)",
+        "(continuous scanning with a good clock) (default %(default)s)",
     ),
     (
         "--max-angular-speed",
         non_negative_float,
         PairingConfig.max_angular_speed_rad_s,
-        "reject profiles taken while the flange turned faster, rad/s; 0 accepts any",
+        "reject profiles taken while the flange turned faster, rad/s; 0 accepts any "
+        "(default %(default)s)",
     ),
 )
 
@@ -86,7 +90,8 @@ TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
     (
         "--min-samples",
         min_samples,
-        "fewest samples with a usable feature (ellipse, corner, ...); default the target's",
+        "fewest samples with a usable feature (ellipse, corner, ...), unitless (default: the "
+        "target's)",
     ),
 )
 
@@ -110,7 +115,7 @@ def _add_pairing_arguments(parser: argparse.ArgumentParser, clock_offset_help: s
         "--sync-tolerance",
         type=positive_float,
         default=PairingConfig.sync_tolerance_s,
-        help="largest profile-to-pose stamp gap, s",
+        help="largest profile-to-pose stamp gap, s (default %(default)s)",
     )
     parser.add_argument("--clock-offset", type=offset, default=None, help=clock_offset_help)
     for flag, parse, default, text in CALIBRATE_NUMBERS:
@@ -130,10 +135,14 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
         "--kinematics)",
     )
     cal.add_argument(
-        "--base-frame", default="base_link", help="robot base frame (start of the TF chain)"
+        "--base-frame",
+        default="base_link",
+        help="robot base frame (start of the TF chain; default %(default)s)",
     )
     cal.add_argument(
-        "--flange-frame", default="tool0", help="frame id of the flange (end of the TF chain)"
+        "--flange-frame",
+        default="tool0",
+        help="frame id of the flange (end of the TF chain; default %(default)s)",
     )
     cal.add_argument(
         "--kinematics",
@@ -144,7 +153,7 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
     )
     cal.add_argument(
         "--joint-state-topic",
-        help="JointState topic (default /joint_states, else the only JointState topic)",
+        help="JointState topic (default: /joint_states, else the only JointState topic)",
     )
     cal.add_argument(
         "--invalid-value",
@@ -153,7 +162,7 @@ def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
         default=[],
         metavar="M",
         help="a depth z, m, that the profiler sends for no return besides NaN/Inf, e.g. "
-        "-0.999999 (Keyence's -999.999 mm) or 0; repeat for several",
+        "-0.999999 (Keyence's -999.999 mm) or 0; repeat for several (default: none)",
     )
 
 
@@ -165,12 +174,33 @@ def _add_initial_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+#: Exit code of a usage error (argparse's; docs/reference.md, "Exit status").
+USAGE_ERROR = 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage error is one line and a pointer to the help, not the
+    whole usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(USAGE_ERROR, f"{self.prog}: error: {message}\nsee '{self.prog} --help'\n")
+
+
+def package_version() -> str:
+    """The installed package's version (setup.py takes it from package.xml)."""
+    try:
+        return version("linelaser_calib")
+    except PackageNotFoundError:
+        return "unknown (the package is not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``linelaser-calib``."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog=PROG,
         description="Hand-eye calibration of a line-laser profile sensor from scans of a target.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     sim_p = sub.add_parser("simulate", help="write a synthetic rosbag2 MCAP bag and truth.yaml")
@@ -178,15 +208,20 @@ def build_parser() -> argparse.ArgumentParser:
     sim_p.add_argument(
         "--scenario",
         default="paper",
-        help=(
-            "preset: paper, ur_scancontrol, continuous, ur5e_kinematic, ur5e_cell, "
-            "cluttered_camera, cylinder_keyence, cylinder_scancontrol, cylinder_gocator, "
-            "weld_seam, weld_seam_general, sphere, sphere_sszn, line, line_features"
-        ),
+        help=f"preset: {', '.join(SCENARIO_PRESETS)} (default %(default)s)",
     )
-    sim_p.add_argument("--seed", type=seed, default=0)
-    for flag, field, kind in SIMULATE_OPTIONS:
-        sim_p.add_argument(flag, dest=field, type=kind, default=None, help=f"scenario {field}")
+    sim_p.add_argument(
+        "--seed", type=seed, default=0, help="seed of the simulation, unitless (default 0)"
+    )
+    for flag, field, kind, text in SIMULATE_OPTIONS:
+        sim_p.add_argument(
+            flag,
+            dest=field,
+            metavar=flag.removeprefix("--").upper().replace("-", "_"),
+            type=kind,
+            default=None,
+            help=f"{text} (default: the preset's)",
+        )
     layout = sim_p.add_mutually_exclusive_group()
     layout.add_argument(
         "--organised",
@@ -224,7 +259,7 @@ def build_parser() -> argparse.ArgumentParser:
     convert_p.set_defaults(func=convert.run)
 
     info_p = sub.add_parser("info", help="print what a bag holds")
-    info_p.add_argument("bag")
+    info_p.add_argument("bag", help="rosbag2 directory, .mcap file or collector session directory")
     info_p.set_defaults(func=info.run)
 
     cal_p = sub.add_parser("calibrate", help="calibrate the hand-eye from a bag")
@@ -232,6 +267,7 @@ def build_parser() -> argparse.ArgumentParser:
     cal_p.add_argument(
         "placements",
         nargs="*",
+        default=[],
         metavar="BAG",
         help="with --kinematics: recordings of other placements of the target by the same arm "
         "and sensor, calibrated together with the first (one hand-eye, one set of kinematic "
@@ -239,7 +275,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     cal_p.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
     cal_p.add_argument("--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)")
-    cal_p.add_argument("--method", choices=[m.value for m in Method], default=Method.DEFAULT.value)
+    cal_p.add_argument(
+        "--method",
+        choices=[m.value for m in Method],
+        default=Method.DEFAULT.value,
+        help="default: maximum likelihood on every inlier point with the robot's pose error "
+        "modelled; paper: the source paper's method (default %(default)s)",
+    )
     cal_p.add_argument(
         "--target",
         choices=target_names(),
@@ -260,7 +302,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
     )
     _add_initial_argument(cal_p)
-    cal_p.add_argument("--seed", type=seed, default=0, help="seed of RANSAC and PSO")
+    cal_p.add_argument(
+        "--seed", type=seed, default=0, help="seed of RANSAC and PSO, unitless (default 0)"
+    )
     _add_pairing_arguments(
         cal_p,
         "added to profile stamps to reach the pose clock, s (default 0); 'auto' estimates "
@@ -274,9 +318,9 @@ def build_parser() -> argparse.ArgumentParser:
     cal_p.add_argument(
         "--scale",
         metavar="auto|fixed|free",
-        help="cylinder target, default method: the sensor's along-line (x) scale, estimated "
-        "with the hand-eye (free) or held at 1 (fixed); default auto: free when --radius is "
-        "given",
+        help="cylinder target, default method: the sensor's along-line (x) scale, unitless, "
+        "estimated with the hand-eye (free) or held at 1 (fixed); default auto: free when "
+        "--radius is given",
     )
     _add_pose_source_arguments(cal_p)
     cal_p.add_argument(
@@ -306,7 +350,12 @@ def build_parser() -> argparse.ArgumentParser:
     plan_p.add_argument(
         "bag", nargs="?", help="rosbag2 directory, .mcap file or session of the scans so far"
     )
-    plan_p.add_argument("--target", choices=target_names(), default=DEFAULT_TARGET)
+    plan_p.add_argument(
+        "--target",
+        choices=plannable_target_names(),
+        default=DEFAULT_TARGET,
+        help="what is scanned; the targets whose poses can be planned (default %(default)s)",
+    )
     plan_p.add_argument("--profile-topic", help="PointCloud2 topic (auto-detected by type)")
     plan_p.add_argument(
         "--pose-topic", help="PoseStamped flange-pose topic (auto-detected by type)"
@@ -321,10 +370,13 @@ def build_parser() -> argparse.ArgumentParser:
     plan_p.add_argument(
         "--cylinder",
         type=numbers,
-        help="px,py,pz,dx,dy,dz: a point on the cylinder axis and its direction (base frame, m)",
+        help="px,py,pz,dx,dy,dz: a point on the cylinder axis and its direction (base frame, "
+        "m; default: from --from or the bag)",
     )
     plan_p.add_argument(
-        "--sphere", type=numbers, help="cx,cy,cz: the centre of the sphere (base frame, m)"
+        "--sphere",
+        type=numbers,
+        help="cx,cy,cz: the centre of the sphere (base frame, m; default: from --from or the bag)",
     )
     plan_p.add_argument(
         "--axial-range",
@@ -338,20 +390,27 @@ def build_parser() -> argparse.ArgumentParser:
         help="ur5e, ur10e or a URDF: also say whether another placement of the cylinder would "
         "determine more of the robot's kinematics (from the bag's scans and /joint_states)",
     )
-    plan_p.add_argument("--n", type=int, default=10, help="poses to plan (default 10)")
-    plan_p.add_argument("--goal-mm", type=positive_float, help="stop at this 1 sigma, mm")
-    plan_p.add_argument("--goal-deg", type=positive_float, help="stop at this 1 sigma, deg")
+    plan_p.add_argument(
+        "--n", type=int, default=10, help="poses to plan, unitless (default %(default)s)"
+    )
+    plan_p.add_argument(
+        "--goal-mm", type=positive_float, help="stop at this 1 sigma, mm (default: none)"
+    )
+    plan_p.add_argument(
+        "--goal-deg", type=positive_float, help="stop at this 1 sigma, deg (default: none)"
+    )
     plan_p.add_argument(
         "--range",
         type=span,
         default=(PlanConstraints.z_min_m, PlanConstraints.z_max_m),
-        help="measuring range of the profiler, m (default 0.07,0.15)",
+        help="measuring range of the profiler, LO,HI in m (default "
+        f"{PlanConstraints.z_min_m},{PlanConstraints.z_max_m})",
     )
     plan_p.add_argument(
         "--fan-deg",
         type=positive_float,
         default=float(np.rad2deg(PlanConstraints.fan_half_angle_rad)),
-        help="half opening of the laser fan, deg (default 25)",
+        help="half opening of the laser fan, deg (default %(default)g)",
     )
     plan_p.add_argument(
         "--reach-centre",
@@ -362,19 +421,21 @@ def build_parser() -> argparse.ArgumentParser:
         "--reach",
         type=positive_float,
         default=PlanConstraints.reach_half_extent_m,
-        help="half side of the reach box, m (default 0.25)",
+        help="half side of the reach box, m (default %(default)s)",
     )
     plan_p.add_argument(
         "--table-height",
         type=float,
         default=PlanConstraints.table_height_m,
-        help="base z of the table; sensor and flange stay above it, m (default 0)",
+        help="base z of the table; sensor and flange stay above it, m (default %(default)s)",
     )
     plan_p.add_argument("--no-table", action="store_true", help="no table below the target")
     for flag, parse_setting, text in TARGET_OPTIONS:
         if flag in PLAN_TARGET_OPTIONS:
             plan_p.add_argument(flag, type=parse_setting, default=None, help=text)
-    plan_p.add_argument("--seed", type=seed, default=0, help="seed of the candidate poses")
+    plan_p.add_argument(
+        "--seed", type=seed, default=0, help="seed of the candidate poses, unitless (default 0)"
+    )
     plan_p.add_argument("--output", help="plan YAML to write (its directory must exist)")
     plan_p.add_argument(
         "--figure",
@@ -420,17 +481,37 @@ def build_parser() -> argparse.ArgumentParser:
     export_p.set_defaults(func=export.run)
 
     demo_p = sub.add_parser("demo", help="calibrate the committed bags and compare with truth")
-    demo_p.add_argument("bags", nargs="?", default="bags")
-    demo_p.add_argument("--seed", type=int, default=0)
+    demo_p.add_argument(
+        "bags", nargs="?", default="bags", help="folder of bags with truth (default bags)"
+    )
+    demo_p.add_argument(
+        "--seed", type=seed, default=0, help="seed of RANSAC and PSO, unitless (default 0)"
+    )
     demo_p.set_defaults(func=demo.run)
     return parser
+
+
+def _quiet_broken_pipe() -> int:
+    """The reader of stdout went away (``... | head``): stop quietly, as ``cat`` does.
+
+    Python would report the failed flush of stdout at exit; pointing stdout at /dev/null
+    prevents that. Exit 0: what was read was the result, and the rest was not wanted.
+    """
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args))
+        code = int(args.func(args))
+        sys.stdout.flush()
+        return code
+    except BrokenPipeError:
+        return _quiet_broken_pipe()
     except CalibrationError as exc:
         print(f"{PROG}: error: {render(str(exc), Front.CLI)}", file=sys.stderr)
         return 1

@@ -11,23 +11,69 @@ from linelaser_calib.cli.arguments import xyz
 from linelaser_calib.cli.common import PROG
 from linelaser_calib.io.bags import bag_info, format_bag_info
 
-#: Command-line options of ``simulate`` that override scenario fields: (flag, field, type).
-SIMULATE_OPTIONS: tuple[tuple[str, str, Callable[[str], object]], ...] = (
-    ("--poses", "n_poses", int),
-    ("--radius", "cylinder_radius_m", float),  # the sphere's radius with a sphere preset
-    ("--points", "resolution", int),
-    ("--sensor-sigma", "sigma_depth_m", float),
-    ("--robot-sigma-t", "robot_sigma_translation_m", float),
-    ("--robot-sigma-r", "robot_sigma_rotation_rad", float),
-    ("--spikes", "spike_fraction", float),
-    ("--arm-seed", "kinematic_seed", int),  # the same arm's kinematic errors in other runs
-    ("--cylinder-base", "cylinder_base_m", xyz),  # another placement of the cylinder, m
-    ("--axis", "axis_direction", xyz),
-    ("--profile-topic", "profile_topic", str),
-    ("--pose-topic", "pose_topic", str),
-    ("--sensor-frame", "sensor_frame", str),
-    ("--flange-frame", "flange_frame", str),
-    ("--base-frame", "base_frame", str),
+#: The simulator's presets, named in ``--scenario``'s help without loading the simulator (a
+#: test holds this list equal to :func:`linelaser_calib.sim.recording.preset_names`).
+SCENARIO_PRESETS = (
+    "cluttered_camera",
+    "continuous",
+    "cylinder_gocator",
+    "cylinder_keyence",
+    "cylinder_scancontrol",
+    "line",
+    "line_features",
+    "paper",
+    "sphere",
+    "sphere_sszn",
+    "ur5e_cell",
+    "ur5e_kinematic",
+    "ur_scancontrol",
+    "weld_seam",
+    "weld_seam_general",
+)
+
+#: Command-line options of ``simulate`` that override scenario fields (each defaults to the
+#: preset's value): (flag, field, type, help).
+SIMULATE_OPTIONS: tuple[tuple[str, str, Callable[[str], object], str], ...] = (
+    ("--poses", "n_poses", int, "number of flange poses, unitless"),
+    (
+        "--radius",
+        "cylinder_radius_m",
+        float,
+        "radius of the target, m (the cylinder's, or the sphere's with a sphere preset)",
+    ),
+    ("--points", "resolution", int, "points per profile, unitless"),
+    ("--sensor-sigma", "sigma_depth_m", float, "profiler depth noise, 1 sigma, m"),
+    (
+        "--robot-sigma-t",
+        "robot_sigma_translation_m",
+        float,
+        "robot pose error, 1 sigma per axis, m",
+    ),
+    (
+        "--robot-sigma-r",
+        "robot_sigma_rotation_rad",
+        float,
+        "robot orientation error, 1 sigma per axis, rad",
+    ),
+    ("--spikes", "spike_fraction", float, "fraction of points that are spikes, unitless"),
+    (
+        "--arm-seed",
+        "kinematic_seed",
+        int,
+        "seed of the arm's kinematic errors (the same arm in other runs), unitless",
+    ),
+    (
+        "--cylinder-base",
+        "cylinder_base_m",
+        xyz,
+        "another placement of the cylinder: its base point x,y,z, m, base frame",
+    ),
+    ("--axis", "axis_direction", xyz, "direction of the cylinder axis x,y,z, unitless"),
+    ("--profile-topic", "profile_topic", str, "PointCloud2 topic to write"),
+    ("--pose-topic", "pose_topic", str, "PoseStamped flange-pose topic to write"),
+    ("--sensor-frame", "sensor_frame", str, "frame id of the profiles"),
+    ("--flange-frame", "flange_frame", str, "frame id of the flange"),
+    ("--base-frame", "base_frame", str, "frame id of the robot base"),
 )
 
 
@@ -35,7 +81,7 @@ def simulate_command(
     out: Path, scenario_name: str, seed: int, overrides: dict[str, object], *, tf: bool = False
 ) -> str:
     """The ``linelaser-calib simulate`` command line that regenerates a bag."""
-    flags = {field: flag for flag, field, _ in SIMULATE_OPTIONS}
+    flags = {field: flag for flag, field, _, _ in SIMULATE_OPTIONS}
     words = [PROG, "simulate", str(out), "--scenario", scenario_name, "--seed", str(seed)]
     for field, value in overrides.items():
         if field == "organised":
@@ -52,7 +98,7 @@ def simulate_command(
 def run(args: argparse.Namespace) -> int:
     overrides: dict[str, object] = {
         field: getattr(args, field)
-        for _, field, _ in SIMULATE_OPTIONS
+        for _, field, _, _ in SIMULATE_OPTIONS
         if getattr(args, field) is not None
     }
     if args.organised is not None:

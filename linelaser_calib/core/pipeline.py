@@ -179,6 +179,42 @@ def check_units(samples: list[Sample]) -> None:
         )
 
 
+def _within_joint_states(
+    samples: list[Sample], setup: KinematicSetup
+) -> tuple[list[Sample], list[Rejection]]:
+    """The samples whose stamps the joint-state stream covers, and a rejection for each
+    other (a recording started or stopped by hand: joint states a few ms short).
+
+    Raises
+    ------
+    DegenerateError
+        When the stream covers none of them.
+    """
+    outside = setup.outside([s.stamp_ns for s in samples])
+    if outside.all():
+        raise DegenerateError(
+            f"none of the {len(samples)} profiles lies within the joint-state stream: "
+            f"{setup.outside_reason(samples[0].stamp_ns)} for the first; record the joint "
+            "states for the whole scan, or check the clock offset"
+        )
+    dropped = [
+        Rejection(s.index, s.stamp_ns, "pairing", setup.outside_reason(s.stamp_ns))
+        for s, out in zip(samples, outside, strict=True)
+        if out
+    ]
+    return [s for s, out in zip(samples, outside, strict=True) if not out], dropped
+
+
+def _outside_note(dropped: list[Rejection], where: str) -> str:
+    """A warning naming the profiles left out because the joint states do not cover them."""
+    indices = ", ".join(f"#{r.index}" for r in dropped)
+    return (
+        f"{len(dropped)} profile(s) of {where} lie outside the joint-state stream and were "
+        f"left out ({indices}): the joint states start after or stop before them; record "
+        "the joint states for the whole scan to use them"
+    )
+
+
 def calibrate_samples(
     samples: list[Sample],
     config: PipelineConfig,
@@ -220,6 +256,12 @@ def calibrate_samples(
             "joint states, {setting:kinematics}): calibrate one recording at a time otherwise"
         )
     check_units(samples)
+    joint_notes = []
+    if config.kinematics is not None:
+        samples, outside = _within_joint_states(samples, config.kinematics)
+        rejections += outside
+        if outside:
+            joint_notes.append(_outside_note(outside, "the recording"))
     features, feature_rejections = target.extract(
         samples, target_config, config.seed, progress, config.workers
     )
@@ -229,6 +271,9 @@ def calibrate_samples(
     placement_notes = []
     for k, (more, setup) in enumerate(placements, start=2):
         check_units(more)
+        more, outside = _within_joint_states(more, setup)
+        if outside:
+            placement_notes.append(_outside_note(outside, f"recording {k}"))
         found, lost = target.extract(more, target_config, config.seed, progress, config.workers)
         target.check_features(found, target_config)
         others.append(Placement(found, setup))
@@ -295,6 +340,7 @@ def calibrate_samples(
         uncertainty_translation_m=sigma_t,
         uncertainty_rotation_rad=sigma_r,
         warnings=list(solution.warnings)
+        + joint_notes
         + placement_notes
         + ([] if check is None else check.warnings),
         self_check=check,

@@ -13,10 +13,9 @@ One reader for ``calibrate --initial`` and the ``initial_hand_eye_path`` paramet
 - The named arguments of the Jazzy ``static_transform_publisher``: ``--x --y --z`` with
   ``--qx --qy --qz --qw`` or ``--roll --pitch --yaw`` (an absent one is 0, ``--qw`` 1).
 
-Numbers may be separated by spaces or commas. Hand-written values are checked: a quaternion
-or rotation matrix a little off unit is normalised with a warning and refused when far off;
-a translation over :data:`MAX_TRANSLATION_M` or angles over 2 pi are refused as millimetres
-or degrees.
+Numbers may be separated by spaces or commas. Values are checked as every hand-eye is
+(:mod:`~linelaser_calib.io.hand_eye`: near-unit rotations normalised with a warning,
+millimetres refused); angles over 2 pi are refused as degrees.
 """
 
 from __future__ import annotations
@@ -30,23 +29,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from linelaser_calib.core.errors import InputError
-from linelaser_calib.core.geometry import (
-    matrices_from_quaternions_xyzw,
-    matrix_from_rpy,
-    project_to_so3,
-    transform_from_rotation_translation,
-)
+from linelaser_calib.core.geometry import matrix_from_rpy, transform_from_rotation_translation
 from linelaser_calib.io.errors import ResultFileError
-from linelaser_calib.io.results import MATRIX_TOLERANCE, _load
+from linelaser_calib.io.hand_eye import check_translation, rotation_from_quaternion
+from linelaser_calib.io.results import _load, hand_eye_transform
 
 FloatArray = NDArray[np.float64]
-
-#: Largest hand-eye translation accepted, m: a sensor on a flange is well within 2 m of it.
-MAX_TRANSLATION_M = 2.0
-#: A quaternion whose norm, or a matrix whose orthonormality, is off by more than this is
-#: normalised with a warning; by more than :data:`FAR_OFF_UNIT` it is refused.
-NEAR_UNIT = 1e-6
-FAR_OFF_UNIT = 0.05
 
 FORMS = (
     "a result YAML or a YAML with a hand_eye section (translation in m and rotation_xyzw, or "
@@ -71,40 +59,8 @@ class InitialHandEye(NamedTuple):
     warnings: list[str]
 
 
-def _rotation_from_quaternion(q_xyzw: FloatArray, warnings: list[str]) -> FloatArray:
-    norm = float(np.linalg.norm(q_xyzw))
-    if not abs(norm - 1.0) <= FAR_OFF_UNIT:
-        raise InputError(
-            f"the quaternion {q_xyzw.tolist()} (xyzw) has norm {norm:.4f}, not 1: check the "
-            "order (x y z w, scalar last) and the digits"
-        )
-    if abs(norm - 1.0) > NEAR_UNIT:
-        warnings.append(f"the quaternion {q_xyzw.tolist()} (xyzw) has norm {norm:.6f}; normalised")
-    return matrices_from_quaternions_xyzw(q_xyzw)
-
-
-def _rotation_from_matrix(M: FloatArray, warnings: list[str]) -> FloatArray:
-    off = float(np.max(np.abs(M.T @ M - np.eye(3))))
-    if not (off <= FAR_OFF_UNIT and np.linalg.det(M) > 0.0):
-        raise InputError(
-            f"the matrix's rotation {M.tolist()} is not a rotation (orthonormality off by "
-            f"{off:.4f}, determinant {np.linalg.det(M):.4f})"
-        )
-    if off > NEAR_UNIT:
-        warnings.append(
-            f"the matrix's rotation is off orthonormal by {off:.2g}; the nearest rotation is used"
-        )
-        return project_to_so3(M)
-    return M
-
-
 def _checked(T: FloatArray, warnings: list[str]) -> InitialHandEye:
-    t = T[:3, 3]
-    if not np.linalg.norm(t) <= MAX_TRANSLATION_M:
-        raise InputError(
-            f"the translation {t.tolist()} is {np.linalg.norm(t):.1f} m from the flange: are "
-            f"these millimetres? Give metres, e.g. {(t / 1000.0).round(6).tolist()}"
-        )
+    check_translation(T[:3, 3])
     return InitialHandEye(T, warnings)
 
 
@@ -112,7 +68,7 @@ def _from_numbers(values: list[float]) -> InitialHandEye:
     """The hand-eye from 7 numbers (x y z qx qy qz qw) or 6 (x y z roll pitch yaw)."""
     warnings: list[str] = []
     if len(values) == 7:
-        R = _rotation_from_quaternion(np.array(values[3:]), warnings)
+        R = rotation_from_quaternion(np.array(values[3:]), warnings)
     elif len(values) == 6:
         angles = np.array(values[3:])
         if np.max(np.abs(angles)) > 2.0 * math.pi:
@@ -166,36 +122,10 @@ def _parse_numbers(spec: str) -> InitialHandEye | None:
 
 
 def _from_file(path: Path) -> InitialHandEye:
+    """The hand-eye of a YAML file, read and checked as every result file is."""
     path, fields = _load(path)
-    hand_eye = fields.section("hand_eye")
-    warnings: list[str] = []
-    has_pose = hand_eye.has("translation") or hand_eye.has("rotation_xyzw")
-    if not has_pose and not hand_eye.has("matrix"):
-        raise ResultFileError(
-            f"{path}: hand_eye needs translation and rotation_xyzw, or matrix; it has "
-            f"{sorted(hand_eye.data)}"
-        )
-    try:
-        if has_pose:
-            R = _rotation_from_quaternion(hand_eye.array("rotation_xyzw", (4,)), warnings)
-            T = transform_from_rotation_translation(R, hand_eye.array("translation", (3,)))
-            if (
-                hand_eye.has("matrix")
-                and np.max(np.abs(hand_eye.array("matrix", (4, 4)) - T)) > MATRIX_TOLERANCE
-            ):
-                raise ResultFileError(
-                    f"{path}: hand_eye.matrix disagrees with hand_eye.translation and "
-                    "hand_eye.rotation_xyzw; fix or delete one of them"
-                )
-        else:
-            M = hand_eye.array("matrix", (4, 4))
-            if np.max(np.abs(M[3] - [0.0, 0.0, 0.0, 1.0])) > MATRIX_TOLERANCE:
-                raise ResultFileError(f"{path}: the last row of hand_eye.matrix must be 0 0 0 1")
-            R = _rotation_from_matrix(M[:3, :3], warnings)
-            T = transform_from_rotation_translation(R, M[:3, 3])
-        return _checked(T, warnings)
-    except InputError as err:
-        raise ResultFileError(f"{path}: {err}") from None
+    T, warnings = hand_eye_transform(fields)
+    return InitialHandEye(T, warnings)
 
 
 def read_initial_hand_eye(spec: str) -> InitialHandEye:

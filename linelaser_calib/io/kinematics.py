@@ -117,6 +117,10 @@ def model_from_urdf(
     return urdf_model(robot, chain, base_frame=base_frame, flange_frame=flange_frame)
 
 
+#: File name endings of a robot description: a name ending so is a file, never a preset.
+URDF_SUFFIXES = (".urdf", ".xacro", ".xml")
+
+
 def load_model(
     spec: str, *, base_frame: str = "base_link", flange_frame: str = "tool0"
 ) -> KinematicModel:
@@ -139,9 +143,17 @@ def load_model(
         except InputError as err:
             raise InputError(f"the URDF text: {err}") from None
     path = Path(spec)
+    presets = ", ".join(sorted(UR_DH))
+    if path.is_dir():
+        raise InputError(f"the robot model {spec} is a directory; give a URDF file or a preset")
+    if not path.exists() and (path.suffix in URDF_SUFFIXES or len(path.parts) > 1):
+        raise InputError(
+            f"the robot model {spec}: no such file; give an existing URDF file, a preset "
+            f"({presets}) or the URDF text"
+        )
     if not path.is_file():
         raise InputError(
-            f"--kinematics {spec!r} is neither a preset ({', '.join(sorted(UR_DH))}) nor a "
+            f"--kinematics {spec!r} is neither a preset ({presets}) nor a "
             "URDF file nor URDF text; give one of them"
         )
     try:

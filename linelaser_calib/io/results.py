@@ -48,9 +48,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import (
-    check_quaternion_xyzw,
     check_transform,
-    transform_from_translation_quaternion,
+    transform_from_rotation_translation,
     translation_quaternion_from_transform,
 )
 from linelaser_calib.core.planning import Plan
@@ -61,6 +60,11 @@ from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
 from linelaser_calib.core.types import Rejection
 from linelaser_calib.io.errors import ResultFileError
+from linelaser_calib.io.hand_eye import (
+    check_translation,
+    rotation_from_matrix,
+    rotation_from_quaternion,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -433,26 +437,73 @@ def _load(path: str | Path) -> tuple[Path, _Fields]:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
-        raise ResultFileError(f"{path} is not valid YAML: {err}") from None
+        raise ResultFileError(f"{path} is not valid YAML: {yaml_problem(err)}") from None
     return path, _Fields(path, data)
+
+
+def yaml_problem(err: yaml.YAMLError) -> str:
+    """What a YAML parser found wrong and where (line and column, 1-based), without the
+    parser's name for text it was handed (``"<unicode string>"``): the caller names the
+    file."""
+    if isinstance(err, yaml.MarkedYAMLError) and err.problem_mark is not None:
+        mark = err.problem_mark
+        context = f" ({err.context})" if err.context else ""
+        return f"{err.problem}{context} at line {mark.line + 1}, column {mark.column + 1}"
+    return str(err)
+
+
+def hand_eye_transform(fields: _Fields) -> tuple[FloatArray, list[str]]:
+    """``T_flange_sensor`` (4, 4) of a file's ``hand_eye`` section and what was normalised.
+
+    The section holds ``translation`` (m) and ``rotation_xyzw``, a 4 x 4 ``matrix``, or both
+    (then they must agree). Every value goes through the checks of
+    :mod:`~linelaser_calib.io.hand_eye`, for every kind of file.
+
+    Raises
+    ------
+    ResultFileError
+        A missing or malformed key, a rotation far from one, or a translation in mm.
+    """
+    path = fields.path
+    hand_eye = fields.section("hand_eye")
+    warnings: list[str] = []
+    has_pose = hand_eye.has("translation") or hand_eye.has("rotation_xyzw")
+    if not has_pose and not hand_eye.has("matrix"):
+        raise ResultFileError(
+            f"{path}: hand_eye needs translation and rotation_xyzw, or matrix; it has "
+            f"{sorted(hand_eye.data)}"
+        )
+    try:
+        if has_pose:
+            R = rotation_from_quaternion(hand_eye.array("rotation_xyzw", (4,)), warnings)
+            T = transform_from_rotation_translation(R, hand_eye.array("translation", (3,)))
+            if (
+                hand_eye.has("matrix")
+                and np.max(np.abs(hand_eye.array("matrix", (4, 4)) - T)) > MATRIX_TOLERANCE
+            ):
+                raise ResultFileError(
+                    f"{path}: hand_eye.matrix disagrees with hand_eye.translation and "
+                    "hand_eye.rotation_xyzw; fix or delete one of them"
+                )
+        else:
+            M = hand_eye.array("matrix", (4, 4))
+            if np.max(np.abs(M[3] - [0.0, 0.0, 0.0, 1.0])) > MATRIX_TOLERANCE:
+                raise ResultFileError(f"{path}: the last row of hand_eye.matrix must be 0 0 0 1")
+            T = transform_from_rotation_translation(
+                rotation_from_matrix(M[:3, :3], warnings), M[:3, 3]
+            )
+        check_translation(T[:3, 3])
+    except ResultFileError:
+        raise
+    except InputError as err:
+        raise ResultFileError(f"{path}: hand_eye: {err}") from None
+    return T, warnings
 
 
 def _read_hand_eye(fields: _Fields) -> tuple[FloatArray, str, str]:
     """``T_flange_sensor`` (4, 4), parent frame, child frame from the ``hand_eye`` section."""
+    T, _ = hand_eye_transform(fields)
     hand_eye = fields.section("hand_eye")
-    translation = hand_eye.array("translation", (3,))
-    try:
-        q_xyzw = check_quaternion_xyzw(hand_eye.array("rotation_xyzw", (4,)))
-    except ValueError as err:
-        raise ResultFileError(f"{fields.path}: key hand_eye.rotation_xyzw: {err}") from None
-    T = transform_from_translation_quaternion(translation, q_xyzw)
-    if hand_eye.has("matrix"):
-        matrix = hand_eye.array("matrix", (4, 4))
-        if np.max(np.abs(matrix - T)) > MATRIX_TOLERANCE:
-            raise ResultFileError(
-                f"{fields.path}: hand_eye.matrix disagrees with hand_eye.translation and "
-                "hand_eye.rotation_xyzw; fix or delete the matrix"
-            )
     return T, hand_eye.text("parent_frame"), hand_eye.text("child_frame")
 
 

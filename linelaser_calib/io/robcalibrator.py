@@ -34,7 +34,7 @@ from linelaser_calib.core.geometry import project_to_so3, transform_from_rotatio
 from linelaser_calib.core.types import FlangePose, FloatArray, Profile
 from linelaser_calib.io.bags import write_bag
 from linelaser_calib.io.errors import BagError
-from linelaser_calib.io.results import write_reference_yaml
+from linelaser_calib.io.results import write_reference_yaml, yaml_problem
 
 #: Stamp of the first profile: the authors' save time, 2023-10-31 15:31:42 (taken as UTC).
 EPOCH_NS = 1_698_766_302_000_000_000
@@ -97,8 +97,12 @@ def _read_scan_line(path: Path) -> FloatArray:
     # PyYAML does not take OpenCV's "%YAML:1.0" directive; drop it.
     text = re.sub(r"^%YAML:1\.0\s*\n", "", text)
     try:
-        values = np.asarray(yaml.safe_load(text)["scan_line"], dtype=np.float64)
-    except (yaml.YAMLError, KeyError, TypeError, ValueError) as err:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        raise BagError(f"{path} is not valid YAML: {yaml_problem(err)}") from None
+    try:
+        values = np.asarray(data["scan_line"], dtype=np.float64)
+    except (KeyError, TypeError, ValueError) as err:
         raise BagError(
             f"{path}: expected a key scan_line with [x, 0, z, ...] in mm: {err}"
         ) from None

@@ -76,6 +76,7 @@ from linelaser_calib.io import write_result_yaml
 from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info, read_joint_states
 from linelaser_calib.io.initial import read_initial_hand_eye
 from linelaser_calib.nodes.clock_offset import DRIFT_FLOOR_S
+from linelaser_calib.nodes.collection import COLLECTION_STATUS, KEY_NOTHING_ACCEPTED
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
     CLOCK_OFFSET_TOPIC,
@@ -477,6 +478,11 @@ class CalibrationServiceNode(Node):
         self._tf_listener = (
             None if self._tf_buffer is None else TransformListener(self._tf_buffer, self)
         )
+        #: The collector's latest word on a session without samples (its /diagnostics).
+        self._collector_status = ""
+        self.create_subscription(
+            DiagnosticArray, "/diagnostics", self._on_diagnostics, 10, callback_group=receive
+        )
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_timer(
             p["diagnostics_period_s"], self._publish_diagnostics, callback_group=receive
@@ -533,6 +539,14 @@ class CalibrationServiceNode(Node):
                 f"the collector started session {msg.data}: dropped the {dropped} samples of "
                 "the previous session"
             )
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        """Keep the collector's word on why it accepted no profile (cleared once it has)."""
+        for status in msg.status:
+            node, _, what = status.name.partition(": ")
+            if what == COLLECTION_STATUS:
+                why = {kv.key: kv.value for kv in status.values}.get(KEY_NOTHING_ACCEPTED)
+                self._collector_status = "" if why is None else f"the {node} {why}"
 
     def _on_clock_offset(self, msg: Float64MultiArray) -> None:
         self._clock_offset = list(msg.data)
@@ -621,6 +635,8 @@ class CalibrationServiceNode(Node):
         p = parameter_values(self, PARAMETERS)
         samples = self._store.samples()
         if not samples:
+            if self._collector_status:
+                return False, f"no samples yet: {self._collector_status}"
             return False, (
                 f"no samples yet: none received on {self._profile_sub.topic_name} and "
                 f"{self._pose_sub.topic_name}; run the collector and scan the "

@@ -54,6 +54,12 @@ ReasonLogger = Callable[[str, str], None]
 _NUMBER = re.compile(r"(?<![A-Za-z_\d])[-+]?\d+(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 
+#: The collector's /diagnostics status is named ``"<node name>: collection"``.
+COLLECTION_STATUS = "collection"
+#: Its value saying why no profile was accepted (:meth:`LiveCollector.nothing_accepted`),
+#: present only then; the calibration service answers /calibrate with it.
+KEY_NOTHING_ACCEPTED = "why no sample"
+
 #: Keys of the diagnostic values (see :meth:`LiveCollector.diagnostic_values`).
 KEY_RECEIVED = "profiles received"
 
@@ -642,6 +648,35 @@ class LiveCollector:
         self._sampled_standstill = None
 
     # -- reporting -----------------------------------------------------------------------
+
+    def nothing_accepted(self) -> str | None:
+        """Why no profile has joined the session though some were received, with the fix;
+        None when the session has samples or nothing was received.
+
+        The most common reasons are counted, e.g. ``received 50 profiles and set every one
+        aside (50 x skipped: robot moving or settling ...)``. When ``stop_and_go`` could not
+        confirm a standstill for most of them, the advice names the modes that need none.
+        """
+        if self.session_samples or self.accepted or not self.received or self.pending:
+            return None
+        counts = {**self.rejected.counts(), **self.skipped.counts()}
+        ordered = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))[:3]
+        reasons = "; ".join(f"{n} x {key}" for key, n in ordered)
+        text = f"received {self.received} profiles and set every one aside ({reasons})"
+        if self.last_rejection:
+            text += f"; the last rejected: {self.last_rejection}"
+        moving = self.skipped.counts().get(reason_key("skipped", SKIP_MOVING), 0)
+        if moving * 2 > self.received:
+            text += (
+                f". In stop_and_go mode a profile is taken only when the flange poses show the "
+                f"flange standing still for standstill_s ({self.config.standstill_s:g} s) "
+                "before it; a pose stream that is published only around each shot cannot show "
+                "that: set the collector's mode:=on_demand (call ~/capture at each stop) or "
+                "mode:=continuous"
+            )
+        elif self.skipped.counts().get(reason_key("skipped", SKIP_NOT_CAPTURED), 0):
+            text += ". In on_demand mode a profile is taken only after a ~/capture call"
+        return text
 
     @property
     def pending(self) -> int:

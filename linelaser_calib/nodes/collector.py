@@ -62,7 +62,14 @@ from linelaser_calib.core.tf import base_frame_warning
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter
 from linelaser_calib.nodes.clock_offset import ClockOffsetTracker, OffsetEstimate, offset_values
-from linelaser_calib.nodes.collection import CollectorConfig, LiveCollector, Mode, PendingSample
+from linelaser_calib.nodes.collection import (
+    COLLECTION_STATUS,
+    KEY_NOTHING_ACCEPTED,
+    CollectorConfig,
+    LiveCollector,
+    Mode,
+    PendingSample,
+)
 from linelaser_calib.nodes.collector_parameters import PARAMETERS
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
@@ -520,7 +527,8 @@ class CollectorNode(Node):
             self._collector.release(time.monotonic())
             work = self._collector.has_work
             values = self._collector.diagnostic_values()
-            last = self._collector.last_rejection
+            nothing = self._collector.nothing_accepted()
+            last = nothing or self._collector.last_rejection
             session_samples = self._collector.session_samples
             received = self._collector.received
             offset = None if self._offsets is None else self._offsets.estimate
@@ -528,6 +536,8 @@ class CollectorNode(Node):
         if work:
             self._work.set()
         values[KEY_STORED] = str(self._session.durable)
+        if nothing is not None:
+            values[KEY_NOTHING_ACCEPTED] = nothing
         level = DiagnosticStatus.OK
         if offset is not None:
             values.update(offset_values(offset))
@@ -564,12 +574,12 @@ class CollectorNode(Node):
     ) -> None:
         if received and not session_samples:
             level = DiagnosticStatus.WARN
-            message = f"no sample accepted yet; last rejection: {last or 'none'}"
+            message = f"no sample accepted yet: {last or 'none rejected'}"
         else:
             message = f"{session_samples} samples in session {self._session.path}"
         status = DiagnosticStatus(
             level=level,
-            name=f"{self.get_name()}: collection",
+            name=f"{self.get_name()}: {COLLECTION_STATUS}",
             message=message,
             hardware_id=self._profile_sub.topic_name,
             values=[KeyValue(key=k, value=v) for k, v in values.items()],

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.robot.kinematics import JointStates
 from linelaser_calib.core.targets.base import ResultSection
 from linelaser_calib.core.targets.cylinder import CylinderSection
@@ -154,8 +155,7 @@ def _rigs(presets: Mapping[str, Any]) -> dict[str, Scenario]:
     return {name: scenario.rig for name, scenario in presets.items()}
 
 
-#: Every family of simulator presets; a name found in none is a cylinder scene's (whose
-#: preset lookup refuses an unknown name with the list of presets).
+#: Every family of simulator presets.
 FAMILIES: tuple[PresetFamily, ...] = (
     PresetFamily(_rigs(WELD_PRESETS), _weld),
     PresetFamily(_rigs(SPHERE_PRESETS), _sphere),
@@ -164,15 +164,24 @@ FAMILIES: tuple[PresetFamily, ...] = (
 )
 
 
+def preset_names() -> list[str]:
+    """Every simulator preset, of every family, sorted."""
+    return sorted(name for family in FAMILIES for name in family.rigs)
+
+
 def record(name: str, overrides: dict[str, object], seed: int) -> SimRecording:
     """Simulate the preset ``name`` with scenario ``overrides`` and ``seed``.
 
     Raises
     ------
     InputError
-        An unknown preset (the message lists them) or a bad override.
+        An unknown preset (the message lists them all) or a bad override.
     """
-    family = next((f for f in FAMILIES if name in f.rigs), FAMILIES[-1])
+    family = next((f for f in FAMILIES if name in f.rigs), None)
+    if family is None:
+        raise InputError(
+            f"unknown scenario preset {name!r}; choose one of {', '.join(preset_names())}"
+        )
     return family.record(name, overrides, seed)
 
 

@@ -54,7 +54,7 @@ from typing import Generic, Protocol, Self, TypeVar
 
 import numpy as np
 import scipy.linalg
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError, SolverError
 from ..geometry import FloatArray, right_jacobian_so3
@@ -174,6 +174,25 @@ class KinematicSetup:
     clock_offset_s: float = 0.0
     config: JointCalibrationConfig = JointCalibrationConfig()
 
+    def outside(self, stamps_ns: ArrayLike) -> NDArray[np.bool_]:
+        """Which profile stamps (M,) ns fall before the first or after the last joint state
+        (with the clock offset): their joint vectors cannot be interpolated."""
+        t = np.asarray(stamps_ns, dtype=np.int64) + round(self.clock_offset_s * 1e9)
+        s = self.states.stamps_ns
+        if len(s) == 0:
+            return np.ones(t.shape, dtype=bool)
+        return np.asarray((t < s[0]) | (t > s[-1]))
+
+    def outside_reason(self, stamp_ns: int) -> str:
+        """Why a profile stamped ``stamp_ns`` (outside the stream) has no joint vector."""
+        t = stamp_ns + round(self.clock_offset_s * 1e9)
+        s = self.states.stamps_ns
+        if len(s) == 0:
+            return "no joint states"
+        if t < s[0]:
+            return f"before the joint-state stream (it starts {(s[0] - t) / 1e6:.1f} ms later)"
+        return f"after the joint-state stream (it ends {(t - s[-1]) / 1e6:.1f} ms earlier)"
+
     def joint_positions(self, stamps_ns: ArrayLike) -> FloatArray:
         """Joint vectors (M, n) at profile stamps (M,) ns, interpolated linearly.
 
@@ -191,7 +210,7 @@ class KinematicSetup:
             )
         t = np.asarray(stamps_ns, dtype=np.int64) + round(self.clock_offset_s * 1e9)
         s = self.states.stamps_ns
-        if len(s) == 0 or np.any(t < s[0]) or np.any(t > s[-1]):
+        if np.any(self.outside(stamps_ns)):
             raise InputError(
                 "some profiles lie outside the joint-state stream; record /joint_states for "
                 "the whole scan"

@@ -562,11 +562,12 @@ def extract_each(
     return features, rejections
 
 
-def rejection_digest(rejections: Sequence[Rejection]) -> str:
+def rejection_digest(rejections: Sequence[Rejection], *, advise_motion: bool = True) -> str:
     """'Rejected: 3 x stage: reason; ...' (the four most common), for error messages.
 
     Profiles rejected because the robot moved are counted together, with advice for
-    continuous scans.
+    continuous scans unless ``advise_motion`` is False (the profiles kept show another
+    target: more of them would not help).
     """
     if not rejections:
         return ""
@@ -581,7 +582,7 @@ def rejection_digest(rejections: Sequence[Rejection]) -> str:
         counts[key] = counts.get(key, 0) + 1
     top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
     digest = "Rejected: " + "; ".join(f"{n} x {k}" for k, n in top) + ". "
-    if moving:
+    if moving and advise_motion:
         digest += (
             f"{moving} profiles were taken while the flange moved faster than the speed gate: "
             "for a scan in motion give {setting:max_linear_speed_m_s} 0 "

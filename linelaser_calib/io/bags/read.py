@@ -6,12 +6,14 @@ single malformed message is skipped and reported in :attr:`BagContents.skipped`.
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NamedTuple
 
 import numpy as np
+import yaml
 from numpy.typing import NDArray
 from rosbags.rosbag2 import Reader
 
@@ -85,6 +87,7 @@ def bag_parts(path: Path) -> list[Path]:
 def open_part(part: Path, bag: Path) -> Iterator[Reader | SessionReader]:
     """Open one bag (rosbags) or session file; any failure to parse it becomes a
     :class:`BagError`."""
+    _check_files_present(part, bag)
     try:
         reader = SessionReader(part) if is_session_file(part) else Reader(part)
         reader.open()
@@ -98,12 +101,43 @@ def open_part(part: Path, bag: Path) -> Iterator[Reader | SessionReader]:
         reader.close()
 
 
+def _check_files_present(part: Path, bag: Path) -> None:
+    """Refuse a bag directory whose metadata.yaml names a storage file that is not there,
+    naming it (an unreadable metadata.yaml is left to the bag reader's own message)."""
+    metadata = part / "metadata.yaml"
+    if not metadata.is_file():
+        return
+    try:
+        info = yaml.safe_load(metadata.read_text(encoding="utf-8"))
+        names = [str(n) for n in info["rosbag2_bagfile_information"]["relative_file_paths"]]
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError):
+        return
+    missing = [name for name in names if not (part / name).is_file()]
+    if missing:
+        raise BagError(
+            f"bag {bag}: its metadata.yaml names {', '.join(missing)}, which is missing from "
+            f"{part}; copy the whole bag directory, or pass the storage file itself if it was "
+            "moved or renamed"
+        )
+
+
 def _unreadable(bag: Path, part: Path, err: Exception) -> str:
     where = str(bag) if part == bag else f"{bag} (sample {part.name})"
+    what = f"{type(err).__name__}: {str(err).rstrip('. ')}"
+    mcap = part if part.suffix == ".mcap" else next(part.glob("*.mcap"), None)
+    if mcap is None or not part.exists():
+        salvage = ""
+    elif shutil.which("mcap") is not None:
+        salvage = f"; or salvage what was written: `mcap recover {mcap} -o recovered.mcap`"
+    else:
+        salvage = (
+            "; or salvage what was written with Foxglove's mcap CLI (not installed on this "
+            "machine; download it from https://github.com/foxglove/mcap/releases): "
+            f"`mcap recover {mcap} -o recovered.mcap`, then pass recovered.mcap"
+        )
     return (
-        f"cannot read bag {where}: {type(err).__name__}: {err}. The file is truncated or "
-        "corrupt (e.g. the recorder was killed before closing it): re-record it, or salvage "
-        "a copy of a truncated MCAP file with the mcap CLI (`mcap recover`)"
+        f"cannot read bag {where}: the file is truncated or corrupt ({what}), e.g. the "
+        f"recorder was killed before closing it: re-record it{salvage}"
     )
 
 

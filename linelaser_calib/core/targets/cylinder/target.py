@@ -51,7 +51,7 @@ from ..base import (
     rejection_digest,
 )
 from .advice import CylinderPlacementAdviser
-from .arc import radius_mismatch
+from .arc import STRAIGHT_PIECES, radius_mismatch
 from .config import CylinderConfig
 from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
 from .joint import JointScan, refine_kinematics
@@ -204,16 +204,31 @@ class CylinderTarget:
         """The radius (m), after checking there are enough ellipses."""
         radius = settle_radius(features, config.radius_m) if features else config.radius_m
         if len(features) < config.min_samples:
+            pieces = [STRAIGHT_PIECES.search(r.reason) for r in context.rejections]
+            corners = sum(int(m[1]) >= 2 for m in pieces if m is not None)
+            fitted = sum(r.stage == "ellipse" for r in context.rejections)
+            another_target = not features and corners > fitted / 2
+            if features:
+                advice = (
+                    "Scan the cylinder from more poses, with the laser line across the cylinder."
+                )
+            elif another_target:
+                advice = (
+                    "The profiles show straight pieces meeting and no arc: a seam's V or an "
+                    "edge. For a weld seam choose {setting:target} known_point (a corner point) "
+                    "or line (a straight seam); for a cylinder, check that the laser line falls "
+                    "across the cylinder within the measuring range."
+                )
+            else:
+                advice = (
+                    "None of the profiles shows the cylinder's arc: check that the laser line "
+                    "falls across the cylinder within the measuring range."
+                )
             raise DegenerateError(
                 f"only {len(features)} of {context.n_samples} profiles gave a usable ellipse, "
                 f"and at least {config.min_samples} are needed. "
-                + rejection_digest(context.rejections)
-                + (
-                    "Scan the cylinder from more poses, with the laser line across the cylinder."
-                    if features
-                    else "None of the profiles shows the cylinder's arc: check that the laser "
-                    "line falls across the cylinder within the measuring range."
-                )
+                + rejection_digest(context.rejections, advise_motion=not another_target)
+                + advice
             )
         assert radius is not None  # features is not empty here
         return radius

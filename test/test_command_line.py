@@ -1,0 +1,147 @@
+"""The command line itself (issue 24, part 3): its version, its help, its usage errors, the
+scenarios and targets it offers, and a reader that leaves early.
+
+Each verb's options are walked from the parser, so an option added later without help, unit
+or default fails here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import fields
+from pathlib import Path
+
+import pytest
+
+from linelaser_calib.cli import build_parser, main
+from linelaser_calib.cli.simulate import SCENARIO_PRESETS
+from linelaser_calib.core.targets import plannable_target_names, target_names
+from linelaser_calib.sim import Scenario
+from linelaser_calib.sim.recording import preset_names
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+#: The simulator's scenario fields, which a user never needs to see.
+SCENARIO_FIELDS = {f.name for f in fields(Scenario)} - {"name"}
+#: A unit a numeric option's help names (or the word "unitless").
+UNIT = re.compile(r"(?<![\w/])(m|s|rad|deg|mm|m/s|rad/s|um|unitless)(?![\w/])")
+
+
+def subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    """Every verb's parser, by name."""
+    found: dict[str, argparse.ArgumentParser] = {}
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            found.update(action.choices)
+    return found
+
+
+def is_numeric(action: argparse.Action) -> bool:
+    """Whether an option's values are numbers: its type parses "1" or "1,2,3" as numbers."""
+    if action.type is None or action.type is str or action.choices is not None:
+        return False
+    for text in ("1", "1,2,3", "1,2"):
+        try:
+            value = action.type(text)  # type: ignore[operator]
+        except (argparse.ArgumentTypeError, ValueError, TypeError):
+            continue
+        return isinstance(value, (int, float, tuple, list))
+    return False
+
+
+def test_version_is_the_package_xml_version(capsys: pytest.CaptureFixture[str]) -> None:
+    expected = ET.parse(REPO_ROOT / "package.xml").getroot().findtext("version")
+    with pytest.raises(SystemExit) as stop:
+        main(["--version"])
+    assert stop.value.code == 0
+    assert capsys.readouterr().out.strip() == f"linelaser-calib {expected}"
+
+
+def test_every_option_has_help_and_numeric_ones_name_unit_and_default() -> None:
+    verbs = subparsers(build_parser())
+    assert {"simulate", "calibrate", "plan", "reconstruct", "export", "demo"} <= set(verbs)
+    missing: list[str] = []
+    for verb, parser in verbs.items():
+        for action in parser._actions:
+            if not action.option_strings or isinstance(
+                action, (argparse._HelpAction, argparse._VersionAction)
+            ):
+                continue
+            name = f"{verb} {action.option_strings[0]}"
+            text = (action.help or "") % {"default": action.default}
+            if not text.strip():
+                missing.append(f"{name}: no help")
+            elif is_numeric(action):
+                if not UNIT.search(text):
+                    missing.append(f"{name}: no unit in {text!r}")
+                if "default" not in text:
+                    missing.append(f"{name}: no default in {text!r}")
+            shown = f"{text} {action.metavar or ''}"
+            own = action.option_strings[0].removeprefix("--").replace("-", "_")
+            internal = action.dest in SCENARIO_FIELDS and action.dest != own
+            if internal and action.dest.upper() in shown.upper():
+                missing.append(f"{name}: the internal field name {action.dest} in {shown!r}")
+    assert not missing, "\n".join(missing)
+
+
+def test_scenario_help_and_refusal_list_every_preset(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert list(SCENARIO_PRESETS) == preset_names()
+    assert len(preset_names()) >= 15
+    code = main(["simulate", str(tmp_path / "bag"), "--scenario", "nope"])
+    err = capsys.readouterr().err
+    assert code == 1
+    for name in preset_names():
+        assert name in err
+    assert not (tmp_path / "bag").exists()
+
+
+def test_plan_offers_only_plannable_targets(capsys: pytest.CaptureFixture[str]) -> None:
+    plan = subparsers(build_parser())["plan"]
+    offered = next(a for a in plan._actions if "--target" in a.option_strings).choices
+    assert offered is not None and tuple(offered) == plannable_target_names()
+    refused = set(target_names()) - set(plannable_target_names())
+    assert refused, "every target plans now: this test needs another refused target"
+    with pytest.raises(SystemExit) as stop:
+        main(["plan", "--target", sorted(refused)[0]])
+    assert stop.value.code == 2
+    assert "invalid choice" in capsys.readouterr().err
+
+
+def test_usage_error_is_one_line_and_a_pointer_to_help(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        main(["calibrate", "--radius", "-3"])
+    assert stop.value.code == 2
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert lines[0].startswith("linelaser-calib calibrate: error: ")
+    assert lines[1:] == ["see 'linelaser-calib calibrate --help'"]
+
+
+def test_a_reader_that_leaves_early_ends_the_output_quietly(tmp_path: Path) -> None:
+    """``export ... | head -1``: no message, no traceback, exit 0 (docs/reference.md)."""
+    result = tmp_path / "result.yaml"
+    result.write_text(
+        "hand_eye:\n  parent_frame: tool0\n  child_frame: laser\n"
+        "  translation: [0.1, 0.02, 0.05]\n  rotation_xyzw: [0, 0, 0, 1]\n"
+        "cylinder: {frame: base_link, point: [0, 0, 0], direction: [0, 0, 1], radius: 0.02}\n"
+        "quality: {method: default, samples_used: [0, 1, 2], samples_rejected: [], "
+        "rms_residual_m: 5.0e-6, warnings: []}\n",
+        encoding="utf-8",
+    )
+    child = subprocess.Popen(
+        [sys.executable, "-m", "linelaser_calib.cli", "export", str(result), "--format", "launch"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert child.stdout is not None and child.stderr is not None
+    child.stdout.close()  # before the program starts writing: every write breaks the pipe
+    err = child.stderr.read()
+    assert child.wait(timeout=60) == 0
+    assert err == b""
