@@ -44,8 +44,6 @@ from linelaser_calib.core.types import FloatArray, Rejection
 
 #: A rival whose BIC lies this much below the model's fits clearly better.
 CLEAR_BIC = 10.0
-#: Break positions tried by :func:`line_pair_fit`, spread over the middle of the profile.
-LINE_PAIR_BREAKS = 24
 #: The recording's spread across profiles is taken as at least this share of its median
 #: (profiles that agree to a few per cent would otherwise make every small difference an
 #: outlier).
@@ -177,40 +175,36 @@ def line_fit(points_xz: ArrayLike) -> ShapeFit:
     return ShapeFit("line", _line_distances(p)[1], 2)
 
 
+def _line_cost(sums: FloatArray, count: FloatArray) -> FloatArray:
+    """Sum of squared distances from its total least squares line of each group of points,
+    from the groups' sums (K, 5) of x, z, x², xz, z² and their counts (K,)."""
+    mx, mz = sums[:, 0] / count, sums[:, 1] / count
+    a = sums[:, 2] - count * mx * mx
+    b = sums[:, 3] - count * mx * mz
+    c = sums[:, 4] - count * mz * mz
+    smallest = 0.5 * (a + c) - np.sqrt(0.25 * (a - c) ** 2 + b * b)
+    return np.asarray(np.maximum(smallest, 0.0))
+
+
 def line_pair_fit(points_xz: ArrayLike) -> ShapeFit:
     """Two straight lines meeting at a break in scan order (a V seam, an edge); 5 numbers.
 
-    The break is tried at :data:`LINE_PAIR_BREAKS` places over the middle 80 % of the
-    profile; at the one of least squared distances, each point is then given to the nearer
-    line and both are refitted.
+    Every break that leaves at least 3 points on each side is tried at once (the total least
+    squares cost of each side from cumulative moments); each line is fitted to the points on
+    its side of the best one. The points stay on their side: giving each point to the nearer
+    line would let two nearly equal lines split a plane's noise between them and fit a plane
+    better than one line does.
     """
     p = _check_points(points_xz, 8)
     n = len(p)
-    best: tuple[float, int] | None = None
-    for split in np.unique(np.linspace(0.1 * n, 0.9 * n, LINE_PAIR_BREAKS).astype(int)):
-        if split < 3 or n - split < 3:
-            continue
-        cost = sum(
-            float(d @ d) for d in (_line_distances(p[:split])[1], _line_distances(p[split:])[1])
-        )
-        if best is None or cost < best[0]:
-            best = (cost, int(split))
-    if best is None:
-        return ShapeFit("line pair", _line_distances(p)[1], 5)
-    split = best[1]
-    # Distances of every point from both lines, then each point to the nearer one.
-    both = []
-    for part in (p[:split], p[split:]):
-        normal, d = _line_distances(part)
-        anchor = part[0] - d[0] * normal
-        both.append((p - anchor) @ normal)
-    nearer = np.abs(both[0]) <= np.abs(both[1])
-    if 3 <= int(nearer.sum()) <= n - 3:
-        residuals = np.empty(n)
-        residuals[nearer] = _line_distances(p[nearer])[1]
-        residuals[~nearer] = _line_distances(p[~nearer])[1]
-    else:
-        residuals = np.where(nearer, both[0], both[1])
+    q = p - p.mean(axis=0)
+    moments = np.column_stack([q[:, 0], q[:, 1], q[:, 0] ** 2, q[:, 0] * q[:, 1], q[:, 1] ** 2])
+    before = np.cumsum(moments, axis=0)[2 : n - 3]  # sums over points 0..k, k = 2 .. n - 4
+    after = moments.sum(axis=0) - before
+    count = np.arange(3, n - 2, dtype=np.float64)
+    cost = _line_cost(before, count) + _line_cost(after, n - count)
+    split = 3 + int(np.argmin(cost))
+    residuals = np.concatenate([_line_distances(p[:split])[1], _line_distances(p[split:])[1]])
     return ShapeFit("line pair", residuals, 5)
 
 
