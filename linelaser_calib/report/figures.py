@@ -135,7 +135,7 @@ def _draw_shape(ax: Axes, shape: Shape) -> FloatArray:
         for start, end in points.reshape(-1, 2, 3):
             ax.plot(*np.stack([start, end]).T, color=color, lw=2.0)
         return points
-    ax.scatter(*points.T, s=60, color=color, edgecolors="k", marker="*", depthshade=False)
+    ax.scatter(*points.T, s=250, color=color, edgecolors="k", marker="*", depthshade=False)
     return points
 
 
@@ -239,11 +239,15 @@ def _plot_traces(ax: Axes, traces: list[tuple[str, list[float]]], scale: float) 
     positive = values[values > 0.0]
     log = len(positive) > 0 and positive.max() >= LOG_SCALE_RATIO * positive.min()
     for label, y in arrays:
-        ax.plot(np.arange(len(y)), np.where(y > 0.0, y, np.nan) if log else y, lw=1.2, label=label)
+        ax.plot(
+            np.arange(len(y)), np.where(y > 0.0, y, np.nan) if log else y, ".-", lw=1.2, label=label
+        )
     if log:
         ax.set_yscale("log")
+    else:
+        ax.ticklabel_format(axis="y", useOffset=False)
     if len(arrays) > 1:
-        _legend_above(ax)
+        ax.legend(loc="best", fontsize="small", framealpha=0.8)
     return True
 
 
@@ -256,6 +260,7 @@ class TracePanel:
     scale: float
     xlabel: str
     ylabel: str
+    violation: str = ""
 
 
 #: The convergence panels, each drawn when the result's history holds one of its traces.
@@ -273,6 +278,7 @@ TRACE_PANELS: tuple[TracePanel, ...] = (
         1e6,
         "GALM outer iteration (runs joined)",
         "mm²",
+        violation="galm_h",
     ),
     TracePanel(
         "Paper's translation shift",
@@ -296,14 +302,19 @@ def _panels(history: dict[str, list[float]]) -> list[TracePanel]:
 
 
 def convergence_figure(data: ReportData) -> Figure:
-    """One panel per solver stage that recorded a trace (see :data:`TRACE_PANELS`)."""
-    fig = _figure(3.6)
+    """One panel per solver stage that recorded a trace (see :data:`TRACE_PANELS`), stacked."""
     history = data.result.history
     panels = _panels(history)
-    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    fig = _figure(2.8 * len(panels))
+    axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
     for ax, panel in zip(axes, panels, strict=True):
         traces = [(label, history.get(key, [])) for key, label in panel.traces]
         _plot_traces(ax, traces, panel.scale)
+        violation = [v for v in history.get(panel.violation, []) if v > 0.0]
+        if violation:
+            twin = ax.twinx()
+            twin.semilogy(violation, ".:", color="0.4", lw=1.0)
+            twin.set_ylabel("constraint violation ‖h‖ (dotted), dimensionless")
         ax.set_title(panel.title, loc="left")
         ax.set_xlabel(panel.xlabel)
         ax.set_ylabel(panel.ylabel)
@@ -320,10 +331,12 @@ def convergence_caption(data: ReportData) -> str:
     ]
     if history.get("galm_phi"):
         parts.append(
-            "In the GALM panel f, the centre-to-axis objective, is what is minimised; φ is the "
-            "augmented Lagrangian's merit (f plus the multiplier and penalty terms of the unit "
-            "direction constraint), which may rise a little as the multipliers are updated and "
-            "the constraint is tightened: that is not divergence."
+            "In the GALM panel f, the centre-to-axis objective, is minimised subject to the "
+            "unit-norm constraints h(x) = 0 (eq. 11), and φ = f − λᵀh + σ/2 ‖h‖² is the augmented "
+            "Lagrangian's merit (eq. 14). Either may rise a little from one outer iteration to "
+            "the next while the multipliers λ and the penalty σ are updated and the constraint "
+            "violation ‖h‖ (dotted, right axis) falls: that is the constraint being met, not "
+            "divergence."
         )
     if "pso_best" in history and not history["pso_best"]:
         parts.append(
