@@ -305,7 +305,7 @@ def convergence_figure(data: ReportData) -> Figure:
     """One panel per solver stage that recorded a trace (see :data:`TRACE_PANELS`), stacked."""
     history = data.result.history
     panels = _panels(history)
-    fig = _figure(2.8 * len(panels))
+    fig = _figure(1.0 + 2.6 * len(panels))
     axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
     for ax, panel in zip(axes, panels, strict=True):
         traces = [(label, history.get(key, [])) for key, label in panel.traces]
