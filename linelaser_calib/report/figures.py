@@ -16,11 +16,14 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import cast
 
 import matplotlib
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
+from mpl_toolkits.mplot3d import Axes3D
 
 from linelaser_calib.core.geometry import FloatArray, orthonormal_basis
 from linelaser_calib.core.planning import SigmaPoint
@@ -53,6 +56,12 @@ def _legend_above(ax: Axes) -> None:
     ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=3, frameon=False)
 
 
+def _profile_axis(ax: Axes, text: str = "profile index") -> None:
+    """Label the x axis as profile indices, ticked at whole numbers."""
+    ax.set_xlabel(text)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+
+
 def feature_distance_figure(data: ReportData) -> Figure:
     """Stem plot of each sample's feature residual (e.g. ellipse centre to axis), µm."""
     fig = _figure(3.6)
@@ -66,7 +75,7 @@ def feature_distance_figure(data: ReportData) -> Figure:
         ax.set_ylim(bottom=0.0)
     else:
         _no_data(ax, "no fitted samples")
-    ax.set_xlabel("profile index")
+    _profile_axis(ax)
     ax.set_ylabel("distance, µm")
     ax.grid(True, alpha=0.3)
     return fig
@@ -103,13 +112,13 @@ def sample_residual_figure(data: ReportData) -> Figure:
         ax.set_xlabel("profile index (box: quartiles, whiskers: 5 % to 95 %)")
         ax.set_ylabel("point to surface, µm (+ outside)")
     else:
-        ax.set_xlabel("profile index")
+        _profile_axis(ax)
         ax.set_ylabel("distance, µm")
     ax.grid(True, axis="y", alpha=0.3)
     return fig
 
 
-def _draw_shape(ax: Axes, shape: Shape) -> FloatArray:
+def _draw_shape(ax: Axes3D, shape: Shape) -> FloatArray:
     """Draw one marker shape (mm) in a 3-D axes; returns points (K, 3) in mm that bound it."""
     points = np.asarray(shape.points, dtype=np.float64) * 1e3
     radius = shape.radius * 1e3
@@ -122,7 +131,7 @@ def _draw_shape(ax: Axes, shape: Shape) -> FloatArray:
         ring = np.cos(angle)[..., None] * u + np.sin(angle)[..., None] * v
         surface = start + radius * ring + along[..., None] * d
         ax.plot_wireframe(*np.moveaxis(surface, -1, 0), color="0.55", lw=0.5, alpha=0.6)
-        return surface.reshape(-1, 3)
+        return np.asarray(surface.reshape(-1, 3), dtype=np.float64)
     if shape.kind == "sphere":
         theta, phi = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi, 19))
         unit = np.stack(
@@ -130,19 +139,28 @@ def _draw_shape(ax: Axes, shape: Shape) -> FloatArray:
         )
         surface = points[0] + radius * unit
         ax.plot_wireframe(*np.moveaxis(surface, -1, 0), color="0.55", lw=0.5, alpha=0.6)
-        return surface.reshape(-1, 3)
+        return np.asarray(surface.reshape(-1, 3), dtype=np.float64)
     if shape.kind == "line":
         for start, end in points.reshape(-1, 2, 3):
             ax.plot(*np.stack([start, end]).T, color=color, lw=2.0)
         return points
-    ax.scatter(*points.T, s=250, color=color, edgecolors="k", marker="*", depthshade=False)
+    ax.scatter(
+        points[:, 0],
+        points[:, 1],
+        points[:, 2],
+        s=250,
+        color=color,
+        edgecolors="k",
+        marker="*",
+        depthshade=False,
+    )
     return points
 
 
 def profiles_3d_figure(data: ReportData) -> Figure:
     """3-D view of the profiles in the base frame with the fitted target's shapes, mm."""
     fig = _figure(7.0)
-    ax = fig.add_subplot(projection="3d")
+    ax = cast(Axes3D, fig.add_subplot(projection="3d"))
     bounds = []
     if data.points_base:
         per_sample = max(1, MAX_3D_POINTS // len(data.points_base))
@@ -215,7 +233,7 @@ def self_check_figure(data: ReportData) -> Figure:
     )
     _legend_above(ax)
     ax.set_ylim(bottom=0.0)
-    ax.set_xlabel("profile index (held out of the solve that mapped it)")
+    _profile_axis(ax, "profile index (held out of the solve that mapped it)")
     ax.set_ylabel("held-out RMS distance, µm")
     ax.grid(True, alpha=0.3)
     return fig
