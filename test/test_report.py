@@ -35,12 +35,14 @@ from linelaser_calib.core.geometry import (
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.base import surface_map
 from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.cylinder.residuals import (
     cylinder_coordinates,
     sample_centre_distances,
     sample_surface_residuals,
 )
+from linelaser_calib.core.targets.sphere.section import SphereSection
 from linelaser_calib.core.types import Rejection, SampleFit
 from linelaser_calib.io import Truth, read_truth_yaml
 from linelaser_calib.offline import calibrate_bag
@@ -460,3 +462,22 @@ def test_a_report_that_fails_while_written_leaves_the_earlier_result(
     assert (report_dir / "index.html").read_text() == "earlier report"
     assert leftovers(report_dir, {"index.html"}) == set()
     assert leftovers(tmp_path, {"result.yaml", "report"}) == set()
+
+
+def test_sphere_surface_map_recovers_longitude_and_latitude() -> None:
+    rng = np.random.default_rng(7)
+    longitude = rng.uniform(-np.pi, np.pi, 50)
+    latitude = rng.uniform(-1.5, 1.5, 50)
+    centre, radius = np.array([0.4, -0.2, 0.1]), 0.025
+    points = centre + radius * np.column_stack(
+        [
+            np.cos(latitude) * np.cos(longitude),
+            np.cos(latitude) * np.sin(longitude),
+            np.sin(latitude),
+        ]
+    )
+    section = SphereSection(centre, radius, 1, radius_estimated=False, side_estimated=False)
+    mapped = surface_map(section, points)
+    assert mapped is not None and mapped.along_unit == "rad"
+    np.testing.assert_allclose(mapped.across, longitude, atol=1e-12)
+    np.testing.assert_allclose(mapped.along, latitude, atol=1e-12)

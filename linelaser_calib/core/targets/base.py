@@ -40,6 +40,10 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
 7. A result section class satisfying :class:`ResultSection` (its YAML key, its plain SI
    mapping, its text, its markers) and ``read_section(mapping, quality)`` that rebuilds it
    from a result file's section (raising ``ValueError`` naming the bad key).
+8. Optionally, capabilities found by attribute, each with a default for a target without it:
+   a ``placement_adviser`` (:func:`placement_adviser`); on the section, ``surface_map`` (its
+   surface unrolled for the report, :func:`surface_map`) and ``feature_distances`` with
+   ``feature_kind`` (the paper's per-sample residual, :func:`feature_residuals`).
 
 Everything is in SI units (m, rad); mm and degrees appear only in human text, labelled.
 """
