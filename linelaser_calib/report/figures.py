@@ -16,14 +16,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import cast
+from typing import Any
 
 import matplotlib
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
-from mpl_toolkits.mplot3d import Axes3D
 
 from linelaser_calib.core.geometry import FloatArray, orthonormal_basis
 from linelaser_calib.core.planning import SigmaPoint
@@ -118,8 +117,9 @@ def sample_residual_figure(data: ReportData) -> Figure:
     return fig
 
 
-def _draw_shape(ax: Axes3D, shape: Shape) -> FloatArray:
-    """Draw one marker shape (mm) in a 3-D axes; returns points (K, 3) in mm that bound it."""
+def _draw_shape(ax: Any, shape: Shape) -> FloatArray:
+    """Draw one marker shape (mm) in a 3-D axes (``Axes3D``); returns points (K, 3) in mm
+    that bound it."""
     points = np.asarray(shape.points, dtype=np.float64) * 1e3
     radius = shape.radius * 1e3
     color = shape.color[:3]
@@ -160,7 +160,8 @@ def _draw_shape(ax: Axes3D, shape: Shape) -> FloatArray:
 def profiles_3d_figure(data: ReportData) -> Figure:
     """3-D view of the profiles in the base frame with the fitted target's shapes, mm."""
     fig = _figure(7.0)
-    ax = cast(Axes3D, fig.add_subplot(projection="3d"))
+    # matplotlib types the 3-D axes as plain Axes; its 3-D methods are used here.
+    ax: Any = fig.add_subplot(projection="3d")
     bounds = []
     if data.points_base:
         per_sample = max(1, MAX_3D_POINTS // len(data.points_base))
