@@ -1,9 +1,9 @@
 """Human-readable text for a calibration result: mm and degrees, each number labelled.
 
-The pieces (:func:`hand_eye_rows`, :func:`target_text`, :func:`residual_rows`,
-:func:`self_check_rows`, :func:`rejection_lines`, :func:`truth_rows`) are shared by the text
-summary of the CLI (:func:`format_summary`), the HTML report and the calibration service's
-/diagnostics, so all say the same thing the same way.
+The pieces (:func:`headline_rows`, :func:`hand_eye_rows`, :func:`target_text`,
+:func:`residual_rows`, :func:`self_check_rows`, :func:`rejection_lines`, :func:`truth_rows`) are
+shared by the text summary of the CLI (:func:`format_summary`), the HTML report and the
+calibration service's /diagnostics, so all say the same thing the same way.
 """
 
 from __future__ import annotations
@@ -176,6 +176,51 @@ def residual_rows(result: CalibrationResult) -> Rows:
                 "largest residuals",
                 ", ".join(f"#{indices[k]} {values[k]:.1f}" for k in worst)
                 + " um (profile index; every sample's is in the result file)",
+            )
+        )
+    return rows
+
+
+def verdict(result: CalibrationResult) -> tuple[str, str]:
+    """``pass`` or ``warn`` and why, in words.
+
+    A written result is never ``refused``: a calibration whose model does not fit or that
+    has too few samples raises instead, and writes no result and no report.
+    """
+    if result.warnings:
+        more = f" (and {len(result.warnings) - 1} more below)" if len(result.warnings) > 1 else ""
+        return "warn", f"{result.warnings[0]}{more}"
+    if result.self_check is None:
+        return "pass", "the model fits and raised no warning; no self-check ran"
+    return "pass", "the model fits, and the self-check on held-out profiles raised no warning"
+
+
+def headline_rows(result: CalibrationResult) -> Rows:
+    """The verdict first, then the accuracy in use and the hand-eye's largest 1 sigma."""
+    state, why = verdict(result)
+    check = result.self_check
+    rows = [
+        ("verdict", f"{state.upper()}: {why}"),
+        (
+            "accuracy in use",
+            "not measured (no self-check ran)"
+            if check is None
+            else f"not measured: {check.no_accuracy_reason}"
+            if check.accuracy_in_use_m is None
+            else f"{check.accuracy_in_use_m * 1e3:.4f} mm RMS (quality.accuracy_in_use_m: scan "
+            f"points of each of {check.regions} regions of the workspace held out in turn, "
+            "mapped with the recorded poses and a hand-eye solved without that region)",
+        ),
+    ]
+    sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+    if sigma_t is None or sigma_r is None:
+        rows.append(("1 sigma", f"not estimated by the {result.method} method"))
+    else:
+        rows.append(
+            (
+                "1 sigma (largest axis)",
+                f"{float(np.max(sigma_t)) * 1e3:.4f} mm translation, "
+                f"{float(np.degrees(np.max(sigma_r))):.4f} deg rotation",
             )
         )
     return rows

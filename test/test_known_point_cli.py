@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_error
@@ -78,9 +79,12 @@ def test_known_point_paper_method_needs_the_taught_point(
     assert "needs --point x,y,z" in err and "taught point" in err
 
 
-def test_report_refuses_known_point_results(
+def test_a_known_point_result_gets_a_report(
     weld_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """Regression of issue 24: the report was refused ("no cylinder") after the result file
+    had been written; it is now made for a known point like for any target."""
+    output, report_dir = tmp_path / "result.yaml", tmp_path / "report"
     code = main(
         [
             "calibrate",
@@ -89,9 +93,15 @@ def test_report_refuses_known_point_results(
             "known_point",
             "--initial",
             str(weld_bag / "initial.yaml"),
+            "--output",
+            str(output),
             "--report",
-            str(tmp_path / "report"),
+            str(report_dir),
         ]
     )
-    assert code == 1
-    assert "no cylinder" in capsys.readouterr().err
+    assert code == 0, capsys.readouterr().err
+    text = (report_dir / "index.html").read_text(encoding="utf-8")
+    point = yaml.safe_load(output.read_text(encoding="utf-8"))["known_point"]["point"]
+    assert "known point target" in text
+    assert "[" + ", ".join(f"{v * 1e3:+.3f}" for v in point) + "] mm" in text
+    assert (report_dir / "profiles_3d.png").stat().st_size > 1000

@@ -3,7 +3,8 @@
 A small simulated bag (12 poses of the paper's scene, with its truth.yaml) is calibrated once
 per method; the report's pages and figures are checked for completeness and against the
 result and the simulator's truth. The page is also rendered in headless Chromium when it is
-installed (skipped otherwise).
+installed (skipped otherwise). Every target's committed bag gets a report through the
+command line, checked against its truth; a run that fails writes none of its outputs.
 """
 
 from __future__ import annotations
@@ -29,20 +30,24 @@ from linelaser_calib.core.geometry import (
     orthonormal_basis,
     quaternion_xyzw_from_matrix,
     transform_error,
+    transform_from_translation_quaternion,
 )
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.base import surface_map
 from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.cylinder.residuals import (
     cylinder_coordinates,
     sample_centre_distances,
     sample_surface_residuals,
 )
+from linelaser_calib.core.targets.sphere.section import SphereSection
 from linelaser_calib.core.types import Rejection, SampleFit
 from linelaser_calib.io import Truth, read_truth_yaml
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.report import write_report
-from linelaser_calib.report.figures import report_data
+from linelaser_calib.report.data import report_data
 from linelaser_calib.sim import scenario_from_preset, simulate
 from linelaser_calib.sim.bag_writer import simulate_to_bag
 from linelaser_calib.summary import format_summary
@@ -56,6 +61,8 @@ EXPECTED_FIGURES = {
     "residual_map.png",
     "convergence.png",
 }
+#: The self-check's figure, in a report of a result with a self-check.
+SELF_CHECK_FIGURE = "self_check.png"
 SMALL: dict[str, object] = {"n_poses": 12, "resolution": 200}
 
 
@@ -149,22 +156,31 @@ def test_report_residuals_agree_with_the_pipeline(result: CalibrationResult) -> 
     if result.method == "paper":
         # The paper method's residual is this very centre-to-axis distance.
         expected = [result.sample_residuals_m[i] for i in data.indices]
-        np.testing.assert_allclose(data.centre_distances_m, expected, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(data.feature_distances_m, expected, rtol=1e-9, atol=1e-12)
     else:
         # With the recorded poses the residual also holds the robot's pose error (0.1 mm).
-        rms = float(np.sqrt(np.mean(data.coordinates.residual_m**2)))
-        assert result.rms_residual_m < rms < 5e-4
-    assert len(data.coordinates.residual_m) == sum(len(f.points) for f in result.sample_fits)
+        assert result.rms_residual_m < data.recorded_pose_rms_m < 5e-4
+    assert len(data.all_distances_m) == sum(len(f.points) for f in result.sample_fits)
+    assert data.surface is not None
+    # The unrolled map measures along the axis from the first scanned point, whichever way
+    # the fitted direction points: 0 to the scanned length, never negative.
+    assert float(np.min(data.surface.along)) == 0.0
+    along = (data.all_points_base - result.target.cylinder.point) @ result.target.cylinder.direction
+    assert float(np.max(data.surface.along)) == pytest.approx(float(np.ptp(along)), rel=1e-9)
 
 
 # --- the HTML page --------------------------------------------------------------------------
 
 
-def check_figures(page: Path) -> None:
+def expected_figures(result: CalibrationResult) -> set[str]:
+    return EXPECTED_FIGURES | ({SELF_CHECK_FIGURE} if result.self_check is not None else set())
+
+
+def check_figures(page: Path, expected: set[str]) -> None:
     """Every expected figure is referenced relatively and is a decodable, non-empty PNG."""
     sources = image_sources(page)
-    assert set(sources) == EXPECTED_FIGURES
-    assert len(sources) == len(EXPECTED_FIGURES)
+    assert set(sources) == expected
+    assert len(sources) == len(expected)
     for source in sources:
         png = page.parent / source
         assert png.stat().st_size > 1000
@@ -175,13 +191,15 @@ def check_figures(page: Path) -> None:
             assert np.asarray(image.convert("L")).std() > 5.0  # not blank
 
 
-def test_report_shows_every_figure_and_is_self_contained(report: Path, tmp_path: Path) -> None:
+def test_report_shows_every_figure_and_is_self_contained(
+    report: Path, result: CalibrationResult, tmp_path: Path
+) -> None:
     text = report.read_text(encoding="utf-8")
     assert "http" not in text and 'src="/' not in text and "file:" not in text
-    check_figures(report)
+    check_figures(report, expected_figures(result))
     copy = tmp_path / "copied"
     shutil.copytree(report.parent, copy)
-    check_figures(copy / report.name)
+    check_figures(copy / report.name, expected_figures(result))
 
 
 def test_report_states_the_result(
@@ -348,5 +366,160 @@ def test_cli_writes_report_and_viz(
     out = capsys.readouterr().out
     assert f"Wrote {report_dir / 'index.html'}" in out
     assert f"Wrote {viz}" in out
-    check_figures(report_dir / "index.html")
+    check_figures(report_dir / "index.html", EXPECTED_FIGURES)
     assert viz.stat().st_size > 0
+
+
+def test_report_puts_the_verdict_first_and_names_each_residual(
+    report: Path, result: CalibrationResult, tmp_path: Path
+) -> None:
+    text = report.read_text(encoding="utf-8")
+    assert text.index("verdict") < text.index("Hand-eye T_flange_sensor")
+    assert "PASS: " in text and "WARN: " not in text
+    if result.self_check is not None:
+        assert f"{result.self_check.accuracy_in_use_m * 1e3:.4f} mm RMS" in text
+    for name in ("fit residual", "recorded-pose residual", "feature residual"):
+        assert f"<th>{name}</th>" in text
+    assert f"{result.rms_residual_m * 1e6:.1f} um RMS" in text
+    warned = write_report(tmp_path / "warned", with_rejection_and_warning(result))
+    assert "WARN: poses weak &amp; &lt;odd&gt;" in warned.read_text(encoding="utf-8")
+
+
+# --- every target's committed bag -------------------------------------------------------
+
+#: Per target: the committed bag and flags of its guide, and the figures of its report.
+COMMON_FIGURES = {"point_residuals.png", "profiles_3d.png", SELF_CHECK_FIGURE, "convergence.png"}
+TARGET_RUNS = {
+    "cylinder": (["bags/paper"], EXPECTED_FIGURES | {SELF_CHECK_FIGURE}),
+    "sphere": (["bags/sphere", "--target", "sphere"], COMMON_FIGURES | {"residual_map.png"}),
+    "line": (
+        [
+            "bags/line",
+            "--target",
+            "line",
+            "--max-speed",
+            "0",
+            "--max-angular-speed",
+            "0",
+            "--clock-offset",
+            "auto",
+        ],
+        COMMON_FIGURES,
+    ),
+    "known_point": (["bags/weld_seam", "--target", "known_point"], COMMON_FIGURES),
+}
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("target", sorted(TARGET_RUNS))
+def test_every_target_gets_a_report(
+    target: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv, figures = TARGET_RUNS[target]
+    bag = REPO / argv[0]
+    output, report_dir = tmp_path / "result.yaml", tmp_path / "report"
+    code = main(
+        ["calibrate", str(bag), *argv[1:], "--output", str(output), "--report", str(report_dir)]
+    )
+    assert code == 0, capsys.readouterr().err
+    page = report_dir / "index.html"
+    assert f"Wrote {page}" in capsys.readouterr().out
+    text = page.read_text(encoding="utf-8")
+    title = get_target(target).title
+    assert f"<h1>Line-laser hand-eye calibration: {title} target</h1>" in text
+    check_figures(page, figures)
+    written = yaml.safe_load(output.read_text(encoding="utf-8"))
+    assert f"{written['quality']['accuracy_in_use_m'] * 1e3:.4f} mm RMS" in text
+    # The target in the base frame, as the result file holds it.
+    assert target in written and "<h2>The " + title + " and the residuals</h2>" in text
+    # Against the simulator's truth: the page shows the hand-eye's error, and it is small.
+    truth = read_truth_yaml(bag / "truth.yaml")
+    estimate = transform_from_translation_quaternion(
+        written["hand_eye"]["translation"], written["hand_eye"]["rotation_xyzw"]
+    )
+    rotation, translation = transform_error(estimate, truth.T_flange_sensor)
+    assert f"{translation * 1e3:.4f} mm" in text and f"{np.degrees(rotation):.4f} deg" in text
+    assert translation < 5e-4 and rotation < np.radians(0.1)
+
+
+# --- a failed run writes nothing ----------------------------------------------------------
+
+
+def leftovers(directory: Path, keep: set[str]) -> set[str]:
+    return {p.name for p in directory.iterdir()} - keep
+
+
+def test_a_refused_calibration_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    output = tmp_path / "result.yaml"
+    output.write_bytes(b"hand_eye: earlier result\n")
+    report_dir, viz = tmp_path / "report", tmp_path / "viz.mcap"
+    argv = ["calibrate", str(REPO / "bags/line"), "--target", "line", "--max-speed", "0"]
+    argv += ["--max-angular-speed", "0", "--output", str(output)]
+    # Without --clock-offset auto the sweep's 12 ms latency bends the seam: refused.
+    assert main([*argv, "--report", str(report_dir), "--viz", str(viz)]) == 1
+    err = capsys.readouterr().err
+    assert "does not fit" in err and "Traceback" not in err
+    assert output.read_bytes() == b"hand_eye: earlier result\n"
+    assert leftovers(tmp_path, {"result.yaml"}) == set()
+
+
+def test_a_report_that_cannot_be_made_is_refused_before_solving(
+    tmp_path: Path, bag: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    output = tmp_path / "result.yaml"
+    output.write_bytes(b"earlier\n")
+    argv = ["calibrate", str(bag), "--method", "paper", "--output", str(output)]
+    assert main([*argv, "--report", str(tmp_path / "missing" / "report")]) == 1
+    assert "does not exist" in capsys.readouterr().err
+    (tmp_path / "taken").write_text("a file")
+    assert main([*argv, "--report", str(tmp_path / "taken")]) == 1
+    assert "it is an existing file" in capsys.readouterr().err
+    assert output.read_bytes() == b"earlier\n"
+    assert leftovers(tmp_path, {"result.yaml", "taken"}) == set()
+
+
+def test_a_report_that_fails_while_written_leaves_the_earlier_result(
+    tmp_path: Path, bag: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import linelaser_calib.report.figures as figures
+
+    def disk_full(data: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(figures, "profiles_3d_figure", disk_full)
+    output, report_dir, viz = tmp_path / "result.yaml", tmp_path / "report", tmp_path / "v.mcap"
+    output.write_bytes(b"earlier\n")
+    argv = ["calibrate", str(bag), "--method", "paper", "--output", str(output)]
+    assert main([*argv, "--report", str(report_dir), "--viz", str(viz)]) == 1
+    err = capsys.readouterr().err
+    assert "cannot write the report" in err and "No space left on device" in err
+    assert output.read_bytes() == b"earlier\n"
+    assert leftovers(tmp_path, {"result.yaml"}) == set()
+    # An earlier report directory keeps its files too.
+    report_dir.mkdir()
+    (report_dir / "index.html").write_text("earlier report")
+    assert main([*argv, "--report", str(report_dir)]) == 1
+    assert (report_dir / "index.html").read_text() == "earlier report"
+    assert leftovers(report_dir, {"index.html"}) == set()
+    assert leftovers(tmp_path, {"result.yaml", "report"}) == set()
+
+
+def test_sphere_surface_map_recovers_longitude_and_latitude() -> None:
+    rng = np.random.default_rng(7)
+    longitude = rng.uniform(-np.pi, np.pi, 50)
+    latitude = rng.uniform(-1.5, 1.5, 50)
+    centre, radius = np.array([0.4, -0.2, 0.1]), 0.025
+    points = centre + radius * np.column_stack(
+        [
+            np.cos(latitude) * np.cos(longitude),
+            np.cos(latitude) * np.sin(longitude),
+            np.sin(latitude),
+        ]
+    )
+    section = SphereSection(centre, radius, 1, radius_estimated=False, side_estimated=False)
+    mapped = surface_map(section, points)
+    assert mapped is not None and mapped.along_unit == "rad"
+    np.testing.assert_allclose(mapped.across, longitude, atol=1e-12)
+    np.testing.assert_allclose(mapped.along, latitude, atol=1e-12)

@@ -14,9 +14,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_from_translation_quaternion
 from linelaser_calib.core.pipeline import PipelineConfig
 from linelaser_calib.core.result import CalibrationResult
@@ -150,3 +152,32 @@ def test_an_existing_file_is_replaced_and_no_partial_file_is_left(
     write_viz_mcap(target, result)
     assert target.read_bytes()[:8] == b"\x89MCAP0\r\n"
     assert [p.name for p in tmp_path.iterdir()] == ["viz.mcap"]
+
+
+def test_every_target_gets_a_visualisation_and_the_help_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Regression of issue 24: --viz works for a known point (and the other targets), and its
+    help no longer says it shows a cylinder only."""
+    repo = Path(__file__).resolve().parents[1]
+    output, viz = tmp_path / "result.yaml", tmp_path / "viz.mcap"
+    argv = ["calibrate", str(repo / "bags/weld_seam"), "--target", "known_point"]
+    assert main([*argv, "--output", str(output), "--viz", str(viz)]) == 0
+    assert f"Wrote {viz}" in capsys.readouterr().out
+    point = yaml.safe_load(output.read_text(encoding="utf-8"))["known_point"]["point"]
+    with viz.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        markers = [
+            decoded
+            for _, channel, _, decoded in reader.iter_decoded_messages()
+            if channel.topic == VIZ_TOPICS["markers"]
+        ]
+    ((marker,),) = [array.markers for array in markers]
+    assert marker.ns == "known_point" and marker.header.frame_id == "base_link"
+    (shown,) = marker.points
+    np.testing.assert_allclose([shown.x, shown.y, shown.z], point, atol=1e-12)
+    with pytest.raises(SystemExit):
+        main(["calibrate", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert "the fitted target and the transforms as an MCAP file" in help_text
+    assert "report (index.html and PNG figures) of any target" in help_text

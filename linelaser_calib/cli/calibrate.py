@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from linelaser_calib.cli.common import (
+    StagedOutputs,
     StderrProgress,
     check_output,
     initial_hand_eye,
@@ -20,7 +21,7 @@ from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.selfcheck import DEFAULT_ARM_ACCURACY_M
-from linelaser_calib.io.results import result_to_dict, truth_beside, write_result_yaml
+from linelaser_calib.io.results import Truth, result_to_dict, truth_beside, write_result_yaml
 from linelaser_calib.offline import OfflineRun, Recording, calibrate_bag
 from linelaser_calib.settings import Front, given_from_arguments, pipeline_config, render_warnings
 from linelaser_calib.summary import format_summary
@@ -116,18 +117,7 @@ def run(args: argparse.Namespace) -> int:
     truth, note = truth_beside(args.bag)
     if note:
         print(note, file=sys.stderr)
-    written = []
-    if args.output is not None:
-        written.append(write_result_yaml(run.result, args.output))
-    if args.viz is not None or args.report is not None:
-        from linelaser_calib.report import write_report, write_viz_mcap
-
-        if args.viz is not None:
-            written.append(write_viz_mcap(args.viz, run.result))
-        if args.report is not None:
-            written.append(
-                write_report(args.report, run.result, inputs=_input_rows(run), truth=truth)
-            )
+    written = _write_outputs(args, run, truth)
     if args.json:
         print(json.dumps(result_to_dict(run.result), indent=2))
     else:
@@ -143,6 +133,36 @@ def run(args: argparse.Namespace) -> int:
         for path in written:
             print(f"Wrote {path}")
     return 0
+
+
+def _write_outputs(args: argparse.Namespace, run: OfflineRun, truth: Truth | None) -> list[Path]:
+    """Write the result, the visualisation and the report, all or none: the visualisation and
+    the report are staged, the result written (atomically), then both moved into place; a
+    failure on the way removes what was staged and leaves any earlier file as it was."""
+    written: list[Path] = []
+    index = None
+    staged = StagedOutputs()
+    try:
+        if args.viz is not None or args.report is not None:
+            from linelaser_calib.report import write_report, write_viz_mcap
+
+            if args.viz is not None:
+                write_viz_mcap(staged.stage(args.viz), run.result)
+            if args.report is not None:
+                index = write_report(
+                    staged.stage(args.report), run.result, inputs=_input_rows(run), truth=truth
+                ).name
+        if args.output is not None:
+            written.append(write_result_yaml(run.result, args.output))
+        staged.commit()
+    except BaseException:
+        staged.discard()
+        raise
+    if args.viz is not None:
+        written.append(Path(args.viz))
+    if index is not None:
+        written.append(Path(args.report) / index)
+    return written
 
 
 def _input_rows(run: OfflineRun) -> list[tuple[str, str]]:

@@ -1,10 +1,12 @@
 """What several verbs of the command line share: the program name, the initial hand-eye,
-progress on stderr, the check of an output path and the pose source."""
+progress on stderr, the check of an output path, outputs written all or none, and the pose
+source."""
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -71,6 +73,49 @@ def check_output(path: str, what: str, *, directory: bool = False) -> Path:
         kind = "an existing directory" if target.is_dir() else "an existing file"
         raise InputError(f"cannot write the {what} {target}: it is {kind}; choose another path")
     return target
+
+
+class StagedOutputs:
+    """Outputs written first at hidden paths beside their own (``.NAME.staged``), then moved
+    into place together by :meth:`commit`; :meth:`discard` removes them, so that a run that
+    fails after writing some of its outputs leaves no file and no directory behind, and an
+    earlier output stays as it was."""
+
+    def __init__(self) -> None:
+        self._moves: list[tuple[Path, Path]] = []
+
+    def stage(self, path: str | Path) -> Path:
+        """The hidden path to write the output ``path`` at (a stale one is removed)."""
+        final = Path(path)
+        hidden = final.with_name(f".{final.name}.staged")
+        _remove(hidden)
+        self._moves.append((hidden, final))
+        return hidden
+
+    def commit(self) -> None:
+        """Move every staged output to its path; a directory into an existing one file by
+        file (replacing files of the same name)."""
+        for hidden, final in self._moves:
+            if hidden.is_dir() and final.is_dir():
+                for item in hidden.iterdir():
+                    os.replace(item, final / item.name)
+                hidden.rmdir()
+            else:
+                os.replace(hidden, final)
+        self._moves = []
+
+    def discard(self) -> None:
+        """Remove every staged output not yet committed."""
+        for hidden, _ in self._moves:
+            _remove(hidden)
+        self._moves = []
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        path.unlink(missing_ok=True)
 
 
 def pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel | None]:

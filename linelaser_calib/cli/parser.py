@@ -294,12 +294,14 @@ def build_parser() -> argparse.ArgumentParser:
     cal_p.add_argument(
         "--report",
         metavar="DIR",
-        help="write an HTML report (index.html and PNG figures) into DIR (needs matplotlib)",
+        help="write an HTML report (index.html and PNG figures) of any target into DIR (needs "
+        "matplotlib); a run that fails writes none of its outputs",
     )
     cal_p.add_argument(
         "--viz",
         metavar="OUT.mcap",
-        help="write the calibrated profiles, cylinder and transforms as an MCAP file (Foxglove)",
+        help="write the calibrated profiles, the fitted target and the transforms as an MCAP "
+        "file (Foxglove)",
     )
     _add_initial_argument(cal_p)
     cal_p.add_argument(

@@ -2,8 +2,8 @@
 
 - :func:`~linelaser_calib.report.html.write_report`: a self-contained HTML page with
   matplotlib figures (matplotlib is imported only when a report is made).
-- :func:`~linelaser_calib.report.viz.write_viz_mcap`: the calibrated profiles, the cylinder
-  and the transforms as ROS 2 messages in one MCAP file;
+- :func:`~linelaser_calib.report.viz.write_viz_mcap`: the calibrated profiles, the fitted
+  target's markers and the transforms as ROS 2 messages in one MCAP file;
   :func:`~linelaser_calib.report.viz.write_cloud_mcap`: point clouds (a reconstruction).
 
 Nothing in :mod:`linelaser_calib.core` imports this package.

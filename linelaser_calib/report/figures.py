@@ -2,9 +2,12 @@
 
 Importing this module imports matplotlib; :func:`linelaser_calib.report.html.write_report`
 imports it only after checking that matplotlib is installed. Every figure is built from a
-:class:`ReportData` (the result plus its residuals, computed once by
-:mod:`~..core.targets.cylinder.residuals`) and listed in :data:`FIGURES`, which the HTML page
-shows in order.
+:class:`ReportData` (the result plus its residuals, computed once through the result
+section's protocol, :class:`~linelaser_calib.core.targets.base.ResultSection`, so that every
+target has a report) and :func:`figures_of` lists those that apply, in page order. A target
+section's optional capabilities add their figures: the unrolled residual map
+(:func:`~linelaser_calib.core.targets.base.surface_map`) and the paper's feature residual
+(:func:`~linelaser_calib.core.targets.base.feature_residuals`).
 
 Lengths are shown in mm and residuals in µm, each axis labelled with its unit.
 """
@@ -13,92 +16,28 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import matplotlib
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from numpy.typing import NDArray
+from matplotlib.ticker import MaxNLocator
 
 from linelaser_calib.core.geometry import FloatArray, orthonormal_basis
 from linelaser_calib.core.planning import SigmaPoint
-from linelaser_calib.core.result import CalibrationResult
-from linelaser_calib.core.targets.cylinder.model import Cylinder
-from linelaser_calib.core.targets.cylinder.residuals import (
-    CylinderCoordinates,
-    axis_extent,
-    cylinder_coordinates,
-    sample_centre_distances,
-    sample_points_base,
-)
-from linelaser_calib.report.errors import require_cylinder
+from linelaser_calib.core.targets.base import Shape, feature_residuals
+from linelaser_calib.report.data import ReportData
 
 matplotlib.use("Agg")
-
-IntArray = NDArray[np.intp]
 
 #: Figure width, inches; at :data:`DPI` the PNGs are 1000 px wide.
 WIDTH_IN = 10.0
 DPI = 100
 #: Points drawn in the 3-D view at most (evenly strided per sample).
 MAX_3D_POINTS = 6000
-#: Colour map of the signed residuals (blue inside, red outside the cylinder).
+#: Colour map of the signed residuals (blue inside, red outside the surface).
 RESIDUAL_CMAP = "RdBu_r"
-
-
-@dataclass(frozen=True)
-class ReportData:
-    """A result and its residuals with the recorded flange poses.
-
-    Attributes
-    ----------
-    result : CalibrationResult
-    cylinder : Cylinder
-        The result's fitted cylinder.
-    indices : ndarray of int, shape (M,)
-        Profile index of each fitted sample the solve used.
-    centre_distances_m : ndarray, shape (M,)
-        Ellipse centre to axis distance of each sample, m.
-    points_base : list of ndarray, shape (K_j, 3)
-        Each sample's inlier points in the base frame, m.
-    coordinates : CylinderCoordinates
-        All points (N = sum K_j) in cylinder coordinates, signed residual in m.
-    sample_of_point : ndarray of int, shape (N,)
-        Position (0..M-1) of each point's sample.
-    """
-
-    result: CalibrationResult
-    cylinder: Cylinder
-    indices: IntArray
-    centre_distances_m: FloatArray
-    points_base: list[FloatArray]
-    coordinates: CylinderCoordinates
-    sample_of_point: IntArray
-
-    @property
-    def surface_residuals_m(self) -> list[FloatArray]:
-        """Signed point-to-surface distances (K_j,) of each sample, m."""
-        return [
-            self.coordinates.residual_m[self.sample_of_point == j] for j in range(len(self.indices))
-        ]
-
-
-def report_data(result: CalibrationResult) -> ReportData:
-    """Map the result's sample fits into the base frame and measure their residuals."""
-    cylinder = require_cylinder(result)
-    fits = result.sample_fits
-    T = result.T_flange_sensor
-    points = [sample_points_base(f, T) for f in fits]
-    stacked = np.concatenate(points) if points else np.zeros((0, 3))
-    return ReportData(
-        result=result,
-        cylinder=cylinder,
-        indices=np.array([f.index for f in fits], dtype=np.intp),
-        centre_distances_m=sample_centre_distances(fits, T, cylinder),
-        points_base=points,
-        coordinates=cylinder_coordinates(stacked, cylinder),
-        sample_of_point=np.repeat(np.arange(len(points)), [len(p) for p in points]),
-    )
 
 
 def _figure(height_in: float) -> Figure:
@@ -111,31 +50,45 @@ def _no_data(ax: Axes, text: str) -> None:
     ax.set_yticks([])
 
 
-def centre_distance_figure(data: ReportData) -> Figure:
-    """Stem plot of each sample's ellipse centre to axis distance, µm (paper Fig. 10)."""
+def _legend_above(ax: Axes) -> None:
+    """The legend above the axes, right-aligned, where it covers no data."""
+    ax.legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=3, frameon=False)
+
+
+def _profile_axis(ax: Axes, text: str = "profile index") -> None:
+    """Label the x axis as profile indices, ticked at whole numbers."""
+    ax.set_xlabel(text)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+
+
+def feature_distance_figure(data: ReportData) -> Figure:
+    """Stem plot of each sample's feature residual (e.g. ellipse centre to axis), µm."""
     fig = _figure(3.6)
     ax = fig.add_subplot()
-    values = data.centre_distances_m * 1e6
+    values = np.zeros(0) if data.feature_distances_m is None else data.feature_distances_m * 1e6
     if len(values):
         ax.stem(data.indices, values, basefmt=" ")
         rms = float(np.sqrt(np.mean(values**2)))
         ax.axhline(rms, color="tab:red", lw=1, ls="--", label=f"RMS {rms:.1f} µm")
-        ax.legend(loc="upper right")
+        _legend_above(ax)
         ax.set_ylim(bottom=0.0)
     else:
         _no_data(ax, "no fitted samples")
-    ax.set_xlabel("profile index")
-    ax.set_ylabel("centre to axis distance, µm")
+    _profile_axis(ax)
+    ax.set_ylabel("distance, µm")
     ax.grid(True, alpha=0.3)
     return fig
 
 
-def point_residual_figure(data: ReportData) -> Figure:
-    """Box plot of each sample's signed point-to-surface distances, µm."""
+def sample_residual_figure(data: ReportData) -> Figure:
+    """Each sample's distances from the fitted target, µm: a box per sample when they are of
+    its points, a stem when there is one per sample (its feature point)."""
     fig = _figure(3.8)
     ax = fig.add_subplot()
-    residuals = [r * 1e6 for r in data.surface_residuals_m]
-    if residuals:
+    residuals = [d * 1e6 for d in data.distances_m]
+    if not residuals:
+        _no_data(ax, "no fitted samples")
+    elif data.per_point:
         ax.boxplot(
             residuals,
             positions=data.indices,
@@ -148,42 +101,84 @@ def point_residual_figure(data: ReportData) -> Figure:
         step = max(1, len(data.indices) // 25)
         ax.set_xticks(data.indices[::step], [str(i) for i in data.indices[::step]])
     else:
-        _no_data(ax, "no fitted samples")
-    ax.set_xlabel("profile index (box: quartiles, whiskers: 5 % to 95 %)")
-    ax.set_ylabel("point to surface, µm (+ outside)")
+        values = np.array([float(r[0]) for r in residuals])
+        ax.stem(data.indices, values, basefmt=" ")
+        rms = float(np.sqrt(np.mean(values**2)))
+        ax.axhline(rms, color="tab:red", lw=1, ls="--", label=f"RMS {rms:.1f} µm")
+        _legend_above(ax)
+        ax.set_ylim(bottom=0.0)
+    if data.per_point:
+        ax.set_xlabel("profile index (box: quartiles, whiskers: 5 % to 95 %)")
+        ax.set_ylabel("point to surface, µm (+ outside)")
+    else:
+        _profile_axis(ax)
+        ax.set_ylabel("distance, µm")
     ax.grid(True, axis="y", alpha=0.3)
     return fig
 
 
+def _draw_shape(ax: Any, shape: Shape) -> FloatArray:
+    """Draw one marker shape (mm) in a 3-D axes (``Axes3D``); returns points (K, 3) in mm
+    that bound it."""
+    points = np.asarray(shape.points, dtype=np.float64) * 1e3
+    radius = shape.radius * 1e3
+    color = shape.color[:3]
+    if shape.kind == "cylinder":
+        start, end = points[0], points[1]
+        d = end - start
+        u, v = orthonormal_basis(d / np.linalg.norm(d))
+        angle, along = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0.0, 1.0, 9))
+        ring = np.cos(angle)[..., None] * u + np.sin(angle)[..., None] * v
+        surface = start + radius * ring + along[..., None] * d
+        ax.plot_wireframe(*np.moveaxis(surface, -1, 0), color="0.55", lw=0.5, alpha=0.6)
+        return np.asarray(surface.reshape(-1, 3), dtype=np.float64)
+    if shape.kind == "sphere":
+        theta, phi = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(0, np.pi, 19))
+        unit = np.stack(
+            [np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)], axis=-1
+        )
+        surface = points[0] + radius * unit
+        ax.plot_wireframe(*np.moveaxis(surface, -1, 0), color="0.55", lw=0.5, alpha=0.6)
+        return np.asarray(surface.reshape(-1, 3), dtype=np.float64)
+    if shape.kind == "line":
+        for start, end in points.reshape(-1, 2, 3):
+            ax.plot(*np.stack([start, end]).T, color=color, lw=2.0)
+        return points
+    ax.scatter(
+        points[:, 0],
+        points[:, 1],
+        points[:, 2],
+        s=250,
+        color=color,
+        edgecolors="k",
+        marker="*",
+        depthshade=False,
+    )
+    return points
+
+
 def profiles_3d_figure(data: ReportData) -> Figure:
-    """3-D view of the profiles in the base frame on the fitted cylinder, mm."""
+    """3-D view of the profiles in the base frame with the fitted target's shapes, mm."""
     fig = _figure(7.0)
-    ax = fig.add_subplot(projection="3d")
-    cylinder = data.cylinder
+    # matplotlib types the 3-D axes as plain Axes; its 3-D methods are used here.
+    ax: Any = fig.add_subplot(projection="3d")
+    bounds = []
     if data.points_base:
         per_sample = max(1, MAX_3D_POINTS // len(data.points_base))
         for j, points in enumerate(data.points_base):
             shown = points[:: max(1, int(np.ceil(len(points) / per_sample)))] * 1e3
             ax.scatter(*shown.T, s=2, color=matplotlib.colormaps["tab20"](j % 20), depthshade=False)
-        centre, length = axis_extent(np.concatenate(data.points_base), cylinder)
-    else:
-        centre, length = np.asarray(cylinder.point), 4.0 * cylinder.radius
-    d = cylinder.direction / np.linalg.norm(cylinder.direction)
-    u, v = orthonormal_basis(d)
-    angle, along = np.meshgrid(np.linspace(0, 2 * np.pi, 37), np.linspace(-0.5, 0.5, 9) * length)
-    surface = (
-        centre[:, None, None]
-        + cylinder.radius * (np.cos(angle) * u[:, None, None] + np.sin(angle) * v[:, None, None])
-        + along * d[:, None, None]
-    ) * 1e3
-    ax.plot_wireframe(*surface, color="0.55", lw=0.5, alpha=0.6)
-    corners = surface.reshape(3, -1)
-    half = 0.5 * float(np.max(np.ptp(corners, axis=1)))
-    middle = 0.5 * (corners.min(axis=1) + corners.max(axis=1))
+            bounds.append(shown)
+    for shape in data.result.target.shapes(data.all_points_base):
+        bounds.append(_draw_shape(ax, shape))
+    corners = np.concatenate(bounds) if bounds else np.zeros((1, 3))
+    half = max(0.5 * float(np.max(np.ptp(corners, axis=0))), 1.0)
+    middle = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
     ax.set_xlim(middle[0] - half, middle[0] + half)
     ax.set_ylim(middle[1] - half, middle[1] + half)
     ax.set_zlim(middle[2] - half, middle[2] + half)
-    ax.set_box_aspect((1.0, 1.0, 1.0))
+    # Zoomed out a little so that the z label, drawn outside the box, stays in the figure.
+    ax.set_box_aspect((1.0, 1.0, 1.0), zoom=0.85)
     frame = data.result.base_frame
     ax.set_xlabel(f"x ({frame}), mm")
     ax.set_ylabel(f"y ({frame}), mm")
@@ -191,30 +186,61 @@ def profiles_3d_figure(data: ReportData) -> Figure:
     return fig
 
 
+def _map_values(values: FloatArray, unit: str) -> tuple[FloatArray, str]:
+    """Values in the unit shown: rad as deg, m as mm."""
+    if unit == "rad":
+        return np.degrees(values), "deg"
+    return values * 1e3, "mm"
+
+
 def residual_map_figure(data: ReportData) -> Figure:
-    """Unrolled cylinder: angle around the axis × position along it, coloured by residual."""
+    """The target's unrolled surface: two surface coordinates, coloured by residual."""
     fig = _figure(4.8)
     ax = fig.add_subplot()
-    c = data.coordinates
-    if len(c.residual_m):
-        residual_um = c.residual_m * 1e6
-        limit = max(float(np.percentile(np.abs(residual_um), 99)), 1e-3)
-        points = ax.scatter(
-            np.degrees(c.angle_rad),
-            c.along_m * 1e3,
-            c=residual_um,
-            s=3,
-            cmap=RESIDUAL_CMAP,
-            vmin=-limit,
-            vmax=limit,
-        )
-        fig.colorbar(points, ax=ax, label="point to surface, µm (+ outside)", extend="both")
+    surface = data.surface
+    residual_um = data.all_distances_m * 1e6
+    if surface is None or not len(residual_um):
+        _no_data(ax, "no fitted samples")
+        return fig
+    across, across_unit = _map_values(surface.across, surface.across_unit)
+    along, along_unit = _map_values(surface.along, surface.along_unit)
+    limit = max(float(np.percentile(np.abs(residual_um), 99)), 1e-3)
+    points = ax.scatter(
+        across, along, c=residual_um, s=3, cmap=RESIDUAL_CMAP, vmin=-limit, vmax=limit
+    )
+    fig.colorbar(points, ax=ax, label="point to surface, µm (+ outside)", extend="both")
+    if surface.across_unit == "rad":
         ax.set_xlim(-180.0, 180.0)
         ax.set_xticks(np.arange(-180, 181, 45))
-    else:
-        _no_data(ax, "no fitted samples")
-    ax.set_xlabel("angle around the axis, deg")
-    ax.set_ylabel("position along the axis, mm")
+    ax.set_xlabel(f"{surface.across_label}, {across_unit}")
+    ax.set_ylabel(f"{surface.along_label}, {along_unit}")
+    ax.grid(True, alpha=0.3)
+    return fig
+
+
+def self_check_figure(data: ReportData) -> Figure:
+    """The self-check's held-out RMS per profile, µm, with the accuracy in use."""
+    fig = _figure(3.6)
+    ax = fig.add_subplot()
+    check = data.result.self_check
+    if check is None or not len(check.indices):
+        _no_data(ax, "no self-check")
+        return fig
+    values = np.asarray(check.held_out_rms_m) * 1e6
+    ax.stem(np.asarray(check.indices), values, basefmt=" ")
+    if check.accuracy_in_use_m is not None:
+        accuracy = check.accuracy_in_use_m * 1e6
+        ax.axhline(
+            accuracy,
+            color="tab:red",
+            lw=1,
+            ls="--",
+            label=f"accuracy in use {accuracy:.1f} µm RMS (regions held out)",
+        )
+    _legend_above(ax)
+    ax.set_ylim(bottom=0.0)
+    _profile_axis(ax, "profile index (held out of the solve that mapped it)")
+    ax.set_ylabel("held-out RMS distance, µm")
     ax.grid(True, alpha=0.3)
     return fig
 
@@ -237,51 +263,111 @@ def _plot_traces(ax: Axes, traces: list[tuple[str, list[float]]], scale: float) 
     positive = values[values > 0.0]
     log = len(positive) > 0 and positive.max() >= LOG_SCALE_RATIO * positive.min()
     for label, y in arrays:
-        ax.plot(np.arange(len(y)), np.where(y > 0.0, y, np.nan) if log else y, lw=1.2, label=label)
+        ax.plot(
+            np.arange(len(y)), np.where(y > 0.0, y, np.nan) if log else y, ".-", lw=1.2, label=label
+        )
     if log:
         ax.set_yscale("log")
+    else:
+        ax.ticklabel_format(axis="y", useOffset=False)
     if len(arrays) > 1:
-        ax.legend(loc="upper right", fontsize="small")
+        ax.legend(loc="best", fontsize="small", framealpha=0.8)
     return True
 
 
-def _missing(history: dict[str, list[float]], key: str, empty: str) -> str:
-    """Why a convergence trace is not drawn: ``empty`` if recorded empty, else not recorded."""
-    return empty if key in history else "not recorded in this result"
+@dataclass(frozen=True)
+class TracePanel:
+    """One panel of the convergence figure: history keys, their labels, scale and axes."""
+
+    title: str
+    traces: tuple[tuple[str, str], ...]
+    scale: float
+    xlabel: str
+    ylabel: str
+    violation: str = ""
+
+
+#: The convergence panels, each drawn when the result's history holds one of its traces.
+TRACE_PANELS: tuple[TracePanel, ...] = (
+    TracePanel(
+        "PSO (paper Fig. 5)",
+        (("pso_best", "f_best"),),
+        1e6,
+        "PSO generation",
+        "best fitness, mm²",
+    ),
+    TracePanel(
+        "GALM (paper Fig. 6)",
+        (("galm_f", "f, centre to axis (minimised)"), ("galm_phi", "φ, augmented merit")),
+        1e6,
+        "GALM outer iteration (runs joined)",
+        "mm²",
+        violation="galm_h",
+    ),
+    TracePanel(
+        "Paper's translation shift",
+        (("paper_delta_r_m", "mean offset"),),
+        1e3,
+        "iteration",
+        "shift, mm",
+    ),
+    TracePanel(
+        "ML refinement",
+        (("refine_cost", "cost"),),
+        1.0,
+        "Levenberg-Marquardt step",
+        "robust cost, dimensionless",
+    ),
+)
+
+
+def _panels(history: dict[str, list[float]]) -> list[TracePanel]:
+    return [p for p in TRACE_PANELS if any(history.get(key) for key, _ in p.traces)]
 
 
 def convergence_figure(data: ReportData) -> Figure:
-    """PSO fitness per generation, GALM objective per outer iteration, refinement cost."""
-    fig = _figure(3.6)
+    """One panel per solver stage that recorded a trace (see :data:`TRACE_PANELS`), stacked."""
     history = data.result.history
-    pso, galm, refine = fig.subplots(1, 3)
-    if _plot_traces(pso, [("f_best", history.get("pso_best", []))], 1e6):
-        pso.set_ylabel("best fitness, mm²")
-    else:
-        _no_data(
-            pso, _missing(history, "pso_best", "no PSO generation ran\n(initial swarm accepted)")
-        )
-    pso.set_xlabel("PSO generation")
-    pso.set_title("PSO (paper Fig. 5)")
-    galm_traces = [
-        ("φ (Lagrangian)", history.get("galm_phi", [])),
-        ("f (centre to axis)", history.get("galm_f", [])),
-    ]
-    if _plot_traces(galm, galm_traces, 1e6):
-        galm.set_ylabel("objective, mm²")
-    else:
-        _no_data(galm, _missing(history, "galm_f", "GALM did not run"))
-    galm.set_xlabel("GALM outer iteration (runs joined)")
-    galm.set_title("GALM (paper Fig. 6)")
-    if _plot_traces(refine, [("cost", history.get("refine_cost", []))], 1.0):
-        refine.set_ylabel("robust cost, dimensionless")
-    else:
-        _no_data(refine, f"no refinement\n(method {data.result.method})")
-    refine.set_xlabel("Levenberg-Marquardt step")
-    refine.set_title("ML refinement")
-    for ax in (pso, galm, refine):
+    panels = _panels(history)
+    fig = _figure(1.0 + 2.6 * len(panels))
+    axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
+    for ax, panel in zip(axes, panels, strict=True):
+        traces = [(label, history.get(key, [])) for key, label in panel.traces]
+        _plot_traces(ax, traces, panel.scale)
+        violation = [v for v in history.get(panel.violation, []) if v > 0.0]
+        if violation:
+            twin = ax.twinx()
+            twin.semilogy(violation, ".:", color="0.4", lw=1.0)
+            twin.set_ylabel("constraint violation ‖h‖ (dotted), dimensionless")
+        ax.set_title(panel.title, loc="left")
+        ax.set_xlabel(panel.xlabel)
+        ax.set_ylabel(panel.ylabel)
         ax.grid(True, which="both", alpha=0.3)
     return fig
+
+
+def convergence_caption(data: ReportData) -> str:
+    """What the convergence panels show, and which solver stages recorded no trace."""
+    history = data.result.history
+    parts = [
+        "Each solver stage's trace per iteration; traces spanning a factor of 10 or more are "
+        "drawn on a log scale."
+    ]
+    if history.get("galm_phi"):
+        parts.append(
+            "In the GALM panel f, the centre-to-axis objective, is minimised subject to the "
+            "unit-norm constraints h(x) = 0 (eq. 11), and φ = f − λᵀh + σ/2 ‖h‖² is the augmented "
+            "Lagrangian's merit (eq. 14). Either may rise a little from one outer iteration to "
+            "the next while the multipliers λ and the penalty σ are updated and the constraint "
+            "violation ‖h‖ (dotted, right axis) falls: that is the constraint being met, not "
+            "divergence."
+        )
+    if "pso_best" in history and not history["pso_best"]:
+        parts.append(
+            "No PSO generation ran: a particle of the initial swarm, polished, was already "
+            "within the acceptance bound, so the seed was taken from it."
+        )
+    return " ".join(parts)
 
 
 @dataclass(frozen=True)
@@ -294,49 +380,72 @@ class FigureSpec:
     build: Callable[[ReportData], Figure]
 
 
-#: The report's figures, in page order.
-FIGURES: tuple[FigureSpec, ...] = (
-    FigureSpec(
-        "centre_distances.png",
-        "Ellipse centre to axis distance per sample",
-        "Each profile's ellipse centre, mapped into the base frame with its recorded flange "
-        "pose and the calibrated hand-eye, and its distance to the fitted axis (the cylinder "
-        "paper's residual, eq. 6 and Fig. 10).",
-        centre_distance_figure,
-    ),
-    FigureSpec(
-        "point_residuals.png",
-        "Point to surface distance per sample",
-        "Signed distance of each inlier point to the fitted cylinder surface with the recorded "
-        "flange poses (no per-sample pose correction), so the robot's pose error is included.",
-        point_residual_figure,
-    ),
-    FigureSpec(
-        "profiles_3d.png",
-        "Profiles in the base frame",
-        "T_base_flange · T_flange_sensor · p for every inlier point, one colour per sample, on "
-        "the fitted cylinder (grey).",
-        profiles_3d_figure,
-    ),
-    FigureSpec(
-        "residual_map.png",
-        "Unrolled residual map",
-        "The cylinder cut open: angle around the axis against position along it, each point "
-        "coloured by its signed distance to the surface (red outside, blue inside). A pattern "
-        "that follows the angle or the position points to a model error (wrong radius, bent "
-        "axis); random colours are noise.",
-        residual_map_figure,
-    ),
-    FigureSpec(
-        "convergence.png",
-        "Convergence",
-        "The seed solve's PSO best fitness per generation and its GALM objective per outer "
-        "iteration (the cylinder paper's Figs. 5 and 6), and the maximum-likelihood "
-        "refinement's cost per accepted step (default method only). Traces spanning a factor of 10 "
-        "or more are drawn on a log scale.",
-        convergence_figure,
-    ),
-)
+def figures_of(data: ReportData) -> list[FigureSpec]:
+    """The report's figures for this result, in page order."""
+    title = data.result.target.title
+    specs = []
+    features = feature_residuals(data.result.target)
+    if features is not None and data.feature_distances_m is not None:
+        specs.append(
+            FigureSpec(
+                "centre_distances.png",
+                f"Feature residual per sample: {features.feature_kind}",
+                "Each profile's feature point, mapped into the base frame with its recorded "
+                "flange pose and the calibrated hand-eye, and its distance from the fitted "
+                f"{title}.",
+                feature_distance_figure,
+            )
+        )
+    what = "inlier point" if data.per_point else "feature point"
+    specs.append(
+        FigureSpec(
+            "point_residuals.png",
+            "Residual per sample (recorded poses)",
+            f"Distance of each {what} from the fitted {title}, mapped with the recorded flange "
+            "poses (no per-sample pose correction), so the robot's pose error is included: "
+            "these are larger than the fit residual, which corrects each pose.",
+            sample_residual_figure,
+        )
+    )
+    specs.append(
+        FigureSpec(
+            "profiles_3d.png",
+            f"Profiles and the {title} in the base frame",
+            "T_base_flange · T_flange_sensor · p for every point the fit used, one colour per "
+            f"sample, with the fitted {title} (grey wireframe, or coloured line or star).",
+            profiles_3d_figure,
+        )
+    )
+    if data.surface is not None and data.per_point:
+        specs.append(
+            FigureSpec(
+                "residual_map.png",
+                "Unrolled residual map",
+                f"The {title}'s surface unrolled: each point at its two surface coordinates, "
+                "coloured by its signed distance to the surface (red outside, blue inside). A "
+                "pattern that follows a coordinate points to a model error (wrong radius, bent "
+                "axis, a scale error); random colours are noise.",
+                residual_map_figure,
+            )
+        )
+    if data.result.self_check is not None:
+        specs.append(
+            FigureSpec(
+                "self_check.png",
+                "Self-check: held-out profiles",
+                "Each held-out profile's RMS distance from the target, mapped with its recorded "
+                "pose and the hand-eye solved without it (the self-check's cross-validation "
+                "folds); their RMS is the accuracy in use.",
+                self_check_figure,
+            )
+        )
+    if _panels(data.result.history):
+        specs.append(
+            FigureSpec(
+                "convergence.png", "Convergence", convergence_caption(data), convergence_figure
+            )
+        )
+    return specs
 
 
 def sigma_curve_figure(predicted: list[SigmaPoint], achieved: list[SigmaPoint]) -> Figure:

@@ -13,17 +13,24 @@ import datetime
 import html
 import importlib.util
 import os
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
 from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets.base import feature_residuals
 from linelaser_calib.io.results import Truth
+from linelaser_calib.report.data import ReportData, report_data
 from linelaser_calib.report.errors import ReportError
 from linelaser_calib.summary import (
     Rows,
     accuracy_in_use_line,
     hand_eye_rows,
+    headline_rows,
     rejection_lines,
+    residual_kind,
     residual_rows,
     self_check_rows,
     target_text,
@@ -44,6 +51,8 @@ td { font-family: ui-monospace, monospace; }
 .warning { background: #fff4e0; border-left: 4px solid #e69500; padding: 0.4em 0.8em;
            margin: 0.4em 0; }
 .ok { color: #2a7a2a; }
+.verdict { font-size: 1.05em; border: 2px solid #2a7a2a; padding: 0.4em 0.8em; }
+.verdict.warn { border-color: #e69500; background: #fff4e0; }
 figure { margin: 1em 0; }
 figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #555; }
@@ -71,8 +80,35 @@ def _items(lines: list[str], css: str = "") -> str:
     return "".join(f'<div class="{css}">{html.escape(line)}</div>' for line in lines)
 
 
+def _residual_rows(result: CalibrationResult, data: ReportData) -> Rows:
+    """Each residual number of the report, named by what it measures, in µm."""
+    title = result.target.title
+    rows = [
+        (
+            "fit residual",
+            f"{result.rms_residual_m * 1e6:.1f} um RMS over {len(result.samples_used)} samples: "
+            f"{residual_kind(result)} (the quantity the {result.method} method minimised)",
+        ),
+        (
+            "recorded-pose residual",
+            f"{data.recorded_pose_rms_m * 1e6:.1f} um RMS: distance of each "
+            f"{'point' if data.per_point else 'feature point'} from the fitted {title} with the "
+            "recorded flange poses, robot pose error included (the residual figure below)",
+        ),
+    ]
+    features = feature_residuals(result.target)
+    if features is not None and data.feature_distances_m is not None:
+        values = data.feature_distances_m
+        rms = float(np.sqrt(np.mean(values**2))) if values.size else float("nan")
+        rows.append(
+            ("feature residual", f"{rms * 1e6:.1f} um RMS: {features.feature_kind}, recorded poses")
+        )
+    return rows + residual_rows(result)[1:]
+
+
 def _page(
     result: CalibrationResult,
+    data: ReportData,
     inputs: Sequence[tuple[str, str]],
     truth: Truth | None,
     created: datetime.datetime,
@@ -82,24 +118,28 @@ def _page(
     method = "maximum likelihood (default)" if result.method == "default" else result.method
     accuracy = accuracy_in_use_line(result)
     header: Rows = [
+        ("target", result.target.title),
         *inputs,
         ("method", method),
         ("created", created.isoformat(timespec="seconds")),
     ]
+    state = "warn" if result.warnings else "pass"
+    title = result.target.title
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
-        "<title>linelaser_calib report</title>",
+        f"<title>linelaser_calib report: {html.escape(title)} target</title>",
         f"<style>{_STYLE}</style></head><body>",
-        "<h1>Line-laser hand-eye calibration</h1>",
+        f"<h1>Line-laser hand-eye calibration: {html.escape(title)} target</h1>",
         *([] if accuracy is None else [f'<p class="accuracy">{html.escape(accuracy)}</p>']),
+        f'<div class="verdict {state}">{_table(headline_rows(result))}</div>',
         _table(header),
         f"<h2>Hand-eye T_flange_sensor ({html.escape(result.parent_frame)} &rarr; "
         f"{html.escape(result.child_frame)})</h2>",
         _table(hand_eye_rows(result)),
-        "<h2>Cylinder and residual</h2>",
+        f"<h2>The {html.escape(title)} and the residuals</h2>",
         f"<p>{html.escape(target_text(result))}</p>",
-        _table(residual_rows(result)),
+        _table(_residual_rows(result, data)),
         *(
             ["<h2>Self-check</h2>", _table(self_check_rows(result))]
             if result.self_check is not None
@@ -113,10 +153,10 @@ def _page(
     ]
     if truth is not None:
         parts += ["<h2>Error against truth</h2>", _table(truth_rows(result, truth))]
-    for file, title, caption in figures:
+    for file, heading, caption in figures:
         parts += [
-            f"<h2>{html.escape(title)}</h2>",
-            f'<figure><img src="{html.escape(file)}" alt="{html.escape(title)}">',
+            f"<h2>{html.escape(heading)}</h2>",
+            f'<figure><img src="{html.escape(file)}" alt="{html.escape(heading)}">',
             f"<figcaption>{html.escape(caption)}</figcaption></figure>",
         ]
     parts.append("</body></html>")
@@ -157,24 +197,27 @@ def write_report(
         matplotlib is missing or the directory cannot be written.
     """
     require_matplotlib()
-    from linelaser_calib.report.figures import FIGURES, report_data
+    from linelaser_calib.report.figures import figures_of
 
     out = Path(directory)
     data = report_data(result)
-    written: list[tuple[str, str, str]] = []
+    created_dir = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
-        for spec in FIGURES:
+        written: list[tuple[str, str, str]] = []
+        for spec in figures_of(data):
             spec.build(data).savefig(out / spec.file, format="png")
             written.append((spec.file, spec.title, spec.caption))
         stamp = created or datetime.datetime.now().astimezone()
         index = out / INDEX
         partial = out / f".{INDEX}.partial"
         try:
-            partial.write_text(_page(result, inputs, truth, stamp, written), encoding="utf-8")
+            partial.write_text(_page(result, data, inputs, truth, stamp, written), encoding="utf-8")
             os.replace(partial, index)
         finally:
             partial.unlink(missing_ok=True)
     except OSError as err:
+        if created_dir:
+            shutil.rmtree(out, ignore_errors=True)
         raise ReportError(f"cannot write the report into {out}: {err.strerror or err}") from err
     return index

@@ -40,6 +40,10 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
 7. A result section class satisfying :class:`ResultSection` (its YAML key, its plain SI
    mapping, its text, its markers) and ``read_section(mapping, quality)`` that rebuilds it
    from a result file's section (raising ``ValueError`` naming the bad key).
+8. Optionally, capabilities found by attribute, each with a default for a target without it:
+   a ``placement_adviser`` (:func:`placement_adviser`); on the section, ``surface_map`` (its
+   surface unrolled for the report, :func:`surface_map`) and ``feature_distances`` with
+   ``feature_kind`` (the paper's per-sample residual, :func:`feature_residuals`).
 
 Everything is in SI units (m, rad); mm and degrees appear only in human text, labelled.
 """
@@ -49,7 +53,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, is_dataclass, replace
-from typing import Any, ClassVar, Protocol, TypeVar
+from typing import Any, ClassVar, Protocol, TypeVar, cast
 
 import numpy as np
 
@@ -437,6 +441,69 @@ def placement_adviser(target: Target[Any]) -> PlacementAdviser | None:
     """The target's placement adviser; None (the default) for a target without one."""
     adviser: PlacementAdviser | None = getattr(target, "placement_adviser", None)
     return adviser
+
+
+@dataclass(frozen=True)
+class SurfaceMap:
+    """Points on a target's surface in two coordinates of that surface (the report's unrolled
+    residual map).
+
+    Attributes
+    ----------
+    across, along : ndarray, shape (N,)
+        The two coordinates of each point, in the unit named by ``across_unit`` and
+        ``along_unit`` (``rad`` or ``m``).
+    across_label, along_label : str
+        What each coordinate is, in words (no unit).
+    across_unit, along_unit : str
+        ``rad`` or ``m``.
+    """
+
+    across: FloatArray
+    along: FloatArray
+    across_label: str
+    along_label: str
+    across_unit: str = "rad"
+    along_unit: str = "m"
+
+
+class SurfaceMapper(Protocol):
+    """Optional capability of a result section (see :func:`surface_map`): its surface
+    unrolled onto two coordinates."""
+
+    def surface_map(self, points_base: FloatArray) -> SurfaceMap:
+        """Coordinates on the section's surface of points (N, 3) near it, base frame, m."""
+        ...
+
+
+def surface_map(section: ResultSection, points_base: FloatArray) -> SurfaceMap | None:
+    """The section's unrolled coordinates of ``points_base`` (N, 3), m; None (the default)
+    for a section without a surface to unroll (a point, a line)."""
+    if not callable(getattr(section, "surface_map", None)):
+        return None
+    return cast(SurfaceMapper, section).surface_map(points_base)
+
+
+class FeatureResiduals(Protocol):
+    """Optional capability of a result section (see :func:`feature_residuals`): the
+    distance of each sample's feature point from the fitted target, as its paper measures it
+    (e.g. an ellipse centre from the cylinder axis)."""
+
+    feature_kind: ClassVar[str]
+
+    def feature_distances(
+        self, fits: Sequence[SampleFit], T_flange_sensor: FloatArray
+    ) -> FloatArray:
+        """Distances (M,) in m of the fits' feature points, recorded poses."""
+        ...
+
+
+def feature_residuals(section: ResultSection) -> FeatureResiduals | None:
+    """The section's feature residuals; None (the default) when the per-sample distances of
+    :meth:`ResultSection.surface_distances` are already those of the feature point."""
+    if not callable(getattr(section, "feature_distances", None)):
+        return None
+    return cast(FeatureResiduals, section)
 
 
 def _set_path(config: Any, path: str, value: Any) -> Any:

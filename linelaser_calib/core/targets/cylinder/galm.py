@@ -115,6 +115,8 @@ class GalmResult:
         f fell below −divergence_cost, x grew beyond divergence_x or became non-finite.
     history_phi, history_f : list of float
         φ and f after each outer iteration.
+    history_h : list of float
+        ‖h‖ after each outer iteration (the constraint violation).
     """
 
     x: FloatArray
@@ -129,6 +131,7 @@ class GalmResult:
     diverged: bool
     history_phi: list[float]
     history_f: list[float]
+    history_h: list[float]
 
 
 class _Diverged(Exception):
@@ -168,6 +171,7 @@ def galm(
     h_prev = float(np.linalg.norm(h))
     history_phi: list[float] = []
     history_f: list[float] = []
+    history_h: list[float] = []
     inner = 0
     converged = diverged = False
     k = 0
@@ -207,6 +211,7 @@ def galm(
         history_f.append(f)
         history_phi.append(f - float(lam_used @ h) + 0.5 * sigma_used * float(h @ h))
         h_norm = float(np.linalg.norm(h))
+        history_h.append(h_norm)
         if diverged or not np.isfinite(f) or f < -config.divergence_cost:
             diverged = True
             break
@@ -230,4 +235,5 @@ def galm(
         diverged=diverged,
         history_phi=history_phi,
         history_f=history_f,
+        history_h=history_h,
     )

@@ -184,7 +184,8 @@ class PaperSolution:
         Extra swarms used.
     history : dict of str to list of float
         ``pso_best``: f_best after each generation (m²); ``galm_phi`` and ``galm_f``:
-        φ and f after each GALM outer iteration (m²), runs concatenated (paper Figs. 5-6).
+        φ and f after each GALM outer iteration (m²), runs concatenated (paper Figs. 5-6);
+        ``galm_h``: the constraint violation ‖h‖ (dimensionless, eq. 11) with them.
     time_s : float
         Wall-clock time of the solve, s.
     """
@@ -212,7 +213,7 @@ class _Run:
     galm_runs: int = 0
     galm_iterations: int = 0
     history: dict[str, list[float]] = field(
-        default_factory=lambda: {"pso_best": [], "galm_phi": [], "galm_f": []}
+        default_factory=lambda: {"pso_best": [], "galm_phi": [], "galm_f": [], "galm_h": []}
     )
 
 
@@ -366,6 +367,7 @@ def _hybrid(
             run.galm_iterations += result.iterations
             run.history["galm_phi"].extend(v * area for v in result.history_phi)
             run.history["galm_f"].extend(v * area for v in result.history_f)
+            run.history["galm_h"].extend(result.history_h)
             if not result.diverged and result.phi < f_best:
                 g_best, f_best = result.x.copy(), result.phi
                 early = polished_if_accepted(g_best)

@@ -3,7 +3,7 @@ sensor's along-line scale when it was estimated with it."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -11,10 +11,10 @@ import numpy as np
 
 from ...geometry import FloatArray, apply_transform
 from ...types import SampleFit
-from ..base import Shape, mm_text, plain_floats, read_vector
+from ..base import Shape, SurfaceMap, mm_text, plain_floats, read_vector
 from .model import Cylinder
 from .problem import measured_to_true
-from .residuals import axis_extent
+from .residuals import axis_extent, cylinder_coordinates, sample_centre_distances
 
 
 @dataclass(frozen=True)
@@ -41,6 +41,9 @@ class CylinderSection:
 
     key: ClassVar[str] = "cylinder"
     title: ClassVar[str] = "cylinder"
+    feature_kind: ClassVar[str] = (
+        "ellipse centre to axis distance (the cylinder paper's residual, eq. 6 and Fig. 10)"
+    )
 
     cylinder: Cylinder
     radius_estimated: bool = False
@@ -114,6 +117,26 @@ class CylinderSection:
         v = apply_transform(T_base_sensor, self.sensor_points(fit.points)) - c.point
         radial = v - np.outer(v @ c.direction, c.direction)
         return np.asarray(np.linalg.norm(radial, axis=1) - c.radius)
+
+    def surface_map(self, points_base: FloatArray) -> SurfaceMap:
+        """Angle around the axis (rad) and position along it (m), measured from the point
+        lowest along the axis, so that the scanned length reads 0 to L whichever way the fitted
+        direction points."""
+        coordinates = cylinder_coordinates(points_base, self.cylinder)
+        along = coordinates.along_m
+        start = float(np.min(along)) if along.size else 0.0
+        return SurfaceMap(
+            coordinates.angle_rad,
+            along - start,
+            "angle around the axis",
+            "position along the axis from the first scanned point",
+        )
+
+    def feature_distances(
+        self, fits: Sequence[SampleFit], T_flange_sensor: FloatArray
+    ) -> FloatArray:
+        """Distance (M,) of each fit's ellipse centre, recorded pose, from the axis, m."""
+        return sample_centre_distances(fits, T_flange_sensor, self.cylinder)
 
     def given_settings(self) -> dict[str, Any]:
         """None: a cylinder result fixes no setting of a later calibration."""

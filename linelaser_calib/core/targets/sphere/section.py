@@ -11,7 +11,7 @@ import numpy as np
 from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
 from ...types import SampleFit
-from ..base import Shape, plain_floats, read_vector
+from ..base import Shape, SurfaceMap, plain_floats, read_vector
 from .model import SIDE_LABELS, side_from_label
 
 
@@ -113,6 +113,17 @@ class SphereSection:
         """Distance of the sample's points from the centre minus the radius (N,), m."""
         points = apply_transform(T_base_sensor, fit.points)
         return np.asarray(np.linalg.norm(points - self.centre_m, axis=1) - self.radius_m)
+
+    def surface_map(self, points_base: FloatArray) -> SurfaceMap:
+        """Longitude about the base z axis and latitude above the centre's x-y plane, rad."""
+        v = np.asarray(points_base, dtype=np.float64).reshape(-1, 3) - self.centre_m
+        return SurfaceMap(
+            np.arctan2(v[:, 1], v[:, 0]),
+            np.arctan2(v[:, 2], np.hypot(v[:, 0], v[:, 1])),
+            "longitude about the base z axis",
+            "latitude above the centre",
+            along_unit="rad",
+        )
 
     def given_settings(self) -> dict[str, Any]:
         """None: a sphere result fixes nothing of a later calibration."""
