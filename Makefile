@@ -28,8 +28,10 @@ lint: $(STAMP)
 typecheck: $(STAMP)
 	$(VENV)/bin/mypy linelaser_calib msg_adapters
 
+# Two workers (pytest-xdist): the suite is mostly one process's work, and this machine has
+# two cores; the ROS tests of the two workers use disjoint DDS domains (test/ros_helpers.py).
 unit: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2
 
 test: lint typecheck unit
 

@@ -10,11 +10,13 @@ collector's diagnostics, calls services and reads latched topics.
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import itertools
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -51,9 +53,21 @@ PACKAGE = "linelaser_calib"
 _domain_counter = itertools.count()
 
 
+#: Domain ids for the tests: 100 .. 199 (the ids of ROS 2 on one host go up to 232).
+_FIRST_DOMAIN, _DOMAINS = 100, 100
+
+
 def new_domain_id() -> int:
-    """A ROS domain id in 100..200, distinct for each call of this process."""
-    return 100 + (os.getpid() * 13 + next(_domain_counter) * 37) % 101
+    """A ROS domain id in 100..199 for each call of this process, never one that another
+    pytest-xdist worker uses: each worker (``PYTEST_XDIST_WORKER`` gw0, gw1, ... of
+    ``PYTEST_XDIST_WORKER_COUNT``) takes its own share of the range and steps through it, so
+    tests running side by side in two workers never hear each other."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    index = int(worker[2:]) if worker.startswith("gw") and worker[2:].isdigit() else 0
+    share = _DOMAINS // max(count, 1)
+    start = (os.getpid() * 13) % share
+    return _FIRST_DOMAIN + index * share + (start + next(_domain_counter)) % share
 
 
 def ros_env(domain_id: int, extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -220,9 +234,21 @@ class ColconInstall:
 
 
 def colcon_build(workspace: Path) -> subprocess.CompletedProcess[str]:
-    """``colcon build`` of the repository into ``workspace`` (build, install and log there)."""
+    """``colcon build`` of the repository into ``workspace`` (build, install and log there).
+
+    One build at a time across processes (pytest-xdist workers): the build writes the
+    package's egg-info into the source tree."""
     env = dict(os.environ)
     env["PATH"] = os.pathsep.join([str(VENV_BIN), env.get("PATH", "")])
+    lock_path = Path(tempfile.gettempdir()) / "linelaser_calib_colcon_build.lock"
+    with lock_path.open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return _colcon_build_unlocked(workspace, env)
+
+
+def _colcon_build_unlocked(
+    workspace: Path, env: dict[str, str]
+) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [
             str(VENV_BIN / "colcon"),
