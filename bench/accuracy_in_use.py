@@ -36,25 +36,21 @@ Run: ``.venv/bin/python bench/accuracy_in_use.py [--seeds N] [--presets a,b] [--
 from __future__ import annotations
 
 import argparse
-import time
 from dataclasses import replace
 
 import numpy as np
+from robot_error import SYSTEMATIC_WORDS, checked_run
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.regions import PLAIN
 from linelaser_calib.core.result import CalibrationResult
-from linelaser_calib.core.robot.kinematics import effective_hand_eye
 from linelaser_calib.core.selfcheck import sigma_at_point
 from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.cylinder.section import CylinderSection
-from linelaser_calib.sim import SimulatedData, scenario_from_preset, simulate
-from linelaser_calib.summary import truth_error
+from linelaser_calib.sim import SimulatedData
 
 PRESETS = ("cluttered_camera", "ur5e_kinematic")
-SYSTEMATIC_WORDS = "looks systematic"
 
 
 def arm_frame_cylinder(result: CalibrationResult, data: SimulatedData) -> Cylinder:
@@ -109,24 +105,10 @@ def user_error(result: CalibrationResult, data: SimulatedData, surface: Cylinder
 
 def run(preset: str, seed: int) -> dict[str, float]:
     """One recording: the numbers of one table row's columns."""
-    data = simulate(scenario_from_preset(preset), seed)
-    start = time.process_time()
-    run_pipeline(data.profiles, data.poses, PipelineConfig(seed=seed, self_check_folds=0))
-    solve_s = time.process_time() - start
-    start = time.process_time()
-    result = run_pipeline(data.profiles, data.poses, PipelineConfig(seed=seed))
-    checked_s = time.process_time() - start
-    check = result.self_check
-    assert check is not None, f"{preset} seed {seed}: no self-check"
-    arm = data.truth.arm
-    T_truth = (
-        data.truth.T_flange_sensor
-        if arm is None
-        else effective_hand_eye(arm.nominal, arm.true, data.truth.T_flange_sensor)
-    )
-    error = truth_error(result.T_flange_sensor, T_truth)
-    e = np.abs(np.concatenate([error.rotation_axes_rad, error.translation_axes_m]))
-    z = e / check.sigma_honest
+    done = checked_run(preset, seed)
+    data, result, check = done.data, done.result, done.check
+    solve_s, checked_s = done.plain_s, done.checked_s
+    z = done.abs_error / check.sigma_honest
     blocked = float("nan") if check.accuracy_in_use_m is None else check.accuracy_in_use_m
     truth = user_error(result, data, data.truth.cylinder)
     relative = user_error(result, data, arm_frame_cylinder(result, data))
