@@ -30,8 +30,10 @@ typecheck: $(STAMP)
 
 # Two workers (pytest-xdist): the suite is mostly one process's work, and this machine has
 # two cores; the ROS tests of the two workers use disjoint DDS domains (test/ros_helpers.py).
+# The timed live replays (marked serial) then run alone: at 10x they need a free core.
 unit: $(STAMP)
-	$(PY) -m pytest -q -n 2
+	$(PY) -m pytest -q -n 2 -m "not serial"
+	$(PY) -m pytest -q -m serial
 
 test: lint typecheck unit
 

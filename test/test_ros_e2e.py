@@ -51,7 +51,7 @@ from msg_adapters import (
     rclpy_types,
 )
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.serial]
 
 #: Bounds on the hand-eye error of the default method (it reaches ~0.02 mm / 0.005 deg here).
 MAX_TRANSLATION_ERROR_M = 0.5e-3
