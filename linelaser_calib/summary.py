@@ -28,6 +28,7 @@ from linelaser_calib.core.selfcheck import sigma_at_point
 from linelaser_calib.core.targets.base import mm_text
 from linelaser_calib.core.types import Rejection
 from linelaser_calib.io.results import Truth
+from linelaser_calib.settings import Front, spelling
 
 #: How roll, pitch and yaw are defined (ROS, REP 103).
 RPY_CONVENTION = "fixed axes x-y-z, R = Rz(yaw) Ry(pitch) Rx(roll)"
@@ -226,9 +227,10 @@ def headline_rows(result: CalibrationResult) -> Rows:
     return rows
 
 
-def self_check_rows(result: CalibrationResult) -> Rows:
+def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows:
     """The self-check: accuracy in use held out by region, the model it chose, the
-    pose-interleaved consistency check, halves, robot error, and the 1σ before widening."""
+    pose-interleaved consistency check, halves, robot error, and the 1σ before widening;
+    settings are named as ``front`` spells them."""
     check = result.self_check
     if check is None:
         return []
@@ -294,6 +296,7 @@ def self_check_rows(result: CalibrationResult) -> Rows:
         ),
     ]
     if check.systematic:
+        arm_setting = spelling("arm_accuracy_m", front)
         rows.append(
             (
                 "1 sigma noise model",
@@ -301,7 +304,7 @@ def self_check_rows(result: CalibrationResult) -> Rows:
                 "above for the systematic error"
                 + (
                     f", with {check.arm_accuracy_m * 1e3:.3f} mm (1 sigma) assumed for the "
-                    "arm's error common to the whole workspace, --arm-accuracy"
+                    f"arm's error common to the whole workspace, {arm_setting}"
                     if check.arm_accuracy_m > 0.0
                     else ""
                 )

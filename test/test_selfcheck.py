@@ -37,9 +37,15 @@ from linelaser_calib.core.targets.base import TargetSolution
 from linelaser_calib.core.targets.cylinder.section import CylinderSection
 from linelaser_calib.core.types import FloatArray, SampleFit
 from linelaser_calib.io.results import result_to_dict
+from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.settings import Front, render
 from linelaser_calib.sim import scenario_from_preset, simulate
-from linelaser_calib.summary import accuracy_in_use_line, format_summary, truth_error
+from linelaser_calib.summary import (
+    accuracy_in_use_line,
+    format_summary,
+    self_check_rows,
+    truth_error,
+)
 
 POINTS = 40
 POINT_SIGMA = 1e-5
@@ -492,6 +498,12 @@ def test_the_arm_accuracy_prior_is_stated_in_the_result_and_refused_with_kinemat
     assert data["quality"]["self_check"]["systematic_robot_error"]
     assert data["quality"]["self_check"]["arm_accuracy_m"] == pytest.approx(5e-4)
     assert min(data["hand_eye"]["uncertainty"]["translation_m"]) >= 5e-4
+    # The summary names the prior as each front end spells it: the flag on the command
+    # line, the parameter in the calibration service's diagnostics.
+    assert "whole workspace, --arm-accuracy" in capsys.readouterr().out
+    run = calibrate_bag(bag, PipelineConfig(arm_accuracy_m=5e-4))
+    node_rows = dict(self_check_rows(run.result, Front.NODE))
+    assert node_rows["1 sigma noise model"].endswith("whole workspace, arm_accuracy)")
     refused = tmp_path / "refused.yaml"
     argv = ["calibrate", str(bag), "--kinematics", "ur5e", "--arm-accuracy", "0.0005"]
     assert main([*argv, "--output", str(refused)]) == 1

@@ -660,7 +660,7 @@ class CalibrationServiceNode(Node):
         if len(self._clock_offset) == 4:
             add_live_clock_offset(result, *self._clock_offset[:3])
         summary = one_line_summary(result, len(samples)) + kinematics_summary(result)
-        self._self_check = self_check_rows(result)
+        self._self_check = self_check_rows(result, Front.NODE)
         self._last_result = result
         self.get_logger().info(f"solved in {time.monotonic() - start:.1f} s")
         self._publish(result)
