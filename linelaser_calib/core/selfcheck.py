@@ -45,6 +45,13 @@ marks it as systematic, each at a false-alarm probability derived, not tuned:
   :data:`REGION_FALSE_ALARM`).
 - **Neighbour correlation** of the interleaved held-out offsets above :func:`neighbour_limit`.
 - Halves that still disagree beyond :data:`HALVES_LIMIT_SIGMAS`.
+- **An arm less accurate than its stated repeatability**: the robot's per-pose error that the
+  solve's pose corrections show (:class:`~.targets.base.RobotError`) above
+  :data:`ROBOT_PRIOR_EXCESS` times the prior (``robot_sigma_t_m``, ``robot_sigma_r_rad``,
+  the arm's repeatability). An arm's independent error from pose to pose is its repeatability;
+  what it errs beyond that is its absolute-accuracy error, which depends on where the arm is
+  and is shared by neighbouring poses, even where the regions above are too few or too alike
+  to show it.
 
 The honest 1σ (:func:`honest_sigma`)
 ------------------------------------
@@ -55,8 +62,11 @@ When the error is systematic the hand-eye's 1σ has two parts, added in quadratu
 - the part common to all regions (e.g. a link length), which no subset of the poses can see:
   a stated prior, the arm's absolute accuracy ``arm_accuracy_m`` (1σ per axis, m; default
   :data:`DEFAULT_ARM_ACCURACY_M`), on the translation, and over the lever of the profile
-  points (their median distance from the sensor) on the rotation. A joint calibration of the
-  kinematics (``flange_poses`` given) estimates that part itself and takes no prior.
+  points (their median distance from the sensor) on the rotation. Where the pose
+  corrections show a larger error from pose to pose, that error is taken instead: the part
+  common to the whole workspace is assumed no larger than the part that varies. A joint
+  calibration of the kinematics (``flange_poses`` given) estimates that part itself and
+  takes no prior.
 
 Halves that still disagree beyond :data:`HALVES_LIMIT_SIGMAS` of that 1σ widen it by their
 excess. Recordings not marked keep the model's 1σ.
@@ -96,7 +106,7 @@ from .regions import (
     pose_distances,
     workspace_regions,
 )
-from .targets.base import TargetSolution
+from .targets.base import ROBOT_PRIOR_EXCESS, RobotError, TargetSolution
 from .types import SampleFit
 
 #: Folds of the pose-interleaved cross-validation, and the most regions of the workspace.
@@ -169,7 +179,11 @@ class SelfCheck:
     systematic : bool
     arm_accuracy_m : float
         The prior on the error common to all regions that the 1σ assumes, m (0 when none:
-        independent error, or a joint kinematic calibration).
+        independent error, or a joint kinematic calibration): the stated one, or the robot's
+        per-pose error where that is larger.
+    robot_excess : float or None
+        The robot's per-pose error over its prior, from the pose corrections (None where the
+        solve estimates none).
     sigma_honest : ndarray, shape (6,)
         The 1σ to report (the model's, or widened).
     solution : TargetSolution
@@ -204,6 +218,7 @@ class SelfCheck:
     pose_clusters: int
     systematic: bool
     arm_accuracy_m: float
+    robot_excess: float | None
     sigma_honest: FloatArray
     solution: TargetSolution = field(repr=False)
     region_indices: list[list[int]] = field(default_factory=list)
@@ -265,6 +280,9 @@ class SelfCheck:
                 "pose_clusters": int(self.pose_clusters),
                 "systematic_robot_error": bool(self.systematic),
                 "arm_accuracy_m": float(self.arm_accuracy_m),
+                "robot_error_over_prior": None
+                if self.robot_excess is None
+                else float(self.robot_excess),
             },
         }
 
@@ -413,13 +431,19 @@ def honest_sigma(
     sigma_region: FloatArray | None,
     arm_accuracy_m: float,
     lever_m: float,
+    robot_error: RobotError | None = None,
 ) -> FloatArray:
     """The 1σ (6,) under a systematic robot error: the part that varies over the workspace
-    (the region jackknife's 1σ, at least the model's) and the part all regions share (the
-    prior ``arm_accuracy_m`` on the translation, over the lever ``lever_m`` on the
-    rotation), added in quadrature."""
+    (the region jackknife's 1σ, at least the model's) and the part all regions share, added
+    in quadrature. The shared part is the prior ``arm_accuracy_m`` on the translation, over
+    the lever ``lever_m`` on the rotation, or the robot's per-pose error ``robot_error``
+    (translation and rotation) on each where that is larger."""
     varying = sigma_model if sigma_region is None else np.maximum(sigma_model, sigma_region)
     shared = arm_accuracy_m * np.array([1.0 / lever_m] * 3 + [1.0] * 3)
+    if robot_error is not None:
+        shared = np.maximum(
+            shared, np.array([robot_error.rotation_rad] * 3 + [robot_error.translation_m] * 3)
+        )
     return np.asarray(np.sqrt(varying**2 + shared**2))
 
 
@@ -582,12 +606,20 @@ def self_check(
                 region_solved = plain_solved
                 region = region_jackknife(plain_solved, chosen, sigma_model)
     lever = float(np.median([np.median(np.linalg.norm(f.record().points, axis=1)) for f in kept]))
+    robot = solution.robot_error
+    beyond_repeatability = robot is not None and robot.excess > ROBOT_PRIOR_EXCESS
+    systematic = systematic or (beyond_repeatability and flange_poses is None)
     prior = arm_accuracy_m if systematic and flange_poses is None else 0.0
+    robot_prior = robot if prior > 0.0 else None
     sigma = (
-        honest_sigma(sigma_model, None if region is None else region.sigma, prior, lever)
+        honest_sigma(
+            sigma_model, None if region is None else region.sigma, prior, lever, robot_prior
+        )
         if systematic
         else sigma_model.copy()
     )
+    if robot_prior is not None:
+        prior = max(prior, robot_prior.translation_m)
     split = _halves(even, odd)
     halves = None
     if split is not None:
@@ -623,6 +655,7 @@ def self_check(
         pose_clusters=clusters,
         systematic=systematic,
         arm_accuracy_m=prior,
+        robot_excess=None if robot is None else robot.excess,
         sigma_honest=sigma,
         solution=chosen,
         region_indices=[[f.index for f in held] for held in held_sets],
@@ -699,15 +732,21 @@ def _warnings(check: SelfCheck) -> list[str]:
                 f"{float(np.max(check.halves_model_sigmas)):.1f} combined sigma of the noise "
                 "model"
             )
+        if check.robot_excess is not None and check.robot_excess > ROBOT_PRIOR_EXCESS:
+            evidence.append(
+                f"the arm errs {check.robot_excess:.1f} times more from pose to pose than its "
+                "stated repeatability ({setting:robot_sigma_t_m}, {setting:robot_sigma_r_rad}): "
+                "an error beyond repeatability depends on where the arm is"
+            )
         basis = (
             "the spread of the hand-eye over the regions left out"
             if check.sigma_region is not None
             else "the noise model (no regions to leave out)"
         )
         shared = (
-            f" plus the stated prior of {check.arm_accuracy_m * 1e3:.3f} mm (1 sigma) on the "
+            f" plus a prior of {check.arm_accuracy_m * 1e3:.3f} mm (1 sigma) on the "
             "arm's error common to the whole workspace, which no subset of the poses can see "
-            "({setting:arm_accuracy_m})"
+            "(the larger of {setting:arm_accuracy_m} and the arm's error from pose to pose)"
             if check.arm_accuracy_m > 0.0
             else ""
         )

@@ -224,6 +224,29 @@ class ResultSection(Protocol):
         ...
 
 
+#: Robot variance factor (as a ratio of 1σ) beyond which the arm is said to be less accurate
+#: than the prior (σ_t, σ_r: its repeatability) assumes.
+ROBOT_PRIOR_EXCESS = 2.0
+
+
+@dataclass(frozen=True)
+class RobotError:
+    """The robot's per-pose error as a default solve's pose corrections show it
+    (variance-component estimate), beside the prior it was solved with.
+
+    Attributes
+    ----------
+    translation_m, rotation_rad : float
+        Estimated 1σ per pose and axis, m and rad.
+    excess : float
+        The estimate over the prior (``robot_sigma_t_m``, ``robot_sigma_r_rad``).
+    """
+
+    translation_m: float
+    rotation_rad: float
+    excess: float
+
+
 @dataclass
 class TargetSolution:
     """What a target's solve returns (indices are profile indices of the input stream).
@@ -259,6 +282,9 @@ class TargetSolution:
     placement_sections : list of ResultSection
         The target's placement in each further recording of a joint calibration
         (:attr:`SolveContext.placements`, same order), as solved with the corrected poses.
+    robot_error : RobotError or None
+        The robot's per-pose error the solve estimated from its pose corrections; None where
+        the solve estimates none.
     """
 
     T_flange_sensor: FloatArray
@@ -278,6 +304,7 @@ class TargetSolution:
     identifiability: KinematicIdentifiability | None = None
     subset_start: object | None = None
     placement_sections: list[ResultSection] = field(default_factory=list)
+    robot_error: RobotError | None = None
 
 
 @dataclass(frozen=True)

@@ -49,6 +49,7 @@ from ...solver import (
     solve_with_rejection,
     variance_factors,
 )
+from ..base import ROBOT_PRIOR_EXCESS
 from .config import RefineConfig
 from .model import Cylinder
 from .problem import (
@@ -61,11 +62,6 @@ from .problem import (
     measured_to_true,
     recentred,
 )
-
-#: Robot variance factor (as a ratio of 1σ) beyond which the arm is said to be less accurate
-#: than the prior (σ_t, σ_r) assumes.
-ROBOT_PRIOR_EXCESS = 2.0
-
 
 #: 1σ of the estimated along-line scale beyond which the poses are said to barely tell a
 #: profile stretched along the line from a larger cylinder (0.015 % on ``ur_scancontrol`` and

@@ -45,6 +45,7 @@ from ..base import (
     Placement,
     Progress,
     ResultSection,
+    RobotError,
     SolveContext,
     TargetSolution,
     mismatch_message,
@@ -380,6 +381,13 @@ class CylinderTarget:
             kinematics=None if outcome is None else outcome.corrections,
             identifiability=None if outcome is None else outcome.identifiability,
             placement_sections=[CylinderSection(p.cylinder, p.radius_estimated) for p in placed],
+            robot_error=RobotError(
+                config.refine.robot_sigma_t_m * refined.robot_sigma_scale,
+                config.refine.robot_sigma_r_rad * refined.robot_sigma_scale,
+                refined.robot_sigma_scale,
+            )
+            if config.refine.estimate_variance_factors
+            else None,
             subset_start=(
                 None
                 if start is not None or outcome is not None or refined.solved is None

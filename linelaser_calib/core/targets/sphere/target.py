@@ -44,6 +44,7 @@ from linelaser_calib.core.solver import Flag, solve_with_rejection
 from linelaser_calib.core.targets.base import (
     Option,
     Progress,
+    RobotError,
     SolveContext,
     TargetSolution,
     extract_each,
@@ -456,6 +457,13 @@ class SphereTarget:
             history={"refine_cost": list(outcome.cost_history)},
             sample_fits=[f.record() for f in kept],
             noise_m=noise,
+            robot_error=RobotError(
+                outcome.robot_sigma_t_m,
+                outcome.robot_sigma_r_rad,
+                outcome.robot_sigma_t_m / config.refine.robot_sigma_t_m,
+            )
+            if config.refine.estimate_variance_factors
+            else None,
         )
 
     def _diagnose(self, covariance: FloatArray, lever_m: float, config: SphereConfig) -> list[str]:
