@@ -133,12 +133,16 @@ def test_a_real_like_line_recording_sets_no_profile_aside_for_its_shape() -> Non
     assert math.degrees(rotation) < 0.3 and translation < 5e-4
 
 
-@pytest.mark.parametrize("target", ["known_point", "line"])
+@pytest.mark.parametrize(
+    ("bag", "target"),
+    [("sphere", "known_point"), ("sphere", "line"), ("robcalibrator_sphere", "known_point")],
+)
 def test_arcs_given_to_the_seam_targets_are_refused_naming_the_curved_targets(
-    target: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
+    bag: str, target: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
 ) -> None:
+    """Simulated sphere scans, and the real ones of the RobCalibrator ball."""
     out = tmp_path / "result.yaml"
-    argv = ["calibrate", str(BAGS / "sphere"), "--target", target, "--output", str(out)]
+    argv = ["calibrate", str(BAGS / bag), "--target", target, "--output", str(out)]
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert not out.exists() and "No result was written" in err

@@ -14,8 +14,10 @@ Methods
     is fitted through the corners reconstructed with the initial hand-eye, and the corners
     may slide along it.
 
-The model check (:meth:`LineTarget.check_fit`) refuses a result whose corners lie far
-further from the line than the sensor and robot noise explain.
+Each profile is checked against rival shapes and the recording's other profiles
+(:func:`~...profile.corner.check_corner_recording`); the model check
+(:meth:`LineTarget.check_fit`) refuses a result whose corners lie far further from the line
+than the corner and robot noise explain.
 """
 
 from __future__ import annotations
