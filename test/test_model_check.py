@@ -128,7 +128,7 @@ def test_v_seam_scans_given_to_the_sphere_are_refused_naming_the_seam(
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert not out.exists() and "No result was written" in err
-    assert "fitted clearly better by a line pair" in err and "--target known_point" in err
+    assert "better described by a line pair" in err and "--target known_point" in err
 
 
 def test_the_recording_scale_sets_aside_only_its_own_outliers() -> None:

@@ -231,7 +231,7 @@ def test_profiles_of_a_plane_give_no_ellipse(
         ["calibrate", str(bag)],
         capsys,
         "no elliptical arc",
-        "fitted clearly better by a line (",
+        "better described by a line (",
         "The scans show a plane",
     )
 
@@ -639,7 +639,7 @@ def test_the_cylinder_on_a_v_seam_names_the_seam_targets(
     err = expect_error(
         ["calibrate", str(bag)],
         capsys,
-        "fitted clearly better by a line pair",
+        "better described by a line pair",
         "a seam's V or an edge (--target known_point or line)",
     )
     assert "speed gate" not in err and "--max-speed" not in err

@@ -24,8 +24,8 @@ questions, and knows no target:
    profile far above it is set aside; one within it is used, whatever its local noise.
 
 Shapes fitted here (points (N, 2) in scan order, m): :func:`line_fit` (2 numbers),
-:func:`line_pair_fit` (a V or a step's two lines, 5 with the break), :func:`conic_fit` (a
-general conic, 5). A target adds its own model (its circle, ellipse ...) as a
+:func:`circle_fit` (3), :func:`line_pair_fit` (a V or a step's two lines, 5 with the break),
+:func:`conic_fit` (a general conic, 5). A target adds its own model (its circle, ellipse ...) as a
 :class:`ShapeFit`.
 """
 
@@ -128,13 +128,18 @@ class Comparison:
     def describe(self) -> str:
         """Both scales in µm and the BIC margin, for messages."""
         if self.rival is None:
-            return f"a {self.model.name} leaves {self.model.scale_m * 1e6:.1f} um"
+            return f"{_a(self.model.name)} leaves {self.model.scale_m * 1e6:.1f} um"
         return (
-            f"a {self.rival.name} leaves {self.rival.scale_m * 1e6:.1f} um where a "
-            f"{self.model.name} leaves {self.model.scale_m * 1e6:.1f} um (robust scale; BIC "
+            f"{_a(self.rival.name)} leaves {self.rival.scale_m * 1e6:.1f} um where "
+            f"{_a(self.model.name)} leaves {self.model.scale_m * 1e6:.1f} um (robust scale; BIC "
             f"{abs(self.delta_bic):.0f} {'lower' if self.delta_bic > 0 else 'higher'}, over "
             f"{self.n_effective:.0f} effective of {len(self.model.residuals_m)} points)"
         )
+
+
+def _a(name: str) -> str:
+    """The name with its indefinite article ("an ellipse", "a line")."""
+    return f"{'an' if name[:1] in 'aeiou' else 'a'} {name}"
 
 
 def bic(fit: ShapeFit, n_effective: float) -> float:
@@ -248,6 +253,40 @@ def conic_fit(points_xz: ArrayLike) -> ConicFit:
 
 
 @dataclass(frozen=True)
+class CircleShapeFit(ShapeFit):
+    """A circle fitted to one profile (:func:`circle_fit`).
+
+    Attributes
+    ----------
+    radius_m : float
+        The circle's radius, m (inf for collinear points).
+    """
+
+    radius_m: float = math.inf
+
+
+def circle_fit(points_xz: ArrayLike) -> CircleShapeFit:
+    """A circle (a sphere's section, a short piece of any arc) by algebraic least squares;
+    3 numbers.
+
+    The Kåsa fit: 2 c·q + k = |q|² solved for the centre c and k on the centred points, the
+    radius sqrt(k + |c|²); a point's residual is its distance from the circle. Exact on
+    noise-free points, and biased by less than the noise where the noise is small against
+    the arc's sagitta.
+    """
+    p = _check_points(points_xz, 3)
+    q = p - p.mean(axis=0)
+    design = np.column_stack([2.0 * q, np.ones(len(q))])
+    (cx, cz, k), *_ = np.linalg.lstsq(design, np.sum(q * q, axis=1), rcond=None)
+    radius_sq = float(k + cx * cx + cz * cz)
+    radius = math.sqrt(radius_sq) if math.isfinite(radius_sq) and radius_sq > 0.0 else math.inf
+    if not math.isfinite(radius):
+        return CircleShapeFit("circle", _line_distances(p)[1], 3, radius_m=math.inf)
+    residuals = np.hypot(q[:, 0] - cx, q[:, 1] - cz) - radius
+    return CircleShapeFit("circle", residuals, 3, radius_m=radius)
+
+
+@dataclass(frozen=True)
 class RecordingScale:
     """How far a model's residual lies from the profile across one recording's profiles.
 
@@ -280,6 +319,29 @@ def recording_scale(values_m: ArrayLike) -> RecordingScale:
     median = float(np.median(v))
     spread = robust_scale_m(v)
     return RecordingScale(median, max(spread, MIN_SPREAD_SHARE * median, 1e-300))
+
+
+def recording_outliers(values_m: ArrayLike, sigmas: float, model: str) -> list[tuple[int, str]]:
+    """Profiles whose model residual (K,), m, lies ``sigmas`` robust spreads above the median
+    of the recording's profiles (:func:`recording_scale`): their positions and the reasons,
+    with the numbers (none for fewer than 3 profiles). ``model`` names the model in the
+    reasons ("circle", "line pair")."""
+    v = np.asarray(values_m, dtype=np.float64)
+    if len(v) < 3:
+        return []
+    scale = recording_scale(v)
+    limit = scale.limit_m(sigmas)
+    return [
+        (
+            int(k),
+            f"the {model} leaves {v[k] * 1e6:.1f} um RMS, "
+            f"{scale.sigmas_above(float(v[k])):.0f} robust spreads above the median "
+            f"{scale.median_m * 1e6:.1f} um of this recording's {len(v)} profiles (spread "
+            f"{scale.spread_m * 1e6:.1f} um; limit {limit * 1e6:.1f} um at {sigmas:.0f} "
+            "spreads)",
+        )
+        for k in np.flatnonzero(v > limit)
+    ]
 
 
 @dataclass(frozen=True)
@@ -317,10 +379,10 @@ def rival_verdict(
     n_features: int,
     rival_targets: Mapping[str, str],
 ) -> str | None:
-    """The refusal of a recording in which a rival fits at least as many profiles clearly
-    better as the target's model fits, naming the rival seen most often and the target it
-    points to (``rival_targets``: rival name -> what the scans show, in words); None
-    otherwise.
+    """The refusal of a recording in which a rival describes at least as many profiles
+    better (:class:`RivalRejection`) as the target's model fits, naming the rival seen most
+    often and the target it points to (``rival_targets``: rival name -> what the scans
+    show, in words); None otherwise.
 
     ``title`` names the target's model ("sphere"), ``shape`` what one profile of it shows
     ("circular arc").
@@ -331,10 +393,11 @@ def rival_verdict(
     names = [r.rival for r in rivals]
     rival = max(sorted(set(names)), key=names.count)
     example = next(r for r in rivals if r.rival == rival)
+    count = names.count(rival)
     return (
         f"the {title} model does not fit these data: {len(rivals)} of "
-        f"{len(rivals) + n_features} profiles are no {shape}, and {names.count(rival)} "
-        f"of them are fitted clearly better by a {rival} (profile {example.index}: "
-        f"{example.detail}). The scans show {rival_targets[rival]}; or the profiles are not "
-        "in metres. No result was written."
+        f"{len(rivals) + n_features} profiles are no {shape}, and {count} of them "
+        f"{'are' if count > 1 else 'is'} better described by {_a(rival)} (profile "
+        f"{example.index}: {example.detail}). The scans show {rival_targets[rival]}; or the "
+        "profiles are not in metres. No result was written."
     )

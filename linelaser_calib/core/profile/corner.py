@@ -16,6 +16,19 @@ A profile without a clear V raises :class:`~linelaser_calib.core.errors.ProfileR
 saying which test failed: too few points; no second line; the lines nearly parallel (a flat
 profile); the lines meeting far from their points; or a line lying on both sides of the
 corner (not a V, e.g. a step or a cross).
+
+Whether a profile is a V at all is not judged by its lines' residual against the point
+noise (a real profiler leaves tens of µm of smooth shape error on a flank over a few µm of
+local noise):
+
+- per profile (:func:`extract_corner_sample`), the two lines meet rival shapes fitted to the
+  same points, a line (a plane) and an arc (a cylinder or sphere), by the information
+  criterion (:mod:`.corner_shape`); a profile a rival fits clearly better is rejected naming
+  it;
+- per recording (:func:`check_corner_recording`), a recording most of whose profiles a
+  rival describes better is refused naming the target it points to, and a profile whose
+  lines leave far more than the recording's other profiles is set aside, with the
+  recording's scale.
 """
 
 from __future__ import annotations
@@ -26,14 +39,29 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import InputError, ProfileRejected
+from ..errors import InputError, ModelMismatch, ProfileRejected
+from ..model_check import recording_outliers
 from ..types import BoolArray, FloatArray, Rejection, Sample, SampleFit
 from .cleaning import CleaningConfig, clean_profile
+from .corner_shape import (
+    NOT_A_V,
+    compare_corner,
+    compare_without_corner,
+    corner_rival_rejection,
+    corner_rival_verdict,
+)
 
 #: Rounds of "refit, re-assign" after RANSAC.
 MAX_REFIT_ROUNDS = 10
 #: Smallest noise-adapted inlier threshold, m.
 MIN_NOISE_THRESHOLD_M = 1e-6
+#: Fewest cleaned points of a profile without a corner that are weighed against the rivals
+#: (a line pair needs 8).
+MIN_RIVAL_POINTS = 8
+
+
+class FlatProfile(ProfileRejected):
+    """A profile whose two lines are one: no second line, or the lines nearly parallel."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +92,10 @@ class CornerConfig:
     max_wrong_side_fraction : float
         Largest share of a line's inliers lying on the far side of the corner (beyond a
         noise margin): a V has each flank on one side. Default 0.05.
+    profile_outlier_sigmas : float
+        A profile whose lines leave an RMS residual this many robust spreads above the
+        median of the recording's profiles is set aside (:func:`check_corner_recording`).
+        Default 6.
     """
 
     inlier_threshold_m: float = 1e-4
@@ -74,9 +106,15 @@ class CornerConfig:
     min_bend_rad: float = math.radians(10.0)
     max_corner_gap_m: float = 3e-3
     max_wrong_side_fraction: float = 0.05
+    profile_outlier_sigmas: float = 6.0
 
     def __post_init__(self) -> None:
-        for name in ("inlier_threshold_m", "noise_threshold_sigmas", "max_corner_gap_m"):
+        for name in (
+            "inlier_threshold_m",
+            "noise_threshold_sigmas",
+            "max_corner_gap_m",
+            "profile_outlier_sigmas",
+        ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise InputError(f"CornerConfig.{name} must be positive and finite, got {value}")
@@ -124,6 +162,14 @@ class CornerFit:
     def sigma_m(self) -> float:
         """RMS 1σ of the corner, sqrt(trace(covariance) / 2), m."""
         return float(np.sqrt(0.5 * np.trace(self.covariance_xz)))
+
+    def residuals_m(self, points_xz: FloatArray) -> FloatArray:
+        """Signed distance of each inlier of the points (N, 2) the fit was made on from its
+        line, in the points' order (K,), m."""
+        inside = self.inliers.any(axis=0)
+        line = np.argmax(self.inliers[:, inside], axis=0)
+        q = points_xz[inside]
+        return np.asarray(np.einsum("ij,ij->i", q, self.normals[line]) - self.offsets[line])
 
 
 @dataclass(frozen=True)
@@ -240,7 +286,7 @@ def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Genera
     first = _ransac_line(p, config.inlier_threshold_m, config.hypotheses, rng)
     rest = np.flatnonzero(~first)
     if len(rest) < need:
-        raise ProfileRejected(
+        raise FlatProfile(
             f"one straight line holds {int(first.sum())} of {n} points and only {len(rest)} "
             f"are left for a second (at least {need} needed): the profile is flat, not a V; "
             "aim the laser line across the seam"
@@ -279,7 +325,7 @@ def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Genera
     lines = (_fit_line(p[masks[0]]), _fit_line(p[masks[1]]))
     bend = math.acos(min(1.0, abs(float(lines[0].direction @ lines[1].direction))))
     if bend < config.min_bend_rad:
-        raise ProfileRejected(
+        raise FlatProfile(
             f"the two lines differ in direction by only {math.degrees(bend):.1f} deg (at least "
             f"{math.degrees(config.min_bend_rad):.1f} deg needed): the profile is flat, not a V"
         )
@@ -331,6 +377,9 @@ class CornerSample:
         From the line fits, m².
     points : ndarray, shape (K, 3)
         The two lines' inlier points, sensor frame, m.
+    rms_m : float or None
+        RMS distance of those points from their lines, m; None for a corner given as
+        feature points (no profile to fit).
     """
 
     index: int
@@ -339,6 +388,7 @@ class CornerSample:
     corner_xz: FloatArray
     covariance_xz: FloatArray
     points: FloatArray
+    rms_m: float | None = None
 
     def record(self) -> SampleFit:
         """The plain record kept in the result (the V corner as the feature point)."""
@@ -348,7 +398,10 @@ class CornerSample:
 def extract_corner_sample(
     sample: Sample, cleaning: CleaningConfig, corner: CornerConfig, rng: np.random.Generator
 ) -> CornerSample | Rejection:
-    """Clean one sample's profile and fit its V corner; a rejection says why it failed.
+    """Clean one sample's profile, fit its V corner and weigh it against the rival shapes;
+    a rejection says why it failed (a
+    :class:`~linelaser_calib.core.model_check.RivalRejection` when a rival fits clearly
+    better, also when no corner was found).
 
     Shared by the targets that see a V (the known point, the straight seam).
 
@@ -370,15 +423,65 @@ def extract_corner_sample(
         cleaned = clean_profile(sample.points, cleaning)
     except ProfileRejected as exc:
         return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
+    xz = cleaned.points_xz
     try:
-        fit = fit_corner(cleaned.points_xz, corner, rng)
+        fit = fit_corner(xz, corner, rng)
     except ProfileRejected as exc:
+        flat = isinstance(exc, FlatProfile)
+        rival = compare_without_corner(xz, flat) if len(xz) >= MIN_RIVAL_POINTS else None
+        if rival is not None:
+            return corner_rival_rejection(sample.index, sample.stamp_ns, *rival)
         return Rejection(sample.index, sample.stamp_ns, "corner", str(exc))
+    inside = fit.inliers.any(axis=0)
+    residuals = fit.residuals_m(xz)
+    comparison = compare_corner(xz[inside], residuals)
+    if comparison.rival_wins:
+        return corner_rival_rejection(sample.index, sample.stamp_ns, NOT_A_V, comparison)
     return CornerSample(
         sample.index,
         sample.stamp_ns,
         np.asarray(sample.T_base_flange, dtype=np.float64),
         fit.corner_xz,
         fit.covariance_xz,
-        cleaned.points[fit.inliers.any(axis=0)],
+        cleaned.points[inside],
+        float(np.sqrt(np.mean(residuals**2))),
     )
+
+
+def check_corner_recording(
+    title: str, corners: list[CornerSample], rejections: list[Rejection], sigmas: float
+) -> tuple[list[CornerSample], list[Rejection]]:
+    """The recording's corners without the outliers among them, and the rejections with
+    theirs added (stage ``corner``).
+
+    A corner whose lines leave an RMS residual ``sigmas`` robust spreads above the median of
+    the recording's profiles is set aside
+    (:func:`~linelaser_calib.core.model_check.recording_outliers`; corners given as feature
+    points are not judged).
+
+    Parameters
+    ----------
+    title : str
+        The target's model in words ("known point"), for the refusal.
+    corners : list of CornerSample
+    rejections : list of Rejection
+        The profiles' rejections (:func:`extract_corner_sample`).
+    sigmas : float
+
+    Raises
+    ------
+    ModelMismatch
+        When a rival shape describes at least as many profiles better as show a corner
+        (:func:`~.corner_shape.corner_rival_verdict`: it names what the scans show).
+    """
+    verdict = corner_rival_verdict(title, rejections, len(corners))
+    if verdict is not None:
+        raise ModelMismatch(verdict)
+    fitted = [(k, c.rms_m) for k, c in enumerate(corners) if c.rms_m is not None]
+    outliers = recording_outliers([rms for _, rms in fitted], sigmas, "line pair")
+    aside = {fitted[j][0]: reason for j, reason in outliers}
+    rejections = rejections + [
+        Rejection(corners[k].index, corners[k].stamp_ns, "corner", reason)
+        for k, reason in aside.items()
+    ]
+    return [c for k, c in enumerate(corners) if k not in aside], rejections

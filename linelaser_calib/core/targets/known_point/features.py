@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...profile.corner import CornerSample, extract_corner_sample
+from ...profile.corner import CornerSample, check_corner_recording, extract_corner_sample
 from ...types import Rejection, Sample
 from ..base import Progress, extract_each
 from .config import KnownPointConfig
@@ -30,5 +30,19 @@ def extract_corners(
     workers: int = 1,
 ) -> tuple[list[CornerSample], list[Rejection]]:
     """:func:`extract_corner` of every sample: the corners and the rejections (``seed`` and
-    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`)."""
-    return extract_each(samples, config, seed, extract_corner, progress, "corner", workers)
+    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`), corners that
+    are outliers among the recording's set aside
+    (:func:`~...profile.corner.check_corner_recording`).
+
+    Raises
+    ------
+    ModelMismatch
+        When a rival shape (a plane's line, a cylinder's or sphere's arc) fits most profiles
+        clearly better than a V; the message names what the scans show.
+    """
+    corners, rejections = extract_each(
+        samples, config, seed, extract_corner, progress, "corner", workers
+    )
+    return check_corner_recording(
+        "known point", corners, rejections, config.corner.profile_outlier_sigmas
+    )

@@ -81,10 +81,14 @@ Without an initial hand-eye they raise DegenerateError.
 
 Model fit
 ---------
-The views' corners, mapped into the base frame, must meet in one point up to the robot's
-pose error and the corner noise (about 0.05-0.1 mm: 1-2 times the robot's σ_t on the weld
-presets). A residual over ten times σ_t is refused: a moving seam (the line target's
-S-sweep gives ~100 mm) or V-corners found on other shapes (a sphere's profiles: ~4 mm).
+Each profile must be a V rather than a rival shape (a plane's line, a cylinder's or
+sphere's arc), and its lines must not leave far more than the recording's other profiles'
+(:func:`~...profile.corner.check_corner_recording`); a recording most of whose profiles a
+rival describes better is refused naming it. The views' corners, mapped into the base
+frame, must meet in one point up to the robot's pose error and the corner noise (about
+0.05-0.1 mm: 1-2 times the robot's σ_t on the weld presets). A residual over ten times σ_t
+is refused: a moving seam (the line target's S-sweep gives ~100 mm) or corners of shapes
+that are no V.
 """
 
 from __future__ import annotations

@@ -14,8 +14,10 @@ Methods
     is fitted through the corners reconstructed with the initial hand-eye, and the corners
     may slide along it.
 
-The model check (:meth:`LineTarget.check_fit`) refuses a result whose corners lie far
-further from the line than the sensor and robot noise explain.
+Each profile is checked against rival shapes and the recording's other profiles
+(:func:`~...profile.corner.check_corner_recording`); the model check
+(:meth:`LineTarget.check_fit`) refuses a result whose corners lie far further from the line
+than the corner and robot noise explain.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from ...errors import DegenerateError, ModelMismatch
-from ...profile.corner import CornerSample
+from ...profile.corner import CornerSample, check_corner_recording
 from ...seam_grid import paper_correction, weld_points_base
 from ...solver import Flag, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
@@ -165,8 +167,16 @@ class LineTarget:
         progress: Progress,
         workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
-        """The seam corner of every sample (:mod:`.features`)."""
-        return extract_each(
+        """The seam corner of every sample (:mod:`.features`), corners that are outliers
+        among the recording's set aside (:func:`~...profile.corner.check_corner_recording`).
+
+        Raises
+        ------
+        ModelMismatch
+            When a rival shape (a plane's line, a cylinder's or sphere's arc) fits most
+            profiles clearly better than a V; the message names what the scans show.
+        """
+        corners, rejections = extract_each(
             samples,
             config,
             seed,
@@ -174,6 +184,9 @@ class LineTarget:
             progress,
             "corner",
             workers,
+        )
+        return check_corner_recording(
+            self.title, corners, rejections, config.features.corner.profile_outlier_sigmas
         )
 
     def solve_paper(

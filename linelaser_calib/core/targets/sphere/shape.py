@@ -16,8 +16,6 @@ Built on :mod:`linelaser_calib.core.model_check`:
 
 from __future__ import annotations
 
-import numpy as np
-
 from linelaser_calib.core.model_check import (
     Comparison,
     RivalRejection,
@@ -26,7 +24,7 @@ from linelaser_calib.core.model_check import (
     conic_fit,
     line_fit,
     line_pair_fit,
-    recording_scale,
+    recording_outliers,
     rival_rejection,
     rival_verdict,
 )
@@ -68,20 +66,5 @@ def circle_rival_verdict(rejections: list[Rejection], n_features: int) -> str | 
 
 def set_aside_outliers(rms_m: FloatArray, sigmas: float) -> list[tuple[int, str]]:
     """Profiles whose circle RMS (K,), m, lies ``sigmas`` robust spreads above the median of
-    the recording's profiles: their positions and the reasons, with the numbers (none for
-    fewer than 3 profiles)."""
-    if len(rms_m) < 3:
-        return []
-    scale = recording_scale(rms_m)
-    limit = scale.limit_m(sigmas)
-    return [
-        (
-            int(k),
-            f"the circle leaves {rms_m[k] * 1e6:.1f} um RMS, "
-            f"{scale.sigmas_above(float(rms_m[k])):.0f} robust spreads above the median "
-            f"{scale.median_m * 1e6:.1f} um of this recording's {len(rms_m)} profiles (spread "
-            f"{scale.spread_m * 1e6:.1f} um; limit {limit * 1e6:.1f} um at {sigmas:.0f} "
-            "spreads)",
-        )
-        for k in np.flatnonzero(np.asarray(rms_m) > limit)
-    ]
+    the recording's profiles (:func:`~linelaser_calib.core.model_check.recording_outliers`)."""
+    return recording_outliers(rms_m, sigmas, "circle")
