@@ -115,3 +115,18 @@ def test_line_noise_rejects_bad_values() -> None:
         LineNoise(0.0, 1e-6, 1e-3)
     with pytest.raises(InputError, match="length"):
         replace(KEYENCE, length_m=0.0)
+
+
+def test_an_error_as_long_as_the_profile_is_not_weighed_by() -> None:
+    """A smooth error whose correlation length exceeds the arc moves each profile as its
+    pose would: its size cannot be learned, so the points stay independent."""
+    rng = np.random.default_rng(5)
+    scene = make_scene(rng, n_poses=30, sensor_sigma=2e-6)
+    model = SensorModel(shape_sigma_m=2e-5, shape_length_m=0.05)
+    points = [p.copy() for p in scene.points]
+    for p in points:
+        p[:, 2] += shape_error(rng, model, p[None, :, 0])[0]
+    T0, cylinder0 = perturbed_start(rng, scene)
+    result = refine_with_outlier_rejection(points, scene.T_base_flange, T0, cylinder0)
+    assert result.line_noise is None
+    assert result.solved is not None and result.solved.problem.whitening is None
