@@ -11,10 +11,19 @@ zeroed (white point noise only). Per preset and method, over seeds:
 - ``rot/trans RMS``: hand-eye error against truth, RMS over seeds (deg, mm);
 - ``x twin``: that translation RMS over the twin's (same method);
 - ``max |e|/σ``: the largest per-axis error over its predicted 1σ (default method only);
-- ``x paper``: the default method's translation RMS over the paper method's.
+- ``x paper``: the default method's translation RMS over the paper method's;
+- ``CRB mm``: the Cramér–Rao bound of the translation (RMS over seeds of √trace) for the
+  points and poses the default method used, under the sensor model's random terms (white,
+  smooth shape error, speckle, quantisation; the fixed linearity bow is a systematic and
+  left out): what the best unbiased estimator of these data could reach
+  (:mod:`_bound`; cylinder presets only);
+- ``x CRB``: the default method's translation RMS over that bound;
+- ``twin CRB``: the same bound for the white-noise twin.
 
-Run: ``.venv/bin/python bench/realistic_sensors.py [--seeds N] [--presets A,B]`` (default
-20 seeds, all four presets; a few seconds per calibration).
+Run: ``.venv/bin/python bench/realistic_sensors.py [--seeds N] [--presets A,B]
+[--independent-points]`` (default 20 seeds, all four presets; a few seconds per
+calibration). ``--independent-points`` runs the cylinder's default method without the
+learned line noise (``RefineConfig.learn_line_noise`` off), as it was before.
 """
 
 from __future__ import annotations
@@ -25,11 +34,13 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from _bound import hand_eye_bound, rms_of
 
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix
 from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets.cylinder.config import CylinderConfig, RefineConfig
 from linelaser_calib.sim.presets import scenario_from_preset
 from linelaser_calib.sim.sensor_models import SensorModel
 from linelaser_calib.sim.simulate import simulate
@@ -47,6 +58,7 @@ class Tally:
     refused: list[str] = field(default_factory=list)
     errors: list[FloatArray] = field(default_factory=list)  # (6,) rotvec rad, translation m
     sigmas: list[FloatArray] = field(default_factory=list)  # (6,) 1σ, or empty
+    bounds: list[FloatArray] = field(default_factory=list)  # (6, 6) Cramér–Rao, or empty
 
     def rms(self) -> tuple[float, float]:
         """Rotation (deg) and translation (mm) RMS over the seeds."""
@@ -58,6 +70,12 @@ class Tally:
         return math.degrees(float(np.sqrt(np.mean(rot**2)))), float(
             np.sqrt(np.mean(trans**2)) * 1e3
         )
+
+    def bound_mm(self) -> float:
+        """Translation RMS (mm) the Cramér–Rao bounds allow, over the seeds."""
+        if not self.bounds:
+            return math.nan
+        return float(np.sqrt(np.mean([rms_of(b)[1] ** 2 for b in self.bounds])))
 
     def worst_ratio(self) -> float:
         """Largest |error| / 1σ over axes and seeds."""
@@ -86,8 +104,9 @@ def _error(result: CalibrationResult, truth: FloatArray) -> FloatArray:
     return np.concatenate([rotation, X[:3, 3] - truth[:3, 3]])
 
 
-def run(preset: str, seeds: int, white: bool) -> dict[str, Tally]:
-    """Both methods on ``seeds`` simulated runs of a preset (or its white-noise twin)."""
+def run(preset: str, seeds: int, white: bool, independent: bool = False) -> dict[str, Tally]:
+    """Both methods on ``seeds`` simulated runs of a preset (or its white-noise twin);
+    ``independent`` weighs a cylinder's points as independent (no learned line noise)."""
     tallies = {"paper": Tally(), "default": Tally()}
     for seed in range(seeds):
         data, truth, target = _data(preset, seed, white)
@@ -95,6 +114,9 @@ def run(preset: str, seeds: int, white: bool) -> dict[str, Tally]:
             tally = tallies[method.value]
             tally.recorded += len(data.profiles)
             config = PipelineConfig(method=method, target=target)
+            if independent and target == "cylinder":
+                refine = RefineConfig(learn_line_noise=False)
+                config = replace(config, target_config=CylinderConfig(refine=refine))
             try:
                 result = run_pipeline(data.profiles, data.poses, config)
             except CalibrationError as exc:
@@ -102,6 +124,13 @@ def run(preset: str, seeds: int, white: bool) -> dict[str, Tally]:
                 continue
             tally.used += len(result.samples_used)
             tally.errors.append(_error(result, truth))
+            if method is Method.DEFAULT and target == "cylinder":
+                scenario = data.truth.scenario
+                tally.bounds.append(
+                    hand_eye_bound(
+                        scenario, scenario.sensor, result.sample_fits, truth, data.truth.cylinder
+                    )
+                )
             if result.uncertainty_rotation_rad is not None:
                 tally.sigmas.append(
                     np.concatenate(
@@ -118,24 +147,37 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=20)
     parser.add_argument("--presets", default=",".join(PRESETS))
+    parser.add_argument(
+        "--independent-points",
+        action="store_true",
+        help="weigh a cylinder's points as independent (the method before the learned line "
+        "noise), for comparison",
+    )
     args = parser.parse_args()
     print(
         f"{'preset':<22}{'method':<9}{'used %':>8}{'refused':>8}{'rot RMS deg':>12}"
         f"{'trans RMS mm':>13}{'x twin':>8}{'max |e|/σ':>10}{'x paper':>8}"
+        f"{'CRB mm':>8}{'x CRB':>7}{'twin CRB':>9}"
     )
     notes = []
     for preset in args.presets.split(","):
-        real = run(preset, args.seeds, white=False)
-        twin = run(preset, args.seeds, white=True)
+        real = run(preset, args.seeds, white=False, independent=args.independent_points)
+        twin = run(preset, args.seeds, white=True, independent=args.independent_points)
         for name, tally in real.items():
             rot, trans = tally.rms()
             ratio_twin = trans / twin[name].rms()[1]
             vs_paper = f"{trans / real['paper'].rms()[1]:.2f}" if name == "default" else "-"
             worst = f"{tally.worst_ratio():.2f}" if tally.sigmas else "-"
+            bound, twin_bound = tally.bound_mm(), twin[name].bound_mm()
+            bounds = (
+                f"{bound:>8.4f}{trans / bound:>7.2f}{twin_bound:>9.4f}"
+                if tally.bounds
+                else f"{'-':>8}{'-':>7}{'-':>9}"
+            )
             print(
                 f"{preset:<22}{name:<9}{100.0 * tally.used / tally.recorded:>8.1f}"
                 f"{len(tally.refused):>8}{rot:>12.4f}{trans:>13.4f}{ratio_twin:>8.2f}"
-                f"{worst:>10}{vs_paper:>8}"
+                f"{worst:>10}{vs_paper:>8}{bounds}"
             )
             notes.extend(f"{preset} {name}: {text}" for text in tally.refused)
             notes.extend(f"{preset} {name} twin: {text}" for text in twin[name].refused)

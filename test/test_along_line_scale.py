@@ -72,6 +72,8 @@ def test_a_fixed_scale_leaves_the_given_radius_contradicted_and_says_how_to_free
     (warning,) = [w for w in result.warnings if "against the given 20.00 mm" in w]
     assert "--scale free estimates it" in render(warning, Front.CLI)
     # The stretched profiles cannot fit the given radius: the hand-eye takes the misfit
-    # (0.31 mm off here, against 0.03 mm with the scale estimated).
+    # (0.11 mm off here, against 0.03 mm with the scale estimated; 0.31 mm with the points
+    # weighed as independent, since the learned line noise takes part of the misfit for
+    # smooth shape error).
     error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)
-    assert error.translation_m > 1.5e-4
+    assert error.translation_m > 7e-5

@@ -82,6 +82,12 @@ class RefineConfig:
         solve exceeds this many sensor σ (the re-estimated one, if larger), then solves
         again: spikes that passed the ellipse RANSAC otherwise bias their sample's pose
         correction. 0 disables. Default 6.
+    learn_line_noise : bool
+        :func:`.refine.refine_with_outlier_rejection` learns the recording's point noise
+        along the line (white, and smooth with a correlation length) from the first solve's
+        residuals and weighs each profile's points with it (generalised least squares):
+        a profiler's smooth shape error does not average out over a profile's points as
+        white noise does. Default True.
     """
 
     sensor_sigma_m: float = 5e-6
@@ -104,6 +110,7 @@ class RefineConfig:
     outlier_prior_probability: float = 1e-6
     max_outlier_fraction: float = 0.2
     point_outlier_sigmas: float = 6.0
+    learn_line_noise: bool = True
 
     def __post_init__(self) -> None:
         positive = {

@@ -139,6 +139,7 @@ class CylinderProblem:
     config: RefineConfig
     centroid: FloatArray | None = None
     estimate_scale: bool = False
+    whitening: FloatArray | None = None  # (M, K, K) per-sample W with W C Wᵀ = I, or None
 
     @property
     def n_samples(self) -> int:
@@ -184,12 +185,21 @@ class CylinderProblem:
         return np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
 
     def residuals(self, state: CylinderState) -> Residuals:
-        """Normalised point residuals (M, K), zero on padding, and pose priors (M, 6)."""
+        """Normalised point residuals (M, K), zero on padding, whitened when
+        :attr:`whitening` is set, and pose priors (M, 6)."""
         return self._residuals(state, _geometry(self, state))
+
+    def point_residuals(self, state: CylinderState) -> FloatArray:
+        """Point-to-surface residuals (M, K) in units of σ_s, zero on padding, never
+        whitened."""
+        geo = _geometry(self, state)
+        return np.asarray((geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m))
 
     def _residuals(self, state: CylinderState, geo: _Geometry) -> Residuals:
         cfg = self.config
         e = (geo.distance - state.radius) * (self.mask / cfg.sensor_sigma_m)
+        if self.whitening is not None:
+            e = np.einsum("mij,mj->mi", self.whitening, e)
         prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
         return Residuals(e, prior)
 
@@ -215,12 +225,28 @@ class CylinderProblem:
             # d (x / (1 + s)) / d s = −x / (1 + s)² = −(x / (1 + s)) / (1 + s)
             columns.append((-n_sensor[..., 0] * geo.p[..., 0] / (1.0 + state.scale))[..., None])
         J_omega = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
+        J_global = np.concatenate(columns, axis=2)
+        J_local = np.concatenate([J_omega, n_corrected], axis=2)
+        if self.whitening is not None:
+            J_global, J_local = self.whitening @ J_global, self.whitening @ J_local
         return Linearisation(
             residuals=self._residuals(state, geo),
-            J_global=np.concatenate(columns, axis=2),
-            J_local=np.concatenate([J_omega, n_corrected], axis=2),
+            J_global=J_global,
+            J_local=J_local,
             pose_prior_sqrt_information=self._prior_sqrt_information(),
         )
+
+    def depth_cosines(self, state: CylinderState) -> FloatArray:
+        """|cosine| (M, K) between each point's surface normal and the sensor's depth axis."""
+        geo = _geometry(self, state)
+        n_sensor = np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ state.R_fs
+        return np.asarray(np.abs(n_sensor[..., 2]))
+
+    def unwhitened_local_jacobian(self, state: CylinderState) -> FloatArray:
+        """d point residual / d (ω, τ) of each point's sample (M, K, 6), m per unit, never
+        whitened: the directions a sample's own pose correction fits away."""
+        jacobian = replace(self, whitening=None).linearise(state).J_local
+        return np.asarray(jacobian * self.config.sensor_sigma_m)
 
     def retract(
         self, state: CylinderState, step_global: FloatArray, step_local: FloatArray

@@ -1,0 +1,228 @@
+"""The noise of a profile along its line, learned from a recording's residuals.
+
+A real profiler's points err by a few µm of local (point-to-point) noise and by a smooth
+depth error along the line of several µm over a few mm, drawn anew with every profile
+(speckle, surface, the triangulation's peak finder). White noise averages out over a
+profile's points; the smooth error does not: it moves a profile's fitted position by about
+itself. A fit that weighs the points as independent takes every profile's smooth error for
+signal, and says it knows the result far better than it does.
+
+:class:`LineNoise` models the residual of point i of a profile (m, along the fitted
+surface's normal) as
+
+    C_ik = σ_w² δ_ik + c_i c_k σ_s² exp(−(x_i − x_k)² / (2 ℓ²)),
+
+σ_w the white noise, σ_s and ℓ the smooth depth error's 1σ and correlation length along
+the line (x, sensor frame), and c_i the cosine between the surface normal and the depth
+axis (a depth error moves a point off a tilted surface by c times itself).
+
+:func:`learn_line_noise` estimates (σ_w, σ_s, ℓ) from the residuals of a first fit pooled
+over all the recording's profiles, by restricted maximum likelihood (REML): each profile's
+residuals are scored only in the directions its own fitted parameters (its pose
+correction) leave free, so that the smooth error those parameters absorbed is not missed.
+:func:`whitening_matrices` turns the model into one matrix per profile that makes its
+residuals independent and of unit variance (generalised least squares).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solve_triangular
+from scipy.optimize import minimize
+
+from ..errors import InputError
+from ..types import FloatArray
+
+#: Fewest points a profile needs to take part in :func:`learn_line_noise`.
+MIN_POINTS = 8
+#: Points per profile that :func:`learn_line_noise` uses at most (evenly spaced along the
+#: profile): enough to see a correlation length of a few point spacings, at a quarter of
+#: the cost of 200.
+LEARN_POINTS = 100
+#: Relative singular-value floor below which a profile's fitted directions are dependent.
+RANK_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class LineNoise:
+    """White and smooth noise of a profile's points along its line (module docstring).
+
+    Attributes
+    ----------
+    white_sigma_m : float
+        1σ of the independent point noise, m.
+    smooth_sigma_m : float
+        1σ of the smooth depth error, m.
+    length_m : float
+        Correlation length of the smooth error along the line, m.
+    """
+
+    white_sigma_m: float
+    smooth_sigma_m: float
+    length_m: float
+
+    def __post_init__(self) -> None:
+        values = (self.white_sigma_m, self.smooth_sigma_m, self.length_m)
+        if not all(math.isfinite(v) for v in values) or self.white_sigma_m <= 0.0:
+            raise InputError(f"line noise: white σ must be > 0 and all finite, got {values}")
+        if self.smooth_sigma_m < 0.0 or self.length_m <= 0.0:
+            raise InputError(f"line noise: smooth σ >= 0 and length > 0 needed, got {values}")
+
+    def covariance(self, x_m: FloatArray, cosine: FloatArray) -> FloatArray:
+        """Covariance (..., N, N) of the residuals of points at ``x_m`` (..., N), m².
+
+        ``cosine`` (..., N) is each point's normal-to-depth cosine (1: a surface facing
+        the sensor).
+        """
+        d = x_m[..., :, None] - x_m[..., None, :]
+        smooth = np.exp(-0.5 * (d / self.length_m) ** 2) * self.smooth_sigma_m**2
+        C = cosine[..., :, None] * smooth * cosine[..., None, :]
+        n = x_m.shape[-1]
+        return np.asarray(C + self.white_sigma_m**2 * np.eye(n))
+
+
+def _padded_covariance(
+    noise: LineNoise, x_m: FloatArray, cosine: FloatArray, mask: FloatArray, unit_m: float
+) -> FloatArray:
+    """Covariances (M, K, K) in units of ``unit_m``², identity on padding rows."""
+    m = mask > 0.0
+    C = noise.covariance(np.where(m, x_m, 0.0), np.where(m, cosine, 0.0)) / unit_m**2
+    both = m[:, :, None] & m[:, None, :]
+    eye = np.broadcast_to(np.eye(x_m.shape[1]), C.shape)
+    return np.asarray(np.where(both, C, eye))
+
+
+def whitening_matrices(
+    noise: LineNoise, x_m: FloatArray, cosine: FloatArray, mask: FloatArray, unit_m: float
+) -> FloatArray:
+    """Per-profile matrices W (M, K, K) with W C Wᵀ = I: residuals in units of ``unit_m``
+    times W are independent with unit variance.
+
+    Parameters
+    ----------
+    noise : LineNoise
+    x_m : ndarray, shape (M, K)
+        Each point's place along the line (sensor x), m.
+    cosine : ndarray, shape (M, K)
+        Each point's normal-to-depth cosine.
+    mask : ndarray, shape (M, K)
+        1 for a real point, 0 for padding (padding rows and columns stay the identity).
+    unit_m : float
+        The unit the residuals are in (e.g. the configured sensor σ), m.
+
+    Returns
+    -------
+    ndarray, shape (M, K, K)
+        Lower-triangular inverses of the Cholesky factors of the covariances.
+    """
+    L = np.linalg.cholesky(_padded_covariance(noise, x_m, cosine, mask, unit_m))
+    eye = np.eye(x_m.shape[1])
+    return np.stack([solve_triangular(Lj, eye, lower=True) for Lj in L])
+
+
+def _reml_cost(
+    log_params: FloatArray,
+    residuals: FloatArray,
+    x_m: FloatArray,
+    cosine: FloatArray,
+    mask: FloatArray,
+    bases: FloatArray,
+    unit_m: float,
+) -> float:
+    """Minus twice the restricted log-likelihood (constants dropped)."""
+    white, smooth, length = np.exp(log_params) * np.array([unit_m, unit_m, 1.0])
+    C = _padded_covariance(LineNoise(white, smooth, length), x_m, cosine, mask, unit_m)
+    L = np.linalg.cholesky(C)
+    rhs = np.concatenate([residuals[..., None] / unit_m, bases], axis=2)
+    solved = np.stack([solve_triangular(Lj, b, lower=True) for Lj, b in zip(L, rhs, strict=True)])
+    r, X = solved[..., :1], solved[..., 1:]  # L⁻¹ r, L⁻¹ X
+    XtX = X.transpose(0, 2, 1) @ X
+    XtX = XtX + np.eye(X.shape[2]) * (np.einsum("mii->mi", XtX) == 0.0)[:, None, :]
+    Xtr = X.transpose(0, 2, 1) @ r
+    logdet_C = 2.0 * np.sum(np.log(np.einsum("mii->mi", L)))
+    _, logdet_X = np.linalg.slogdet(XtX)
+    quadratic = np.sum(r**2) - np.sum(Xtr * np.linalg.solve(XtX, Xtr))
+    return float(logdet_C + np.sum(logdet_X) + quadratic)
+
+
+def learn_line_noise(
+    residuals_m: FloatArray,
+    x_m: FloatArray,
+    cosine: FloatArray,
+    mask: FloatArray,
+    bases: FloatArray,
+) -> LineNoise:
+    """The recording's :class:`LineNoise` from a first fit's residuals (REML).
+
+    Parameters
+    ----------
+    residuals_m : ndarray, shape (M, K)
+        Signed point residuals of M profiles after a fit, m (any value on padding).
+    x_m : ndarray, shape (M, K)
+        Each point's place along the line (sensor x), m.
+    cosine : ndarray, shape (M, K)
+        Each point's normal-to-depth cosine.
+    mask : ndarray, shape (M, K)
+        1 for a real point, 0 for padding.
+    bases : ndarray, shape (M, K, P)
+        Per profile, the residuals' derivatives by the profile's own fitted parameters (its
+        pose correction): directions in which its residuals were fitted away. Dependent
+        columns are allowed.
+
+    Returns
+    -------
+    LineNoise
+
+    Raises
+    ------
+    InputError
+        Fewer than two profiles with :data:`MIN_POINTS` points, or shapes that differ.
+    """
+    shapes = {np.shape(a) for a in (residuals_m, x_m, cosine, mask)}
+    if len(shapes) != 1 or np.shape(bases)[:2] != np.shape(mask):
+        raise InputError(f"learn_line_noise: array shapes differ: {shapes}, {np.shape(bases)}")
+    m = np.asarray(mask) > 0.0
+    keep = np.sum(m, axis=1) >= MIN_POINTS
+    if np.count_nonzero(keep) < 2:
+        raise InputError(f"learn_line_noise needs two profiles of {MIN_POINTS}+ points")
+    every = max(1, math.ceil(np.shape(mask)[1] / LEARN_POINTS))
+    m = m[keep, ::every]
+    r = np.where(m, residuals_m[keep, ::every], 0.0)
+    x = np.where(m, x_m[keep, ::every], 0.0)
+    c = np.where(m, cosine[keep, ::every], 0.0)
+    X = _orthonormal_bases(np.where(m[..., None], bases[keep, ::every], 0.0))
+    unit = float(np.sqrt(np.sum(r**2) / np.count_nonzero(m)))
+    if not unit > 0.0:
+        raise InputError("learn_line_noise: the residuals are all zero")
+    span = float(
+        np.median(np.max(np.where(m, x, -np.inf), axis=1) - np.min(np.where(m, x, np.inf), axis=1))
+    )
+    d2 = np.diff(r, n=2, axis=1)[m[:, 2:] & m[:, 1:-1] & m[:, :-2]]
+    white0 = float(np.sqrt(np.mean(d2**2) / 6.0)) if len(d2) else unit
+    start = np.log([max(white0, 1e-3 * unit) / unit, 1.0, 0.2 * span])
+    spacing = span / max(float(np.median(np.sum(m, axis=1))) - 1.0, 1.0)
+    bounds = [(math.log(1e-4), math.log(10.0))] * 2 + [
+        (math.log(spacing), math.log(max(2.0 * span, 2.0 * spacing)))
+    ]
+    best = minimize(
+        _reml_cost,
+        np.clip(start, [b[0] for b in bounds], [b[1] for b in bounds]),
+        args=(r, x, c, m.astype(np.float64), X, unit),
+        method="L-BFGS-B",
+        bounds=bounds,
+    )
+    white, smooth, length = np.exp(best.x)
+    return LineNoise(float(white * unit), float(smooth * unit), float(length))
+
+
+def _orthonormal_bases(bases: FloatArray) -> FloatArray:
+    """Each profile's fitted directions as orthonormal columns (M, K, P'), P' the largest
+    rank; a profile of lower rank gets zero columns (which the cost leaves out)."""
+    U, s, _ = np.linalg.svd(bases, full_matrices=False)
+    rank = s > RANK_TOLERANCE * s[:, :1]
+    p = int(np.max(np.sum(rank, axis=1)))
+    U, rank = U[:, :, :p], rank[:, :p]
+    return np.asarray(U * rank[:, None, :])

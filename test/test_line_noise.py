@@ -1,0 +1,132 @@
+"""The point noise along the line, learned from residuals, and the refinement weighed by it."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from _cylinder_points import make_scene, perturbed_start
+
+from linelaser_calib.core.errors import InputError
+from linelaser_calib.core.geometry import rotvec_from_matrix
+from linelaser_calib.core.profile.noise import LineNoise, learn_line_noise, whitening_matrices
+from linelaser_calib.core.targets.cylinder.config import RefineConfig
+from linelaser_calib.core.targets.cylinder.refine import refine_with_outlier_rejection
+from linelaser_calib.sim.sensor_models import SensorModel, shape_error
+
+#: A Keyence-class profiler (sim preset ``cylinder_keyence``): 1.5 µm white noise, 6 µm of
+#: smooth depth error over 3 mm.
+KEYENCE = LineNoise(white_sigma_m=1.5e-6, smooth_sigma_m=6e-6, length_m=3e-3)
+
+
+def _profiles(
+    rng: np.random.Generator, noise: LineNoise, m: int = 30, k: int = 200
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Places x (M, K), cosines, a mask with some short profiles, and the fit's directions
+    (constant, slope, cosine: an arc's shift and tilt) of M profiles."""
+    x = np.sort(rng.uniform(-6e-3, 6e-3, (m, k)), axis=1)
+    cosine = np.cos(np.arcsin(np.clip(x / 8e-3, -0.95, 0.95)))
+    mask = np.ones((m, k))
+    mask[:5, 150:] = 0.0
+    bases = np.stack([np.ones((m, k)), x / 6e-3, cosine], axis=2) * mask[..., None]
+    return x, cosine, mask, bases
+
+
+def test_learned_noise_recovers_the_simulated_sigmas_and_length() -> None:
+    rng = np.random.default_rng(0)
+    x, cosine, mask, bases = _profiles(rng, KEYENCE)
+    draws = np.linalg.cholesky(KEYENCE.covariance(x, cosine)) @ rng.normal(size=(*x.shape, 1))
+    residuals = draws[..., 0].copy()
+    for j in range(len(x)):  # what a fit of each profile's own directions leaves
+        fit = np.linalg.lstsq(bases[j], residuals[j] * mask[j], rcond=None)[0]
+        residuals[j] -= bases[j] @ fit
+    learned = learn_line_noise(residuals, x, cosine, mask, bases)
+    assert learned.white_sigma_m == pytest.approx(KEYENCE.white_sigma_m, rel=0.1)
+    assert learned.smooth_sigma_m == pytest.approx(KEYENCE.smooth_sigma_m, rel=0.25)
+    assert learned.length_m == pytest.approx(KEYENCE.length_m, rel=0.25)
+
+
+def test_white_residuals_learn_no_smooth_error() -> None:
+    rng = np.random.default_rng(1)
+    x, cosine, mask, bases = _profiles(rng, KEYENCE)
+    learned = learn_line_noise(rng.normal(0.0, 2e-6, x.shape), x, cosine, mask, bases)
+    assert learned.white_sigma_m == pytest.approx(2e-6, rel=0.1)
+    assert learned.smooth_sigma_m < 0.4 * learned.white_sigma_m
+
+
+def test_whitening_makes_the_covariance_the_identity() -> None:
+    rng = np.random.default_rng(2)
+    x, cosine, mask, _ = _profiles(rng, KEYENCE, m=4, k=50)
+    W = whitening_matrices(KEYENCE, x, cosine, mask, 5e-6)
+    for j in range(4):
+        n = int(mask[j].sum())
+        C = KEYENCE.covariance(x[j, :n], cosine[j, :n]) / 5e-6**2
+        np.testing.assert_allclose(W[j, :n, :n] @ C @ W[j, :n, :n].T, np.eye(n), atol=1e-8)
+        np.testing.assert_allclose(W[j, n:, n:], np.eye(len(x[j]) - n))
+
+
+def test_learn_line_noise_refuses_too_few_profiles() -> None:
+    x, cosine, mask, bases = _profiles(np.random.default_rng(3), KEYENCE, m=1)
+    with pytest.raises(InputError, match="two profiles"):
+        learn_line_noise(np.zeros_like(x), x, cosine, mask, bases)
+
+
+def test_generalised_least_squares_beats_independent_points_on_smooth_errors() -> None:
+    """Profiles with a Keyence-class smooth depth error (sim's own generator): weighing the
+    points with the learned noise is more accurate than taking them as independent, and its
+    1σ holds the error."""
+    model = SensorModel(shape_sigma_m=6e-6, shape_length_m=3e-3)
+    independent, weighed = [], []
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        scene = make_scene(
+            rng, sensor_sigma=1.5e-6, robot_sigma_t=3e-5, robot_sigma_r=float(np.deg2rad(0.003))
+        )
+        points = [p.copy() for p in scene.points]
+        for p in points:
+            p[:, 2] += shape_error(rng, model, p[None, :, 0])[0]
+        T0, cylinder0 = perturbed_start(rng, scene)
+        for learn, errors in ((False, independent), (True, weighed)):
+            config = RefineConfig(learn_line_noise=learn)
+            result = refine_with_outlier_rejection(
+                points, scene.T_base_flange, T0, cylinder0, config, radius_m=0.02
+            )
+            T, truth = result.T_flange_sensor, scene.T_flange_sensor
+            error = np.concatenate(
+                [rotvec_from_matrix(T[:3, :3].T @ truth[:3, :3]), truth[:3, 3] - T[:3, 3]]
+            )
+            errors.append(error)
+            if learn:
+                assert result.line_noise is not None
+                assert result.line_noise.smooth_sigma_m == pytest.approx(6e-6, rel=0.3)
+                sigma = np.concatenate([result.sigma_rotation_rad, result.sigma_translation_m])
+                assert np.max(np.abs(error) / sigma) < 3.0
+            else:
+                assert result.line_noise is None
+    rms = [
+        np.sqrt(np.mean(np.sum(np.array(e)[:, 3:] ** 2, axis=1))) for e in (independent, weighed)
+    ]
+    assert rms[1] < 0.7 * rms[0]
+
+
+def test_line_noise_rejects_bad_values() -> None:
+    with pytest.raises(InputError, match="white"):
+        LineNoise(0.0, 1e-6, 1e-3)
+    with pytest.raises(InputError, match="length"):
+        replace(KEYENCE, length_m=0.0)
+
+
+def test_an_error_as_long_as_the_profile_is_not_weighed_by() -> None:
+    """A smooth error whose correlation length exceeds the arc moves each profile as its
+    pose would: its size cannot be learned, so the points stay independent."""
+    rng = np.random.default_rng(5)
+    scene = make_scene(rng, n_poses=30, sensor_sigma=2e-6)
+    model = SensorModel(shape_sigma_m=2e-5, shape_length_m=0.05)
+    points = [p.copy() for p in scene.points]
+    for p in points:
+        p[:, 2] += shape_error(rng, model, p[None, :, 0])[0]
+    T0, cylinder0 = perturbed_start(rng, scene)
+    result = refine_with_outlier_rejection(points, scene.T_base_flange, T0, cylinder0)
+    assert result.line_noise is None
+    assert result.solved is not None and result.solved.problem.whitening is None
