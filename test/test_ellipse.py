@@ -215,6 +215,18 @@ def test_straight_line_is_rejected() -> None:
         fit_ellipse_direct(np.column_stack([x, 0.25 + 0.1 * x]))
 
 
+def test_a_bowed_plane_is_no_short_arc() -> None:
+    """A plane seen by a profiler whose 40 mm line bows by 50 um: a smooth curve that an
+    ellipse fits far better than a line, yet neither an arc nor a short arc (its tangent
+    turns by half a degree; an ellipse hugging it from both sides turns by 180 deg)."""
+    rng = np.random.default_rng(9)
+    x = np.linspace(-0.02, 0.02, 500)
+    bow = 50e-6 * (1.0 - (x / 0.02) ** 2)
+    plane = np.column_stack([x, 0.25 + 0.1 * x + bow]) + SIGMA * rng.standard_normal((500, 2))
+    with pytest.raises(ProfileRejected):
+        fit_ellipse_ransac(plane, EllipseConfig(), rng)
+
+
 def test_too_few_points_and_bad_input() -> None:
     rng = np.random.default_rng(8)
     points, _, _ = random_arc(rng, 120.0, n=10)
