@@ -3,15 +3,16 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from linelaser_calib.cli import main
-from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.errors import CalibrationError, DegenerateError
 from linelaser_calib.core.geometry import transform_error
-from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.targets.cylinder import CylinderConfig
 from linelaser_calib.core.targets.cylinder.ellipse import EllipseConfig
 from linelaser_calib.core.targets.cylinder.features import FittedSample, fit_sample
@@ -89,13 +90,15 @@ def short_arcs() -> SimulatedData:
 def test_short_arcs_of_25_deg_are_used_and_calibrate(short_arcs: SimulatedData) -> None:
     """Every arc is short: without short arcs the recording is refused (most profiles give no
     ellipse, and the failed ones look like line pairs); with them their points give the
-    hand-eye, the radius given."""
+    hand-eye, the radius given. The paper's method, on centres, refuses short arcs."""
     data = short_arcs
     radius = data.truth.cylinder.radius
     arcs_only = CylinderConfig(radius_m=radius, ellipse=EllipseConfig(min_short_arc_turn_rad=0.0))
     with pytest.raises(CalibrationError):
         run_pipeline(data.profiles, data.poses, PipelineConfig(target_config=arcs_only))
     config = PipelineConfig(target_config=CylinderConfig(radius_m=radius), self_check_folds=0)
+    with pytest.raises(DegenerateError, match=r"the paper's method needs \d+; \d+ more show short"):
+        run_pipeline(data.profiles, data.poses, replace(config, method=Method.PAPER))
     result = run_pipeline(data.profiles, data.poses, config)
     assert len(result.samples_used) >= 12
     rotation, translation = transform_error(result.T_flange_sensor, data.truth.T_flange_sensor)

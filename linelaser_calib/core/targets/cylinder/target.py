@@ -30,6 +30,7 @@ times more.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -279,10 +280,18 @@ class CylinderTarget:
     def solve_paper(
         self, features: list[Any], config: CylinderConfig, context: SolveContext
     ) -> TargetSolution:
-        """The paper's PSO + GALM hybrid on the ellipse centres, of the long arcs when there
-        are enough (:func:`centred`; the paper rejects short arcs)."""
+        """The paper's PSO + GALM hybrid on the long arcs' ellipse centres (the paper rejects
+        short arcs; with fewer than ``config.min_samples`` long arcs it refuses)."""
         radius = self._checked(features, config, context)
-        used = centred(features, config)
+        used = long_arcs(features)
+        if len(used) < config.min_samples:
+            raise DegenerateError(
+                f"only {len(used)} of {context.n_samples} profiles show an arc long enough "
+                f"for its centre ({math.degrees(config.ellipse.min_arc_coverage_rad):.0f} deg "
+                f"or more), and the paper's method needs {config.min_samples}; "
+                f"{len(features) - len(used)} more show short arcs, whose points the default "
+                "method uses: choose {setting:method} default."
+            )
         kept = {f.index for f in used}
         short = [
             Rejection(f.index, f.stamp_ns, "ellipse", SHORT_ARC_UNUSED)
