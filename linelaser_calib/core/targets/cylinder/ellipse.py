@@ -176,9 +176,9 @@ class EllipseConfig:
         as a short arc when its tangent turns by at least this much from one end to the
         other, and by less than ``min_arc_coverage_rad``, rad (0 refuses short arcs). Its
         centre and semi-axes are left unused; its points still constrain the surface in the
-        joint fit of all profiles. The default
-        15 deg is a 13 mm wide arc of a 100 mm shaft, and 25 times the turn of a profiler's
-        40 mm line bowed by 50 um, so that a plane's profile stays a line.
+        joint fit of all profiles. The default 15 deg is a 13 mm wide arc of a 100 mm shaft,
+        and 25 times the turn of a profiler's 40 mm line bowed by 50 um, so that a plane's
+        profile stays a line.
     noise_threshold_sigmas : float
         After RANSAC, the inlier threshold shrinks to this many robust sigmas of the
         inliers' distances (1.4826 * median), never below 1 um nor above
