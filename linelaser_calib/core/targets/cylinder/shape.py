@@ -44,6 +44,13 @@ def compare_ellipse(points_xz: FloatArray, conic: FloatArray) -> Comparison:
     return compare_models(ellipse, [line_fit(points_xz), line_pair_fit(points_xz)])
 
 
+def compare_with_line(points_xz: FloatArray, conic: FloatArray) -> Comparison:
+    """A short arc's ellipse (conic (6,), m) against a line alone, on its inliers (N, 2), m:
+    is the arc clearly curved (:attr:`~linelaser_calib.core.model_check.Comparison.model_wins`)?"""
+    ellipse = ShapeFit("ellipse", sampson_distance(conic, points_xz), 5)
+    return compare_models(ellipse, [line_fit(points_xz)])
+
+
 def compare_without_arc(points_xz: FloatArray) -> Comparison:
     """A general conic in the ellipse's place against the rival shapes, on a cleaned profile
     (N, 2), m, in scan order, in which no arc was found."""

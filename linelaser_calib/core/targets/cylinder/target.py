@@ -30,6 +30,7 @@ times more.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -54,7 +55,14 @@ from ..base import (
 from .advice import CylinderPlacementAdviser
 from .arc import STRAIGHT_PIECES, radius_mismatch
 from .config import CylinderConfig
-from .features import FittedSample, arc_notes, fit_sample, fit_samples, settle_radius
+from .features import (
+    FittedSample,
+    arc_notes,
+    fit_sample,
+    fit_samples,
+    long_arcs,
+    settle_radius,
+)
 from .joint import JointScan, refine_kinematics
 from .model import Cylinder, centre_distances
 from .plan import CylinderPlanner
@@ -157,6 +165,21 @@ def recording_scale_m(features: list[FittedSample], floor_m: float) -> float:
     return float(np.median(fits)) if fits else floor_m
 
 
+#: Why the paper's method leaves a short arc out.
+SHORT_ARC_UNUSED = (
+    "a short arc: its centre is not a measurement, and the paper's method uses the centres "
+    "of the long arcs only (the default method uses its points)"
+)
+
+
+def centred(features: list[FittedSample], config: CylinderConfig) -> list[FittedSample]:
+    """The samples whose ellipse centres a solve on the centres uses: the long arcs when at
+    least ``config.min_samples`` are there, else all (a short arc's centre is not a
+    measurement, :attr:`~.ellipse.EllipseFit.short`)."""
+    long = [f for f in features if not f.ellipse.short]
+    return long if len(long) >= config.min_samples else features
+
+
 class CylinderTarget:
     """The cylinder target (see the module docstring)."""
 
@@ -241,8 +264,11 @@ class CylinderTarget:
         context: SolveContext,
         paper: bool,
     ) -> PaperSolution:
-        """The paper's global solve on the ellipse centres."""
-        centres = np.array([f.ellipse.centre_xz for f in features])
+        """The paper's global solve on the ellipse centres (:func:`centred`; a short arc's
+        centre is that of the circle of the radius through it)."""
+        radius = settle_radius(features, config.radius_m)
+        features = centred(features, config)
+        centres = np.array([f.centre_xz(radius) for f in features])
         T_base_flange = np.stack([f.T_base_flange for f in features])
         context.progress("global solve", 0, 1)
         hybrid = config.hybrid if paper else config.seed_hybrid
@@ -255,12 +281,29 @@ class CylinderTarget:
     def solve_paper(
         self, features: list[Any], config: CylinderConfig, context: SolveContext
     ) -> TargetSolution:
-        """The paper's PSO + GALM hybrid on the ellipse centres."""
+        """The paper's PSO + GALM hybrid on the long arcs' ellipse centres (the paper rejects
+        short arcs; with fewer than ``config.min_samples`` long arcs it refuses)."""
         radius = self._checked(features, config, context)
+        used = long_arcs(features)
+        if len(used) < config.min_samples:
+            raise DegenerateError(
+                f"only {len(used)} of {context.n_samples} profiles show an arc long enough "
+                f"for its centre ({math.degrees(config.ellipse.min_arc_coverage_rad):.0f} deg "
+                f"or more), and the paper's method needs {config.min_samples}; "
+                f"{len(features) - len(used)} more show short arcs, whose points the default "
+                "method uses: choose {setting:method} default."
+            )
+        kept = {f.index for f in used}
+        short = [
+            Rejection(f.index, f.stamp_ns, "ellipse", SHORT_ARC_UNUSED)
+            for f in features
+            if f.index not in kept
+        ]
+        features = used
         solution = self._seed(features, config, context, paper=True)
         T = solution.T_flange_sensor
         cylinder = replace(solution.cylinder, radius=radius)
-        centres = np.array([f.ellipse.centre_xz for f in features])
+        centres = np.array([f.centre_xz(radius) for f in features])
         T_base_flange = np.stack([f.T_base_flange for f in features])
         distances = centre_distances(centres, T_base_flange, T, cylinder)
         warnings = []
@@ -276,7 +319,7 @@ class CylinderTarget:
             section=CylinderSection(cylinder, config.radius_m is None),
             method="paper",
             samples_used=[f.index for f in features],
-            rejections=[],
+            rejections=short,
             rms_residual_m=float(np.sqrt(np.mean(distances**2))),
             sample_residuals_m={
                 f.index: float(d) for f, d in zip(features, distances, strict=True)
@@ -312,7 +355,9 @@ class CylinderTarget:
         """Maximum likelihood on every inlier point, seeded by the paper's solve (or started
         at the context's warm start)."""
         radius = self._checked(features, config, context)
-        mismatch = radius_mismatch([f.ellipse.semi_axes[1] for f in features], config.radius_m)
+        mismatch = radius_mismatch(
+            [f.ellipse.semi_axes[1] for f in long_arcs(features)], config.radius_m
+        )
         config = replace(
             config, refine=replace(config.refine, estimate_scale=estimates_scale(config))
         )
