@@ -30,8 +30,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import solve_triangular
-from scipy.optimize import minimize
 
 from ..errors import InputError
 from ..types import FloatArray
@@ -118,6 +116,8 @@ def whitening_matrices(
     ndarray, shape (M, K, K)
         Lower-triangular inverses of the Cholesky factors of the covariances.
     """
+    from scipy.linalg import solve_triangular  # loaded only where used
+
     L = np.linalg.cholesky(_padded_covariance(noise, x_m, cosine, mask, unit_m))
     eye = np.eye(x_m.shape[1])
     return np.stack([solve_triangular(Lj, eye, lower=True) for Lj in L])
@@ -133,6 +133,8 @@ def _reml_cost(
     unit_m: float,
 ) -> float:
     """Minus twice the restricted log-likelihood (constants dropped)."""
+    from scipy.linalg import solve_triangular  # loaded only where used
+
     white, smooth, length = np.exp(log_params) * np.array([unit_m, unit_m, 1.0])
     C = _padded_covariance(LineNoise(white, smooth, length), x_m, cosine, mask, unit_m)
     L = np.linalg.cholesky(C)
@@ -181,6 +183,8 @@ def learn_line_noise(
     InputError
         Fewer than two profiles with :data:`MIN_POINTS` points, or shapes that differ.
     """
+    from scipy.optimize import minimize  # loaded only where used
+
     shapes = {np.shape(a) for a in (residuals_m, x_m, cosine, mask)}
     if len(shapes) != 1 or np.shape(bases)[:2] != np.shape(mask):
         raise InputError(f"learn_line_noise: array shapes differ: {shapes}, {np.shape(bases)}")
