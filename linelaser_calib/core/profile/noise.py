@@ -22,6 +22,11 @@ residuals are scored only in the directions its own fitted parameters (its pose
 correction) leave free, so that the smooth error those parameters absorbed is not missed.
 :func:`whitening_matrices` turns the model into one matrix per profile that makes its
 residuals independent and of unit variance (generalised least squares).
+
+The smooth part is kept only where the residuals call for it: a likelihood-ratio test of
+the fit against white noise alone (REML, 2 more parameters, χ² at
+:data:`SMOOTH_FALSE_ALARM`). White-noise residuals learn ``smooth_sigma_m`` 0, and a
+refinement then weighs the points as independent, as before.
 """
 
 from __future__ import annotations
@@ -42,6 +47,9 @@ MIN_POINTS = 8
 LEARN_POINTS = 100
 #: Relative singular-value floor below which a profile's fitted directions are dependent.
 RANK_TOLERANCE = 1e-6
+#: False-alarm probability of the test that finds a smooth part in white-noise residuals
+#: (the 3σ two-sided normal tail, as the self-check's tests).
+SMOOTH_FALSE_ALARM = 0.0027
 
 
 @dataclass(frozen=True)
@@ -183,7 +191,8 @@ def learn_line_noise(
     InputError
         Fewer than two profiles with :data:`MIN_POINTS` points, or shapes that differ.
     """
-    from scipy.optimize import minimize  # loaded only where used
+    from scipy.optimize import minimize, minimize_scalar  # loaded only where used
+    from scipy.special import chdtri
 
     shapes = {np.shape(a) for a in (residuals_m, x_m, cosine, mask)}
     if len(shapes) != 1 or np.shape(bases)[:2] != np.shape(mask):
@@ -219,6 +228,16 @@ def learn_line_noise(
         bounds=bounds,
     )
     white, smooth, length = np.exp(best.x)
+    lowest = bounds[0][0]
+    white_only = minimize_scalar(
+        lambda w: _reml_cost(
+            np.array([w, lowest, best.x[2]]), r, x, c, m.astype(np.float64), X, unit
+        ),
+        bounds=bounds[0],
+        method="bounded",
+    )
+    if white_only.fun - best.fun < chdtri(2.0, SMOOTH_FALSE_ALARM):
+        return LineNoise(float(math.exp(white_only.x) * unit), 0.0, float(length))
     return LineNoise(float(white * unit), float(smooth * unit), float(length))
 
 

@@ -57,6 +57,7 @@ from ...solver import (
     N_HAND_EYE,
     N_LOCAL,
     Flag,
+    RejectionOutcome,
     Solution,
     evaluate_loss,
     normal_equations,
@@ -89,6 +90,13 @@ MAX_SCALE_SIGMA = 0.002
 #: :func:`recording_line_noise`); the real-profiler presets learn 0.12-0.2 (3-5 mm on
 #: 16-40 mm arcs).
 MAX_NOISE_LENGTH_FRACTION = 1.0 / 3.0
+
+#: RMS point residual of the solve weighed by the learned line noise, over the first solve's
+#: (points independent), beyond which the learned noise is not used. Where it describes the
+#: noise the two solves differ by about the bound and their residuals by far less than this;
+#: where it lets the solve leave a misfit of the shape along the line (all arcs short), the
+#: whitened cost barely sees that misfit and the residual grows many times.
+MAX_NOISE_RESIDUAL_GROWTH = 1.25
 
 
 class DroppedSample(NamedTuple):
@@ -500,7 +508,14 @@ def summarise(
         pose_corrections=np.hstack([state.omega, state.tau]),
         rms_residual_m=float(np.sqrt(np.sum(squares) / n_points)),
         chi2_dof=chi2_dof,
-        sensor_sigma_estimated_m=cfg.sensor_sigma_m * float(np.sqrt(factors[0])),
+        # A point's 1σ about the surface: with a learned line noise its white and smooth
+        # parts together (the factor then scales the whitened residuals).
+        sensor_sigma_estimated_m=float(np.sqrt(factors[0]))
+        * (
+            cfg.sensor_sigma_m
+            if noise is None
+            else np.hypot(noise.white_sigma_m, noise.smooth_sigma_m)
+        ),
         robot_sigma_scale=robot_scale,
         cost_history=history,
         iterations=solution.iterations,
@@ -617,7 +632,8 @@ def recording_line_noise(result: RefineResult, limit_m: float) -> LineNoise | No
         return None
     x = np.where(mask > 0.0, problem.points[..., 0], np.nan)
     extent = float(np.nanmedian(np.nanmax(x, axis=1) - np.nanmin(x, axis=1)))
-    return noise if noise.length_m <= MAX_NOISE_LENGTH_FRACTION * extent else None
+    smooth = noise.smooth_sigma_m > 0.0
+    return noise if smooth and noise.length_m <= MAX_NOISE_LENGTH_FRACTION * extent else None
 
 
 def _trim_points(
@@ -677,6 +693,11 @@ def refine_with_outlier_rejection(
         T0, start = first.T_flange_sensor, first.cylinder
 
     def solve_subset(keep: list[int], previous: RefineResult | None) -> RefineResult:
+        return _solve_subset(keep, previous, noise)
+
+    def _solve_subset(
+        keep: list[int], previous: RefineResult | None, noise: LineNoise | None
+    ) -> RefineResult:
         if previous is None and first is not None:
             if not trimmed_any and noise is None and len(keep) == len(points):
                 return first  # the same problem, solved already
@@ -698,13 +719,32 @@ def refine_with_outlier_rejection(
             [points[i] for i in keep], T_all[keep], T_start, axis, cfg, radius_m, noise=noise
         )
 
-    outcome = solve_with_rejection(
-        len(points),
-        solve_subset,
-        lambda result, _keep: _outlier_samples(result, cfg),
-        cfg.max_outlier_fraction,
-        cfg.min_samples,
-    )
+    def with_rejection() -> RejectionOutcome[RefineResult]:
+        return solve_with_rejection(
+            len(points),
+            solve_subset,
+            lambda result, _keep: _outlier_samples(result, cfg),
+            cfg.max_outlier_fraction,
+            cfg.min_samples,
+        )
+
+    try:
+        outcome = with_rejection()
+    except (DegenerateError, SolverError):
+        if noise is None:
+            raise
+        outcome = None
+    if noise is not None and first is not None:
+        growth = (
+            np.inf
+            if outcome is None
+            else outcome.outcome.rms_residual_m / max(first.rms_residual_m, 1e-300)
+        )
+        if growth > MAX_NOISE_RESIDUAL_GROWTH:
+            # The learned noise explains a misfit, not noise: weigh the points as independent.
+            noise = None
+            outcome = with_rejection()
+    assert outcome is not None
     result = outcome.outcome
     if outcome.left_flagged:
         result.warnings.append(
