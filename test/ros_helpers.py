@@ -436,7 +436,7 @@ class RosProbe:
 
     # -- services and latched topics -----------------------------------------------------
 
-    def call(self, service: str, timeout_s: float = 60.0) -> Trigger.Response:
+    def call(self, service: str, timeout_s: float = 180.0) -> Trigger.Response:
         """Call a std_srvs/Trigger service and wait for the answer."""
         client = self.node.create_client(Trigger, service)
         try:

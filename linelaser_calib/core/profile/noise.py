@@ -43,12 +43,12 @@ from ..types import FloatArray
 MIN_POINTS = 8
 #: Points per profile that :func:`learn_line_noise` uses at most (evenly spaced along the
 #: profile): enough to see a correlation length of a few point spacings, at a quarter of
-#: the cost of 200.
+#: the cost of 200 (60 points under-estimated a 6 µm smooth part by a third).
 LEARN_POINTS = 100
 #: Profiles that :func:`learn_line_noise` uses at most (evenly spaced through the recording):
-#: the noise is the sensor's, and 24 profiles of 100 points pin its three numbers to a few
-#: per cent; every profile more costs a Cholesky factor per likelihood evaluation.
-LEARN_PROFILES = 24
+#: the noise is the sensor's, and 16 profiles of 100 points pin its three numbers to 10-25 %
+#: (test_line_noise); every profile more costs a Cholesky factor per likelihood evaluation.
+LEARN_PROFILES = 16
 #: Relative singular-value floor below which a profile's fitted directions are dependent.
 RANK_TOLERANCE = 1e-6
 #: False-alarm probability of the test that finds a smooth part in white-noise residuals
