@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from geometry_msgs.msg import PoseArray
 from ros_helpers import Recording, params
-from test_ros_e2e import SHORT_SCAN, Graph, graph, settled  # noqa: F401 - graph is a fixture
+from test_ros_e2e import REPLAY_10X, SHORT_SCAN, Graph, graph, settled  # noqa: F401 - graph is a fixture
 from visualization_msgs.msg import MarkerArray
 
 from linelaser_calib.core.geometry import transform_from_translation_quaternion
@@ -21,7 +21,7 @@ def test_plan_service_publishes_feasible_poses_after_a_calibration(graph: Graph)
     scenario = scenario_from_preset("ur_scancontrol", **SHORT_SCAN)
     data = simulate(scenario, seed=3)
     recording = Recording.from_data(data.profiles, data.poses)
-    graph.collector(*params(reliable_inputs=True))
+    graph.collector(*params(**REPLAY_10X))
     graph.service(*params(radius=0.02, plan_poses=6, plan_axial_range=[0.0, 0.1]))
     probe = graph.probe
     player = probe.player()

@@ -74,6 +74,7 @@ from linelaser_calib.nodes.collector_parameters import PARAMETERS
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
     CLOCK_OFFSET_TOPIC,
+    POSE_INPUT_DEPTH,
     SAMPLE_POSE_TOPIC,
     SAMPLE_PROFILE_TOPIC,
     SESSION_TOPIC,
@@ -177,6 +178,7 @@ class CollectorNode(Node):
         )
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         qos = input_qos(bool(p["reliable_inputs"]))
+        pose_qos = input_qos(bool(p["reliable_inputs"]), POSE_INPUT_DEPTH)
         self._invalid_values_m = tuple(p["invalid_values_m"] or ())
         self._base_frame = str(p["base_frame"])
         self._base_frame_warned = False
@@ -195,7 +197,7 @@ class CollectorNode(Node):
                 str(p["flange_frame"]),
                 pairing.sync_tolerance_s,
                 config.pose_window_s,
-                qos,
+                pose_qos,
                 self._add_pose,
                 self._reject_pose,
             )
@@ -203,7 +205,7 @@ class CollectorNode(Node):
             self._pose_input = JointStatePoseInput(
                 self,
                 robot,
-                qos,
+                pose_qos,
                 self._add_pose,
                 self._reject_pose,
             )
@@ -211,7 +213,7 @@ class CollectorNode(Node):
             PoseStamped,
             "flange_pose",
             self._on_pose,  # type: ignore[arg-type]
-            qos,
+            pose_qos,
         )
         # Its own group: while a capture waits, the default group (inputs, timers) runs on.
         self.create_service(

@@ -37,8 +37,14 @@ from rclpy.utilities import try_shutdown
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.settings import Front, render
 
-#: History of each input subscription (profiles, flange poses): a burst this long is absorbed.
+#: History of the profile subscription: a backlog this long is absorbed.
 INPUT_DEPTH = 1000
+#: History of the pose subscriptions (flange poses, joint states, /tf): an arm streams them
+#: at up to 500 Hz, so while the collector validates a dense profile (or its machine is
+#: busy) hundreds queue up; 1,000 overflowed at a 10x replay of 125 Hz poses on a loaded
+#: two-core runner (a reliable keep-last queue drops its oldest message when full). Poses
+#: are small: this is about 2 MB at most.
+POSE_INPUT_DEPTH = 20000
 #: Topics of the collected samples (published by the collector, read by the service).
 SAMPLE_PROFILE_TOPIC = "linelaser_calib/samples/profile"
 SAMPLE_POSE_TOPIC = "linelaser_calib/samples/flange_pose"
@@ -55,15 +61,16 @@ MARKERS_TOPIC = "linelaser_calib/markers"
 CALIBRATE_SERVICE = "calibrate"
 
 
-def input_qos(reliable: bool) -> QoSProfile:
-    """QoS of the ``profile`` and ``flange_pose`` subscriptions.
+def input_qos(reliable: bool, depth: int = INPUT_DEPTH) -> QoSProfile:
+    """QoS of the ``profile`` and ``flange_pose`` subscriptions, keeping the last ``depth``.
 
     Best effort (the sensor-data profile with a deep history) matches every publisher;
-    reliable loses nothing but needs a reliable publisher.
+    reliable loses nothing while the backlog stays under ``depth``, but needs a reliable
+    publisher.
     """
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
-        depth=INPUT_DEPTH,
+        depth=depth,
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
         durability=DurabilityPolicy.VOLATILE,
     )
