@@ -130,3 +130,21 @@ def test_an_error_as_long_as_the_profile_is_not_weighed_by() -> None:
     result = refine_with_outlier_rejection(points, scene.T_base_flange, T0, cylinder0)
     assert result.line_noise is None
     assert result.solved is not None and result.solved.problem.whitening is None
+
+
+def test_the_restricted_likelihood_gradient_is_its_derivative() -> None:
+    """The analytic REML gradient that the learning's L-BFGS-B uses agrees with central
+    differences of the cost (including padding and a profile of lower rank)."""
+    from scipy.optimize import approx_fprime
+
+    from linelaser_calib.core.profile.noise import _orthonormal_bases, _Reml
+
+    rng = np.random.default_rng(3)
+    x, cosine, mask, bases = _profiles(rng, KEYENCE, m=5, k=40)
+    bases[1, :, 2] = bases[1, :, 0]  # a dependent column: rank 2
+    residuals = rng.normal(0.0, 3e-6, x.shape) * mask
+    reml = _Reml(residuals, x, cosine, mask, _orthonormal_bases(bases), 3e-6)
+    for log_params in ([-0.5, 0.3, np.log(2e-3)], [0.1, -2.0, np.log(6e-3)]):
+        _, gradient = reml(np.array(log_params))
+        numeric = approx_fprime(np.array(log_params), lambda p: reml(p)[0], 1e-6)
+        np.testing.assert_allclose(gradient, numeric, rtol=1e-4, atol=1e-3)
