@@ -157,6 +157,10 @@ def residual_rows(result: CalibrationResult) -> Rows:
             f"samples used ({residual_kind(result)})",
         )
     ]
+    noise_text = getattr(result.target, "noise_text", None)
+    noise = None if noise_text is None else noise_text()
+    if noise is not None:
+        rows.append(("point noise", noise))
     if result.sample_residuals_m:
         indices = np.array(list(result.sample_residuals_m))
         values = np.array(list(result.sample_residuals_m.values())) * 1e6

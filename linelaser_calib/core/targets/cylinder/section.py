@@ -9,7 +9,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
+from ...profile.noise import LineNoise
 from ...types import SampleFit
 from ..base import Shape, SurfaceMap, mm_text, plain_floats, read_vector
 from .model import Cylinder
@@ -37,6 +39,10 @@ class CylinderSection:
         1σ of ``scale``.
     scale_radius_correlation : float or None
         Correlation coefficient of the scale and the radius, when both were estimated.
+    line_noise : LineNoise or None
+        The recording's point noise along the line that weighed the points (white σ, smooth
+        σ and its correlation length, learned from the residuals; default method), or None
+        when the points were weighed as independent.
     """
 
     key: ClassVar[str] = "cylinder"
@@ -51,6 +57,7 @@ class CylinderSection:
     scale: float | None = None
     scale_sigma: float | None = None
     scale_radius_correlation: float | None = None
+    line_noise: LineNoise | None = None
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
         """``{frame, point, direction, radius}`` (m), and with an estimated scale
@@ -75,11 +82,31 @@ class CylinderSection:
         return mapping
 
     def quality_entries(self) -> dict[str, Any]:
-        """``radius_estimated`` and the re-estimated noise levels (``noise_estimated``)."""
+        """``radius_estimated``, the re-estimated noise levels (``noise_estimated``) and the
+        learned point noise along the line (``line_noise``: ``white_sigma_m``,
+        ``smooth_sigma_m``, ``length_m``), when there is one."""
         entries: dict[str, Any] = {"radius_estimated": bool(self.radius_estimated)}
         if self.noise_levels:
             entries["noise_estimated"] = {k: float(v) for k, v in self.noise_levels.items()}
+        if self.line_noise is not None:
+            n = self.line_noise
+            entries["line_noise"] = {
+                "white_sigma_m": float(n.white_sigma_m),
+                "smooth_sigma_m": float(n.smooth_sigma_m),
+                "length_m": float(n.length_m),
+            }
         return entries
+
+    def noise_text(self) -> str | None:
+        """The learned point noise along the line in words (µm, mm), or None."""
+        n = self.line_noise
+        if n is None:
+            return None
+        return (
+            f"learned from the residuals: {n.white_sigma_m * 1e6:.1f} um from point to point "
+            f"and {n.smooth_sigma_m * 1e6:.1f} um smooth along the line over "
+            f"{n.length_m * 1e3:.1f} mm; the points are weighed as correlated"
+        )
 
     def describe(self, base_frame: str) -> str:
         """The axis point, direction and radius (mm)."""
@@ -184,7 +211,26 @@ def read_cylinder_section(
         scale=None if ratio is None else ratio - 1.0,
         scale_sigma=sigma if scaled else None,
         scale_radius_correlation=correlation if scaled else None,
+        line_noise=_line_noise(quality.get("line_noise")),
     )
+
+
+def _line_noise(mapping: Any) -> LineNoise | None:
+    """The ``quality.line_noise`` mapping as a LineNoise, or None when absent (ValueError
+    naming the key)."""
+    if mapping is None:
+        return None
+    if not isinstance(mapping, Mapping):
+        raise ValueError(f"key quality.line_noise must be a mapping, got {mapping!r}")
+    values = [_optional_number(mapping, k) for k in ("white_sigma_m", "smooth_sigma_m", "length_m")]
+    if any(v is None for v in values):
+        raise ValueError(
+            "key quality.line_noise needs white_sigma_m, smooth_sigma_m and length_m (m)"
+        )
+    try:
+        return LineNoise(*(float(v) for v in values if v is not None))
+    except InputError as err:
+        raise ValueError(f"key quality.line_noise: {err}") from None
 
 
 def _optional_number(mapping: Mapping[str, Any], key: str) -> float | None:

@@ -409,6 +409,7 @@ class CylinderTarget:
                 scale=None if refined.sigma_scale is None else refined.scale,
                 scale_sigma=refined.sigma_scale,
                 scale_radius_correlation=refined.scale_radius_correlation,
+                line_noise=refined.line_noise,
             ),
             method="default",
             samples_used=[features[j].index for j in refined.used],
