@@ -38,7 +38,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import stats
+from scipy.special import ndtri
 
 from linelaser_calib.core.types import FloatArray, Rejection
 
@@ -49,8 +49,9 @@ CLEAR_BIC = 10.0
 #: outlier).
 MIN_SPREAD_SHARE = 0.1
 #: σ per median absolute deviation for Gaussian values (scipy.stats.median_abs_deviation's
-#: "normal" scale; its per-call cost, some ms, would dominate the fits here).
-MAD_TO_SIGMA = 1.0 / float(stats.norm.ppf(0.75))
+#: "normal" scale; its per-call cost, some ms, would dominate the fits here). The normal
+#: quantile comes from scipy.special: scipy.stats costs most of a second to import.
+MAD_TO_SIGMA = 1.0 / float(ndtri(0.75))
 
 
 @dataclass(frozen=True)

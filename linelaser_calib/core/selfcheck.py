@@ -87,7 +87,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.special import chdtri
-from scipy.stats import f_oneway
 
 from .errors import CalibrationError
 from .forked import map_forked
@@ -482,6 +481,8 @@ def region_offset_p(
     """Smallest p-value of the one-way analysis of variance of the profiles' mean signed
     offsets and tilts (:func:`tilt`) from ``solution``'s target, grouped by region ``label``
     (M,): whether regions are off by more than their poses' spread explains."""
+    from scipy.stats import f_oneway  # most of a second to import: only where it is used
+
     d = held_out_distances(solution, kept, flange_poses)
     offsets = np.array([np.mean(di) for di in d])
     tilts = np.array([tilt(f.record().points[:, 0], di) for f, di in zip(kept, d, strict=True)])
