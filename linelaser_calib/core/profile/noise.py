@@ -20,7 +20,7 @@ axis (a depth error moves a point off a tilted surface by c times itself).
 over all the recording's profiles, by restricted maximum likelihood (REML): each profile's
 residuals are scored only in the directions its own fitted parameters (its pose
 correction) leave free, so that the smooth error those parameters absorbed is not missed.
-:func:`whitening_matrices` turns the model into one matrix per profile that makes its
+:func:`line_whitening` turns the model into one linear map per profile that makes its
 residuals independent and of unit variance (generalised least squares).
 
 The smooth part is kept only where the residuals call for it: a likelihood-ratio test of
@@ -35,6 +35,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InputError
 from ..types import FloatArray
@@ -94,22 +95,60 @@ class LineNoise:
         return np.asarray(C + self.white_sigma_m**2 * np.eye(n))
 
 
-def _padded_covariance(
-    noise: LineNoise, x_m: FloatArray, cosine: FloatArray, mask: FloatArray, unit_m: float
-) -> FloatArray:
-    """Covariances (M, K, K) in units of ``unit_m``², identity on padding rows."""
-    m = mask > 0.0
-    C = noise.covariance(np.where(m, x_m, 0.0), np.where(m, cosine, 0.0)) / unit_m**2
-    both = m[:, :, None] & m[:, None, :]
-    eye = np.broadcast_to(np.eye(x_m.shape[1]), C.shape)
-    return np.asarray(np.where(both, C, eye))
+#: Highest angular frequency of the smooth error's spectrum the low-rank whitening keeps, in
+#: units of 1 / length: the Gaussian kernel's spectral density there is e^-10 of its peak.
+SPECTRUM_CUT = 4.5
+#: Margin of the low-rank basis' domain beyond each profile's ends, in correlation lengths
+#: (the Hilbert-space basis bends the covariance near its domain's boundary).
+DOMAIN_MARGIN = 2.0
 
 
-def whitening_matrices(
+@dataclass(frozen=True)
+class Whitening:
+    """Per-profile W with W C Wᵀ = I, applied without forming the K × K matrices.
+
+    C = w² I + U Λ Uᵀ (U orthonormal columns, K × R per profile), so
+    W = (I − U diag(g) Uᵀ) / w with g = 1 − (1 + Λ/w²)^−½. :func:`line_whitening` builds it
+    from a low-rank (Hilbert-space) basis of the smooth error; applying it costs O(K R).
+
+    Attributes
+    ----------
+    white : float
+        w, the white σ in the residuals' unit.
+    U : ndarray, shape (M, K, R)
+        Orthonormal directions of the smooth part (zero rows on padding).
+    shrink : ndarray, shape (M, R)
+        g per direction.
+    """
+
+    white: float
+    U: FloatArray
+    shrink: FloatArray
+
+    def apply(self, a: FloatArray) -> FloatArray:
+        """W a for residuals (M, K) or Jacobians (M, K, P)."""
+        vector = a.ndim == 2
+        b = a[..., None] if vector else a
+        projected = self.U.transpose(0, 2, 1) @ b  # (M, R, P)
+        out = (b - self.U @ (self.shrink[..., None] * projected)) / self.white
+        return np.asarray(out[..., 0] if vector else out)
+
+    def take(self, rows: ArrayLike) -> Whitening:
+        """The whitening of the profiles ``rows`` (indices)."""
+        index = np.asarray(rows, dtype=np.intp)
+        return Whitening(self.white, self.U[index], self.shrink[index])
+
+
+def line_whitening(
     noise: LineNoise, x_m: FloatArray, cosine: FloatArray, mask: FloatArray, unit_m: float
-) -> FloatArray:
-    """Per-profile matrices W (M, K, K) with W C Wᵀ = I: residuals in units of ``unit_m``
-    times W are independent with unit variance.
+) -> Whitening:
+    """:class:`Whitening` of the points' residuals (in units of ``unit_m``) under ``noise``.
+
+    The smooth part's Gaussian kernel is expanded per profile in the Laplacian eigenbasis of
+    an interval around the profile's points, sin(π j (x − a) / (2 L)), weighted by the
+    kernel's spectral density σ_s² √(2π) ℓ exp(−ω_j² ℓ² / 2) at ω_j = π j / (2 L) (Solin and
+    Särkkä 2020), up to ω = :data:`SPECTRUM_CUT` / ℓ: a few tens of functions, however many
+    points the profile has.
 
     Parameters
     ----------
@@ -119,19 +158,34 @@ def whitening_matrices(
     cosine : ndarray, shape (M, K)
         Each point's normal-to-depth cosine.
     mask : ndarray, shape (M, K)
-        1 for a real point, 0 for padding (padding rows and columns stay the identity).
+        1 for a real point, 0 for padding (the map scales padding by 1 / w only).
     unit_m : float
         The unit the residuals are in (e.g. the configured sensor σ), m.
-
-    Returns
-    -------
-    ndarray, shape (M, K, K)
-        Lower-triangular inverses of the Cholesky factors of the covariances.
     """
-    L = np.linalg.cholesky(_padded_covariance(noise, x_m, cosine, mask, unit_m))
-    # One batched call for all profiles (the inverse of a lower-triangular factor is lower
-    # triangular; the covariances are well conditioned by their white part).
-    return np.asarray(np.tril(np.linalg.inv(L)))
+    m = mask > 0.0
+    length = noise.length_m
+    lo = np.min(np.where(m, x_m, np.inf), axis=1)
+    hi = np.max(np.where(m, x_m, -np.inf), axis=1)
+    lo, hi = np.where(np.isfinite(lo), lo, 0.0), np.where(np.isfinite(hi), hi, 0.0)
+    half = 0.5 * np.maximum(hi - lo, 0.0) + DOMAIN_MARGIN * length  # L per profile
+    n_basis = max(1, math.ceil(SPECTRUM_CUT * 2.0 * float(np.max(half)) / (math.pi * length)))
+    j = np.arange(1, n_basis + 1)
+    omega = math.pi * j[None, :] / (2.0 * half[:, None])  # (M, J)
+    density = (
+        (noise.smooth_sigma_m / unit_m) ** 2
+        * math.sqrt(2.0 * math.pi)
+        * length
+        * np.exp(-0.5 * (omega * length) ** 2)
+    )
+    centre = 0.5 * (lo + hi)
+    phase = (x_m - centre[:, None] + half[:, None])[..., None] * omega[:, None, :]
+    basis = np.sin(phase) / np.sqrt(half)[:, None, None]  # (M, K, J)
+    B = np.where(m[..., None], cosine[..., None] * basis * np.sqrt(density)[:, None, :], 0.0)
+    Q, R = np.linalg.qr(B)  # batched thin QR: B = Q R
+    lam, V = np.linalg.eigh(R @ R.transpose(0, 2, 1))
+    white = noise.white_sigma_m / unit_m
+    shrink = 1.0 - 1.0 / np.sqrt(1.0 + np.maximum(lam, 0.0) / white**2)
+    return Whitening(white, np.asarray(Q @ V), np.asarray(shrink))
 
 
 class _Reml:

@@ -63,6 +63,7 @@ from numpy.typing import ArrayLike
 
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
+from ...profile.noise import Whitening
 from ...solver import N_HAND_EYE, Linearisation, Residuals
 from .config import RefineConfig
 from .model import Cylinder
@@ -139,7 +140,7 @@ class CylinderProblem:
     config: RefineConfig
     centroid: FloatArray | None = None
     estimate_scale: bool = False
-    whitening: FloatArray | None = None  # (M, K, K) per-sample W with W C Wᵀ = I, or None
+    whitening: Whitening | None = None  # per-sample W with W C Wᵀ = I, or None
 
     @property
     def n_samples(self) -> int:
@@ -199,7 +200,7 @@ class CylinderProblem:
         cfg = self.config
         e = (geo.distance - state.radius) * (self.mask / cfg.sensor_sigma_m)
         if self.whitening is not None:
-            e = np.einsum("mij,mj->mi", self.whitening, e)
+            e = self.whitening.apply(e)
         prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
         return Residuals(e, prior)
 
@@ -228,7 +229,8 @@ class CylinderProblem:
         J_global = np.concatenate(columns, axis=2)
         J_local = np.concatenate([J_omega, n_corrected], axis=2)
         if self.whitening is not None:
-            J_global, J_local = self.whitening @ J_global, self.whitening @ J_local
+            J_global = self.whitening.apply(J_global)
+            J_local = self.whitening.apply(J_local)
         return Linearisation(
             residuals=self._residuals(state, geo),
             J_global=J_global,
