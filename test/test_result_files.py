@@ -231,6 +231,12 @@ def test_truth_extras_cannot_replace_the_truth_or_hold_objects(tmp_path: Path) -
         ("set cylinder.along_line_scale -1", "key along_line_scale must be a ratio > 0"),
         ("set cylinder.along_line_scale wide", "key along_line_scale must be a finite number"),
         ("set quality.rms_residual_m fast", "key quality.rms_residual_m must be a number"),
+        (
+            "set quality.line_noise {white_sigma_m: 1.0e-6, smooth_sigma_m: 4.0e-6, length_m: -1}",
+            "key quality.line_noise: line noise: smooth σ >= 0 and length > 0 needed",
+        ),
+        ("set quality.line_noise {white_sigma_m: 1.0e-6}", "key quality.line_noise needs"),
+        ("set quality.line_noise [1, 2]", "key quality.line_noise must be a mapping"),
         ("delete quality", "key quality is missing"),
     ],
 )
