@@ -157,10 +157,10 @@ def residual_rows(result: CalibrationResult) -> Rows:
             f"samples used ({residual_kind(result)})",
         )
     ]
-    noise_text = getattr(result.target, "noise_text", None)
-    noise = None if noise_text is None else noise_text()
-    if noise is not None:
-        rows.append(("point noise", noise))
+    line_noise_text = getattr(result.target, "line_noise_text", None)
+    line_noise = None if line_noise_text is None else line_noise_text()
+    if line_noise is not None:
+        rows.append(("line noise", line_noise))
     if result.sample_residuals_m:
         indices = np.array(list(result.sample_residuals_m))
         values = np.array(list(result.sample_residuals_m.values())) * 1e6

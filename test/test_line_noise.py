@@ -179,7 +179,7 @@ def test_the_learned_line_noise_is_reported_and_read_back(tmp_path: Path) -> Non
     assert isinstance(section, CylinderSection) and section.line_noise is not None
     assert 6e-6 < section.line_noise.smooth_sigma_m < 24e-6
     assert 2.5e-3 < section.line_noise.length_m < 10e-3
-    assert "point noise           learned from the residuals" in format_summary(result)
+    assert "line noise            learned from the residuals" in format_summary(result)
     back = read_result_yaml(write_result_yaml(result, tmp_path / "r.yaml")).target
     assert isinstance(back, CylinderSection) and back.line_noise is not None
     assert back.line_noise.length_m == pytest.approx(section.line_noise.length_m, rel=1e-9)
@@ -187,4 +187,4 @@ def test_the_learned_line_noise_is_reported_and_read_back(tmp_path: Path) -> Non
     paper = read_bag(root / "paper")
     white = run_pipeline(paper.profiles, paper.poses, PipelineConfig(self_check_folds=0))
     assert isinstance(white.target, CylinderSection) and white.target.line_noise is None
-    assert "point noise" not in format_summary(white)
+    assert "line noise" not in format_summary(white)

@@ -97,7 +97,7 @@ class CylinderSection:
             }
         return entries
 
-    def noise_text(self) -> str | None:
+    def line_noise_text(self) -> str | None:
         """The learned point noise along the line in words (µm, mm), or None."""
         n = self.line_noise
         if n is None:
