@@ -11,6 +11,8 @@ zeroed (white point noise only). Per preset and method, over seeds:
 - ``rot/trans RMS``: hand-eye error against truth, RMS over seeds (deg, mm);
 - ``x twin``: that translation RMS over the twin's (same method);
 - ``max |e|/σ``: the largest per-axis error over its predicted 1σ (default method only);
+- ``RMS e/σ``, ``in 1σ %``: the RMS of the per-axis error over its 1σ (1 when the 1σ is
+  honest) and the share of per-axis errors within it (68 % for a Gaussian error);
 - ``x paper``: the default method's translation RMS over the paper method's;
 - ``CRB mm``: the Cramér–Rao bound of the translation (RMS over seeds of √trace) for the
   points and poses the default method used, under the sensor model's random terms (white,
@@ -81,6 +83,18 @@ class Tally:
         """Largest |error| / 1σ over axes and seeds."""
         ratios = [np.max(np.abs(e) / s) for e, s in zip(self.errors, self.sigmas, strict=True)]
         return float(np.max(ratios)) if ratios else math.nan
+
+    def z(self) -> FloatArray:
+        """error / 1σ per seed and axis (seeds with a 1σ), shape (S, 6)."""
+        return np.array([e / s for e, s in zip(self.errors, self.sigmas, strict=True)])
+
+    def rms_ratio(self) -> float:
+        """RMS of error / 1σ over axes and seeds: 1 for an honest 1σ."""
+        return float(np.sqrt(np.mean(self.z() ** 2))) if self.sigmas else math.nan
+
+    def within_sigma(self) -> float:
+        """Share of per-axis errors within their 1σ, %: 68 for an honest Gaussian 1σ."""
+        return float(100.0 * np.mean(np.abs(self.z()) < 1.0)) if self.sigmas else math.nan
 
 
 def _data(preset: str, seed: int, white: bool) -> tuple[Any, FloatArray, str]:
@@ -156,10 +170,11 @@ def main() -> None:
     args = parser.parse_args()
     print(
         f"{'preset':<22}{'method':<9}{'used %':>8}{'refused':>8}{'rot RMS deg':>12}"
-        f"{'trans RMS mm':>13}{'x twin':>8}{'max |e|/σ':>10}{'x paper':>8}"
+        f"{'trans RMS mm':>13}{'x twin':>8}{'max |e|/σ':>10}{'RMS e/σ':>8}{'in 1σ %':>8}"
+        f"{'x paper':>8}"
         f"{'CRB mm':>8}{'x CRB':>7}{'twin CRB':>9}"
     )
-    notes = []
+    notes, twin_notes = [], []
     for preset in args.presets.split(","):
         real = run(preset, args.seeds, white=False, independent=args.independent_points)
         twin = run(preset, args.seeds, white=True, independent=args.independent_points)
@@ -168,6 +183,11 @@ def main() -> None:
             ratio_twin = trans / twin[name].rms()[1]
             vs_paper = f"{trans / real['paper'].rms()[1]:.2f}" if name == "default" else "-"
             worst = f"{tally.worst_ratio():.2f}" if tally.sigmas else "-"
+            honesty = (
+                f"{tally.rms_ratio():>8.2f}{tally.within_sigma():>8.0f}"
+                if tally.sigmas
+                else f"{'-':>8}{'-':>8}"
+            )
             bound, twin_bound = tally.bound_mm(), twin[name].bound_mm()
             bounds = (
                 f"{bound:>8.4f}{trans / bound:>7.2f}{twin_bound:>9.4f}"
@@ -177,11 +197,19 @@ def main() -> None:
             print(
                 f"{preset:<22}{name:<9}{100.0 * tally.used / tally.recorded:>8.1f}"
                 f"{len(tally.refused):>8}{rot:>12.4f}{trans:>13.4f}{ratio_twin:>8.2f}"
-                f"{worst:>10}{vs_paper:>8}{bounds}"
+                f"{worst:>10}{honesty}{vs_paper:>8}{bounds}"
             )
+            if name == "default" and twin[name].sigmas:
+                twin_notes.append(
+                    f"{preset} twin, default: RMS e/σ {twin[name].rms_ratio():.2f}, "
+                    f"in 1σ {twin[name].within_sigma():.0f} %, max |e|/σ "
+                    f"{twin[name].worst_ratio():.2f}"
+                )
             notes.extend(f"{preset} {name}: {text}" for text in tally.refused)
             notes.extend(f"{preset} {name} twin: {text}" for text in twin[name].refused)
     print(f"{args.seeds} seeds per preset; twin: the same scenes with white point noise only")
+    for line in twin_notes:
+        print(line)
     for note in notes:
         print("refused:", note)
 

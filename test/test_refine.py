@@ -3,6 +3,7 @@ block form for the shared solver (core/solver) and its observability check."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -326,3 +327,41 @@ def test_input_validation() -> None:
         refine(scene.points, scene.T_base_flange, T0, cylinder0, radius_m=-0.02)
     with pytest.raises(InputError, match="loss"):
         RefineConfig(loss="cauchy")
+
+
+def test_profiles_that_err_alike_widen_the_sigma() -> None:
+    # Every profile's points share a depth error (a tilt of 20 µm across the line) that the
+    # model, weighing them as independent, does not know: the hand-eye scatters from
+    # profile to profile beyond what the model predicts, and the 1σ is widened by it.
+    scene, T0, cylinder0 = scene_and_start(
+        21, n_poses=30, n_points=150, robot_sigma_t=1e-5, robot_sigma_r=float(np.deg2rad(0.001))
+    )
+    rng = np.random.default_rng(22)
+    points = []
+    for p in scene.points:
+        q = np.array(p, dtype=np.float64)
+        span = np.ptp(q[:, 0])
+        q[:, 2] += rng.normal(0.0, 20e-6) * (q[:, 0] - q[:, 0].mean()) / span
+        points.append(q)
+    config = RefineConfig(robot_sigma_t_m=1e-5, robot_sigma_r_rad=float(np.deg2rad(0.001)))
+    plain = refine(
+        points, scene.T_base_flange, T0, cylinder0, replace(config, widen_by_dispersion=False)
+    )
+    widened = refine(points, scene.T_base_flange, T0, cylinder0, config)
+    assert plain.dispersion_ratio is None and widened.dispersion_ratio is not None
+    assert np.max(widened.dispersion_ratio) > 2.0
+    np.testing.assert_allclose(widened.T_flange_sensor, plain.T_flange_sensor, atol=1e-12)
+    scale = np.sqrt(np.maximum(widened.dispersion_ratio, 1.0))
+    np.testing.assert_allclose(
+        widened.sigma_translation_m, plain.sigma_translation_m * scale[3:], rtol=1e-9
+    )
+    np.testing.assert_allclose(
+        widened.sigma_rotation_rad, plain.sigma_rotation_rad * scale[:3], rtol=1e-9
+    )
+
+
+def test_profiles_with_white_noise_are_not_widened_much() -> None:
+    scene, T0, cylinder0 = scene_and_start(23, n_poses=40, n_points=150)
+    result = refine(scene.points, scene.T_base_flange, T0, cylinder0, radius_m=RADIUS)
+    assert result.dispersion_ratio is not None
+    assert np.all(result.dispersion_ratio < 2.0), result.dispersion_ratio

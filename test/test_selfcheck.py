@@ -374,12 +374,16 @@ def test_region_dependent_robot_error_is_detected_and_its_sigma_honest() -> None
 
 
 def test_independent_robot_noise_is_not_flagged() -> None:
-    """The paper preset (independent per-pose noise): no warning, the model's 1σ is kept."""
+    """The paper preset (independent per-pose noise): no warning, the model's 1σ is kept,
+    widened at most a little where the profiles happen to scatter it more (50 profiles: the
+    dispersion ratio scatters by about ±0.2 about 1)."""
     _, result = calibrated("paper", 2)
     check = result.self_check
     assert check is not None and not check.systematic
     assert not any("looks systematic" in w for w in result.warnings)
-    np.testing.assert_allclose(result.uncertainty_translation_m, check.sigma_model[3:], rtol=1e-12)
+    assert not any("than the noise model predicts" in w for w in result.warnings)
+    widened = np.asarray(result.uncertainty_translation_m) / check.sigma_model[3:]
+    assert np.all((widened > 1.0 - 1e-9) & (widened < 1.3)), widened
     assert check.accuracy_in_use_m is not None and 5e-5 < check.accuracy_in_use_m < 3e-4
     assert check.model is not None and check.model.chosen == PER_POSE
 

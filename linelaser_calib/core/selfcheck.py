@@ -301,11 +301,22 @@ def hand_eye_difference(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
     return np.concatenate([rotation, T_b[:3, 3] - T_a[:3, 3]])
 
 
-def _sigma(solution: TargetSolution) -> FloatArray | None:
-    """(6,) model 1σ [rotation, translation] of a solution, None if it has none."""
+def _reported_sigma(solution: TargetSolution) -> FloatArray | None:
+    """(6,) 1σ [rotation, translation] a solution reports, None if it has none."""
     if solution.sigma_rotation_rad is None or solution.sigma_translation_m is None:
         return None
     return np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
+
+
+def _sigma(solution: TargetSolution) -> FloatArray | None:
+    """(6,) noise-model 1σ [rotation, translation] of a solution (its reported 1σ without
+    the widening for profiles that scatter it more than the model says), None if it has
+    none. The statistics below compare with the model; the widening is a floor of the
+    final 1σ."""
+    sigma = _reported_sigma(solution)
+    if sigma is None or solution.sigma_widening is None:
+        return sigma
+    return np.asarray(sigma / solution.sigma_widening)
 
 
 def tilt(x: FloatArray, d: FloatArray) -> float:
@@ -621,6 +632,11 @@ def self_check(
     )
     if robot_prior is not None:
         prior = max(prior, robot_prior.translation_m)
+    # The chosen solve's own 1σ, widened where its profiles scatter it beyond the noise
+    # model, is a floor: the statistics above judge the robot's error against the model.
+    reported = _reported_sigma(chosen)
+    if reported is not None:
+        sigma = np.maximum(sigma, reported)
     split = _halves(even, odd)
     halves = None
     if split is not None:

@@ -23,11 +23,15 @@ from .lm import (
     Solution,
     SolverConfig,
     cost,
+    dispersion_warning,
     evaluate_loss,
     normal_equations,
+    sample_dispersion,
     solve,
     solve_damped,
     variance_factors,
+    widen_covariance,
+    widening,
 )
 from .rejection import Flag, RejectionOutcome, solve_with_rejection
 
@@ -44,10 +48,14 @@ __all__ = [
     "Solution",
     "SolverConfig",
     "cost",
+    "dispersion_warning",
     "evaluate_loss",
     "normal_equations",
+    "sample_dispersion",
     "solve",
     "solve_damped",
     "solve_with_rejection",
     "variance_factors",
+    "widen_covariance",
+    "widening",
 ]

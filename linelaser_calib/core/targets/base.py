@@ -285,6 +285,11 @@ class TargetSolution:
     robot_error : RobotError or None
         The robot's per-pose error the solve estimated from its pose corrections; None where
         the solve estimates none.
+    sigma_widening : ndarray, shape (6,), or None
+        Factors (>= 1, [rotation, translation]) by which the 1σ above was widened because the
+        profiles scatter the hand-eye more than the noise model predicts
+        (:func:`~linelaser_calib.core.solver.sample_dispersion`); None where not checked.
+        The 1σ divided by them is the noise model's.
     """
 
     T_flange_sensor: FloatArray
@@ -305,6 +310,7 @@ class TargetSolution:
     subset_start: object | None = None
     placement_sections: list[ResultSection] = field(default_factory=list)
     robot_error: RobotError | None = None
+    sigma_widening: FloatArray | None = None
 
 
 @dataclass(frozen=True)

@@ -93,6 +93,10 @@ class RefineConfig:
         residuals and weighs each profile's points with it (generalised least squares):
         a profiler's smooth shape error does not average out over a profile's points as
         white noise does. Default True.
+    widen_by_dispersion : bool
+        Widen the 1σ of a parameter where the profiles scatter the estimate more than the
+        noise model says (:func:`~linelaser_calib.core.solver.sample_dispersion`: a
+        delete-one-profile jackknife against its expectation under the model). Default True.
     """
 
     sensor_sigma_m: float = 5e-6
@@ -117,6 +121,7 @@ class RefineConfig:
     max_outlier_fraction: float = 0.2
     point_outlier_sigmas: float = 6.0
     learn_line_noise: bool = True
+    widen_by_dispersion: bool = True
 
     def __post_init__(self) -> None:
         positive = {

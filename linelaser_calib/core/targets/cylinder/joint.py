@@ -174,6 +174,7 @@ def refine_kinematics(
             cost_history=joint.cost_history,
             iterations=joint.iterations,
             converged=joint.converged,
+            linearisation=linearisation,
         )
         results.append(summarise(corrected, inner))
     _check_kinematic_fit(max(r.robot_sigma_scale for r in results), outcome, setup)
@@ -181,4 +182,5 @@ def refine_kinematics(
     for result in results:
         result.sigma_rotation_rad, result.sigma_translation_m = sigma[:3], sigma[3:]
         result.covariance_hand_eye = outcome.covariance[:N_HAND_EYE, :N_HAND_EYE]
+        result.dispersion_ratio = None  # the joint covariance is not widened
     return results, outcome

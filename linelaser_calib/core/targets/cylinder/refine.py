@@ -59,11 +59,14 @@ from ...solver import (
     Flag,
     RejectionOutcome,
     Solution,
+    dispersion_warning,
     evaluate_loss,
     normal_equations,
+    sample_dispersion,
     solve,
     solve_with_rejection,
     variance_factors,
+    widen_covariance,
 )
 from ..base import ROBOT_PRIOR_EXCESS
 from .config import RefineConfig
@@ -185,6 +188,11 @@ class RefineResult:
     line_noise : LineNoise or None
         The recording's point noise along the line that weighed the points (generalised
         least squares), when learned; None weighs them as independent.
+    dispersion_ratio : ndarray, shape (6,), or None
+        How much more the hand-eye moves from profile to profile than the noise model
+        says, per axis (observed over expected variance,
+        :func:`~linelaser_calib.core.solver.sample_dispersion`); the 1σ above is widened by
+        its square root where it exceeds 1. None when not checked (too few profiles).
     """
 
     T_flange_sensor: FloatArray
@@ -216,6 +224,7 @@ class RefineResult:
     warnings: list[str]
     solved: SolvedProblem | None = None
     line_noise: LineNoise | None = None
+    dispersion_ratio: FloatArray | None = None
 
     @property
     def sample_residuals_m(self) -> dict[int, float]:
@@ -446,6 +455,10 @@ def summarise(
     observability = _observability(problem, state, normal.schur_information())
     observability.raise_if_unobservable()
     covariance = np.linalg.inv(normal.schur_information(*factors))
+    dispersion = (
+        sample_dispersion(solution, cfg.solver, *factors) if cfg.widen_by_dispersion else None
+    )
+    covariance = widen_covariance(covariance, dispersion)
     sigma = np.sqrt(np.diag(covariance))
     r, s = problem.radius_index, problem.scale_index
 
@@ -454,6 +467,9 @@ def summarise(
     beyond = np.sum(np.abs(e) > cfg.loss_scale, axis=1)
     cylinder_point = state.point - float(state.point @ state.direction) * state.direction
     warnings = list(observability.warnings)
+    scatter = dispersion_warning(dispersion)
+    if scatter is not None:
+        warnings.append(scatter)
     correlation = (
         None if r is None or s is None else float(covariance[r, s] / (sigma[r] * sigma[s]))
     )
@@ -533,6 +549,7 @@ def summarise(
         warnings=warnings,
         solved=SolvedProblem(problem, state, noise),
         line_noise=noise,
+        dispersion_ratio=None if dispersion is None else dispersion[:N_HAND_EYE],
     )
 
 

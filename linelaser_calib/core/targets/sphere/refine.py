@@ -72,8 +72,10 @@ from linelaser_calib.core.solver import (
     Linearisation,
     SolverConfig,
     evaluate_loss,
+    sample_dispersion,
     solve,
     variance_factors,
+    widen_covariance,
 )
 from linelaser_calib.core.solver.lm import Residuals
 from linelaser_calib.core.types import BoolArray, FloatArray
@@ -224,6 +226,11 @@ class SphereRefineConfig:
         With ``estimate_variance_factors``, solve again this many times with the noise
         levels re-estimated (so that stated levels far from the real ones weight the points
         and the pose priors as the data say); the robot's are only ever lowered. Default 2.
+    widen_by_dispersion : bool
+        Widen the 1σ of a parameter where the profiles scatter the estimate more than the
+        noise model says (:func:`~linelaser_calib.core.solver.sample_dispersion`): the
+        points of a real profile err alike along the line, not independently as this
+        refinement weighs them. Default True.
     """
 
     sensor_sigma_m: float = 5e-6
@@ -235,6 +242,7 @@ class SphereRefineConfig:
     max_iterations: int = 50
     estimate_variance_factors: bool = True
     variance_rounds: int = 2
+    widen_by_dispersion: bool = True
 
     def __post_init__(self) -> None:
         for name in ("sensor_sigma_m", "robot_sigma_t_m", "robot_sigma_r_rad", "loss_scale"):
@@ -358,6 +366,13 @@ class SphereRefinement:
         The noise levels the covariance was formed with (re-estimated when configured).
     cost_history : list of float
     converged : bool
+    dispersion_ratio : ndarray, shape (G,), or None
+        Observed over expected profile-to-profile scatter of each global number
+        (:func:`~linelaser_calib.core.solver.sample_dispersion`); the covariance is widened
+        by it where it exceeds 1. None when not checked.
+    model_covariance : ndarray, shape (G, G), or None
+        The covariance before that widening: what the noise model and the poses give (the
+        question whether the poses suffice); None when it equals ``covariance``.
     """
 
     state: SphereState
@@ -369,6 +384,8 @@ class SphereRefinement:
     robot_sigma_r_rad: float
     cost_history: list[float]
     converged: bool
+    dispersion_ratio: FloatArray | None = None
+    model_covariance: FloatArray | None = None
 
     @property
     def rms_m(self) -> float:
@@ -438,10 +455,18 @@ def refine_sphere(
             problem.n_global,
         )
     information = solution.normal.schur_information(sensor, robot)
+    dispersion = (
+        sample_dispersion(solution, solver_config, sensor, robot)
+        if config.widen_by_dispersion
+        else None
+    )
     residuals = solution.residuals.points[problem.sample, problem.slot] * config.sensor_sigma_m
+    covariance = np.linalg.pinv(information)
     return SphereRefinement(
         state=state,
-        covariance=np.linalg.pinv(information),
+        covariance=widen_covariance(covariance, dispersion),
+        dispersion_ratio=dispersion,
+        model_covariance=None if dispersion is None else covariance,
         residuals_m=np.asarray(residuals),
         sample=problem.sample,
         sensor_sigma_m=config.sensor_sigma_m * math.sqrt(sensor),

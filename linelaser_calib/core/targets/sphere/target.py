@@ -40,7 +40,7 @@ from linelaser_calib.core.errors import (
 from linelaser_calib.core.geometry import FloatArray
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
-from linelaser_calib.core.solver import Flag, solve_with_rejection
+from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
 from linelaser_calib.core.targets.base import (
     Option,
     Progress,
@@ -422,10 +422,17 @@ class SphereTarget:
         sigma = np.sqrt(np.maximum(np.diag(outcome.covariance), 0.0))
         noise = float(np.median([f.circle.rms_m for f in kept]))
         if self._misfit(outcome.rms_m, noise, outcome.robot_sigma_t_m, config) is None:
-            # A model that does not fit is refused by check_fit, not called degenerate.
-            warnings += self._diagnose(outcome.covariance[:6, :6], lever, config)
+            # A model that does not fit is refused by check_fit, not called degenerate. Whether
+            # the poses suffice is a question of the noise model, not of the widened 1σ.
+            model = (
+                outcome.covariance if outcome.model_covariance is None else outcome.model_covariance
+            )
+            warnings += self._diagnose(model[:6, :6], lever, config)
         for index, reason in run.left_flagged:
             warnings.append(f"profile {features[index].index} looks like an outlier: {reason}")
+        scatter = dispersion_warning(outcome.dispersion_ratio)
+        if scatter is not None:
+            warnings.append(scatter)
         rms = outcome.sample_rms_m()
         section = SphereSection(
             state.centre_m,
@@ -457,6 +464,9 @@ class SphereTarget:
             history={"refine_cost": list(outcome.cost_history)},
             sample_fits=[f.record() for f in kept],
             noise_m=noise,
+            sigma_widening=None
+            if outcome.dispersion_ratio is None
+            else widening(outcome.dispersion_ratio[:6]),
             robot_error=RobotError(
                 outcome.robot_sigma_t_m,
                 outcome.robot_sigma_r_rad,
