@@ -144,6 +144,8 @@ def residual_kind(result: CalibrationResult) -> str:
 RESIDUAL_PERCENTILES = (25, 50, 75, 95)
 #: Samples with the largest residual named in a summary (every one is in the result file).
 WORST_SHOWN = 5
+#: Widening of the 1σ for the profiles' scatter below which the summary does not mention it.
+WIDENING_SHOWN = 1.05
 
 
 def residual_rows(result: CalibrationResult) -> Rows:
@@ -299,6 +301,17 @@ def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows
             + ")",
         ),
     ]
+    widening = check.sigma_widening
+    if widening is not None and float(np.max(widening)) > WIDENING_SHOWN:
+        rows.append(
+            (
+                "profile scatter",
+                f"leaving one profile out moves the hand-eye up to {float(np.max(widening)):.2f}x "
+                "as far as the noise model predicts; the 1 sigma of those axes is widened by "
+                f"that (rotation x{'/'.join(f'{v:.2f}' for v in widening[:3])}, translation "
+                f"x{'/'.join(f'{v:.2f}' for v in widening[3:])})",
+            )
+        )
     if check.systematic:
         arm_setting = spelling("arm_accuracy_m", front)
         rows.append(

@@ -547,3 +547,23 @@ def test_the_arm_accuracy_prior_is_stated_in_the_result_and_refused_with_kinemat
     assert main([*argv, "--output", str(refused)]) == 1
     assert "--arm-accuracy does not act with --kinematics" in capsys.readouterr().err
     assert not refused.exists()
+
+
+def test_a_real_profilers_scatter_widens_the_1_sigma_and_says_so() -> None:
+    # cylinder_scancontrol seed 0: lateral noise and speckle the learned line noise does not
+    # describe make the profiles scatter the hand-eye about twice as much as predicted
+    # along the line (rotation about x, translation along x).
+    _, result = calibrated("cylinder_scancontrol", 0)
+    check = result.self_check
+    assert check is not None and check.sigma_widening is not None
+    assert np.all(check.sigma_widening >= 1.0) and float(np.max(check.sigma_widening)) > 1.2
+    reported = np.concatenate([result.uncertainty_rotation_rad, result.uncertainty_translation_m])
+    solution = check.solution
+    own = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
+    assert np.all(reported >= own * (1.0 - 1e-12))  # the widened 1σ is a floor
+    entry = result_to_dict(result)["quality"]["self_check"]["profile_scatter_widening"]
+    np.testing.assert_allclose(entry["rotation_rad"], check.sigma_widening[:3], rtol=1e-12)
+    np.testing.assert_allclose(entry["translation_m"], check.sigma_widening[3:], rtol=1e-12)
+    text = format_summary(result)
+    row = next(line for line in text.splitlines() if line.strip().startswith("profile scatter"))
+    assert "leaving one profile out moves the hand-eye up to" in row

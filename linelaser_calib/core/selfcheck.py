@@ -185,6 +185,10 @@ class SelfCheck:
         solve estimates none).
     sigma_honest : ndarray, shape (6,)
         The 1σ to report (the model's, or widened).
+    sigma_widening : ndarray, shape (6,), or None
+        Factors (>= 1) by which the chosen solve widened its own 1σ because its profiles
+        scatter the hand-eye more than its noise model predicts
+        (:attr:`TargetSolution.sigma_widening`); a floor of ``sigma_honest``.
     solution : TargetSolution
         The chosen model's solve of all features (the result to report).
     region_indices : list of list of int
@@ -220,6 +224,7 @@ class SelfCheck:
     robot_excess: float | None
     sigma_honest: FloatArray
     solution: TargetSolution = field(repr=False)
+    sigma_widening: FloatArray | None = None
     region_indices: list[list[int]] = field(default_factory=list)
     region_solutions: list[TargetSolution | None] = field(default_factory=list, repr=False)
     warnings: list[str] = field(default_factory=list)
@@ -282,6 +287,9 @@ class SelfCheck:
                 "robot_error_over_prior": None
                 if self.robot_excess is None
                 else float(self.robot_excess),
+                "profile_scatter_widening": None
+                if self.sigma_widening is None
+                else _axes(self.sigma_widening),
             },
         }
 
@@ -675,6 +683,7 @@ def self_check(
         robot_excess=None if robot is None else robot.excess,
         sigma_honest=sigma,
         solution=chosen,
+        sigma_widening=chosen.sigma_widening,
         region_indices=[[f.index for f in held] for held in held_sets],
         region_solutions=[None if isinstance(r, CalibrationError) else r for r in region_solved],
     )
