@@ -348,10 +348,10 @@ def test_profiles_that_err_alike_widen_the_sigma() -> None:
         points, scene.T_base_flange, T0, cylinder0, replace(config, widen_by_dispersion=False)
     )
     widened = refine(points, scene.T_base_flange, T0, cylinder0, config)
-    assert plain.dispersion_ratio is None and widened.dispersion_ratio is not None
-    assert np.max(widened.dispersion_ratio) > 2.0
+    assert plain.sample_dispersion is None and widened.sample_dispersion is not None
+    assert np.max(widened.sample_dispersion) > 2.0
     np.testing.assert_allclose(widened.T_flange_sensor, plain.T_flange_sensor, atol=1e-12)
-    scale = np.sqrt(np.maximum(widened.dispersion_ratio, 1.0))
+    scale = np.sqrt(np.maximum(widened.sample_dispersion, 1.0))
     np.testing.assert_allclose(
         widened.sigma_translation_m, plain.sigma_translation_m * scale[3:], rtol=1e-9
     )
@@ -363,5 +363,5 @@ def test_profiles_that_err_alike_widen_the_sigma() -> None:
 def test_profiles_with_white_noise_are_not_widened_much() -> None:
     scene, T0, cylinder0 = scene_and_start(23, n_poses=40, n_points=150)
     result = refine(scene.points, scene.T_base_flange, T0, cylinder0, radius_m=RADIUS)
-    assert result.dispersion_ratio is not None
-    assert np.all(result.dispersion_ratio < 2.0), result.dispersion_ratio
+    assert result.sample_dispersion is not None
+    assert np.all(result.sample_dispersion < 2.0), result.sample_dispersion

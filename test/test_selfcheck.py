@@ -561,7 +561,7 @@ def test_a_real_profilers_scatter_widens_the_1_sigma_and_says_so() -> None:
     solution = check.solution
     own = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
     assert np.all(reported >= own * (1.0 - 1e-12))  # the widened 1σ is a floor
-    entry = result_to_dict(result)["quality"]["self_check"]["profile_scatter_widening"]
+    entry = result_to_dict(result)["quality"]["self_check"]["sigma_widening"]
     np.testing.assert_allclose(entry["rotation_rad"], check.sigma_widening[:3], rtol=1e-12)
     np.testing.assert_allclose(entry["translation_m"], check.sigma_widening[3:], rtol=1e-12)
     text = format_summary(result)

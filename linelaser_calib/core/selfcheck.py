@@ -287,7 +287,7 @@ class SelfCheck:
                 "robot_error_over_prior": None
                 if self.robot_excess is None
                 else float(self.robot_excess),
-                "profile_scatter_widening": None
+                "sigma_widening": None
                 if self.sigma_widening is None
                 else _axes(self.sigma_widening),
             },

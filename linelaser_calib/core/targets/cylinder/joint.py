@@ -182,5 +182,5 @@ def refine_kinematics(
     for result in results:
         result.sigma_rotation_rad, result.sigma_translation_m = sigma[:3], sigma[3:]
         result.covariance_hand_eye = outcome.covariance[:N_HAND_EYE, :N_HAND_EYE]
-        result.dispersion_ratio = None  # the joint covariance is not widened
+        result.sample_dispersion = None  # the joint covariance is not widened
     return results, outcome

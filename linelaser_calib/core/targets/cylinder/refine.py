@@ -188,7 +188,7 @@ class RefineResult:
     line_noise : LineNoise or None
         The recording's point noise along the line that weighed the points (generalised
         least squares), when learned; None weighs them as independent.
-    dispersion_ratio : ndarray, shape (6,), or None
+    sample_dispersion : ndarray, shape (6,), or None
         How much more the hand-eye moves from profile to profile than the noise model
         says, per axis (observed over expected variance,
         :func:`~linelaser_calib.core.solver.sample_dispersion`); the 1σ above is widened by
@@ -224,7 +224,7 @@ class RefineResult:
     warnings: list[str]
     solved: SolvedProblem | None = None
     line_noise: LineNoise | None = None
-    dispersion_ratio: FloatArray | None = None
+    sample_dispersion: FloatArray | None = None
 
     @property
     def sample_residuals_m(self) -> dict[int, float]:
@@ -549,7 +549,7 @@ def summarise(
         warnings=warnings,
         solved=SolvedProblem(problem, state, noise),
         line_noise=noise,
-        dispersion_ratio=None if dispersion is None else dispersion[:N_HAND_EYE],
+        sample_dispersion=None if dispersion is None else dispersion[:N_HAND_EYE],
     )
 
 

@@ -428,7 +428,7 @@ class CylinderTarget:
             kinematics=None if outcome is None else outcome.corrections,
             identifiability=None if outcome is None else outcome.identifiability,
             placement_sections=[CylinderSection(p.cylinder, p.radius_estimated) for p in placed],
-            sigma_widening=widening(refined.dispersion_ratio),
+            sigma_widening=widening(refined.sample_dispersion),
             robot_error=RobotError(
                 config.refine.robot_sigma_t_m * refined.robot_sigma_scale,
                 config.refine.robot_sigma_r_rad * refined.robot_sigma_scale,

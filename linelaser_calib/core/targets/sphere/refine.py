@@ -366,7 +366,7 @@ class SphereRefinement:
         The noise levels the covariance was formed with (re-estimated when configured).
     cost_history : list of float
     converged : bool
-    dispersion_ratio : ndarray, shape (G,), or None
+    sample_dispersion : ndarray, shape (G,), or None
         Observed over expected profile-to-profile scatter of each global number
         (:func:`~linelaser_calib.core.solver.sample_dispersion`); the covariance is widened
         by it where it exceeds 1. None when not checked.
@@ -384,7 +384,7 @@ class SphereRefinement:
     robot_sigma_r_rad: float
     cost_history: list[float]
     converged: bool
-    dispersion_ratio: FloatArray | None = None
+    sample_dispersion: FloatArray | None = None
     model_covariance: FloatArray | None = None
 
     @property
@@ -465,7 +465,7 @@ def refine_sphere(
     return SphereRefinement(
         state=state,
         covariance=widen_covariance(covariance, dispersion),
-        dispersion_ratio=dispersion,
+        sample_dispersion=dispersion,
         model_covariance=None if dispersion is None else covariance,
         residuals_m=np.asarray(residuals),
         sample=problem.sample,

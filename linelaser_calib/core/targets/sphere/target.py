@@ -430,7 +430,7 @@ class SphereTarget:
             warnings += self._diagnose(model[:6, :6], lever, config)
         for index, reason in run.left_flagged:
             warnings.append(f"profile {features[index].index} looks like an outlier: {reason}")
-        scatter = dispersion_warning(outcome.dispersion_ratio)
+        scatter = dispersion_warning(outcome.sample_dispersion)
         if scatter is not None:
             warnings.append(scatter)
         rms = outcome.sample_rms_m()
@@ -465,8 +465,8 @@ class SphereTarget:
             sample_fits=[f.record() for f in kept],
             noise_m=noise,
             sigma_widening=None
-            if outcome.dispersion_ratio is None
-            else widening(outcome.dispersion_ratio[:6]),
+            if outcome.sample_dispersion is None
+            else widening(outcome.sample_dispersion[:6]),
             robot_error=RobotError(
                 outcome.robot_sigma_t_m,
                 outcome.robot_sigma_r_rad,
