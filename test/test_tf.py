@@ -195,3 +195,19 @@ def test_live_tf_messages_give_the_flange_poses_once_tf_static_arrived() -> None
         received += poses
     for got, sent in zip(received, stream[1:], strict=True):
         np.testing.assert_allclose(got.T_base_flange, sent.T_base_flange, atol=1e-12)
+
+
+def test_why_no_pose_names_the_missing_link_or_the_stale_ones() -> None:
+    stream = [FlangePose(k * 2 * MS, np.eye(4)) for k in range(50)]  # 500 Hz for 0.1 s
+    dynamic, static = ur_tf_tree(stream, "base_link", "tool0")
+    tree = TransformTree(max_age_s=1.0)
+    tree.extend(dynamic, static=False)
+    tree.extend([t for t in static if t.child != "tool0"], static=True)
+    why = tree.why_no_pose("base_link", "tool0", 50 * MS, 0.02)
+    assert why is not None and "tool0 does not appear in any transform" in why
+    tree.extend(static, static=True)
+    assert tree.why_no_pose("base_link", "tool0", 50 * MS, 0.02) is None
+    why = tree.why_no_pose("base_link", "tool0", 1598 * MS, 0.02)  # the stream stopped at 98 ms
+    assert why is not None
+    for link in ("shoulder_link", "forearm_link", "wrist_3_link"):
+        assert f"-> {link} is stale: its newest transform on /tf is 1.500 s older" in why

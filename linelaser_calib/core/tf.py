@@ -237,6 +237,37 @@ class TransformTree:
             products.append(T)
         return invert_transform(products[0]) @ products[1]
 
+    def why_no_pose(
+        self, base_frame: str, flange_frame: str, stamp_ns: int, tolerance_s: float
+    ) -> str | None:
+        """Why the tree gives no flange pose at ``stamp_ns``, naming the frames; None when
+        it gives one.
+
+        The chain may be broken (a link never received, e.g. on /tf_static: the
+        :meth:`chain` message), or a dynamic link may have nothing within ``tolerance_s``
+        of the stamp: stale when its newest transform is older than that (the /tf stream
+        stopped), else a gap around the stamp.
+        """
+        try:
+            up, down = self.chain(base_frame, flange_frame)
+        except TfChainError as err:
+            return str(err)
+        tolerance_ns = round(tolerance_s * NS_PER_S)
+        problems = []
+        for edge in up + down:
+            if edge.static:
+                continue
+            buffer = self._dynamic[edge.child][1]
+            latest = buffer.latest_stamp_ns
+            if latest is not None and latest < stamp_ns - tolerance_ns:
+                problems.append(
+                    f"{edge.parent} -> {edge.child} is stale: its newest transform on /tf is "
+                    f"{(stamp_ns - latest) / NS_PER_S:.3f} s older than the stamp"
+                )
+            elif isinstance(reason := buffer.pose_at(stamp_ns, tolerance_ns), str):
+                problems.append(f"{edge.parent} -> {edge.child}: {reason}")
+        return "; ".join(problems) or None
+
     def flange_poses(
         self, base_frame: str, flange_frame: str, tolerance_s: float
     ) -> list[FlangePose]:

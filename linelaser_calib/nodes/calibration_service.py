@@ -21,8 +21,11 @@
   (TransformStamped ``flange_frame`` -> ``sensor_frame``, transient_local) and
   ``linelaser_calib/markers`` (in ``base_frame``: the profiles mapped through the result and
   the target's shapes, e.g. the fitted cylinder or the known point), puts the collector's
-  clock offset and live estimate (``linelaser_calib/clock_offset``) in the result, broadcasts
-  ``/tf_static`` where ``tf2_ros`` is importable, and writes the result YAML to
+  clock offset and live estimate (``linelaser_calib/clock_offset``) in the result, publishes
+  the hand-eye on ``/tf_static`` as tf2_ros's static broadcaster does (its own ``TFMessage``
+  publisher, :mod:`~linelaser_calib.nodes.tf_output`; no tf2_ros needed), warning when
+  another ``/tf_static`` publisher already gives the sensor frame a parent, and writes the
+  result YAML to
   ``output_path`` atomically. A failed calibration leaves the last good file.
 - With ``kinematics`` set (a robot model: ur5e, ur10e, a URDF), ``calibrate`` runs the joint
   kinematic + hand-eye calibration instead (:func:`calibrate_session`): the offline path on
@@ -51,7 +54,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseArray, PoseStamped, TransformStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
@@ -93,6 +95,7 @@ from linelaser_calib.nodes.common import (
 )
 from linelaser_calib.nodes.joint_state_input import live_kinematic_model
 from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
+from linelaser_calib.nodes.tf_output import static_tf_publisher
 from linelaser_calib.offline import Recording, bag_samples, calibrate_bag
 from linelaser_calib.settings import Front, given_from_parameters, render, render_warnings
 from linelaser_calib.settings import pipeline_config as settings_pipeline_config
@@ -108,11 +111,6 @@ from msg_adapters import (
     shape_markers,
     transform_stamped_from_matrix,
 )
-
-try:  # a full ROS install has tf2_ros; the PyPI wheels do not
-    from tf2_ros import Buffer, StaticTransformBroadcaster, TransformListener
-except ImportError:
-    Buffer = StaticTransformBroadcaster = TransformListener = None
 
 NODE_NAME = "calibration_service"
 #: Diagnostic value: complete samples held.
@@ -383,23 +381,21 @@ def kinematics_summary(result: CalibrationResult) -> str:
     )
 
 
-def second_parent_warning(frames_yaml: str, child: str, parent: str) -> str | None:
-    """A warning when ``child`` already has a parent other than ``parent`` in /tf.
+def second_parent_warning(parents: dict[str, str], child: str, parent: str) -> str | None:
+    """A warning when ``child`` already has a parent other than ``parent`` in /tf_static.
 
     Parameters
     ----------
-    frames_yaml : str
-        ``tf2_ros.Buffer.all_frames_as_yaml()``: ``frame: {parent: ..., ...}`` per frame.
+    parents : dict
+        Parent of each frame as the other /tf_static publishers give it.
     child, parent : str
         The hand-eye about to be broadcast: sensor frame and flange frame.
     """
-    frames = yaml.safe_load(frames_yaml) or {}
-    entry = frames.get(child) if isinstance(frames, dict) else None
-    known = entry.get("parent") if isinstance(entry, dict) else None
-    if known is None or str(known) == parent:
+    known = parents.get(child)
+    if known is None or known == parent:
         return None
     return (
-        f"the sensor frame {child} already has parent {known} in /tf (e.g. a joint of the "
+        f"the sensor frame {child} already has parent {known} on /tf_static (e.g. a joint of the "
         f"URDF); broadcasting {parent} -> {child} gives it two parents, which breaks the TF "
         f"tree. Remove the other transform (replace the URDF joint with `linelaser-calib "
         f"export RESULT.yaml --format urdf`), or give the sensor another frame name "
@@ -471,13 +467,12 @@ class CalibrationServiceNode(Node):
         )
         self._hand_eye_pub = self.create_publisher(TransformStamped, HAND_EYE_TOPIC, latched_qos(1))
         self._markers_pub = self.create_publisher(MarkerArray, MARKERS_TOPIC, latched_qos(1))
-        self._tf_static = (
-            None if StaticTransformBroadcaster is None else StaticTransformBroadcaster(self)
-        )
-        self._tf_buffer = None if Buffer is None else Buffer()
-        self._tf_listener = (
-            None if self._tf_buffer is None else TransformListener(self._tf_buffer, self)
-        )
+        self._tf_static = static_tf_publisher(self)
+        if self._tf_static is None:
+            self.get_logger().warning(
+                "tf2_msgs is missing (no ROS install sourced, and not built by make venv): the "
+                "hand-eye is published on linelaser_calib/hand_eye but not on /tf_static"
+            )
         #: The collector's latest word on a session without samples (its /diagnostics).
         self._collector_status = ""
         self.create_subscription(
@@ -754,13 +749,12 @@ class CalibrationServiceNode(Node):
         )
         self._hand_eye_pub.publish(transform)
         if self._tf_static is not None:
-            if self._tf_buffer is not None:
-                warning = second_parent_warning(
-                    self._tf_buffer.all_frames_as_yaml(), result.child_frame, result.parent_frame
-                )
-                if warning is not None:
-                    self.get_logger().warning(warning)
-            self._tf_static.sendTransform(transform)
+            warning = second_parent_warning(
+                self._tf_static.parents, result.child_frame, result.parent_frame
+            )
+            if warning is not None:
+                self.get_logger().warning(warning)
+            self._tf_static.send(transform)
         # Clear what an earlier calibration drew (e.g. another target's shapes).
         markers = [Marker(action=Marker.DELETEALL)]
         points = points_in_base(result, MAX_MARKER_POINTS)

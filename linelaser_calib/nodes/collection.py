@@ -388,6 +388,9 @@ class LiveCollector:
         )
         self.rejected = ReasonCounter(on_new_reason)
         self.skipped = ReasonCounter(on_new_reason)
+        #: The pose source's word on why it gave no flange pose at a stamp (pose clock, ns),
+        #: added to a profile's reason when no pose was near it (e.g. which /tf link is stale).
+        self.explain_no_pose: Callable[[int], str | None] | None = None
         self.pose_rejected = ReasonCounter(on_new_reason)
         self.check_failed = ReasonCounter(on_new_reason)
         self.profile_gaps = SequenceGaps()
@@ -486,7 +489,7 @@ class LiveCollector:
             waiting.popleft()
             outcome = self.poses.pair(head.profile, head.index, self._pair_config)
             if isinstance(outcome, Rejection):
-                self._reject(outcome.stage, outcome.reason)
+                self._reject(outcome.stage, self._explained(outcome))
                 continue
             self.paired += 1
             standstill = None
@@ -504,6 +507,17 @@ class LiveCollector:
                     outcome, head.profile.frame_id, self._base_frame, head.generation, standstill
                 )
             )
+
+    def _explained(self, rejection: Rejection) -> str:
+        """The pairing's reason, with the pose source's explanation when no pose was near."""
+        if self.explain_no_pose is None:
+            return rejection.reason
+        pairing = self.config.pairing
+        t = rejection.stamp_ns + round(pairing.clock_offset_s * NS_PER_S)
+        if not isinstance(self.poses.pose_at(t, round(pairing.sync_tolerance_s * NS_PER_S)), str):
+            return rejection.reason  # a pose was near: rejected for another reason
+        why = self.explain_no_pose(t)
+        return rejection.reason if why is None else f"{rejection.reason}: {why}"
 
     def _offer(self, pending: PendingSample) -> None:
         mode = self.config.mode

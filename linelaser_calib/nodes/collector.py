@@ -197,10 +197,10 @@ class CollectorNode(Node):
                 str(p["flange_frame"]),
                 pairing.sync_tolerance_s,
                 config.pose_window_s,
-                pose_qos,
                 self._add_pose,
                 self._reject_pose,
             )
+            self._collector.explain_no_pose = self._pose_input.why_no_pose
         elif robot is not None:
             self._pose_input = JointStatePoseInput(
                 self,

@@ -49,15 +49,18 @@ PARAMETERS = (
     ParamSpec(
         "reliable_inputs",
         False,
-        "Subscribe profile and flange_pose with reliable QoS (nothing lost, needs reliable "
-        "publishers) instead of best effort (sensor-data QoS, matches any publisher).",
+        "Subscribe profile and flange_pose (or joint_states) with reliable QoS (nothing lost, "
+        "needs reliable publishers) instead of best effort (sensor-data QoS, matches any "
+        "publisher). /tf is always best effort (it hears every publisher), /tf_static reliable "
+        "and transient local.",
         read_only=True,
     ),
     ParamSpec(
         "pose_source",
         PoseSource.POSE.value,
         "Where flange poses come from: pose (geometry_msgs/PoseStamped on flange_pose), tf "
-        "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs) or "
+        "(the chain base_frame -> flange_frame from /tf and /tf_static; needs tf2_msgs, which "
+        "make venv builds where no ROS install provides it) or "
         "joint_states (sensor_msgs/JointState on joint_states through the kinematics model).",
         choices=tuple(s.value for s in PoseSource),
         read_only=True,

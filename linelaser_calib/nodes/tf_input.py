@@ -5,8 +5,15 @@
 The transforms go into the same :class:`~linelaser_calib.core.tf.TransformTree` as offline;
 each ``/tf`` message that moves a dynamic link of the chain base frame -> flange frame
 gives one flange pose at its stamp, which then goes through the collector's ordinary
-pairing. ``tf2_msgs`` comes with every ROS 2 install that has ``tf2_ros`` but not with the
-PyPI wheels: without it, :class:`TfPoseInput` refuses to start with a clear message.
+pairing. ``/tf`` is subscribed best effort (a deep keep-last history), which hears reliable
+publishers (robot_state_publisher, tf2_ros) and best-effort ones alike; ``/tf_static``
+reliable and transient local, so static transforms sent before the collector started arrive
+too. When a profile finds no flange pose, :meth:`TfPoseInput.why_no_pose` names the link
+that is missing or stale.
+
+``tf2_msgs`` comes with every ROS 2 install; ``make venv`` builds it where the PyPI wheels
+are all there is (resource/tf2_msgs). Without it, :class:`TfPoseInput` refuses to start
+with a clear message.
 """
 
 from __future__ import annotations
@@ -15,12 +22,11 @@ from collections.abc import Callable
 from typing import Any
 
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.tf import StampedTransform, TransformTree, live_flange_poses
 from linelaser_calib.core.types import FlangePose
-from linelaser_calib.nodes.common import latched_qos
+from linelaser_calib.nodes.common import POSE_INPUT_DEPTH, input_qos, latched_qos
 from msg_adapters import stamped_transforms_from_msgs
 
 try:  # a full ROS install has tf2_msgs; the PyPI wheels do not
@@ -46,8 +52,6 @@ class TfPoseInput:
         Largest gap to another dynamic transform interpolated at a stamp, s.
     max_age_s : float
         Dynamic transforms kept behind the newest of their link, s.
-    qos : QoSProfile
-        QoS of the ``/tf`` subscription.
     on_pose : callable(FlangePose)
     on_problem : callable(str)
         Called with the reason when a message gives no pose (e.g. the chain is incomplete).
@@ -65,20 +69,22 @@ class TfPoseInput:
         flange_frame: str,
         tolerance_s: float,
         max_age_s: float,
-        qos: QoSProfile,
         on_pose: Callable[[FlangePose], None],
         on_problem: Callable[[str], None],
     ) -> None:
         if _MISSING is not None:
             raise InputError(
                 f"pose_source 'tf' needs the tf2_msgs message package ({_MISSING}), part of "
-                "every ROS 2 install with tf2_ros; source that install, or publish the flange "
+                "every ROS 2 install and built into .venv by `make venv` (cmake and a C/C++ "
+                "compiler needed); source the install or run make venv, or publish the flange "
                 "pose as geometry_msgs/PoseStamped and use pose_source 'pose'"
             )
         self.tree = TransformTree(max_age_s)
         self._base, self._flange, self._tolerance_s = base_frame, flange_frame, tolerance_s
         self._on_pose, self._on_problem = on_pose, on_problem
-        node.create_subscription(TFMessage, "/tf", self._on_tf, qos)
+        node.create_subscription(
+            TFMessage, "/tf", self._on_tf, input_qos(reliable=False, depth=POSE_INPUT_DEPTH)
+        )
         node.create_subscription(
             TFMessage, "/tf_static", self._on_tf_static, latched_qos(TF_STATIC_DEPTH)
         )
@@ -103,3 +109,7 @@ class TfPoseInput:
             self._on_problem(problem)
         for pose in poses:
             self._on_pose(pose)
+
+    def why_no_pose(self, stamp_ns: int) -> str | None:
+        """Why the TF tree gives no flange pose at ``stamp_ns`` (the frames), or None."""
+        return self.tree.why_no_pose(self._base, self._flange, stamp_ns, self._tolerance_s)
