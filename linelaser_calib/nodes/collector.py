@@ -197,6 +197,7 @@ class CollectorNode(Node):
                 str(p["flange_frame"]),
                 pairing.sync_tolerance_s,
                 config.pose_window_s,
+                pose_qos,
                 self._add_pose,
                 self._reject_pose,
             )

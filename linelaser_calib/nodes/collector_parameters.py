@@ -49,10 +49,9 @@ PARAMETERS = (
     ParamSpec(
         "reliable_inputs",
         False,
-        "Subscribe profile and flange_pose (or joint_states) with reliable QoS (nothing lost, "
-        "needs reliable publishers) instead of best effort (sensor-data QoS, matches any "
-        "publisher). /tf is always best effort (it hears every publisher), /tf_static reliable "
-        "and transient local.",
+        "Subscribe profile and flange_pose (or joint_states, or /tf) with reliable QoS (nothing "
+        "lost, needs reliable publishers) instead of best effort (sensor-data QoS, matches any "
+        "publisher). /tf_static is always reliable and transient local.",
         read_only=True,
     ),
     ParamSpec(
