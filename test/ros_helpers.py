@@ -191,6 +191,15 @@ def params(**values: Any) -> list[str]:
     return out
 
 
+def settled(values: dict[str, str]) -> int:
+    """Accepted samples, after checking that every received profile is accounted for."""
+    received, accepted = int(values["profiles received"]), int(values["samples accepted"])
+    rejected, skipped = int(values["profiles rejected"]), int(values["profiles skipped"])
+    assert int(values["profiles pending"]) == 0
+    assert received == accepted + rejected + skipped, values
+    return accepted
+
+
 # -- colcon --------------------------------------------------------------------------------
 
 _colcon_lock = threading.Lock()

@@ -27,6 +27,7 @@ from ros_helpers import (
     new_domain_id,
     params,
     processes,
+    settled,
     wait_for,
 )
 from sensor_msgs.msg import JointState
@@ -207,15 +208,6 @@ def check_markers(markers: MarkerArray, cylinder: Cylinder) -> None:
     radial = offset - np.outer(offset @ cylinder.direction, cylinder.direction)
     distance = np.linalg.norm(radial, axis=1)
     assert np.median(np.abs(distance - cylinder.radius)) < 0.1e-3
-
-
-def settled(values: dict[str, str]) -> int:
-    """Accepted samples, after checking that every received profile is accounted for."""
-    received, accepted = int(values["profiles received"]), int(values["samples accepted"])
-    rejected, skipped = int(values["profiles rejected"]), int(values["profiles skipped"])
-    assert int(values["profiles pending"]) == 0
-    assert received == accepted + rejected + skipped, values
-    return accepted
 
 
 def test_colcon_nodes_calibrate_a_live_scan_replayed_at_1x(

@@ -29,6 +29,7 @@ from ros_helpers import (
     params,
     processes,
     reliable_qos,
+    settled,
     wait_for,
 )
 from scipy.spatial.transform import Rotation, Slerp
@@ -203,15 +204,6 @@ def node_args(tmp_path: Path, **collector: Any) -> tuple[list[str], list[str]]:
         ),
         params(output_path=str(tmp_path / "hand_eye.yaml"), diagnostics_period_s=0.2),
     )
-
-
-def settled(values: dict[str, str]) -> int:
-    """Accepted samples, after checking that every received profile is accounted for."""
-    received, accepted = int(values["profiles received"]), int(values["samples accepted"])
-    rejected, skipped = int(values["profiles rejected"]), int(values["profiles skipped"])
-    assert int(values["profiles pending"]) == 0
-    assert received == accepted + rejected + skipped, values
-    return accepted
 
 
 # -- over DDS ------------------------------------------------------------------------------
