@@ -47,6 +47,7 @@ from .targets.base import (
     sample_rng,
 )
 from .types import FlangePose, Profile, Rejection, Sample
+from .verdict import no_self_check_reason
 
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
 MAX_PLAUSIBLE_DEPTH_M = 5.0
@@ -246,6 +247,7 @@ def calibrate_samples(
         The target's model does not fit the data; nothing is to be written then.
     """
     rejections = list(rejected or [])
+    recorded = len(samples) + len(rejections)
     if not samples:
         raise DegenerateError("no samples to calibrate from: collect profiles of the target first")
     target, target_config = config.target_impl, config.target_config
@@ -286,7 +288,7 @@ def calibrate_samples(
         initial_T_flange_sensor=config.initial_T_flange_sensor,
         seed=config.seed,
         rejections=rejections,
-        n_samples=len(samples),
+        n_samples=recorded,
         progress=progress,
         kinematics=config.kinematics,
         placements=others,
@@ -350,6 +352,14 @@ def calibrate_samples(
         identifiability=solution.identifiability,
         placement_sections=list(solution.placement_sections),
         measuring_centre_depth_m=measuring_centre_depth(solution.sample_fits),
+        self_check_skipped_because=""
+        if check is not None
+        else no_self_check_reason(
+            config.method is Method.DEFAULT,
+            config.self_check_folds,
+            len(solution.samples_used),
+            solution.sigma_translation_m is not None,
+        ),
     )
 
 

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from .robot.kinematics import KinematicCorrections
     from .selfcheck import SelfCheck
     from .targets.base import ResultSection
+    from .verdict import Verdict
 
 
 @dataclass
@@ -69,6 +70,11 @@ class CalibrationResult:
     measuring_centre_depth_m : float or None
         Mean depth (sensor z, m) of the used profile points: the measuring centre (0, 0, z_c)
         of the sensor frame, where the hand-eye's 1σ is also given.
+    self_check_skipped_because : str
+        Why no self-check ran (empty when one did, or when not known, e.g. read from a file).
+    verdict : Verdict or None
+        The verdict (:mod:`linelaser_calib.core.verdict`), once judged with every warning in
+        (``settings.render_warnings``) or as read from a result file; None before.
     """
 
     T_flange_sensor: FloatArray
@@ -95,3 +101,5 @@ class CalibrationResult:
     self_check: SelfCheck | None = None
     placement_sections: list[ResultSection] = field(default_factory=list)
     measuring_centre_depth_m: float | None = None
+    self_check_skipped_because: str = ""
+    verdict: Verdict | None = None
