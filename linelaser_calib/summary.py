@@ -27,8 +27,8 @@ from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections, effective_hand_eye
 from linelaser_calib.core.selfcheck import SelfCheck, sigma_at_point, systematic_evidence
 from linelaser_calib.core.targets.base import mm_text, rejection_kind
-from linelaser_calib.core.types import Rejection
-from linelaser_calib.core.verdict import WARNINGS_GUIDE, Level, Verdict, verdict_of, warning_kind
+from linelaser_calib.core.types import Level, Rejection, Verdict
+from linelaser_calib.core.verdict import WARNINGS_GUIDE, verdict_of, warning_kind
 from linelaser_calib.io.results import Truth
 from linelaser_calib.settings import Front, spelling
 

@@ -10,14 +10,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from .types import FloatArray, Rejection, SampleFit
+from .types import FloatArray, Rejection, SampleFit, Verdict
 
 if TYPE_CHECKING:
     from .robot.joint_calibration import KinematicIdentifiability
     from .robot.kinematics import KinematicCorrections
     from .selfcheck import SelfCheck
     from .targets.base import ResultSection
-    from .verdict import Verdict
 
 
 @dataclass

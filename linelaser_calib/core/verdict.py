@@ -21,27 +21,14 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from enum import Enum
 
 from .result import CalibrationResult
 from .selfcheck import DEFAULT_FOLDS
 from .settings_text import setting
+from .types import Level, Verdict
 
 #: Where each warning is explained: the anchor of its paragraph is ``#<warning id>``.
 WARNINGS_GUIDE = "docs/quality_and_warnings.md"
-
-
-class Level(str, Enum):
-    """How far a result can be trusted, best first."""
-
-    GOOD = "good"
-    USE_WITH_CARE = "use_with_care"
-    DO_NOT_USE = "do_not_use"
-
-    @property
-    def words(self) -> str:
-        """The level in words (``use with care``)."""
-        return self.value.replace("_", " ")
 
 
 #: What a warning does to the verdict: nothing (a note), or the level it lowers it to.
@@ -241,7 +228,7 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
     ),
     WarningKind(
         "no-kinematic-corrections",
-        r"the \w+ method of the .* target does not estimate kinematic corrections",
+        r"the \S+ method of the .* target does not estimate kinematic corrections",
         NOTE,
         "",
         "nothing: the joint states were used with the nominal model",
@@ -279,33 +266,6 @@ _RANK = {kind.id: k for k, kind in enumerate(WARNING_KINDS)}
 def warning_kind(warning: str) -> WarningKind:
     """The kind of ``warning`` (its stable id, weight and next step)."""
     return next((kind for kind in WARNING_KINDS if kind.matches(warning)), OTHER)
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """The verdict on a calibration (the result file's ``quality.verdict``).
-
-    Attributes
-    ----------
-    level : Level
-    reason : str
-        The one reason that decides it.
-    next_step : str
-        The one thing to do next.
-    accuracy_in_use_m : float or None
-        The self-check's accuracy in use, m, beside the verdict; None when not measured.
-    not_measured_because : str
-        Why there is no accuracy in use (empty when there is one).
-    warning_ids : tuple of str
-        The stable id of each of the result's warnings, in their order.
-    """
-
-    level: Level
-    reason: str
-    next_step: str
-    accuracy_in_use_m: float | None = None
-    not_measured_because: str = ""
-    warning_ids: tuple[str, ...] = ()
 
 
 #: The next step of a good result.

@@ -59,8 +59,8 @@ from linelaser_calib.core.robot.kinematics import KinematicCorrections
 from linelaser_calib.core.selfcheck import sigma_at_point
 from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
-from linelaser_calib.core.types import Rejection
-from linelaser_calib.core.verdict import Level, Verdict, verdict_of
+from linelaser_calib.core.types import Level, Rejection, Verdict
+from linelaser_calib.core.verdict import verdict_of
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.hand_eye import (
     check_translation,
