@@ -108,6 +108,17 @@ def hand_eye_rows(result: CalibrationResult) -> Rows:
         rows.append(("1 sigma translation", f"{mm_text(sigma_t)} (flange x, y, z)"))
     if sigma_r is not None:
         rows.append(("1 sigma rotation", f"{deg_text(sigma_r)} ({ROTATION_AXES})"))
+    if result.initial_T_flange_sensor is not None:
+        change = truth_error(T, result.initial_T_flange_sensor)
+        rows.append(
+            (
+                "initial corrected by",
+                f"{change.translation_m * 1e3:.3f} mm, {np.degrees(change.rotation_rad):.3f} deg "
+                f"(the initial hand-eye given: translation {mm_text(change.translation_axes_m)} "
+                f"flange x, y, z; rotation {deg_text(change.rotation_axes_rad, 3)} about the "
+                "sensor x, y, z axes)",
+            )
+        )
     depth = result.measuring_centre_depth_m
     if sigma_t is not None and sigma_r is not None and depth is not None:
         at_centre = sigma_at_point(T, sigma_r, sigma_t, np.array([0.0, 0.0, depth]))

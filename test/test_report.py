@@ -408,9 +408,12 @@ TARGET_RUNS = {
             "--clock-offset",
             "auto",
         ],
+        COMMON_FIGURES | {"clock_offset.png"},
+    ),
+    "known_point": (
+        ["bags/weld_seam", "--target", "known_point", "--initial", "bags/weld_seam/initial.yaml"],
         COMMON_FIGURES,
     ),
-    "known_point": (["bags/weld_seam", "--target", "known_point"], COMMON_FIGURES),
 }
 REPO = Path(__file__).resolve().parents[1]
 
@@ -422,8 +425,9 @@ def test_every_target_gets_a_report(
     argv, figures = TARGET_RUNS[target]
     bag = REPO / argv[0]
     output, report_dir = tmp_path / "result.yaml", tmp_path / "report"
+    flags = [str(REPO / a) if a.startswith("bags/") else a for a in argv[1:]]
     code = main(
-        ["calibrate", str(bag), *argv[1:], "--output", str(output), "--report", str(report_dir)]
+        ["calibrate", str(bag), *flags, "--output", str(output), "--report", str(report_dir)]
     )
     assert code == 0, capsys.readouterr().err
     page = report_dir / "index.html"
@@ -444,6 +448,30 @@ def test_every_target_gets_a_report(
     rotation, translation = transform_error(estimate, truth.T_flange_sensor)
     assert f"{translation * 1e3:.4f} mm" in text and f"{np.degrees(rotation):.4f} deg" in text
     assert translation < 5e-4 and rotation < np.radians(0.1)
+    # Issue 30: how far an initial hand-eye was corrected, where one was given.
+    assert ("initial corrected by" in text) == ("--initial" in argv)
+
+
+def test_figures_mark_rejections_offset_flat_costs_and_scale_axes_alike(
+    result: CalibrationResult,
+) -> None:
+    """Issue 30: a rejected profile is marked, not a silent gap; a cost that barely changes
+    is drawn as its change from the final value; one mm is as long on every 3-D axis."""
+    from linelaser_calib.report.figures import (
+        convergence_figure,
+        profiles_3d_figure,
+        sample_residual_figure,
+    )
+
+    data = report_data(with_rejection_and_warning(result))
+    labels = [c.get_label() for c in sample_residual_figure(data).axes[0].collections]
+    assert any(label.startswith("rejected (1;") for label in labels)
+    flat = replace(result, history={"refine_cost": [3104.67013, 3104.67001, 3104.67]})
+    line = convergence_figure(report_data(flat)).axes[0].lines[0]
+    assert np.allclose(line.get_ydata(), [1.3e-4, 1e-5, 0.0], atol=1e-9)
+    ax = profiles_3d_figure(data).axes[0]
+    spans = [np.ptp(limits) for limits in (ax.get_xlim(), ax.get_ylim(), ax.get_zlim())]
+    assert np.allclose(ax.get_box_aspect() / np.max(ax.get_box_aspect()), spans / np.max(spans))
 
 
 # --- a failed run writes nothing ----------------------------------------------------------

@@ -16,6 +16,7 @@ import yaml
 from linelaser_calib.cli import main
 from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.pipeline import Method
+from linelaser_calib.core.regions import PER_POSE, PLAIN, ModelChoice
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.types import Level, Rejection
 from linelaser_calib.core.verdict import OTHER, WARNING_KINDS, judge, warning_kind
@@ -25,7 +26,13 @@ from linelaser_calib.io.results import read_result_yaml, write_result_yaml
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.settings import Front, pipeline_config, render_warnings
 from linelaser_calib.sim.bag_writer import simulate_to_bag
-from linelaser_calib.summary import format_summary, rejection_lines, samples_line, truth_error
+from linelaser_calib.summary import (
+    format_summary,
+    model_text,
+    rejection_lines,
+    samples_line,
+    truth_error,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 BAGS = ROOT / "bags"
@@ -172,3 +179,14 @@ def test_every_warning_kind_has_its_paragraph_in_the_guide() -> None:
         example = re.sub(r"\bN\b", "3", quoted[kind.id]).replace("... ", "x ")
         assert warning_kind(example) is kind, (kind.id, example)
     assert f"`{OTHER.id}`" in text
+
+
+def test_the_model_row_says_when_the_lower_figure_is_not_significant() -> None:
+    """Issue 30: 'per-pose ... chosen by the accuracy in use (0.2392 vs 0.2210 mm)' claimed to
+    choose the worse number; the choice is a paired test, and the row says so."""
+    kept = model_text(ModelChoice(PER_POSE, {PER_POSE: 2.392e-4, PLAIN: 2.210e-4}))
+    assert "kept: the plain fit's lower figure is not significantly better" in kept
+    assert "0.2392 mm" in kept and "0.2210 mm" in kept
+    assert model_text(ModelChoice(PLAIN, {PER_POSE: 2.4e-4, PLAIN: 1.2e-4})).startswith(
+        "plain fit, better beyond chance"
+    )
