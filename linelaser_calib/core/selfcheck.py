@@ -82,7 +82,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -727,19 +727,9 @@ def _halves(
     return np.abs(difference), np.sqrt(sigma_a**2 + sigma_b**2)
 
 
-@dataclass(frozen=True)
-class Evidence:
-    """One statistic that can mark the robot's error systematic (:func:`systematic_evidence`).
-
-    Attributes
-    ----------
-    name, value : str
-        The statistic and its value, in a few words (``regions' offsets``, ``p = 1.2e-02``).
-    shown : bool
-        Beyond its false-alarm limit: it marks the error systematic.
-    text : str
-        What it shows, in a sentence's words, when shown.
-    """
+class Evidence(NamedTuple):
+    """A statistic that can mark the robot's error systematic: its name and value in a few
+    words, whether it is beyond its false-alarm limit, and what that shows, in words."""
 
     name: str
     value: str
