@@ -207,12 +207,10 @@ def verdict_line(result: CalibrationResult) -> str:
     )
 
 
-def refusal_line() -> str:
-    """The verdict of a refused run, printed before its one-paragraph reason."""
-    return (
-        f"Verdict: {Level.DO_NOT_USE.words.upper()}: the calibration was refused and no result "
-        "was written. Next: do what the error below says, and calibrate again."
-    )
+def refusal_text(message: str) -> str:
+    """The one paragraph of a calibration the data refused: its verdict first, then
+    ``message`` (why, and what to do)."""
+    return f"refused, no result was written (verdict: {Level.DO_NOT_USE.words}): {message}"
 
 
 #: Longest warning text shown in a summary line (its whole text is in the result file).

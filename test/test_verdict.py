@@ -124,15 +124,18 @@ def test_without_a_self_check_there_is_no_good_and_the_reason_is_given(
 def test_a_refused_run_says_do_not_use_first_and_counts_every_recorded_profile(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    """A continuous scan with the default speed gate: refused (exit 1, nothing written); the
-    first line says do not use, and the count is of every profile recorded."""
+    """A continuous scan with the default speed gate: refused (exit 1, nothing written); its
+    one paragraph opens with the verdict, and the count is of every profile recorded."""
     bag, _ = simulate_to_bag(tmp_path / "bag", "continuous", 0, {"n_poses": 12})
     recorded = len(read_bag(bag).profiles)
     out = tmp_path / "r.yaml"
     assert main(["calibrate", str(bag), "--output", str(out)]) == 1
-    err = capsys.readouterr().err.splitlines()
-    assert err[0].startswith("Verdict: DO NOT USE: the calibration was refused")
-    assert re.search(rf"only \d+ of {recorded} recorded profiles", err[1])
+    err = capsys.readouterr().err
+    assert err.startswith(
+        "linelaser-calib: error: refused, no result was written (verdict: do not use): "
+    )
+    assert err.count("\n") == 1
+    assert re.search(rf"only \d+ of {recorded} recorded profiles", err)
     assert not out.exists()
 
 

@@ -192,6 +192,13 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
         f"give {setting('centre_side')}, or add poses that cut the ball at other heights",
     ),
     WarningKind(
+        "off-plane",
+        r"\d+% of the points have \|y\| up to",
+        _CARE,
+        "the profiles may not be in the sensor frame",
+        "check the profiles' frame_id and the driver's output frame",
+    ),
+    WarningKind(
         "grazing-trimmed",
         r"trimmed the grazing-angle ends",
         NOTE,
@@ -204,6 +211,27 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
         NOTE,
         "",
         "a few at the start or end are normal; many mean a clock offset or a gap in the poses",
+    ),
+    WarningKind(
+        "pose-stream",
+        r"\d+ flange poses (arrived out of stamp order|repeated a stamp)",
+        NOTE,
+        "",
+        "nothing: the poses were sorted and a repeated stamp kept once",
+    ),
+    WarningKind(
+        "tf-conflict",
+        r"\S+ has parent \S+ but transforms give it parent",
+        NOTE,
+        "",
+        "check the recording's /tf publishers",
+    ),
+    WarningKind(
+        "placement-features-lost",
+        r"recording \d+: \d+ of its \d+ paired profiles gave no feature",
+        NOTE,
+        "",
+        "check the named recording's rejections",
     ),
     WarningKind(
         "skipped-messages",
