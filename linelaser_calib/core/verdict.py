@@ -298,8 +298,8 @@ def warning_kind(warning: str) -> WarningKind:
 
 #: The next step of a good result.
 EXPORT = (
-    "export it (linelaser-calib export RESULT.yaml --format urdf, static-tf or launch) or use "
-    "the published hand-eye"
+    "export it (linelaser-calib export RESULT.yaml: a URDF joint, a static transform or a "
+    "launch file) or use the published hand-eye"
 )
 
 
