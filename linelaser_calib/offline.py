@@ -2,13 +2,20 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
+from linelaser_calib.core.pipeline import (
+    OFFSET_COSTS,
+    OFFSET_TRIALS,
+    PipelineConfig,
+    estimate_clock_offset,
+    run_pipeline,
+)
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig, KinematicSetup
@@ -177,9 +184,10 @@ def calibrate_bag(
             "{setting:nominal_kinematics}): give one recording, or the robot model"
         )
     bag, flange_poses = reading.read(config.pairing.sync_tolerance_s, progress)
+    trace: list[tuple[float, float]] = []
     if estimate_offset:
         progress("clock offset", 0, 1)
-        offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config)
+        offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config, trace=trace)
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
         progress("clock offset", 1, 1)
     others = []
@@ -201,6 +209,10 @@ def calibrate_bag(
     result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others)
     result.warnings.extend(unpaired)
     result.clock_offset_estimated = estimate_offset
+    finite = sorted((t, c) for t, c in trace if math.isfinite(c))
+    if finite:
+        result.history[OFFSET_TRIALS] = [t for t, _ in finite]
+        result.history[OFFSET_COSTS] = [c for _, c in finite]
     result.parent_frame = reading.flange_frame
     result.child_frame = bag.sensor_frame
     result.base_frame = flange_poses.base_frame

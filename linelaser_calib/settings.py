@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 from typing import Any
 
@@ -29,6 +29,7 @@ from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SETTINGS as TARGET_SETTINGS
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.types import FloatArray
+from linelaser_calib.core.verdict import judge
 
 
 class Front(Enum):
@@ -121,9 +122,14 @@ def render(text: str, front: Front) -> str:
 
 
 def render_warnings(result: CalibrationResult, front: Front) -> None:
-    """Spell the settings named in the result's warnings for ``front`` (in place), before
+    """Spell the settings named in the result's warnings for ``front`` (in place), and judge
+    its verdict (``result.verdict``, spelled for ``front`` too) with every warning in, before
     the result is shown or written."""
     result.warnings[:] = [render(warning, front) for warning in result.warnings]
+    verdict = judge(result)
+    result.verdict = replace(
+        verdict, reason=render(verdict.reason, front), next_step=render(verdict.next_step, front)
+    )
 
 
 def target_config(target_name: str, method: str, given: Mapping[str, Any], front: Front) -> Any:

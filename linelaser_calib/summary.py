@@ -8,6 +8,7 @@ calibration service's /diagnostics, so all say the same thing the same way.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,12 +22,13 @@ from linelaser_calib.core.geometry import (
     rotvec_from_matrix,
     rpy_from_matrix,
 )
-from linelaser_calib.core.regions import PER_POSE, PLAIN
+from linelaser_calib.core.regions import CHOICE_CONFIDENCE, PER_POSE, PLAIN, ModelChoice
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections, effective_hand_eye
-from linelaser_calib.core.selfcheck import sigma_at_point
-from linelaser_calib.core.targets.base import mm_text
-from linelaser_calib.core.types import Rejection
+from linelaser_calib.core.selfcheck import SelfCheck, sigma_at_point, systematic_evidence
+from linelaser_calib.core.targets.base import mm_text, rejection_kind
+from linelaser_calib.core.types import Level, Rejection, Verdict
+from linelaser_calib.core.verdict import WARNINGS_GUIDE, verdict_of, warning_kind
 from linelaser_calib.io.results import Truth
 from linelaser_calib.settings import Front, spelling
 
@@ -45,15 +47,18 @@ def deg_text(values: ArrayLike, digits: int = 4) -> str:
 
 
 def group_rejections(rejections: list[Rejection]) -> list[tuple[str, list[int]]]:
-    """(stage: reason, profile indices) pairs, most frequent first."""
+    """(``stage: reason`` of a kind, profile indices) pairs, most frequent first: rejections
+    whose reasons differ only in their numbers are one kind
+    (:func:`~linelaser_calib.core.targets.base.rejection_kind`)."""
     groups: dict[str, list[int]] = {}
     for r in rejections:
-        groups.setdefault(f"{r.stage}: {r.reason}", []).append(r.index)
+        groups.setdefault(rejection_kind(r), []).append(r.index)
     return sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0]))
 
 
 def one_line_summary(result: CalibrationResult, samples_total: int) -> str:
-    """One line describing a calibration, every number with its unit.
+    """One line describing a calibration, every number with its unit: the verdict
+    (:func:`verdict_line`) first.
 
     Parameters
     ----------
@@ -79,9 +84,10 @@ def one_line_summary(result: CalibrationResult, samples_total: int) -> str:
         f"; {len(result.samples_used)} of {samples_total} samples used, "
         f"rms residual {result.rms_residual_m * 1e6:.1f} um, method {result.method}"
     )
-    if result.warnings:
-        text += f"; {len(result.warnings)} warning(s): {result.warnings[0]}"
-    return text
+    verdict = verdict_of(result)
+    if verdict.warning_ids:
+        text += f"; warnings: {', '.join(verdict.warning_ids)}"
+    return f"{verdict_line(result)} {text}"
 
 
 def hand_eye_rows(result: CalibrationResult) -> Rows:
@@ -102,6 +108,17 @@ def hand_eye_rows(result: CalibrationResult) -> Rows:
         rows.append(("1 sigma translation", f"{mm_text(sigma_t)} (flange x, y, z)"))
     if sigma_r is not None:
         rows.append(("1 sigma rotation", f"{deg_text(sigma_r)} ({ROTATION_AXES})"))
+    if result.initial_T_flange_sensor is not None:
+        change = truth_error(T, result.initial_T_flange_sensor)
+        rows.append(
+            (
+                "initial corrected by",
+                f"{change.translation_m * 1e3:.3f} mm, {np.degrees(change.rotation_rad):.3f} deg "
+                f"(the initial hand-eye given: translation {mm_text(change.translation_axes_m)} "
+                f"flange x, y, z; rotation {deg_text(change.rotation_axes_rad, 3)} about the "
+                "sensor x, y, z axes)",
+            )
+        )
     depth = result.measuring_centre_depth_m
     if sigma_t is not None and sigma_r is not None and depth is not None:
         at_centre = sigma_at_point(T, sigma_r, sigma_t, np.array([0.0, 0.0, depth]))
@@ -113,21 +130,6 @@ def hand_eye_rows(result: CalibrationResult) -> Rows:
             )
         )
     return rows
-
-
-def accuracy_in_use_line(result: CalibrationResult) -> str | None:
-    """What a user will see scanning elsewhere in the cell, in one sentence (None without a
-    self-check)."""
-    check = result.self_check
-    if check is None:
-        return None
-    if check.accuracy_in_use_m is None:
-        return f"Accuracy in use: not measured: {check.no_accuracy_reason}."
-    return (
-        f"Accuracy in use: scans elsewhere in the cell will be off by about "
-        f"{check.accuracy_in_use_m * 1e3:.3f} mm RMS (each of {check.regions} regions of the "
-        "workspace held out in turn, calibrated on the others)."
-    )
 
 
 def target_text(result: CalibrationResult) -> str:
@@ -188,36 +190,75 @@ def residual_rows(result: CalibrationResult) -> Rows:
     return rows
 
 
-def verdict(result: CalibrationResult) -> tuple[str, str]:
-    """``pass`` or ``warn`` and why, in words.
+def accuracy_text(verdict: Verdict) -> str:
+    """The accuracy in use beside a verdict: ``0.0346 mm RMS`` or ``not measured``."""
+    if verdict.accuracy_in_use_m is None:
+        return "not measured"
+    return f"{verdict.accuracy_in_use_m * 1e3:.4f} mm RMS"
 
-    A written result is never ``refused``: a calibration whose model does not fit or that
-    has too few samples raises instead, and writes no result and no report.
-    """
-    if result.warnings:
-        more = f" (and {len(result.warnings) - 1} more below)" if len(result.warnings) > 1 else ""
-        return "warn", f"{result.warnings[0]}{more}"
-    if result.self_check is None:
-        return "pass", "the model fits and raised no warning; no self-check ran"
-    return "pass", "the model fits, and the self-check on held-out profiles raised no warning"
+
+def verdict_line(result: CalibrationResult) -> str:
+    """The summary's first line: the verdict, the accuracy in use, the deciding reason and
+    the next step (:func:`~linelaser_calib.core.verdict.verdict_of`)."""
+    verdict = verdict_of(result)
+    return (
+        f"Verdict: {verdict.level.words.upper()} (accuracy in use {accuracy_text(verdict)}): "
+        f"{verdict.reason}. Next: {verdict.next_step}."
+    )
+
+
+def refusal_text(message: str) -> str:
+    """The one paragraph of a calibration the data refused: its verdict first, then
+    ``message`` (why, and what to do)."""
+    return f"refused, no result was written (verdict: {Level.DO_NOT_USE.words}): {message}"
+
+
+#: Longest warning text shown in a summary line (its whole text is in the result file).
+WARNING_SHOWN = 110
+#: A warning's words before its first colon stand for it when they are at least this long.
+MIN_HEAD = 30
+
+
+def warning_reference(k: int, warning: str) -> str:
+    """Where the ``k``-th warning's whole text is (the result file) and what to do about it
+    (its paragraph in the warnings guide, by its stable id)."""
+    return f"quality.warnings[{k}]; {WARNINGS_GUIDE}#{warning_kind(warning).id}"
+
+
+def warning_lines(result: CalibrationResult) -> list[str]:
+    """One line per warning: its stable id, its opening words, and where its whole text
+    (the result file) and what to do (the guide's paragraph) are."""
+    lines = []
+    for k, warning in enumerate(result.warnings):
+        head = warning.split(": ")[0]
+        head = head if len(head) >= MIN_HEAD else warning
+        if len(head) > WARNING_SHOWN:
+            head = head[:WARNING_SHOWN].rsplit(" ", 1)[0] + " ..."
+        kind = warning_kind(warning)
+        label = "note" if kind.level is None else "warning"
+        lines.append(f"{label} {kind.id}: {head} ({warning_reference(k, warning)})")
+    return lines
 
 
 def headline_rows(result: CalibrationResult) -> Rows:
-    """The verdict first, then the accuracy in use and the hand-eye's largest 1 sigma."""
-    state, why = verdict(result)
+    """The verdict first (level, accuracy in use, reason, next step), then the hand-eye's
+    largest 1 sigma."""
+    verdict = verdict_of(result)
     check = result.self_check
+    accuracy = accuracy_text(verdict)
+    if verdict.not_measured_because:
+        accuracy += f": {verdict.not_measured_because}"
+    elif check is not None:
+        accuracy += (
+            f" (quality.accuracy_in_use_m: scan points of each of {check.regions} regions of "
+            "the workspace held out in turn, mapped with the recorded poses and a hand-eye "
+            "solved without that region)"
+        )
     rows = [
-        ("verdict", f"{state.upper()}: {why}"),
-        (
-            "accuracy in use",
-            "not measured (no self-check ran)"
-            if check is None
-            else f"not measured: {check.no_accuracy_reason}"
-            if check.accuracy_in_use_m is None
-            else f"{check.accuracy_in_use_m * 1e3:.4f} mm RMS (quality.accuracy_in_use_m: scan "
-            f"points of each of {check.regions} regions of the workspace held out in turn, "
-            "mapped with the recorded poses and a hand-eye solved without that region)",
-        ),
+        ("verdict", verdict.level.words.upper()),
+        ("accuracy in use", accuracy),
+        ("why", verdict.reason),
+        ("next step", verdict.next_step),
     ]
     sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
     if sigma_t is None or sigma_r is None:
@@ -233,6 +274,47 @@ def headline_rows(result: CalibrationResult) -> Rows:
     return rows
 
 
+def model_text(model: ModelChoice) -> str:
+    """Which robot-error model the accuracy in use chose, and whether the difference between
+    the two models is significant (:func:`~linelaser_calib.core.regions.choose_model`)."""
+    names = {PER_POSE: "per-pose robot error", PLAIN: "plain fit"}
+    figures = ", ".join(
+        f"{names[name]} {value * 1e3:.4f} mm" for name, value in model.accuracy_m.items()
+    )
+    if PLAIN not in model.accuracy_m:
+        return (
+            f"{names[PER_POSE]} ({figures}; plain fit not tried: the robot error looks "
+            "independent per pose)"
+        )
+    test = f"one-sided paired t-test over the regions at {CHOICE_CONFIDENCE:.0%}"
+    if model.chosen == PLAIN:
+        return f"plain fit, better beyond chance ({figures}; {test})"
+    if model.accuracy_m[PLAIN] < model.accuracy_m[PER_POSE]:
+        return (
+            f"{names[PER_POSE]} kept: the plain fit's lower figure is not significantly "
+            f"better ({figures}; {test})"
+        )
+    return f"{names[PER_POSE]}, the better of the two ({figures})"
+
+
+def robot_error_text(check: SelfCheck) -> str:
+    """Systematic or independent per pose, with the statistics that show it and those within
+    their limits (:func:`~linelaser_calib.core.selfcheck.systematic_evidence`)."""
+    evidence = systematic_evidence(check)
+    shown = [f"{item.name} {item.value}" for item in evidence if item.shown]
+    within = [f"{item.name} {item.value}" for item in evidence if not item.shown]
+    offsets = f"held-out offsets {check.offset_rms_m * 1e3:.4f} mm RMS"
+    if not check.systematic:
+        return f"independent per pose ({offsets}; each within its limit: {', '.join(within)})"
+    return (
+        "systematic, shown by "
+        + (", ".join(shown) if shown else "the halves' disagreement")
+        + f" ({offsets}"
+        + (f"; within their limits: {', '.join(within)}" if within else "")
+        + ")"
+    )
+
+
 def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows:
     """The self-check: accuracy in use held out by region, the model it chose, the
     pose-interleaved consistency check, halves, robot error, and the 1σ before widening;
@@ -241,7 +323,6 @@ def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows
     if check is None:
         return []
     poses = "recorded poses" if result.kinematics is None else "corrected kinematics"
-    model_names = {PER_POSE: "per-pose robot error", PLAIN: "plain fit"}
     rows = [
         (
             "accuracy in use",
@@ -252,22 +333,7 @@ def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows
         ),
     ]
     if check.model is not None:
-        rows.append(
-            (
-                "model",
-                f"{model_names[check.model.chosen]} chosen by the accuracy in use ("
-                + ", ".join(
-                    f"{model_names[name]} {value * 1e3:.4f} mm"
-                    for name, value in check.model.accuracy_m.items()
-                )
-                + (
-                    ""
-                    if PLAIN in check.model.accuracy_m
-                    else "; plain fit not tried: the robot error looks independent per pose"
-                )
-                + ")",
-            )
-        )
+        rows.append(("model", model_text(check.model)))
     rows += [
         (
             "consistency check",
@@ -282,24 +348,7 @@ def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows
             else f"{float(np.max(check.halves_sigmas)):.1f} combined sigma (largest axis, even "
             "vs odd poses)",
         ),
-        (
-            "robot error",
-            ("systematic" if check.systematic else "independent per pose")
-            + f" (held-out offsets {check.offset_rms_m * 1e3:.4f} mm RMS, neighbour "
-            f"correlation {check.neighbour_correlation:.2f}"
-            + (
-                ""
-                if check.region_ratio is None
-                else f", hand-eye moves {check.region_ratio:.1f}x what the noise model "
-                f"predicts when one of {check.regions} regions of the workspace is left out"
-            )
-            + (
-                ""
-                if check.region_offset_p is None
-                else f", regions' offsets differ at p = {check.region_offset_p:.1e}"
-            )
-            + ")",
-        ),
+        ("robot error", robot_error_text(check)),
     ]
     widening = check.sigma_widening
     if widening is not None and float(np.max(widening)) > WIDENING_SHOWN:
@@ -332,12 +381,21 @@ def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows
 
 
 def rejection_lines(result: CalibrationResult) -> list[str]:
-    """One line per distinct rejection reason: count, stage, reason and profile indices."""
+    """One line per kind of rejection (:func:`group_rejections`): count, reason, stage and
+    profile indices (every profile's own reason is in the result file)."""
     lines = []
-    for reason, indices in group_rejections(result.samples_rejected):
+    for kind, indices in group_rejections(result.samples_rejected):
+        stage, reason = kind.split(": ", 1)
         shown = ", ".join(str(i) for i in indices[:12]) + (" ..." if len(indices) > 12 else "")
-        lines.append(f"{len(indices)} x {reason}  [profiles {shown}]")
+        count = f"{len(indices)} profile{'s' if len(indices) > 1 else ''}"
+        lines.append(f"{count}: {reason} (at {stage}; #{shown})")
     return lines
+
+
+def samples_line(result: CalibrationResult) -> str:
+    """How many profiles were recorded, used and rejected."""
+    used, rejected = len(result.samples_used), len(result.samples_rejected)
+    return f"Profiles: {used} used of {used + rejected} recorded, {rejected} rejected"
 
 
 @dataclass(frozen=True)
@@ -430,22 +488,28 @@ def truth_rows(result: CalibrationResult, truth: Truth) -> Rows:
     return rows
 
 
-def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str:
-    """Multi-line summary a person can act on.
+def format_summary(
+    result: CalibrationResult, truth: Truth | None = None, preamble: Sequence[str] = ()
+) -> str:
+    """Multi-line summary a person can act on: the verdict first, then one line per warning
+    (its whole text is in the result file), then the numbers.
 
     Parameters
     ----------
     result : CalibrationResult
     truth : Truth, optional
         When given (simulated bags), the error against it is printed too.
+    preamble : sequence of str
+        Lines shown after the verdict and the warnings (what was calibrated).
     """
 
     def table(rows: Rows) -> list[str]:
         return [f"  {label:<22}{text}" for label, text in rows]
 
-    accuracy = accuracy_in_use_line(result)
     lines = [
-        *([] if accuracy is None else [accuracy]),
+        verdict_line(result),
+        *[f"  {line}" for line in warning_lines(result)],
+        *preamble,
         f"Hand-eye T_flange_sensor ({result.parent_frame} -> {result.child_frame}), "
         f"method {result.method}:",
         *table(hand_eye_rows(result)),
@@ -455,9 +519,9 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
     ]
     if result.self_check is not None:
         lines += ["Self-check:", *table(self_check_rows(result))]
-    lines.append(
-        f"Samples: {len(result.samples_used)} used, {len(result.samples_rejected)} rejected"
-    )
+    elif result.self_check_skipped_because:
+        lines.append(f"Self-check: not run: {result.self_check_skipped_because}")
+    lines.append(samples_line(result))
     lines += [f"  {line}" for line in rejection_lines(result)]
     if result.clock_offset_s or result.clock_offset_estimated:
         how = "estimated from the data" if result.clock_offset_estimated else "given"
@@ -477,7 +541,6 @@ def format_summary(result: CalibrationResult, truth: Truth | None = None) -> str
             f"{len(result.kinematics.corrections)} estimated, "
             f"{len(result.kinematics.kept_nominal)} kept nominal (the result's kinematics section)"
         )
-    lines += [f"WARNING: {warning}" for warning in result.warnings]
     if truth is not None:
         lines.append("Error against truth:")
         if isinstance(truth.raw.get("kinematics"), dict):

@@ -560,6 +560,8 @@ def known_result() -> CalibrationResult:
 def test_summary_line_gives_every_number_with_its_unit() -> None:
     text = one_line_summary(known_result(), 30)
     assert "\n" not in text
+    # The verdict first, as everywhere (issue 30): no self-check, so not good, and why.
+    assert text.startswith("Verdict: USE WITH CARE (accuracy in use not measured): not checked")
     assert "tool0 -> laser" in text
     assert "translation [12.000, -85.000, 95.000] mm" in text
     assert "rpy [10.0000, -5.0000, 95.0000] deg" in text

@@ -216,7 +216,8 @@ def test_report_states_the_result(
     assert "fixed axes x-y-z" in text
     assert str(bag) in text
     assert f"{result.target.cylinder.radius * 1e3:.3f} mm" in text
-    assert f"{len(result.samples_used)} used, 0 rejected" in text
+    n = len(result.samples_used)
+    assert f"Profiles: {n} used of {n} recorded, 0 rejected" in text
     rotation, translation = transform_error(T, truth.T_flange_sensor)
     assert "Error against truth" in text
     assert f"{np.degrees(rotation):.4f} deg" in text
@@ -224,11 +225,8 @@ def test_report_states_the_result(
     if result.method == "default":
         assert "1 sigma translation" in text
         assert result.self_check is not None and result.self_check.accuracy_in_use_m is not None
-        top = text.index("<h1>")
-        assert text.index("scans elsewhere in the cell will be off by about") < text.index(
-            "<table", top
-        )
-        assert f"{result.self_check.accuracy_in_use_m * 1e3:.3f} mm RMS" in text
+        accuracy = f"{result.self_check.accuracy_in_use_m * 1e3:.4f} mm RMS"
+        assert text.index("<h1>") < text.index(accuracy) < text.index("<h2>")
     else:
         assert "not estimated by the paper method" in text
 
@@ -238,7 +236,7 @@ def test_report_lists_rejections_and_warnings_escaped(
 ) -> None:
     page = write_report(tmp_path / "report", with_rejection_and_warning(result))
     text = page.read_text(encoding="utf-8")
-    assert "1 x ellipse: arc too short &lt;1 mm&gt; &amp; thin  [profiles 5]" in text
+    assert "1 profile: arc too short &lt;1 mm&gt; &amp; thin (at ellipse; #5)" in text
     assert "poses weak &amp; &lt;odd&gt;" in text
     assert "Error against truth" not in text
 
@@ -290,9 +288,10 @@ def test_summary_has_everything_issue_6_asks_for(result: CalibrationResult, trut
     assert "1 sigma" in text
     assert f"rms {result.rms_residual_m * 1e6:.1f} um" in text
     assert "per-sample residual" in text and "median" in text
-    assert f"Samples: {len(result.samples_used)} used, 1 rejected" in text
-    assert "1 x ellipse: arc too short <1 mm> & thin  [profiles 5]" in text
-    assert "WARNING: poses weak & <odd>" in text
+    used = len(result.samples_used)
+    assert f"Profiles: {used} used of {used + 1} recorded, 1 rejected" in text
+    assert "1 profile: arc too short <1 mm> & thin (at ellipse; #5)" in text
+    assert "warning other-warnings: poses weak & <odd> (quality.warnings[0]; " in text
     assert "Error against truth" in text
 
 
@@ -318,7 +317,7 @@ def test_summary_of_a_thousand_profiles_shows_the_distribution_and_the_worst(
     assert f"95% {np.percentile(values, 95):.1f}" in text
     assert f"min {values.min():.1f}" in text and "max 50.0 um" in text
     assert "#777 50.0, #123 40.0, " in text
-    assert "Samples: 1000 used, 200 rejected" in text
+    assert "Profiles: 1000 used of 1200 recorded, 200 rejected" in text
 
 
 def test_truth_in_other_frames_is_not_compared(result: CalibrationResult, truth: Truth) -> None:
@@ -375,14 +374,19 @@ def test_report_puts_the_verdict_first_and_names_each_residual(
 ) -> None:
     text = report.read_text(encoding="utf-8")
     assert text.index("verdict") < text.index("Hand-eye T_flange_sensor")
-    assert "PASS: " in text and "WARN: " not in text
+    # No good without a self-check (the paper method has none).
+    level = "good" if result.self_check is not None else "use_with_care"
+    assert f'<div class="verdict {level}">' in text
+    assert f"<td>{level.replace('_', ' ').upper()}</td>" in text
     if result.self_check is not None:
         assert f"{result.self_check.accuracy_in_use_m * 1e3:.4f} mm RMS" in text
     for name in ("fit residual", "recorded-pose residual", "feature residual"):
         assert f"<th>{name}</th>" in text
     assert f"{result.rms_residual_m * 1e6:.1f} um RMS" in text
     warned = write_report(tmp_path / "warned", with_rejection_and_warning(result))
-    assert "WARN: poses weak &amp; &lt;odd&gt;" in warned.read_text(encoding="utf-8")
+    page = warned.read_text(encoding="utf-8")
+    assert '<div class="verdict use_with_care">' in page and "<td>USE WITH CARE</td>" in page
+    assert "poses weak &amp; &lt;odd&gt;" in page
 
 
 # --- every target's committed bag -------------------------------------------------------
@@ -404,9 +408,12 @@ TARGET_RUNS = {
             "--clock-offset",
             "auto",
         ],
+        COMMON_FIGURES | {"clock_offset.png"},
+    ),
+    "known_point": (
+        ["bags/weld_seam", "--target", "known_point", "--initial", "bags/weld_seam/initial.yaml"],
         COMMON_FIGURES,
     ),
-    "known_point": (["bags/weld_seam", "--target", "known_point"], COMMON_FIGURES),
 }
 REPO = Path(__file__).resolve().parents[1]
 
@@ -418,8 +425,9 @@ def test_every_target_gets_a_report(
     argv, figures = TARGET_RUNS[target]
     bag = REPO / argv[0]
     output, report_dir = tmp_path / "result.yaml", tmp_path / "report"
+    flags = [str(REPO / a) if a.startswith("bags/") else a for a in argv[1:]]
     code = main(
-        ["calibrate", str(bag), *argv[1:], "--output", str(output), "--report", str(report_dir)]
+        ["calibrate", str(bag), *flags, "--output", str(output), "--report", str(report_dir)]
     )
     assert code == 0, capsys.readouterr().err
     page = report_dir / "index.html"
@@ -440,6 +448,30 @@ def test_every_target_gets_a_report(
     rotation, translation = transform_error(estimate, truth.T_flange_sensor)
     assert f"{translation * 1e3:.4f} mm" in text and f"{np.degrees(rotation):.4f} deg" in text
     assert translation < 5e-4 and rotation < np.radians(0.1)
+    # Issue 30: how far an initial hand-eye was corrected, where one was given.
+    assert ("initial corrected by" in text) == ("--initial" in argv)
+
+
+def test_figures_mark_rejections_offset_flat_costs_and_scale_axes_alike(
+    result: CalibrationResult,
+) -> None:
+    """Issue 30: a rejected profile is marked, not a silent gap; a cost that barely changes
+    is drawn as its change from the final value; one mm is as long on every 3-D axis."""
+    from linelaser_calib.report.figures import (
+        convergence_figure,
+        profiles_3d_figure,
+        sample_residual_figure,
+    )
+
+    data = report_data(with_rejection_and_warning(result))
+    labels = [c.get_label() for c in sample_residual_figure(data).axes[0].collections]
+    assert any(label.startswith("rejected (1;") for label in labels)
+    flat = replace(result, history={"refine_cost": [3104.67013, 3104.67001, 3104.67]})
+    line = convergence_figure(report_data(flat)).axes[0].lines[0]
+    assert np.allclose(line.get_ydata(), [1.3e-4, 1e-5, 0.0], atol=1e-9)
+    ax = profiles_3d_figure(data).axes[0]
+    spans = [np.ptp(limits) for limits in (ax.get_xlim(), ax.get_ylim(), ax.get_zlim())]
+    assert np.allclose(ax.get_box_aspect() / np.max(ax.get_box_aspect()), spans / np.max(spans))
 
 
 # --- a failed run writes nothing ----------------------------------------------------------

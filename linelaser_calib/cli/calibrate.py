@@ -15,7 +15,13 @@ from linelaser_calib.cli.common import (
     initial_hand_eye,
     pose_source,
 )
-from linelaser_calib.core.errors import InputError, PairingError
+from linelaser_calib.core.errors import (
+    DegenerateError,
+    InputError,
+    ModelMismatch,
+    PairingError,
+    SolverError,
+)
 from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method, PipelineConfig
@@ -24,7 +30,7 @@ from linelaser_calib.core.selfcheck import DEFAULT_ARM_ACCURACY_M
 from linelaser_calib.io.results import Truth, result_to_dict, truth_beside, write_result_yaml
 from linelaser_calib.offline import OfflineRun, Recording, calibrate_bag
 from linelaser_calib.settings import Front, given_from_arguments, pipeline_config, render_warnings
-from linelaser_calib.summary import format_summary
+from linelaser_calib.summary import format_summary, refusal_text
 
 
 def calibrate_config(args: argparse.Namespace) -> PipelineConfig:
@@ -111,8 +117,13 @@ def run(args: argparse.Namespace) -> int:
         )
     except PairingError as exc:
         raise PairingError(
-            f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
+            refusal_text(
+                f"{exc} (Options of calibrate: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
+            )
         ) from exc
+    except (DegenerateError, ModelMismatch, SolverError) as exc:
+        exc.args = (refusal_text(str(exc)),)
+        raise
     render_warnings(run.result, Front.CLI)
     truth, note = truth_beside(args.bag)
     if note:
@@ -121,15 +132,15 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result_to_dict(run.result), indent=2))
     else:
-        print(_input_line(run))
+        inputs = [_input_line(run)]
         if args.placements:
-            print(
+            inputs.append(
                 f"  calibrated together with {len(args.placements)} more recordings "
                 f"({', '.join(args.placements)}): one hand-eye and one set of kinematic "
                 "corrections; the target, residuals and self-check below are the first "
                 "recording's"
             )
-        print(format_summary(run.result, truth))
+        print(format_summary(run.result, truth, inputs))
         for path in written:
             print(f"Wrote {path}")
     return 0

@@ -47,6 +47,7 @@ from .targets.base import (
     sample_rng,
 )
 from .types import FlangePose, Profile, Rejection, Sample
+from .verdict import no_self_check_reason
 
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
 MAX_PLAUSIBLE_DEPTH_M = 5.0
@@ -246,6 +247,7 @@ def calibrate_samples(
         The target's model does not fit the data; nothing is to be written then.
     """
     rejections = list(rejected or [])
+    recorded = len(samples) + len(rejections)
     if not samples:
         raise DegenerateError("no samples to calibrate from: collect profiles of the target first")
     target, target_config = config.target_impl, config.target_config
@@ -286,7 +288,7 @@ def calibrate_samples(
         initial_T_flange_sensor=config.initial_T_flange_sensor,
         seed=config.seed,
         rejections=rejections,
-        n_samples=len(samples),
+        n_samples=recorded,
         progress=progress,
         kinematics=config.kinematics,
         placements=others,
@@ -350,6 +352,15 @@ def calibrate_samples(
         identifiability=solution.identifiability,
         placement_sections=list(solution.placement_sections),
         measuring_centre_depth_m=measuring_centre_depth(solution.sample_fits),
+        initial_T_flange_sensor=config.initial_T_flange_sensor,
+        self_check_skipped_because=""
+        if check is not None
+        else no_self_check_reason(
+            config.method is Method.DEFAULT,
+            config.self_check_folds,
+            len(solution.samples_used),
+            solution.sigma_translation_m is not None,
+        ),
     )
 
 
@@ -441,12 +452,18 @@ def run_pipeline(
     return result
 
 
+#: History keys (``CalibrationResult.history``) of the clock offsets tried by
+#: :func:`estimate_clock_offset`, s, in increasing order, and their costs.
+OFFSET_TRIALS, OFFSET_COSTS = "clock_offset_trial_s", "clock_offset_cost"
+
+
 def estimate_clock_offset(
     profiles: list[Profile],
     poses: list[FlangePose],
     config: PipelineConfig,
     half_range_s: float = 0.05,
     tolerance_s: float = 1e-4,
+    trace: list[tuple[float, float]] | None = None,
 ) -> float:
     """The clock offset (s) between profile and pose stamps that fits the target best.
 
@@ -456,7 +473,8 @@ def estimate_clock_offset(
     points, robot pose error modelled) is evaluated at offsets within ``half_range_s`` of
     ``config.pairing.clock_offset_s``: a grid of 11, then a golden-section search to
     ``tolerance_s``. The features are extracted once. Where the cost is flat (step-and-shoot:
-    the flange stands still at every profile) the configured offset is returned.
+    the flange stands still at every profile) the configured offset is returned. ``trace``,
+    when given, receives every (offset in s, cost) evaluated, for a figure.
 
     Raises
     ------
@@ -488,9 +506,14 @@ def estimate_clock_offset(
     def cost(offset_s: float) -> float:
         shift = round(offset_s * NS_PER_S)
         found = [buffer.pose_at(f.stamp_ns + shift, tolerance_ns) for f in features]
-        if any(isinstance(T, str) for T in found):
-            return float("inf")
-        return cost_of_poses(np.stack(found))
+        value = (
+            float("inf")
+            if any(isinstance(T, str) for T in found)
+            else float(cost_of_poses(np.stack(found)))
+        )
+        if trace is not None:
+            trace.append((offset_s, value))
+        return value
 
     grid = np.linspace(start - half_range_s, start + half_range_s, 11)
     costs = np.array([cost(float(t)) for t in grid])

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from .types import FloatArray, Rejection, SampleFit
+from .types import FloatArray, Rejection, SampleFit, Verdict
 
 if TYPE_CHECKING:
     from .robot.joint_calibration import KinematicIdentifiability
@@ -69,6 +69,14 @@ class CalibrationResult:
     measuring_centre_depth_m : float or None
         Mean depth (sensor z, m) of the used profile points: the measuring centre (0, 0, z_c)
         of the sensor frame, where the hand-eye's 1σ is also given.
+    initial_T_flange_sensor : ndarray, shape (4, 4), or None
+        The initial hand-eye the calibration started from (``--initial``), when given: the
+        summary says how far it was corrected (not written to result files).
+    self_check_skipped_because : str
+        Why no self-check ran (empty when one did, or when not known, e.g. read from a file).
+    verdict : Verdict or None
+        The verdict (:mod:`linelaser_calib.core.verdict`), once judged with every warning in
+        (``settings.render_warnings``) or as read from a result file; None before.
     """
 
     T_flange_sensor: FloatArray
@@ -95,3 +103,6 @@ class CalibrationResult:
     self_check: SelfCheck | None = None
     placement_sections: list[ResultSection] = field(default_factory=list)
     measuring_centre_depth_m: float | None = None
+    initial_T_flange_sensor: FloatArray | None = None
+    self_check_skipped_because: str = ""
+    verdict: Verdict | None = None

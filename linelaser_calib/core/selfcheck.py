@@ -82,7 +82,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -727,6 +727,74 @@ def _halves(
     return np.abs(difference), np.sqrt(sigma_a**2 + sigma_b**2)
 
 
+class Evidence(NamedTuple):
+    """A statistic that can mark the robot's error systematic: its name and value in a few
+    words, whether it is beyond its false-alarm limit, and what that shows, in words."""
+
+    name: str
+    value: str
+    shown: bool
+    text: str
+
+
+def systematic_evidence(check: SelfCheck) -> list[Evidence]:
+    """Each statistic the self-check tests for a systematic robot error (those it has), with
+    whether it is beyond its limit."""
+    out = []
+    if check.region_offset_p is not None:
+        out.append(
+            Evidence(
+                "regions' offsets",
+                f"p = {check.region_offset_p:.1e}",
+                check.region_offset_p < REGION_FALSE_ALARM / 2,
+                "regions of the workspace are off by more than their poses' spread explains "
+                f"(analysis of variance, p = {check.region_offset_p:.1e})",
+            )
+        )
+    out.append(
+        Evidence(
+            "neighbour correlation",
+            f"{check.neighbour_correlation:.2f}",
+            check.neighbour_correlation > neighbour_limit(len(check.indices)),
+            "neighbouring poses are off alike (correlation "
+            f"{check.neighbour_correlation:.2f} of their held-out offsets)",
+        )
+    )
+    if check.region_ratio is not None:
+        out.append(
+            Evidence(
+                "region dispersion",
+                f"{check.region_ratio:.1f}x the noise model's",
+                check.region_ratio > region_limit(check.regions - 1),
+                f"the hand-eye moves {check.region_ratio:.1f} times more when one region of "
+                "the workspace is left out than the noise model predicts",
+            )
+        )
+    if check.halves_model_sigmas is not None:
+        halves = float(np.max(check.halves_model_sigmas))
+        out.append(
+            Evidence(
+                "halves",
+                f"{halves:.1f} combined sigma of the noise model",
+                halves > HALVES_LIMIT_SIGMAS,
+                f"the even and odd halves differ by up to {halves:.1f} combined sigma of the "
+                "noise model",
+            )
+        )
+    if check.robot_excess is not None:
+        out.append(
+            Evidence(
+                "arm error",
+                f"{check.robot_excess:.1f}x its stated repeatability",
+                check.robot_excess > ROBOT_PRIOR_EXCESS,
+                f"the arm errs {check.robot_excess:.1f} times more from pose to pose than its "
+                "stated repeatability ({setting:robot_sigma_t_m}, {setting:robot_sigma_r_rad}): "
+                "an error beyond repeatability depends on where the arm is",
+            )
+        )
+    return out
+
+
 def _warnings(check: SelfCheck) -> list[str]:
     """The self-check's warnings in plain words (mm, degrees)."""
     out = []
@@ -734,36 +802,7 @@ def _warnings(check: SelfCheck) -> list[str]:
         factor_t = float(np.max(check.sigma_honest[3:] / check.sigma_model[3:]))
         factor_r = float(np.max(check.sigma_honest[:3] / check.sigma_model[:3]))
         evidence = [f"the held-out profiles are off by {check.offset_rms_m * 1e3:.3f} mm RMS"]
-        if check.region_offset_p is not None and check.region_offset_p < REGION_FALSE_ALARM / 2:
-            evidence.append(
-                "regions of the workspace are off by more than their poses' spread explains "
-                f"(analysis of variance, p = {check.region_offset_p:.1e})"
-            )
-        if check.neighbour_correlation > neighbour_limit(len(check.indices)):
-            evidence.append(
-                "neighbouring poses are off alike (correlation "
-                f"{check.neighbour_correlation:.2f} of their held-out offsets)"
-            )
-        if check.region_ratio is not None and check.region_ratio > region_limit(check.regions - 1):
-            evidence.append(
-                f"the hand-eye moves {check.region_ratio:.1f} times more when one region of "
-                "the workspace is left out than the noise model predicts"
-            )
-        if (
-            check.halves_model_sigmas is not None
-            and np.max(check.halves_model_sigmas) > HALVES_LIMIT_SIGMAS
-        ):
-            evidence.append(
-                "the even and odd halves differ by up to "
-                f"{float(np.max(check.halves_model_sigmas)):.1f} combined sigma of the noise "
-                "model"
-            )
-        if check.robot_excess is not None and check.robot_excess > ROBOT_PRIOR_EXCESS:
-            evidence.append(
-                f"the arm errs {check.robot_excess:.1f} times more from pose to pose than its "
-                "stated repeatability ({setting:robot_sigma_t_m}, {setting:robot_sigma_r_rad}): "
-                "an error beyond repeatability depends on where the arm is"
-            )
+        evidence += [item.text for item in systematic_evidence(check) if item.shown]
         basis = (
             "the spread of the hand-eye over the regions left out"
             if check.sigma_region is not None

@@ -6,6 +6,7 @@ All arrays are float64 in SI units (metres, radians); stamps are integer nanosec
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import Enum
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -122,3 +123,43 @@ class SampleFit:
     T_base_flange: FloatArray
     points: FloatArray
     feature_xz: FloatArray
+
+
+class Level(str, Enum):
+    """How far a result can be trusted, best first."""
+
+    GOOD = "good"
+    USE_WITH_CARE = "use_with_care"
+    DO_NOT_USE = "do_not_use"
+
+    @property
+    def words(self) -> str:
+        """The level in words (``use with care``)."""
+        return self.value.replace("_", " ")
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The verdict on a calibration (the result file's ``quality.verdict``).
+
+    Attributes
+    ----------
+    level : Level
+    reason : str
+        The one reason that decides it.
+    next_step : str
+        The one thing to do next.
+    accuracy_in_use_m : float or None
+        The self-check's accuracy in use, m, beside the verdict; None when not measured.
+    not_measured_because : str
+        Why there is no accuracy in use (empty when there is one).
+    warning_ids : tuple of str
+        The stable id of each of the result's warnings, in their order.
+    """
+
+    level: Level
+    reason: str
+    next_step: str
+    accuracy_in_use_m: float | None = None
+    not_measured_because: str = ""
+    warning_ids: tuple[str, ...] = ()

@@ -14,7 +14,8 @@ The result file layout (the README's "Result file")::
         measuring_centre_m: [0, 0, z_c]   # sensor frame: the used points' mean depth
         at_measuring_centre_m: [sx, sy, sz]   # of that point, flange axes
     cylinder: {frame: base_link, point: [x, y, z], direction: [x, y, z], radius: r}
-    quality: {method: ..., samples_used: N, samples_rejected: [...], rms_residual_m: ...,
+    quality: {verdict: {level: good|use_with_care|do_not_use, reason, next_step, warnings: [ids]},
+              method: ..., samples_used: N, samples_rejected: [...], rms_residual_m: ...,
               warnings: [...], accuracy_in_use_m: ..., accuracy_in_use: {...}, self_check: {...}}
 
 The target's section (``cylinder`` above; ``known_point``, ...) is the target's own: its
@@ -58,7 +59,8 @@ from linelaser_calib.core.robot.kinematics import KinematicCorrections
 from linelaser_calib.core.selfcheck import sigma_at_point
 from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
-from linelaser_calib.core.types import Rejection
+from linelaser_calib.core.types import Level, Rejection, Verdict
+from linelaser_calib.core.verdict import verdict_of
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.hand_eye import (
     check_translation,
@@ -193,9 +195,43 @@ def _measuring_centre(result: CalibrationResult) -> dict[str, list[float]]:
     }
 
 
+def _verdict_section(verdict: Verdict) -> dict[str, Any]:
+    """``quality.verdict``: level, the deciding reason, the next step and the warnings' ids
+    (the accuracy in use and why it is missing are in ``quality.accuracy_in_use*``)."""
+    return {
+        "level": verdict.level.value,
+        "reason": verdict.reason,
+        "next_step": verdict.next_step,
+        "warnings": list(verdict.warning_ids),
+    }
+
+
+def _read_verdict(quality: _Fields) -> Verdict | None:
+    """``quality.verdict`` with the accuracy in use beside it; None in a file without one."""
+    if not quality.has("verdict"):
+        return None
+    section = quality.section("verdict")
+    level = section.text("level")
+    if level not in {item.value for item in Level}:
+        raise section._error(
+            "level", f"must be one of {', '.join(item.value for item in Level)}, got {level!r}"
+        )
+    accuracy = quality.data.get("accuracy_in_use")
+    why = accuracy.get("not_measured_because") if isinstance(accuracy, dict) else None
+    return Verdict(
+        Level(level),
+        section.text("reason"),
+        section.text("next_step"),
+        quality.number("accuracy_in_use_m") if quality.has("accuracy_in_use_m") else None,
+        why if isinstance(why, str) else "",
+        tuple(str(i) for i in section.items("warnings")),
+    )
+
+
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     """The result in the contract layout (plain lists and numbers), for YAML and JSON."""
     unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
+    verdict = verdict_of(result)
     hand_eye = _hand_eye_section(result.T_flange_sensor, result.parent_frame, result.child_frame)
     hand_eye["uncertainty"] = (
         None
@@ -210,6 +246,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
         "hand_eye": hand_eye,
         **_target_section(result.target, result.base_frame),
         "quality": {
+            "verdict": _verdict_section(verdict),
             "method": result.method,
             "samples_used": len(result.samples_used),
             "samples_rejected": [
@@ -224,7 +261,14 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             "rms_residual_m": float(result.rms_residual_m),
             "warnings": [str(w) for w in result.warnings],
             **_plain(result.target.quality_entries()),
-            **({} if result.self_check is None else result.self_check.quality_entries()),
+            **(
+                {
+                    "accuracy_in_use_m": None,
+                    "accuracy_in_use": {"not_measured_because": verdict.not_measured_because},
+                }
+                if result.self_check is None
+                else result.self_check.quality_entries()
+            ),
             "clock_offset_s": float(result.clock_offset_s),
             "clock_offset_estimated": bool(result.clock_offset_estimated),
             **{
@@ -598,6 +642,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
             else None
         ),
         warnings=[str(w) for w in quality.items("warnings")],
+        verdict=_read_verdict(quality),
         parent_frame=parent_frame,
         child_frame=child_frame,
         base_frame=base_frame,

@@ -648,12 +648,12 @@ class CalibrationServiceNode(Node):
                 result = calibrate_samples(samples, pipeline_config(p, self._warn))
         except CalibrationError as err:
             return False, str(err)
-        render_warnings(result, Front.NODE)
         result.parent_frame = p["flange_frame"]
         result.child_frame = p["sensor_frame"]
         result.base_frame = p["base_frame"]
         if len(self._clock_offset) == 4:
             add_live_clock_offset(result, *self._clock_offset[:3])
+        render_warnings(result, Front.NODE)
         summary = one_line_summary(result, len(samples)) + kinematics_summary(result)
         self._self_check = self_check_rows(result, Front.NODE)
         self._last_result = result

@@ -25,6 +25,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from linelaser_calib.core.geometry import FloatArray, orthonormal_basis
+from linelaser_calib.core.pipeline import OFFSET_COSTS, OFFSET_TRIALS
 from linelaser_calib.core.planning import SigmaPoint
 from linelaser_calib.core.targets.base import Shape, feature_residuals
 from linelaser_calib.report.data import ReportData
@@ -61,6 +62,26 @@ def _profile_axis(ax: Axes, text: str = "profile index") -> None:
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
 
 
+def _mark_rejected(ax: Axes, data: ReportData) -> None:
+    """Mark each rejected profile (x at the foot of the axes) so that it is no silent gap,
+    and widen the profile axis to hold them and the used ones."""
+    rejected = np.array([r.index for r in data.result.samples_rejected], dtype=np.intp)
+    if not len(rejected):
+        return
+    ax.scatter(
+        rejected,
+        np.full(len(rejected), 0.03),
+        transform=ax.get_xaxis_transform(),
+        marker="x",
+        s=18,
+        color="tab:red",
+        label=f"rejected ({len(rejected)}; reasons in the Samples section)",
+    )
+    every = np.concatenate([data.indices, rejected])
+    ax.set_xlim(float(every.min()) - 1.0, float(every.max()) + 1.0)
+    _legend_above(ax)
+
+
 def feature_distance_figure(data: ReportData) -> Figure:
     """Stem plot of each sample's feature residual (e.g. ellipse centre to axis), µm."""
     fig = _figure(3.6)
@@ -74,6 +95,7 @@ def feature_distance_figure(data: ReportData) -> Figure:
         ax.set_ylim(bottom=0.0)
     else:
         _no_data(ax, "no fitted samples")
+    _mark_rejected(ax, data)
     _profile_axis(ax)
     ax.set_ylabel("distance, µm")
     ax.grid(True, alpha=0.3)
@@ -107,6 +129,8 @@ def sample_residual_figure(data: ReportData) -> Figure:
         ax.axhline(rms, color="tab:red", lw=1, ls="--", label=f"RMS {rms:.1f} µm")
         _legend_above(ax)
         ax.set_ylim(bottom=0.0)
+    if residuals:
+        _mark_rejected(ax, data)
     if data.per_point:
         ax.set_xlabel("profile index (box: quartiles, whiskers: 5 % to 95 %)")
         ax.set_ylabel("point to surface, µm (+ outside)")
@@ -142,7 +166,7 @@ def _draw_shape(ax: Any, shape: Shape) -> FloatArray:
         return np.asarray(surface.reshape(-1, 3), dtype=np.float64)
     if shape.kind == "line":
         for start, end in points.reshape(-1, 2, 3):
-            ax.plot(*np.stack([start, end]).T, color=color, lw=2.0)
+            ax.plot(*np.stack([start, end]).T, color="tab:red", lw=3.0, zorder=10)
         return points
     ax.scatter(
         points[:, 0],
@@ -165,20 +189,30 @@ def profiles_3d_figure(data: ReportData) -> Figure:
     bounds = []
     if data.points_base:
         per_sample = max(1, MAX_3D_POINTS // len(data.points_base))
-        for j, points in enumerate(data.points_base):
-            shown = points[:: max(1, int(np.ceil(len(points) / per_sample)))] * 1e3
-            ax.scatter(*shown.T, s=2, color=matplotlib.colormaps["tab20"](j % 20), depthshade=False)
-            bounds.append(shown)
+        shown = [p[:: max(1, int(np.ceil(len(p) / per_sample)))] * 1e3 for p in data.points_base]
+        index = np.concatenate(
+            [np.full(len(p), i) for p, i in zip(shown, data.indices, strict=True)]
+        )
+        points = ax.scatter(
+            *np.concatenate(shown).T, s=1, c=index, cmap="cividis", alpha=0.5, depthshade=False
+        )
+        fig.colorbar(points, ax=ax, shrink=0.6, label="profile index")
+        bounds += shown
     for shape in data.result.target.shapes(data.all_points_base):
         bounds.append(_draw_shape(ax, shape))
     corners = np.concatenate(bounds) if bounds else np.zeros((1, 3))
-    half = max(0.5 * float(np.max(np.ptp(corners, axis=0))), 1.0)
+    # Each axis spans its data (at least a tenth of the widest), one mm as long on all three:
+    # a flat sweep gives a flat box, not a cube mostly empty.
+    span = np.ptp(corners, axis=0)
+    span = np.maximum(span, max(0.1 * float(np.max(span)), 1.0)) * 1.05
     middle = 0.5 * (corners.min(axis=0) + corners.max(axis=0))
-    ax.set_xlim(middle[0] - half, middle[0] + half)
-    ax.set_ylim(middle[1] - half, middle[1] + half)
-    ax.set_zlim(middle[2] - half, middle[2] + half)
+    ax.set_xlim(middle[0] - span[0] / 2, middle[0] + span[0] / 2)
+    ax.set_ylim(middle[1] - span[1] / 2, middle[1] + span[1] / 2)
+    ax.set_zlim(middle[2] - span[2] / 2, middle[2] + span[2] / 2)
     # Zoomed out a little so that the z label, drawn outside the box, stays in the figure.
-    ax.set_box_aspect((1.0, 1.0, 1.0), zoom=0.85)
+    ax.set_box_aspect(tuple(span / np.max(span)), zoom=0.85)
+    for axis, length in zip((ax.xaxis, ax.yaxis, ax.zaxis), span / np.max(span), strict=True):
+        axis.set_major_locator(MaxNLocator(max(2, round(7 * float(length)))))
     frame = data.result.base_frame
     ax.set_xlabel(f"x ({frame}), mm")
     ax.set_ylabel(f"y ({frame}), mm")
@@ -271,26 +305,27 @@ def _plot_traces(ax: Axes, traces: list[tuple[str, list[float]]], scale: float) 
     """Plot convergence traces (values times ``scale``) against their iteration.
 
     The axis is logarithmic when the positive values span at least :data:`LOG_SCALE_RATIO`
-    (non-positive values are then left out), linear otherwise. Returns False when no trace
-    has a value.
+    (non-positive values are then left out). Otherwise each trace is drawn as its change from
+    its final value, which its legend states: a cost that changes by 1e-4 of itself is then
+    readable. Returns True for a logarithmic axis, False for changes from the final value.
     """
     arrays = [(label, np.asarray(v, dtype=np.float64) * scale) for label, v in traces if len(v)]
-    if not arrays:
-        return False
     values = np.concatenate([y for _, y in arrays])
     positive = values[values > 0.0]
     log = len(positive) > 0 and positive.max() >= LOG_SCALE_RATIO * positive.min()
     for label, y in arrays:
-        ax.plot(
-            np.arange(len(y)), np.where(y > 0.0, y, np.nan) if log else y, ".-", lw=1.2, label=label
-        )
+        if log:
+            ax.plot(np.arange(len(y)), np.where(y > 0.0, y, np.nan), ".-", lw=1.2, label=label)
+        else:
+            ax.plot(
+                np.arange(len(y)), y - y[-1], ".-", lw=1.2, label=f"{label} (final {y[-1]:.6g})"
+            )
     if log:
         ax.set_yscale("log")
     else:
-        ax.ticklabel_format(axis="y", useOffset=False)
-    if len(arrays) > 1:
-        ax.legend(loc="best", fontsize="small", framealpha=0.8)
-    return True
+        ax.axhline(0.0, color="0.3", lw=0.8)
+    ax.legend(loc="best", fontsize="small", framealpha=0.8)
+    return log
 
 
 @dataclass(frozen=True)
@@ -351,7 +386,7 @@ def convergence_figure(data: ReportData) -> Figure:
     axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
     for ax, panel in zip(axes, panels, strict=True):
         traces = [(label, history.get(key, [])) for key, label in panel.traces]
-        _plot_traces(ax, traces, panel.scale)
+        log = _plot_traces(ax, traces, panel.scale)
         violation = [v for v in history.get(panel.violation, []) if v > 0.0]
         if violation:
             twin = ax.twinx()
@@ -359,7 +394,7 @@ def convergence_figure(data: ReportData) -> Figure:
             twin.set_ylabel("constraint violation ‖h‖ (dotted), dimensionless")
         ax.set_title(panel.title, loc="left")
         ax.set_xlabel(panel.xlabel)
-        ax.set_ylabel(panel.ylabel)
+        ax.set_ylabel(panel.ylabel if log else f"change from the final,\n{panel.ylabel}")
         ax.grid(True, which="both", alpha=0.3)
     return fig
 
@@ -369,7 +404,8 @@ def convergence_caption(data: ReportData) -> str:
     history = data.result.history
     parts = [
         "Each solver stage's trace per iteration; traces spanning a factor of 10 or more are "
-        "drawn on a log scale."
+        "drawn on a log scale, flatter ones as their change from the final value (given in "
+        "the legend)."
     ]
     if history.get("galm_phi"):
         parts.append(
@@ -386,6 +422,30 @@ def convergence_caption(data: ReportData) -> str:
             "within the acceptance bound, so the seed was taken from it."
         )
     return " ".join(parts)
+
+
+def clock_offset_figure(data: ReportData) -> Figure:
+    """The clock offsets the estimate tried against the target's cost, ms, with the chosen
+    one (the cost on a log axis where it spans a factor of 10, else as its change from the
+    lowest)."""
+    result = data.result
+    fig = _figure(3.4)
+    ax = fig.add_subplot()
+    offsets = np.asarray(result.history.get(OFFSET_TRIALS, []), dtype=np.float64) * 1e3
+    costs = np.asarray(result.history.get(OFFSET_COSTS, []), dtype=np.float64)
+    lowest = float(costs.min())
+    if lowest > 0.0 and float(costs.max()) >= LOG_SCALE_RATIO * lowest:
+        ax.semilogy(offsets, costs, ".-", lw=1.0, label="tried")
+        ax.set_ylabel("target cost, dimensionless")
+    else:
+        ax.plot(offsets, costs - lowest, ".-", lw=1.0, label=f"tried (lowest {lowest:.6g})")
+        ax.set_ylabel("target cost − lowest, dimensionless")
+    chosen = result.clock_offset_s * 1e3
+    ax.axvline(chosen, color="tab:red", lw=1.2, ls="--", label=f"estimate {chosen:+.2f} ms")
+    ax.set_xlabel("clock offset added to the profile stamps, ms")
+    ax.grid(True, alpha=0.3)
+    _legend_above(ax)
+    return fig
 
 
 @dataclass(frozen=True)
@@ -429,8 +489,9 @@ def figures_of(data: ReportData) -> list[FigureSpec]:
         FigureSpec(
             "profiles_3d.png",
             f"Profiles and the {title} in the base frame",
-            "T_base_flange · T_flange_sensor · p for every point the fit used, one colour per "
-            f"sample, with the fitted {title} (grey wireframe, or coloured line or star).",
+            "T_base_flange · T_flange_sensor · p for every point the fit used, coloured by "
+            f"profile index, with the fitted {title} (grey wireframe, red line or star); one mm "
+            "is as long on every axis.",
             profiles_3d_figure,
         )
     )
@@ -458,6 +519,18 @@ def figures_of(data: ReportData) -> list[FigureSpec]:
                 "neighbours stay in the solve; only a consistency check, it does not see an "
                 "error that neighbouring poses share.",
                 self_check_figure,
+            )
+        )
+    if data.result.clock_offset_estimated and data.result.history.get(OFFSET_TRIALS):
+        specs.append(
+            FigureSpec(
+                "clock_offset.png",
+                "Clock offset estimate",
+                "The target's cost with the profiles paired at each clock offset tried (a grid, "
+                "then a golden-section search about its best): a clear minimum is a well "
+                "determined offset; a flat curve means the flange stood still and no offset can "
+                "be seen.",
+                clock_offset_figure,
             )
         )
     if _panels(data.result.history):

@@ -21,20 +21,22 @@ import numpy as np
 
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.base import feature_residuals
+from linelaser_calib.core.verdict import verdict_of, warning_kind
 from linelaser_calib.io.results import Truth
 from linelaser_calib.report.data import ReportData, report_data
 from linelaser_calib.report.errors import ReportError
 from linelaser_calib.summary import (
     Rows,
-    accuracy_in_use_line,
     hand_eye_rows,
     headline_rows,
     rejection_lines,
     residual_kind,
     residual_rows,
+    samples_line,
     self_check_rows,
     target_text,
     truth_rows,
+    warning_reference,
 )
 
 INDEX = "index.html"
@@ -52,7 +54,8 @@ td { font-family: ui-monospace, monospace; }
            margin: 0.4em 0; }
 .ok { color: #2a7a2a; }
 .verdict { font-size: 1.05em; border: 2px solid #2a7a2a; padding: 0.4em 0.8em; }
-.verdict.warn { border-color: #e69500; background: #fff4e0; }
+.verdict.use_with_care { border-color: #e69500; background: #fff4e0; }
+.verdict.do_not_use { border-color: #b00020; background: #fde8ea; }
 figure { margin: 1em 0; }
 figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 0.9em; color: #555; }
@@ -78,6 +81,16 @@ def _table(rows: Rows) -> str:
 
 def _items(lines: list[str], css: str = "") -> str:
     return "".join(f'<div class="{css}">{html.escape(line)}</div>' for line in lines)
+
+
+def _warnings(result: CalibrationResult) -> str:
+    """Each warning's whole text, headed by its stable id, which is also its paragraph's
+    anchor in the warnings guide."""
+    return "".join(
+        f'<div class="warning"><b>{html.escape(warning_kind(text).id)}</b> '
+        f"({html.escape(warning_reference(k, text))}): {html.escape(text)}</div>"
+        for k, text in enumerate(result.warnings)
+    )
 
 
 def _residual_rows(result: CalibrationResult, data: ReportData) -> Rows:
@@ -116,14 +129,13 @@ def _page(
 ) -> str:
     """The HTML text; ``figures`` holds (file, title, caption) of the written PNGs."""
     method = "maximum likelihood (default)" if result.method == "default" else result.method
-    accuracy = accuracy_in_use_line(result)
     header: Rows = [
         ("target", result.target.title),
         *inputs,
         ("method", method),
         ("created", created.isoformat(timespec="seconds")),
     ]
-    state = "warn" if result.warnings else "pass"
+    state = verdict_of(result).level.value
     title = result.target.title
     parts = [
         "<!DOCTYPE html>",
@@ -131,7 +143,6 @@ def _page(
         f"<title>linelaser_calib report: {html.escape(title)} target</title>",
         f"<style>{_STYLE}</style></head><body>",
         f"<h1>Line-laser hand-eye calibration: {html.escape(title)} target</h1>",
-        *([] if accuracy is None else [f'<p class="accuracy">{html.escape(accuracy)}</p>']),
         f'<div class="verdict {state}">{_table(headline_rows(result))}</div>',
         _table(header),
         f"<h2>Hand-eye T_flange_sensor ({html.escape(result.parent_frame)} &rarr; "
@@ -140,16 +151,15 @@ def _page(
         f"<h2>The {html.escape(title)} and the residuals</h2>",
         f"<p>{html.escape(target_text(result))}</p>",
         _table(_residual_rows(result, data)),
-        *(
-            ["<h2>Self-check</h2>", _table(self_check_rows(result))]
-            if result.self_check is not None
-            else []
-        ),
+        "<h2>Self-check</h2>",
+        _table(self_check_rows(result))
+        if result.self_check is not None
+        else f"<p>not run: {html.escape(result.self_check_skipped_because or 'unknown')}</p>",
         "<h2>Samples</h2>",
-        f"<p>{len(result.samples_used)} used, {len(result.samples_rejected)} rejected.</p>",
+        f"<p>{html.escape(samples_line(result))}.</p>",
         _items(rejection_lines(result)),
         "<h2>Warnings</h2>",
-        _items(result.warnings, "warning") if result.warnings else '<p class="ok">none</p>',
+        _warnings(result) if result.warnings else '<p class="ok">none</p>',
     ]
     if truth is not None:
         parts += ["<h2>Error against truth</h2>", _table(truth_rows(result, truth))]

@@ -326,7 +326,8 @@ class SolveContext:
     rejections : list of Rejection
         Earlier rejections (pairing, features), for error messages.
     n_samples : int
-        Samples handed to the target (before feature extraction).
+        Profiles recorded: those handed to the target (before feature extraction) and those
+        rejected before (pairing), for the counts of error messages.
     progress : callable
     kinematics : KinematicSetup or None
         The robot model and joint states: the default method then estimates the
@@ -662,6 +663,19 @@ def extract_each(
     return features, rejections
 
 
+#: The kind of every profile rejected because the robot moved (:func:`rejection_kind`).
+MOVING_KIND = "pairing: robot moving or turning during the profile"
+
+
+def rejection_kind(rejection: Rejection) -> str:
+    """``stage: reason`` without the reason's numbers (its words up to a parenthesis or a
+    colon), so that rejections of one kind are counted together; every profile rejected
+    because the robot moved is :data:`MOVING_KIND`."""
+    if rejection.stage == "pairing" and rejection.reason.startswith(MOVING_REASONS):
+        return MOVING_KIND
+    return f"{rejection.stage}: {rejection.reason.split(' (')[0].split(':')[0]}"
+
+
 def rejection_digest(rejections: Sequence[Rejection], *, advise_motion: bool = True) -> str:
     """'Rejected: 3 x stage: reason; ...' (the four most common), for error messages.
 
@@ -674,11 +688,8 @@ def rejection_digest(rejections: Sequence[Rejection], *, advise_motion: bool = T
     counts: dict[str, int] = {}
     moving = 0
     for r in rejections:
-        if r.stage == "pairing" and r.reason.startswith(MOVING_REASONS):
-            moving += 1
-            key = f"{r.stage}: robot moving or turning during the profile"
-        else:
-            key = f"{r.stage}: {r.reason.split(' (')[0].split(':')[0]}"
+        key = rejection_kind(r)
+        moving += key == MOVING_KIND
         counts[key] = counts.get(key, 0) + 1
     top = sorted(counts.items(), key=lambda kv: -kv[1])[:4]
     digest = "Rejected: " + "; ".join(f"{n} x {k}" for k, n in top) + ". "
@@ -700,6 +711,11 @@ def plain_floats(values: Any) -> list[float]:
 def mm_text(values: Any) -> str:
     """``[+1.000, ...] mm`` from lengths in m."""
     return "[" + ", ".join(f"{v * 1e3:+.3f}" for v in np.ravel(values)) + "] mm"
+
+
+def direction_text(values: Any) -> str:
+    """``[+0.00000, ...]`` of a unit vector (no unit)."""
+    return "[" + ", ".join(f"{v:+.5f}" for v in np.ravel(values)) + "]"
 
 
 def read_vector(mapping: Mapping[str, Any], key: str) -> FloatArray:

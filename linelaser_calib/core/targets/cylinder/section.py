@@ -13,7 +13,7 @@ from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
 from ...profile.noise import LineNoise
 from ...types import SampleFit
-from ..base import Shape, SurfaceMap, mm_text, plain_floats, read_vector
+from ..base import Shape, SurfaceMap, direction_text, mm_text, plain_floats, read_vector
 from .model import Cylinder
 from .problem import measured_to_true
 from .residuals import axis_extent, cylinder_coordinates, sample_centre_distances
@@ -113,9 +113,7 @@ class CylinderSection:
         c = self.cylinder
         return (
             f"Cylinder in {base_frame}: point {mm_text(c.point)}, direction "
-            + "["
-            + ", ".join(f"{v:+.5f}" for v in c.direction)
-            + f"], radius {c.radius * 1e3:.3f} mm"
+            f"{direction_text(c.direction)}, radius {c.radius * 1e3:.3f} mm"
             + (" (estimated)" if self.radius_estimated else " (given)")
             + (
                 ""

@@ -250,7 +250,8 @@ class CylinderTarget:
                     "falls across the cylinder within the measuring range."
                 )
             raise DegenerateError(
-                f"only {len(features)} of {context.n_samples} profiles gave a usable ellipse, "
+                f"only {len(features)} of {context.n_samples} recorded profiles gave a usable "
+                "ellipse, "
                 f"and at least {config.min_samples} are needed. "
                 + rejection_digest(context.rejections, advise_motion=not another_target)
                 + advice
@@ -288,7 +289,8 @@ class CylinderTarget:
         used = long_arcs(features)
         if len(used) < config.min_samples:
             raise DegenerateError(
-                f"only {len(used)} of {context.n_samples} profiles show an arc long enough "
+                f"only {len(used)} of {context.n_samples} recorded profiles show an arc long "
+                "enough "
                 f"for its centre ({math.degrees(config.ellipse.min_arc_coverage_rad):.0f} deg "
                 f"or more), and the paper's method needs {config.min_samples}; "
                 f"{len(features) - len(used)} more show short arcs, whose points the default "

@@ -52,7 +52,7 @@ class KnownPoint:
 
     def describe(self, base_frame: str) -> str:
         """The point (mm), taught or estimated with its 1σ."""
-        text = f"Known point in {base_frame}: {mm_text(self.point)}"
+        text = f"Known point in {base_frame}: point {mm_text(self.point)}"
         if self.estimated and self.sigma_m is not None:
             return text + f" (estimated, 1 sigma {mm_text(self.sigma_m)})"
         return text + (" (estimated)" if self.estimated else " (taught)")

@@ -229,7 +229,7 @@ def _check_count(
 ) -> None:
     if len(corners) < min_samples:
         raise DegenerateError(
-            f"only {len(corners)} of {n_samples} profiles show a weld-seam corner, "
+            f"only {len(corners)} of {n_samples} recorded profiles show a weld-seam corner, "
             f"and at least {min_samples} are needed. "
             + rejection_digest(rejections)
             + "Aim the laser line across the seam through the taught point, both flanks in view."

@@ -9,7 +9,7 @@ import numpy as np
 
 from ...geometry import FloatArray, apply_transform
 from ...types import SampleFit
-from ..base import Shape, plain_floats
+from ..base import Shape, direction_text, mm_text, plain_floats
 from .model import Line
 
 
@@ -57,10 +57,9 @@ class LineSection:
 
     def describe(self, base_frame: str) -> str:
         """One line, mm."""
-        p, d = self.line.point * 1e3, self.line.direction
         return (
-            f"seam line ({base_frame}): through ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) mm "
-            f"along ({d[0]:+.4f}, {d[1]:+.4f}, {d[2]:+.4f})"
+            f"Seam line in {base_frame}: point {mm_text(self.line.point)} (nearest the base "
+            f"origin), direction {direction_text(self.line.direction)}"
         )
 
     def residual_kind(self, method: str) -> str:

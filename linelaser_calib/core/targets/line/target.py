@@ -116,7 +116,8 @@ def _solution(
 def _require(features: list[CornerSample], config: LineConfig, context: SolveContext) -> None:
     if len(features) < config.min_samples:
         raise DegenerateError(
-            f"only {len(features)} of {context.n_samples} profiles show a seam corner, and at "
+            f"only {len(features)} of {context.n_samples} recorded profiles show a seam corner, "
+            "and at "
             f"least {config.min_samples} are needed. "
             + rejection_digest(context.rejections)
             + "Sweep the laser line across the seam along its length, both flanks in view."

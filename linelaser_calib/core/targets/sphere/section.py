@@ -11,7 +11,7 @@ import numpy as np
 from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
 from ...types import SampleFit
-from ..base import Shape, SurfaceMap, plain_floats, read_vector
+from ..base import Shape, SurfaceMap, mm_text, plain_floats, read_vector
 from .model import SIDE_LABELS, side_from_label
 
 
@@ -91,9 +91,8 @@ class SphereSection:
 
     def describe(self, base_frame: str) -> str:
         """One line: centre and radius in mm, side."""
-        x, y, z = (v * 1e3 for v in self.centre_m)
         return (
-            f"sphere centre ({x:.3f}, {y:.3f}, {z:.3f}) mm in {base_frame}, radius "
+            f"Sphere in {base_frame}: centre {mm_text(self.centre_m)}, radius "
             f"{self.radius_m * 1e3:.3f} mm ({'estimated' if self.radius_estimated else 'given'})"
             f", centre on the sensor's {SIDE_LABELS[self.centre_side]} side "
             f"({'from the data' if self.side_estimated else 'given'})"
