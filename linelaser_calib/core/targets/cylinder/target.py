@@ -25,7 +25,10 @@ naming what it shows. A cylinder's cut is an ellipse whose semi-minor axis is th
 every view, but a short arc leaves that axis uncertain, so the radius is judged by the joint
 fit of all profiles: its point residual stays near what each profile's own free ellipse
 leaves (the recording's scale); scans of a sphere (circles of varying radius) leave many
-times more.
+times more. Which target the recording shows is decided on the whole recording
+(:mod:`..rivals`): where the fit is in doubt (that residual, a robot error far beyond the
+prior, no convergence) the sphere's full fit with the poses is made, and the recording is
+refused naming it only when it explains the points clearly better.
 """
 
 from __future__ import annotations
@@ -203,6 +206,8 @@ class CylinderTarget:
     planner = CylinderPlanner()
     #: Whether another placement would determine more of the robot's kinematics.
     placement_adviser = CylinderPlacementAdviser()
+    #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
+    rivals = ("sphere",)
 
     def validate(
         self, sample: Sample, config: CylinderConfig, rng: np.random.Generator
@@ -429,6 +434,7 @@ class CylinderTarget:
             identifiability=None if outcome is None else outcome.identifiability,
             placement_sections=[CylinderSection(p.cylinder, p.radius_estimated) for p in placed],
             sigma_widening=widening(refined.sample_dispersion),
+            converged=refined.converged,
             robot_error=RobotError(
                 config.refine.robot_sigma_t_m * refined.robot_sigma_scale,
                 config.refine.robot_sigma_r_rad * refined.robot_sigma_scale,
@@ -497,8 +503,7 @@ class CylinderTarget:
         factor = PAPER_MISFIT_FACTOR if solution.method == "paper" else MISFIT_FACTOR
         if solution.rms_residual_m > factor * solution.noise_m:
             detail = (
-                "the profiles are not cuts of one cylinder, though each is an elliptical arc "
-                "(a sphere's cuts are circles of varying radius: {setting:target} sphere)"
+                "the profiles are not cuts of one cylinder, though each is an elliptical arc"
                 if solution.method == "default"
                 else ""
             )
