@@ -68,6 +68,7 @@ from ...solver import (
     variance_factors,
     widen_covariance,
 )
+from ..along_line import measured_to_true
 from ..base import ROBOT_PRIOR_EXCESS
 from .config import RefineConfig
 from .model import Cylinder
@@ -78,7 +79,6 @@ from .problem import (
     data_centroid,
     initial_state,
     lever_arm_m,
-    measured_to_true,
     recentred,
 )
 

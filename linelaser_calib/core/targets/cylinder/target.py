@@ -45,6 +45,7 @@ from ...geometry import FloatArray
 from ...robot.joint_calibration import KinematicSetup
 from ...solver import widening
 from ...types import Rejection, Sample
+from ..along_line import PLAUSIBLE_SCALE_ERROR, scale_text
 from ..base import (
     Option,
     Placement,
@@ -78,7 +79,7 @@ from .refine import (
     refine_subset,
     refine_with_outlier_rejection,
 )
-from .section import CylinderSection, read_cylinder_section, scale_text
+from .section import CylinderSection, read_cylinder_section
 
 #: Points per profile in the refinements of the clock-offset search.
 OFFSET_SEARCH_POINTS = 50
@@ -90,10 +91,6 @@ OFFSET_SEARCH_POINTS = 50
 MISFIT_FACTOR = 5.0
 #: The same for the paper method's centre-to-axis RMS against the robot's σ_t.
 PAPER_MISFIT_FACTOR = 100.0
-#: Largest along-line scale error taken as a plausible explanation of a radius gap: a
-#: profiler's x scale is typically good to a few tenths of a percent, a poorly calibrated
-#: camera-based one to about a percent.
-PLAUSIBLE_SCALE_ERROR = 0.02
 
 
 def estimates_scale(config: CylinderConfig) -> bool:

@@ -46,6 +46,7 @@ from linelaser_calib.core.model_check import Comparison
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
+from linelaser_calib.core.targets.along_line import PLAUSIBLE_SCALE_ERROR
 from linelaser_calib.core.targets.base import (
     Option,
     Progress,
@@ -62,7 +63,7 @@ from linelaser_calib.core.targets.sphere.circle import (
     fit_circle_geometric,
     fit_circle_ransac,
 )
-from linelaser_calib.core.targets.sphere.config import SphereConfig
+from linelaser_calib.core.targets.sphere.config import SphereConfig, estimates_scale
 from linelaser_calib.core.targets.sphere.model import (
     SIDE_LABELS,
     FixedPointSolution,
@@ -215,6 +216,7 @@ class SphereTarget:
         "robot_sigma_t_m": Option("refine.robot_sigma_t_m"),
         "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad"),
         "min_samples": Option("min_samples"),
+        "scale": Option("scale", methods=("default",)),
     }
     #: Pose planning (:mod:`linelaser_calib.core.planning`).
     planner = SpherePlanner()
@@ -357,7 +359,12 @@ class SphereTarget:
         first round on.
         """
         self._require(features, config, context)
-        refine_config = replace(config.refine, estimate_radius=config.radius_m is None)
+        refine_config = replace(
+            config.refine,
+            estimate_radius=config.radius_m is None,
+            estimate_scale=estimates_scale(config),
+        )
+        scale = 0.0
         warm = context.warm_start
         if warm is not None and isinstance(warm.section, SphereSection):
             section = warm.section
@@ -368,6 +375,7 @@ class SphereTarget:
                 section.centre_side,
             )
             warnings: list[str] = []
+            scale = section.scale or 0.0
             levels = section.noise_levels or {}
             stated = refine_config
             refine_config = replace(
@@ -409,7 +417,13 @@ class SphereTarget:
                 )
             else:
                 T_start_k, centre_k, radius_k = T_start, centre, radius
-            start = SphereState(T_start_k, centre_k, radius_k, np.zeros((len(kept), N_LOCAL)))
+            start = SphereState(
+                T_start_k,
+                centre_k,
+                radius_k,
+                np.zeros((len(kept), N_LOCAL)),
+                scale if previous is None else previous.state.scale,
+            )
             return refine_sphere(
                 np.stack([f.T_base_flange for f in chosen]),
                 [f.points for f in chosen],
@@ -453,6 +467,14 @@ class SphereTarget:
         scatter = dispersion_warning(outcome.sample_dispersion)
         if scatter is not None:
             warnings.append(scatter)
+        if outcome.scale_index is not None and abs(state.scale) > PLAUSIBLE_SCALE_ERROR:
+            warnings.append(
+                f"the estimated along-line scale is {1.0 + state.scale:.4f} "
+                f"({100.0 * state.scale:+.2f} % from nominal): a scale error beyond "
+                f"{100.0 * PLAUSIBLE_SCALE_ERROR:.0f} % is implausible, and it likely takes up "
+                "something else, such as a ball that is not the given size (measure it, or "
+                "omit {setting:radius_m}); {setting:scale} fixed holds it at 1"
+            )
         rms = outcome.sample_rms_m()
         section = SphereSection(
             state.centre_m,
@@ -461,6 +483,8 @@ class SphereTarget:
             radius_estimated=config.radius_m is None,
             side_estimated=config.centre_side is None,
             centre_sigma_m=sigma[6:9],
+            scale=None if outcome.scale_index is None else state.scale,
+            scale_sigma=None if outcome.scale_index is None else float(sigma[outcome.scale_index]),
             noise_levels={
                 "sensor_sigma_m": outcome.sensor_sigma_m,
                 "robot_sigma_t_m": outcome.robot_sigma_t_m,
