@@ -21,10 +21,13 @@ models (:func:`check_model`, called by the pipeline after the solve):
    the likelihood of the points under one common Gaussian noise). A rival whose RMS
    distance is :data:`CLEAR_FACTOR` times smaller wins clearly: the recording is refused,
    the rival named with both figures.
-3. **Otherwise** a fit that needs a robot error :data:`MISFIT_ROBOT_EXCESS` times the prior
-   is refused as a misfit; a fit check that failed is refused too, unless every rival fitted
-   is clearly worse (the data are then still consistent with the target, and the failed
-   check becomes a warning with both figures).
+3. **Otherwise** the data are still consistent with the target when a rival was fitted and
+   every rival leaves :data:`CLEAR_FACTOR` times more. A fit that needs a robot error
+   :data:`MISFIT_ROBOT_EXCESS` times the prior is refused as a misfit unless they are (its
+   warnings say how large the error is); a failed fit check is refused too unless they are,
+   and then becomes a warning with both figures, but one that failed on the robot's error
+   is always refused, in the target's own words (e.g. a sphere centre given on the wrong
+   side).
 """
 
 from __future__ import annotations
@@ -130,6 +133,23 @@ def _doubts(
     return doubts
 
 
+def _what(problem: ModelMismatch) -> str:
+    """What a fit check found, without its title, causes and ending."""
+    text = str(problem)
+    for end in (". Likely causes", ". No result"):
+        text = text.split(end)[0]
+    return text.split("does not fit these data: ", 1)[-1]
+
+
+def _inserted(text: str, more: str) -> str:
+    """A refusal's text with ``more`` (sentences) before its likely causes or its end."""
+    for mark in (" Likely causes", " No result was written"):
+        if mark in text:
+            head, _, tail = text.partition(mark)
+            return f"{head}{more}{mark}{tail}"
+    return text + more
+
+
 def check_model(
     target: Target[Any],
     config: Any,
@@ -139,8 +159,8 @@ def check_model(
     context: SolveContext,
 ) -> None:
     """Refuse a solution whose target a rival explains clearly better, or that does not fit
-    (see the module docstring); a failed fit check that every rival explains clearly worse
-    becomes a warning on the solution.
+    and is not consistent (see the module docstring); a failed fit check that every rival
+    explains clearly worse becomes a warning on the solution.
 
     Raises
     ------
@@ -167,7 +187,7 @@ def check_model(
     every = [fits[k] for k in sorted(fits)]
     own = _judged(target, solution, every)
     judged = sorted((_judged(t, s, every) for t, s in rivals), key=lambda w: w.rms_m)
-    misfit = [] if problem is None else [str(problem).split(": ", 1)[-1].split(". ")[0]]
+    misfit = [] if problem is None else [_what(problem)]
     why = "; ".join(doubts + misfit)
     figures = (
         f"over {own.n_points} points of {own.n_profiles} profiles mapped with the recorded "
@@ -180,15 +200,18 @@ def check_model(
             f"{own.text()} ({figures}). The scans show a {best.title}: choose "
             f"{{setting:target}} {best.name}. No result was written."
         )
-    if robot_misfit:
+    compared = (
+        " A rival fitted with the poses does no better: "
+        + "; ".join(w.text() for w in judged)
+        + f", {own.text()} ({figures})."
+        if judged
+        else ""
+    )
+    consistent = bool(judged) and judged[0].rms_m >= CLEAR_FACTOR * own.rms_m
+    if problem is not None and (robot_misfit or not consistent):
+        raise ModelMismatch(_inserted(str(problem), compared))
+    if robot_misfit and not consistent:
         assert robot is not None
-        compared = (
-            " A rival fitted with the poses does no better: "
-            + "; ".join(f"{w.text()}" for w in judged)
-            + f", {own.text()} ({figures})."
-            if judged
-            else ""
-        )
         raise ModelMismatch(
             f"the {own.title} model does not fit these data: its fit needs flange-pose "
             f"corrections of {robot.translation_m * 1e3:.3f} mm and "
@@ -204,10 +227,9 @@ def check_model(
         )
     if problem is None:
         return
-    if not judged or judged[0].rms_m < CLEAR_FACTOR * own.rms_m:
-        raise problem
     solution.warnings.append(
-        f"{str(problem).split('. Likely causes')[0]}; but {own.text()} where "
+        f"the {own.title} model does not fit these data: {_what(problem)}; but {own.text()} "
+        "where "
         + ", ".join(w.text() for w in judged)
         + f" ({figures}): these data are still best explained by a {own.title}, and the "
         "result is kept"
