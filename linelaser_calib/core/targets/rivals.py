@@ -24,10 +24,11 @@ models (:func:`check_model`, called by the pipeline after the solve):
 3. **Otherwise** the data are still consistent with the target when a rival was fitted and
    every rival leaves :data:`CLEAR_FACTOR` times more. A fit that needs a robot error
    :data:`MISFIT_ROBOT_EXCESS` times the prior is refused as a misfit unless they are (its
-   warnings say how large the error is); a failed fit check is refused too unless they are,
-   and then becomes a warning with both figures, but one that failed on the robot's error
-   is always refused, in the target's own words (e.g. a sphere centre given on the wrong
-   side).
+   warnings say how large the error is); a failed fit check is refused too unless they are
+   or no rival could be fitted at all (it then becomes a warning with the figures), but one
+   that failed on the robot's error is always refused, in the target's own words (e.g. a
+   sphere centre given on the wrong side). A target that names no rival keeps its fit
+   check's refusals.
 """
 
 from __future__ import annotations
@@ -177,11 +178,10 @@ def check_model(
     robot_misfit = robot is not None and robot.excess > MISFIT_ROBOT_EXCESS
     if problem is None and not doubts:
         return
-    rivals = [
-        found
-        for name in getattr(target, "rivals", ())
-        if (found := _rival_solution(name, samples, context)) is not None
-    ]
+    declared = tuple(getattr(target, "rivals", ()))
+    tried = {name: _rival_solution(name, samples, context) for name in declared}
+    rivals = [found for found in tried.values() if found is not None]
+    unfit = [get_target(name).title for name, found in tried.items() if found is None]
     fits = {f.index: f for _, s in rivals for f in s.sample_fits}
     fits.update({f.index: f for f in solution.sample_fits})
     every = [fits[k] for k in sorted(fits)]
@@ -207,8 +207,11 @@ def check_model(
         if judged
         else ""
     )
+    # Every rival fitted leaves CLEAR_FACTOR times more (and one at least was fitted) ...
     consistent = bool(judged) and judged[0].rms_m >= CLEAR_FACTOR * own.rms_m
-    if problem is not None and (robot_misfit or not consistent):
+    # ... or, for a failed residual check, no rival could be fitted at all.
+    unrivalled = bool(declared) and (consistent or not judged)
+    if problem is not None and (robot_misfit or not unrivalled):
         raise ModelMismatch(_inserted(str(problem), compared))
     if robot_misfit and not consistent:
         assert robot is not None
@@ -227,10 +230,13 @@ def check_model(
         )
     if problem is None:
         return
+    others = [w.text() for w in judged] + [
+        f"the {title} could not be fitted to these profiles" for title in unfit
+    ]
     solution.warnings.append(
-        f"the {own.title} model does not fit these data: {_what(problem)}; but {own.text()} "
-        "where "
-        + ", ".join(w.text() for w in judged)
-        + f" ({figures}): these data are still best explained by a {own.title}, and the "
-        "result is kept"
+        f"the {own.title} model does not fit these data: {_what(problem)}; but "
+        + (f"{own.text()} where " if judged else "")
+        + ", ".join(others)
+        + (f" ({figures})" if judged else "")
+        + f": these data are still best explained by a {own.title}, and the result is kept"
     )
