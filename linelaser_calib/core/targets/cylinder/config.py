@@ -8,9 +8,9 @@ import numpy as np
 
 from ...errors import InputError
 from ...observability import ObservabilityConfig
+from ...profile.along_line import SCALE_MODES
 from ...profile.cleaning import CleaningConfig
 from ...solver import LOSSES, SolverConfig
-from ..along_line import SCALE_MODES
 from .arc import ArcConfig
 from .ellipse import EllipseConfig
 from .pso_alm import HybridConfig

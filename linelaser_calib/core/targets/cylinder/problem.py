@@ -63,9 +63,9 @@ from numpy.typing import ArrayLike
 
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
+from ...profile.along_line import measured_to_true
 from ...profile.noise import Whitening
 from ...solver import N_HAND_EYE, Linearisation, Residuals
-from ..along_line import measured_to_true
 from .config import RefineConfig
 from .model import Cylinder
 

@@ -11,9 +11,9 @@ import numpy as np
 
 from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
+from ...profile.along_line import measured_to_true, scale_text
 from ...profile.noise import LineNoise
 from ...types import SampleFit
-from ..along_line import measured_to_true, scale_text
 from ..base import Shape, SurfaceMap, mm_text, plain_floats, read_vector
 from .model import Cylinder
 from .residuals import axis_extent, cylinder_coordinates, sample_centre_distances

@@ -42,10 +42,10 @@ import numpy as np
 
 from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
+from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, scale_text
 from ...robot.joint_calibration import KinematicSetup
 from ...solver import widening
 from ...types import Rejection, Sample
-from ..along_line import PLAUSIBLE_SCALE_ERROR, scale_text
 from ..base import (
     Option,
     Placement,

@@ -8,8 +8,8 @@ import numpy as np
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.observability import ObservabilityConfig
+from linelaser_calib.core.profile.along_line import SCALE_MODES
 from linelaser_calib.core.profile.cleaning import CleaningConfig
-from linelaser_calib.core.targets.along_line import SCALE_MODES
 from linelaser_calib.core.targets.sphere.circle import CircleConfig
 from linelaser_calib.core.targets.sphere.model import SIDE_LABELS
 from linelaser_calib.core.targets.sphere.refine import SphereRefineConfig

@@ -73,6 +73,7 @@ from linelaser_calib.core.geometry import (
     right_jacobian_so3,
     transform_from_rotation_translation,
 )
+from linelaser_calib.core.profile.along_line import measured_to_true
 from linelaser_calib.core.solver import (
     Linearisation,
     SolverConfig,
@@ -83,7 +84,6 @@ from linelaser_calib.core.solver import (
     widen_covariance,
 )
 from linelaser_calib.core.solver.lm import Residuals
-from linelaser_calib.core.targets.along_line import measured_to_true
 from linelaser_calib.core.types import BoolArray, FloatArray
 
 IntArray = NDArray[np.int64]

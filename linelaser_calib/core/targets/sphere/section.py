@@ -10,8 +10,8 @@ import numpy as np
 
 from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
+from ...profile.along_line import measured_to_true, scale_text
 from ...types import SampleFit
-from ..along_line import measured_to_true, scale_text
 from ..base import Shape, SurfaceMap, plain_floats, read_vector
 from .model import SIDE_LABELS, side_from_label
 

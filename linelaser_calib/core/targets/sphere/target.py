@@ -44,9 +44,9 @@ from linelaser_calib.core.errors import (
 from linelaser_calib.core.geometry import FloatArray
 from linelaser_calib.core.model_check import Comparison
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
+from linelaser_calib.core.profile.along_line import PLAUSIBLE_SCALE_ERROR
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
-from linelaser_calib.core.targets.along_line import PLAUSIBLE_SCALE_ERROR
 from linelaser_calib.core.targets.base import (
     Option,
     Progress,
