@@ -12,6 +12,8 @@ import pytest
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pipeline import PipelineConfig
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
 from linelaser_calib.core.targets.sphere.model import (
@@ -20,8 +22,9 @@ from linelaser_calib.core.targets.sphere.model import (
     fixed_point_residuals,
 )
 from linelaser_calib.io.bags import read_bag
-from linelaser_calib.io.results import read_reference_yaml, read_result_yaml
+from linelaser_calib.io.results import read_reference_yaml
 from linelaser_calib.io.robcalibrator import read_robcalibrator, transform_from_xyzwpr
+from linelaser_calib.offline import calibrate_bag
 
 POSES_MM_DEG = [[100.0, -200.0, 300.0, 90.0, 0.0, 0.0], [0.0, 0.0, 500.0, 0.0, 30.0, 45.0]]
 HTM = [[0.0, -1.0, 0.0, -150.0], [-1.0, 0.0, 0.0, 700.0], [0.0, 0.0, -1.0, 480.0], [0, 0, 0, 1]]
@@ -141,11 +144,10 @@ def ball_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return out
 
 
-def _centre_scatter_m(bag: Path, result: Path) -> tuple[float, int]:
+def _centre_scatter_m(bag: Path, result: CalibrationResult) -> float:
     """RMS scatter of the profiles' ball centres mapped with a result's hand-eye (its
-    radius and side), and how many profiles the result used."""
-    written = read_result_yaml(result)
-    section = written.target
+    radius and side)."""
+    section = result.target
     assert isinstance(section, SphereSection)
     contents = read_bag(bag)
     samples = pair_profiles(contents.profiles, contents.poses, PairingConfig()).samples
@@ -158,23 +160,22 @@ def _centre_scatter_m(bag: Path, result: Path) -> tuple[float, int]:
         section.radius_m,
         section.centre_side,
     )
-    residuals = fixed_point_residuals(T, centres, written.T_flange_sensor)
-    return centre_scatter_m(residuals), len(written.samples_used)
+    return centre_scatter_m(fixed_point_residuals(T, centres, result.T_flange_sensor))
 
 
-@pytest.mark.parametrize("radius", [["--radius", "0.0127"], []], ids=["given", "free"])
+@pytest.mark.parametrize("radius_m", [0.0127, None], ids=["given", "free"])
 def test_the_real_ball_set_calibrates_as_a_sphere_with_every_profile(
-    ball_bag: Path, radius: list[str], tmp_path: Path
+    ball_bag: Path, radius_m: float | None
 ) -> None:
     """A conic beats a circle on 9 of its 10 single profiles (the profiler's smooth shape
     error); the whole recording is still one ball. Published hand-eye: 0.91 mm centre
-    scatter, a plain linear solve 0.82 mm."""
-    out = tmp_path / "ball.yaml"
-    assert (
-        main(["calibrate", str(ball_bag), "--target", "sphere", *radius, "--output", str(out)]) == 0
+    scatter, a plain linear solve 0.82 mm; here 0.78 mm (given) and 0.71 mm (free)."""
+    config = PipelineConfig(
+        target="sphere", target_config=SphereConfig(radius_m=radius_m), self_check_folds=0
     )
-    scatter, used = _centre_scatter_m(ball_bag, out)
-    assert used == 10 and scatter <= 0.85e-3
+    result = calibrate_bag(ball_bag, config).result
+    assert len(result.samples_used) == 10
+    assert _centre_scatter_m(ball_bag, result) <= 0.85e-3
 
 
 def test_the_real_ball_given_to_the_cylinder_is_refused_naming_the_sphere(
