@@ -188,6 +188,8 @@ def check_model(
     own = _judged(target, solution, every)
     judged = sorted((_judged(t, s, every) for t, s in rivals), key=lambda w: w.rms_m)
     misfit = [] if problem is None else [_what(problem)]
+    if any("flange-pose corrections" in m for m in misfit):
+        doubts = [d for d in doubts if not d.startswith("its fit needs a robot pose error")]
     why = "; ".join(doubts + misfit)
     figures = (
         f"over {own.n_points} points of {own.n_profiles} profiles mapped with the recorded "
