@@ -57,7 +57,7 @@ REFUSED = [
     ("cylinder", "paper", ["--initial", INITIAL], "--initial"),
     ("cylinder", "default", ["--point", "0.5,0.1,0"], "--point"),
     ("cylinder", "paper", ["--scale", "free"], "--scale"),
-    ("sphere", "default", ["--scale", "free"], "--scale"),
+    ("sphere", "paper", ["--scale", "free"], "--scale"),
     ("line", "default", ["--scale", "fixed"], "--scale"),
     ("known_point", "default", ["--scale", "free"], "--scale"),
 ]

@@ -320,9 +320,9 @@ def build_parser() -> argparse.ArgumentParser:
     cal_p.add_argument(
         "--scale",
         metavar="auto|fixed|free",
-        help="cylinder target, default method: the sensor's along-line (x) scale, unitless, "
-        "estimated with the hand-eye (free) or held at 1 (fixed); default auto: free when "
-        "--radius is given",
+        help="cylinder and sphere targets, default method: the sensor's along-line (x) scale, "
+        "unitless, estimated with the hand-eye (free) or held at 1 (fixed); default auto: for "
+        "the cylinder free when --radius is given, for the sphere fixed",
     )
     _add_pose_source_arguments(cal_p)
     cal_p.add_argument(

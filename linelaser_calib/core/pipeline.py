@@ -46,6 +46,7 @@ from .targets.base import (
     rejection_digest,
     sample_rng,
 )
+from .targets.rivals import check_model
 from .types import FlangePose, Profile, Rejection, Sample
 from .verdict import no_self_check_reason
 
@@ -295,7 +296,7 @@ def calibrate_samples(
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
     solution = solve[config.method](features, target_config, context)
-    target.check_fit(solution, target_config)
+    check_model(target, target_config, samples, features, solution, context)
     if placements and solution.kinematics is None:
         raise InputError(
             f"the {target.title} target does not estimate kinematic corrections, so its "

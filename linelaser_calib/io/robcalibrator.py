@@ -9,8 +9,12 @@ The folder layout (as published with RobCalibrator, MIT licence):
 - ``RobPoses.rob``: JSON ``{"RobPoses": [[x, y, z, w, p, r], …]}``, one per profile, in
   order: FANUC xyzwpr of the flange in the robot base, mm and degrees, R = Rz(r)·Ry(p)·Rx(w).
 - ``calibration.sec``: JSON with the calibration object (``CalibObj``: ``Radius`` mm,
-  ``SphCtrDirc`` ``+Y``/``-Y``) and the authors' solution (``Solution.HTM``: their
-  T_flange_sensor, translation in mm).
+  ``SphCtrDirc`` ``+Y``/``-Y`` where stated) and the authors' solution (``Solution.HTM``:
+  their T_flange_sensor, translation in mm).
+
+Their 12.7 mm ball set (``data/ScanData/ball``) names its files ``1_3C_line.yml`` … and
+``robpose.txt`` (rows ``x y z w p r``), and keeps its licence in the parent folder; both
+layouts are read. OpenCV writes a missing point as ``.Nan``.
 
 Everything is returned in SI units. The scans were taken step-and-shoot; the recordings
 carry no time, so profile j is stamped ``epoch_ns + j`` seconds and the flange pose is
@@ -66,8 +70,8 @@ class RobCalibratorScans:
     poses : list of FlangePose
         Each flange pose repeated at :data:`POSE_OFFSETS_NS` around its profile's stamp.
     sphere_radius_m : float
-    centre_side : str
-        ``+y`` or ``-y`` (their ``SphCtrDirc``).
+    centre_side : str or None
+        ``+y`` or ``-y`` (their ``SphCtrDirc``); None where they do not state it.
     T_flange_sensor_published : ndarray, shape (4, 4)
         The authors' hand-eye, m.
     """
@@ -75,7 +79,7 @@ class RobCalibratorScans:
     profiles: list[Profile]
     poses: list[FlangePose]
     sphere_radius_m: float
-    centre_side: str
+    centre_side: str | None
     T_flange_sensor_published: FloatArray
 
 
@@ -96,6 +100,8 @@ def _read_scan_line(path: Path) -> FloatArray:
         raise BagError(f"cannot read {path}: {err}") from None
     # PyYAML does not take OpenCV's "%YAML:1.0" directive; drop it.
     text = re.sub(r"^%YAML:1\.0\s*\n", "", text)
+    # OpenCV writes a missing point as ".Nan", which YAML spells ".nan".
+    text = re.sub(r"(?<![\w.])\.Nan\b", ".nan", text)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as err:
@@ -111,6 +117,25 @@ def _read_scan_line(path: Path) -> FloatArray:
     return np.asarray(values.reshape(-1, 3) * 1e-3)
 
 
+def _read_poses_mm(folder: Path) -> Any:
+    """The flange poses of a folder, rows ``x y z w p r`` (mm, deg): ``RobPoses.rob``, or the
+    plain text ``robpose.txt`` (one row per line) of the ball set."""
+    text = folder / "robpose.txt"
+    if not (folder / "RobPoses.rob").exists() and text.is_file():
+        try:
+            return np.loadtxt(text, dtype=np.float64, ndmin=2)
+        except ValueError as err:
+            raise BagError(f"{text}: expected rows of x y z w p r (mm, deg): {err}") from None
+    return _read_json(folder / "RobPoses.rob")["RobPoses"]
+
+
+def _profile_file(folder: Path, k: int) -> Path:
+    """Profile ``k`` (from 1): ``p<k>.yml``, or ``<k>_3C_line.yml`` in the ball set."""
+    plain = folder / f"p{k}.yml"
+    ball = folder / f"{k}_3C_line.yml"
+    return ball if not plain.exists() and ball.is_file() else plain
+
+
 def read_robcalibrator(folder: str | Path) -> RobCalibratorScans:
     """Read a RobCalibrator scan folder (see the module docstring).
 
@@ -120,24 +145,29 @@ def read_robcalibrator(folder: str | Path) -> RobCalibratorScans:
         A missing or malformed file, or profiles and poses that do not match in number.
     """
     folder = Path(folder)
-    poses_mm = _read_json(folder / "RobPoses.rob")
     calibration = _read_json(folder / "calibration.sec")
     try:
-        rows = np.asarray(poses_mm["RobPoses"], dtype=np.float64)
+        rows = np.asarray(_read_poses_mm(folder), dtype=np.float64)
         radius = float(calibration["CalibObj"]["Radius"]) * 1e-3
-        side = str(calibration["CalibObj"]["SphCtrDirc"]).lower()
+        stated = calibration["CalibObj"].get("SphCtrDirc")
+        side = None if stated is None else str(stated).lower()
         htm = np.asarray(calibration["Solution"]["HTM"], dtype=np.float64)
-    except (KeyError, TypeError, ValueError) as err:
+    except (KeyError, TypeError, ValueError, AttributeError) as err:
         raise BagError(
             f"{folder}: RobPoses.rob needs RobPoses [[x, y, z, w, p, r], ...] and calibration.sec "
-            f"CalibObj.Radius, CalibObj.SphCtrDirc and Solution.HTM: {err}"
+            f"CalibObj.Radius and Solution.HTM: {err}"
         ) from None
-    if rows.ndim != 2 or rows.shape[1] != 6 or htm.shape != (4, 4) or side not in ("+y", "-y"):
+    if (
+        rows.ndim != 2
+        or rows.shape[1] != 6
+        or htm.shape != (4, 4)
+        or side not in ("+y", "-y", None)
+    ):
         raise BagError(
             f"{folder}: expected N x 6 poses, a 4 x 4 HTM and SphCtrDirc +Y or -Y; got poses "
             f"{rows.shape}, HTM {htm.shape}, SphCtrDirc {side!r}"
         )
-    files = [folder / f"p{k + 1}.yml" for k in range(len(rows))]
+    files = [_profile_file(folder, k + 1) for k in range(len(rows))]
     missing = [f.name for f in files if not f.is_file()]
     if missing:
         raise BagError(f"{folder}: {len(rows)} poses but no profile file {', '.join(missing)}")
@@ -171,8 +201,7 @@ beside this file). Converted to rosbag2 (SI units) by:
   profile j is stamped 2023-10-31 15:31:42 UTC + j s.
 - `reference.yaml`: the authors' published hand-eye (their `Solution.HTM`) in the result
   file's `hand_eye` keys, SI. It is their estimate, not ground truth.
-- The sphere centre lies on the sensor's {side} side of the laser plane (their
-  `SphCtrDirc`).
+{side}
 """
 
 
@@ -191,6 +220,8 @@ def convert_robcalibrator(folder: str | Path, output: str | Path, command: str) 
     """
     folder, output = Path(folder), Path(output)
     licence = folder / "LICENSE"
+    if not licence.is_file() and (folder.parent / "LICENSE").is_file():
+        licence = folder.parent / "LICENSE"  # a subfolder of the repository's scans
     if not licence.is_file():
         raise BagError(
             f"{folder} has no LICENSE file: the scans travel with their licence; copy it there"
@@ -205,7 +236,7 @@ def convert_robcalibrator(folder: str | Path, output: str | Path, command: str) 
             "calibration.sec Solution.HTM, the authors' estimate, not ground truth",
             "target": "sphere",
             "settings": {"radius_m": scans.sphere_radius_m},
-            "centre_side": scans.centre_side,
+            **({} if scans.centre_side is None else {"centre_side": scans.centre_side}),
             "conversion": {"command": command},
         },
     )
@@ -217,7 +248,10 @@ def convert_robcalibrator(folder: str | Path, output: str | Path, command: str) 
             command=command,
             profile_topic="/profile",
             pose_topic="/flange_pose",
-            side=scans.centre_side,
+            side="- The sphere centre's side of the laser plane is not stated."
+            if scans.centre_side is None
+            else f"- The sphere centre lies on the sensor's {scans.centre_side} side of the "
+            "laser plane (their\n  `SphCtrDirc`).",
         ),
         encoding="utf-8",
     )

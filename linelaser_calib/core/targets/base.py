@@ -41,7 +41,11 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
    mapping, its text, its markers) and ``read_section(mapping, quality)`` that rebuilds it
    from a result file's section (raising ``ValueError`` naming the bad key).
 8. Optionally, capabilities found by attribute, each with a default for a target without it:
-   a ``placement_adviser`` (:func:`placement_adviser`); on the section, ``surface_map`` (its
+   a ``placement_adviser`` (:func:`placement_adviser`); ``rivals`` (names of the targets whose
+   full model may explain its recordings instead) and ``model_doubt(features, config)`` (why
+   its own per-profile shapes put its model in doubt, or None), with which
+   :func:`~linelaser_calib.core.targets.rivals.check_model` judges the whole recording; on
+   the section, ``surface_map`` (its
    surface unrolled for the report, :func:`surface_map`) and ``feature_distances`` with
    ``feature_kind`` (the paper's per-sample residual, :func:`feature_residuals`).
 
@@ -290,6 +294,8 @@ class TargetSolution:
         profiles scatter the hand-eye more than the noise model predicts
         (:func:`~linelaser_calib.core.solver.sample_dispersion`); None where not checked.
         The 1σ divided by them is the noise model's.
+    converged : bool
+        Whether the solve converged (False: it stopped at its iteration limit).
     """
 
     T_flange_sensor: FloatArray
@@ -310,6 +316,7 @@ class TargetSolution:
     subset_start: object | None = None
     placement_sections: list[ResultSection] = field(default_factory=list)
     robot_error: RobotError | None = None
+    converged: bool = True
     sigma_widening: FloatArray | None = None
 
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...observability import ObservabilityConfig
+from ...profile.along_line import SCALE_MODES
 from ...profile.cleaning import CleaningConfig
 from ...solver import LOSSES, SolverConfig
 from .arc import ArcConfig
@@ -16,8 +17,6 @@ from .pso_alm import HybridConfig
 
 #: Fewest fitted samples the hand-eye plus axis can be solved from with any margin.
 MIN_SAMPLES = 8
-#: How the default method treats the sensor's along-line scale (``CylinderConfig.scale``).
-SCALE_MODES = ("auto", "fixed", "free")
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ import numpy as np
 
 from ...errors import InputError, ModelMismatch, ProfileRejected
 from ...geometry import FloatArray
+from ...model_check import Comparison
 from ...profile.cleaning import clean_profile
 from ...types import Rejection, Sample, SampleFit
 from ..base import Progress, extract_each, sample_rng
@@ -41,13 +42,15 @@ MIN_RIVAL_POINTS = 8
 class FittedSample:
     """A sample with the points of its arc and its fitted ellipse (the cylinder target's
     feature); ``arc`` says how the arc was found, ``trimmed`` how many grazing-angle points
-    were trimmed from it."""
+    were trimmed from it, ``rival`` the comparison when a rival shape fits this one profile
+    clearly better than its ellipse (kept unless most profiles are so, :func:`fit_samples`)."""
 
     sample: Sample
     points: FloatArray
     ellipse: EllipseFit
     arc: ArcFit | None = None
     trimmed: int = 0
+    rival: Comparison | None = None
 
     @property
     def index(self) -> int:
@@ -93,11 +96,13 @@ def fit_sample(
 ) -> FittedSample | Rejection:
     """Clean one sample's profile and fit its ellipse; a rejection says why it failed.
 
-    ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes. A profile that a
-    rival shape (a line, a V) fits clearly better than its ellipse, or than any conic when
-    no arc was found, gives a :class:`~linelaser_calib.core.model_check.RivalRejection`
-    (:mod:`.shape`). A short arc (:attr:`~.ellipse.EllipseFit.short`) must also fit its
-    ellipse clearly better than a line.
+    ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes. A profile without
+    an arc that a rival shape (a line, a V) fits clearly better than any conic gives a
+    :class:`~linelaser_calib.core.model_check.RivalRejection` (:mod:`.shape`); an arc that
+    a rival fits clearly better is kept, with the comparison (:attr:`FittedSample.rival`):
+    one profile does not decide what the recording shows. A short arc
+    (:attr:`~.ellipse.EllipseFit.short`) must also fit its ellipse clearly better than a
+    line.
     """
     try:
         cleaned = clean_profile(sample.points, config.cleaning)
@@ -112,8 +117,6 @@ def fit_sample(
                 return arc_rival_rejection(sample.index, sample.stamp_ns, comparison)
         return Rejection(sample.index, sample.stamp_ns, "ellipse", str(exc))
     comparison = compare_ellipse(arc.points_xz, arc.ellipse.conic)
-    if comparison.rival_wins:
-        return arc_rival_rejection(sample.index, sample.stamp_ns, comparison)
     if arc.ellipse.short:
         to_line = compare_with_line(arc.points_xz[arc.ellipse.inliers], arc.ellipse.conic)
         if not to_line.model_wins:
@@ -123,7 +126,8 @@ def fit_sample(
                 "ellipse",
                 f"the short arc is not clearly curved: {to_line.describe()}",
             )
-    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc)
+    rival = comparison if comparison.rival_wins else None
+    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc, rival=rival)
 
 
 def fit_samples(
@@ -142,7 +146,10 @@ def fit_samples(
         When a configured radius disagrees with the profiles (:func:`settle_radius`).
     ModelMismatch
         When a rival shape fits at least as many profiles clearly better as give an
-        ellipse (it names what they show).
+        ellipse it does not (it names what they show). A minority of arcs that a rival fits
+        better are used: a real profiler's shape error makes a V or a line beat an ellipse
+        now and then, and the refinement's outlier test sets aside an arc that the one
+        cylinder does not explain.
     """
 
     def fit_bounded(
@@ -153,7 +160,10 @@ def fit_samples(
     fitted, rejections = extract_each(
         samples, config, seed, fit_bounded, progress, "ellipse", workers
     )
-    verdict = arc_rival_verdict(rejections, len(fitted))
+    preferring: list[Rejection] = [
+        arc_rival_rejection(f.index, f.stamp_ns, f.rival) for f in fitted if f.rival is not None
+    ]
+    verdict = arc_rival_verdict(rejections + preferring, len(fitted) - len(preferring))
     if verdict is not None:
         raise ModelMismatch(verdict)
     if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):

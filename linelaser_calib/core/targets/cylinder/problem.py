@@ -63,6 +63,7 @@ from numpy.typing import ArrayLike
 
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
+from ...profile.along_line import measured_to_true
 from ...profile.noise import Whitening
 from ...solver import N_HAND_EYE, Linearisation, Residuals
 from .config import RefineConfig
@@ -291,15 +292,6 @@ def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
     distance = np.sqrt(np.sum(radial**2, axis=2))
     normal = radial / np.maximum(distance, 1e-300)[..., None]
     return _Geometry(p, y, RE, distance, normal, along)
-
-
-def measured_to_true(points: ArrayLike, scale: float) -> FloatArray:
-    """Sensor points (..., 3) with the along-line scale error s removed: x → x / (1 + s), m."""
-    if scale == 0.0:
-        return np.asarray(points, dtype=np.float64)
-    p = np.array(points, dtype=np.float64)
-    p[..., 0] /= 1.0 + scale
-    return p
 
 
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:

@@ -52,6 +52,7 @@ from scipy.special import chdtri
 from ...errors import DegenerateError, InputError, SolverError
 from ...geometry import FloatArray, exp_so3, transform_from_rotation_translation
 from ...observability import Observability, analyse_observability, pose_geometry
+from ...profile.along_line import measured_to_true
 from ...profile.noise import LineNoise, learn_line_noise, line_whitening
 from ...solver import (
     N_HAND_EYE,
@@ -78,7 +79,6 @@ from .problem import (
     data_centroid,
     initial_state,
     lever_arm_m,
-    measured_to_true,
     recentred,
 )
 

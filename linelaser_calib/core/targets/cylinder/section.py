@@ -11,11 +11,11 @@ import numpy as np
 
 from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
+from ...profile.along_line import measured_to_true, scale_text
 from ...profile.noise import LineNoise
 from ...types import SampleFit
 from ..base import Shape, SurfaceMap, direction_text, mm_text, plain_floats, read_vector
 from .model import Cylinder
-from .problem import measured_to_true
 from .residuals import axis_extent, cylinder_coordinates, sample_centre_distances
 
 
@@ -252,19 +252,4 @@ def correlation_text(correlation: float | None) -> str:
     return (
         f", correlated {correlation:+.2f} with the radius (a profile stretched along the line "
         "looks like a larger cylinder)"
-    )
-
-
-def scale_text(scale: float, sigma: float | None) -> str:
-    """The along-line scale in words: the ratio and the difference in %, with its 1σ, which
-    is the noise model's: whatever else stretches the arcs (a grazing-angle smear at their
-    ends, a robot error that grows along the line) goes into the scale too, and the
-    self-check judges the hand-eye, not the scale. On ``cluttered_camera`` (0.5 % true, with
-    a grazing-angle bias) it reads about 0.82 ± 0.02 %."""
-    spread = "" if sigma is None else f" ± {sigma:.5f}"
-    percent = "" if sigma is None else f" ± {100.0 * sigma:.3f}"
-    return (
-        f"sensor along-line (x) scale {1.0 + scale:.5f}{spread} "
-        f"({100.0 * scale:+.3f}{percent} % from nominal, estimated; noise-model 1 sigma: "
-        "anything else that stretches the arcs, such as grazing-angle smear, goes into it too)"
     )

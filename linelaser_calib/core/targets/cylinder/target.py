@@ -25,7 +25,10 @@ naming what it shows. A cylinder's cut is an ellipse whose semi-minor axis is th
 every view, but a short arc leaves that axis uncertain, so the radius is judged by the joint
 fit of all profiles: its point residual stays near what each profile's own free ellipse
 leaves (the recording's scale); scans of a sphere (circles of varying radius) leave many
-times more.
+times more. Which target the recording shows is decided on the whole recording
+(:mod:`..rivals`): where the fit is in doubt (that residual, a robot error far beyond the
+prior, no convergence) the sphere's full fit with the poses is made, and the recording is
+refused naming it only when it explains the points clearly better.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import numpy as np
 
 from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
+from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, scale_text
 from ...robot.joint_calibration import KinematicSetup
 from ...solver import widening
 from ...types import Rejection, Sample
@@ -75,7 +79,7 @@ from .refine import (
     refine_subset,
     refine_with_outlier_rejection,
 )
-from .section import CylinderSection, read_cylinder_section, scale_text
+from .section import CylinderSection, read_cylinder_section
 
 #: Points per profile in the refinements of the clock-offset search.
 OFFSET_SEARCH_POINTS = 50
@@ -87,10 +91,6 @@ OFFSET_SEARCH_POINTS = 50
 MISFIT_FACTOR = 5.0
 #: The same for the paper method's centre-to-axis RMS against the robot's σ_t.
 PAPER_MISFIT_FACTOR = 100.0
-#: Largest along-line scale error taken as a plausible explanation of a radius gap: a
-#: profiler's x scale is typically good to a few tenths of a percent, a poorly calibrated
-#: camera-based one to about a percent.
-PLAUSIBLE_SCALE_ERROR = 0.02
 
 
 def estimates_scale(config: CylinderConfig) -> bool:
@@ -203,6 +203,8 @@ class CylinderTarget:
     planner = CylinderPlanner()
     #: Whether another placement would determine more of the robot's kinematics.
     placement_adviser = CylinderPlacementAdviser()
+    #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
+    rivals = ("sphere",)
 
     def validate(
         self, sample: Sample, config: CylinderConfig, rng: np.random.Generator
@@ -431,6 +433,7 @@ class CylinderTarget:
             identifiability=None if outcome is None else outcome.identifiability,
             placement_sections=[CylinderSection(p.cylinder, p.radius_estimated) for p in placed],
             sigma_widening=widening(refined.sample_dispersion),
+            converged=refined.converged,
             robot_error=RobotError(
                 config.refine.robot_sigma_t_m * refined.robot_sigma_scale,
                 config.refine.robot_sigma_r_rad * refined.robot_sigma_scale,
@@ -499,8 +502,7 @@ class CylinderTarget:
         factor = PAPER_MISFIT_FACTOR if solution.method == "paper" else MISFIT_FACTOR
         if solution.rms_residual_m > factor * solution.noise_m:
             detail = (
-                "the profiles are not cuts of one cylinder, though each is an elliptical arc "
-                "(a sphere's cuts are circles of varying radius: {setting:target} sphere)"
+                "the profiles are not cuts of one cylinder, though each is an elliptical arc"
                 if solution.method == "default"
                 else ""
             )

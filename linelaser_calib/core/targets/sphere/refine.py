@@ -22,6 +22,11 @@ tens of µm of a real profiler's shape error): on the RobCalibrator scans the fr
 came out 41.2 mm for a 40 mm ball with the robot's σ at 1 mm (102 mm unweighted). r_j is
 kept above :data:`MIN_SECTION_SHARE` R.
 
+The profiler may read x along its line as (1 + s) times the true one: with
+``estimate_scale`` the points are taken as q = (x / (1 + s), y, z) and s is estimated with
+the rest (∂e/∂s = −w_j nᵀ R_j E_j R_X e_x q_x / (1 + s) / σ_s; the weight does not depend
+on the points).
+
 under the Huber loss (quadratic within ``loss_scale``, linear beyond) against spikes, plus
 the Gaussian priors ω_j / σ_r and τ_j / σ_t per sample. Minimising ½ Σ loss is the joint
 maximum a-posteriori estimate of the hand-eye, the sphere and the pose corrections.
@@ -68,6 +73,7 @@ from linelaser_calib.core.geometry import (
     right_jacobian_so3,
     transform_from_rotation_translation,
 )
+from linelaser_calib.core.profile.along_line import measured_to_true
 from linelaser_calib.core.solver import (
     Linearisation,
     SolverConfig,
@@ -100,12 +106,16 @@ class SphereState:
     radius_m : float
     corrections : ndarray, shape (K, 6)
         Per-sample pose corrections [ω (rad), τ (m)], flange frame.
+    scale : float
+        The sensor's along-line scale error s (x reads (1 + s) times the true one; 0 unless
+        estimated).
     """
 
     T_flange_sensor: FloatArray
     centre_m: FloatArray
     radius_m: float
     corrections: FloatArray
+    scale: float = 0.0
 
 
 def point_residuals(
@@ -127,7 +137,8 @@ def point_residuals(
     state : SphereState
     T_base_flange : ndarray, shape (K, 4, 4)
     points : ndarray, shape (K, M, 3)
-        Sensor-frame points of every sample, m, padded.
+        Sensor-frame points of every sample as measured, m, padded (the state's along-line
+        scale error is removed from them).
     valid : ndarray of bool, shape (K, M)
         The slots that hold a point (the others give zero residuals and Jacobians).
     sensor_sigma_m : float
@@ -138,12 +149,13 @@ def point_residuals(
     -------
     residuals : ndarray, shape (K, M)
         w_j (‖x − c‖ − R) / σ_s (see the module docstring).
-    J_global : ndarray, shape (K, M, 10), or None
-        Against [θ (3), ρ (3), c (3), R].
+    J_global : ndarray, shape (K, M, 11), or None
+        Against [θ (3), ρ (3), c (3), R, s].
     J_local : ndarray, shape (K, M, 6), or None
         Against the own sample's [ω (3), τ (3)].
     """
     X = state.T_flange_sensor
+    points = measured_to_true(points, state.scale)
     omega, tau = state.corrections[:, :3], state.corrections[:, 3:]
     E = np.stack([matrix_from_rotvec(w) for w in omega]) if len(omega) else np.zeros((0, 3, 3))
     Rj = T_base_flange[:, :3, :3]
@@ -189,13 +201,15 @@ def point_residuals(
     nR = n @ Rj
     nRE = n @ RE
     w = weight[..., None]
-    J_global = np.empty((*valid.shape, 10))
+    J_global = np.empty((*valid.shape, 11))
     # θ at 0 (J_r = I): −nᵀ R_j E_j R_X [q]ₓ, and aᵀ[q]ₓ = (a × q)ᵀ.
     J_global[..., :3] = -np.cross(nRE @ X[:3, :3], points) * w
     J_global[..., 3:6] = nRE * w
     J_global[..., 6:9] = -n * w
     J_global[..., 9] = -weight
-    J_global += misfit * weight_global[:, None, :]
+    J_global[..., :10] += misfit * weight_global[:, None, :]
+    # s: the true x is the measured one over 1 + s (the weight does not depend on it).
+    J_global[..., 10] = -(nRE @ X[:3, 0]) * points[..., 0] / (1.0 + state.scale) * weight
     J_local = np.empty((*valid.shape, N_LOCAL))
     J_local[..., :3] = -(np.cross(nRE, s) @ right_jacobian_so3(omega)) * w
     J_local[..., 3:] = nR * w
@@ -216,6 +230,9 @@ class SphereRefineConfig:
         Where the Huber loss turns linear, in σ. Default 3.
     estimate_radius : bool
         Estimate the sphere radius (otherwise it is held at the start value).
+    estimate_scale : bool
+        Estimate the sensor's along-line scale error s with the hand-eye (otherwise it is
+        held at the start value, 0).
     max_points_per_profile : int
         Profiles with more points are subsampled evenly (0 keeps all). Default 300.
     max_iterations : int
@@ -238,6 +255,7 @@ class SphereRefineConfig:
     robot_sigma_r_rad: float = float(np.deg2rad(0.01))
     loss_scale: float = 3.0
     estimate_radius: bool = True
+    estimate_scale: bool = False
     max_points_per_profile: int = 300
     max_iterations: int = 50
     estimate_variance_factors: bool = True
@@ -265,8 +283,8 @@ def subsample(points: FloatArray, most: int) -> FloatArray:
 class SphereProblem:
     """The refinement in the shared solver's block form (a ``BlockProblem``).
 
-    Global parameters [θ (3), ρ (3), c (3)] and R when estimated; the points of sample j
-    are row j of a (M, K) array, padded with zeros.
+    Global parameters [θ (3), ρ (3), c (3)], R when estimated and the along-line scale s
+    when estimated; the points of sample j are row j of a (M, K) array, padded with zeros.
     """
 
     def __init__(
@@ -286,15 +304,27 @@ class SphereProblem:
         self.valid[self.sample, self.slot] = True
         self.points = np.zeros((*self.valid.shape, 3))
         self.points[self.valid] = np.concatenate(used)
-        self._G = 10 if config.estimate_radius else 9
-        self._scale = np.array([lever_m] * 3 + [1.0] * (self._G - 3))
+        self._columns = list(range(9))
+        self.radius_index: int | None = None
+        self.scale_index: int | None = None
+        if config.estimate_radius:
+            self.radius_index = len(self._columns)
+            self._columns.append(9)
+        if config.estimate_scale:
+            self.scale_index = len(self._columns)
+            self._columns.append(10)
+        self._G = len(self._columns)
+        # The scale moves a point by its x: weighed like a rotation, by the lever.
+        self._scale = np.array(
+            [lever_m] * 3 + [1.0] * 6 + [lever_m if c == 10 else 1.0 for c in self._columns[9:]]
+        )
         self.sqrt_prior = np.array(
             [1.0 / config.robot_sigma_r_rad] * 3 + [1.0 / config.robot_sigma_t_m] * 3
         )
 
     @property
     def n_global(self) -> int:
-        """9, or 10 with the radius."""
+        """9, plus the radius and the scale when estimated."""
         return self._G
 
     @property
@@ -327,7 +357,7 @@ class SphereProblem:
         assert Jg is not None and Jl is not None
         return Linearisation(
             residuals=Residuals(r, state.corrections * self.sqrt_prior),
-            J_global=Jg[..., : self._G],
+            J_global=Jg[..., self._columns],
             J_local=Jl,
             pose_prior_sqrt_information=self.sqrt_prior,
         )
@@ -335,15 +365,17 @@ class SphereProblem:
     def retract(
         self, state: SphereState, step_global: FloatArray, step_local: FloatArray
     ) -> SphereState:
-        """R_X ← R_X·Exp(θ), t_X ← t_X + ρ; c, R and the corrections additively."""
+        """R_X ← R_X·Exp(θ), t_X ← t_X + ρ; c, R, s and the corrections additively."""
         X = state.T_flange_sensor
+        r, s = self.radius_index, self.scale_index
         return SphereState(
             transform_from_rotation_translation(
                 X[:3, :3] @ matrix_from_rotvec(step_global[:3]), X[:3, 3] + step_global[3:6]
             ),
             state.centre_m + step_global[6:9],
-            state.radius_m + (float(step_global[9]) if self._G == 10 else 0.0),
+            state.radius_m + (0.0 if r is None else float(step_global[r])),
             state.corrections + step_local,
+            state.scale + (0.0 if s is None else float(step_global[s])),
         )
 
 
@@ -357,7 +389,8 @@ class SphereRefinement:
         The estimate.
     covariance : ndarray, shape (G, G)
         Of the global numbers [θ (rad, sensor axes), ρ (m, flange axes), c (m), R (m, when
-        estimated)], pose corrections marginalised, with the re-estimated noise levels.
+        estimated), s (when estimated)], pose corrections marginalised, with the
+        re-estimated noise levels.
     residuals_m : ndarray, shape (N,)
         Distances of the points used from the sphere, in the laser plane, m.
     sample : ndarray of int, shape (N,)
@@ -373,6 +406,8 @@ class SphereRefinement:
     model_covariance : ndarray, shape (G, G), or None
         The covariance before that widening: what the noise model and the poses give (the
         question whether the poses suffice); None when it equals ``covariance``.
+    scale_index : int or None
+        Where the along-line scale is among the global numbers, when estimated.
     """
 
     state: SphereState
@@ -386,6 +421,7 @@ class SphereRefinement:
     converged: bool
     sample_dispersion: FloatArray | None = None
     model_covariance: FloatArray | None = None
+    scale_index: int | None = None
 
     @property
     def rms_m(self) -> float:
@@ -474,4 +510,5 @@ def refine_sphere(
         robot_sigma_r_rad=config.robot_sigma_r_rad * math.sqrt(robot),
         cost_history=solution.cost_history,
         converged=solution.converged,
+        scale_index=problem.scale_index,
     )

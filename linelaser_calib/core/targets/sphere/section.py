@@ -10,6 +10,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
+from ...profile.along_line import measured_to_true, scale_text
 from ...types import SampleFit
 from ..base import Shape, SurfaceMap, mm_text, plain_floats, read_vector
 from .model import SIDE_LABELS, side_from_label
@@ -26,6 +27,10 @@ def read_sphere_section(mapping: Mapping[str, Any], quality: Mapping[str, Any]) 
     if not radius > 0.0:
         raise ValueError(f"key radius must be > 0 m, got {radius}")
     sigma = mapping.get("uncertainty_m")
+    ratio = mapping.get("along_line_scale")
+    if ratio is not None and not (isinstance(ratio, (int, float)) and ratio > 0.0):
+        raise ValueError(f"key along_line_scale must be a ratio > 0, got {ratio!r}")
+    scale_sigma = mapping.get("along_line_scale_sigma")
     return SphereSection(
         centre_m=centre,
         radius_m=radius,
@@ -34,6 +39,8 @@ def read_sphere_section(mapping: Mapping[str, Any], quality: Mapping[str, Any]) 
         side_estimated=bool(quality.get("centre_side_estimated", False)),
         centre_sigma_m=None if sigma is None else np.asarray(sigma, dtype=np.float64),
         noise_levels=dict(quality.get("noise_estimated") or {}),
+        scale=None if ratio is None else float(ratio) - 1.0,
+        scale_sigma=None if ratio is None or scale_sigma is None else float(scale_sigma),
     )
 
 
@@ -54,6 +61,9 @@ class SphereSection:
     noise_levels : dict of str to float
         The noise levels re-estimated from the residuals (``sensor_sigma_m``,
         ``robot_sigma_t_m``, ``robot_sigma_r_rad``; default method), or empty.
+    scale, scale_sigma : float or None
+        The sensor's along-line scale error s estimated with the sphere, and its 1σ
+        (``--scale``); None when it was not estimated.
     """
 
     key: ClassVar[str] = "sphere"
@@ -66,9 +76,22 @@ class SphereSection:
     side_estimated: bool
     centre_sigma_m: FloatArray | None = None
     noise_levels: Mapping[str, float] | None = None
+    scale: float | None = None
+    scale_sigma: float | None = None
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
-        """``{frame, centre, radius, centre_side, uncertainty_m}`` in m."""
+        """``{frame, centre, radius, centre_side, uncertainty_m}`` in m, and with an
+        estimated scale ``along_line_scale`` (the ratio 1 + s) and its 1σ."""
+        scale = (
+            {}
+            if self.scale is None
+            else {
+                "along_line_scale": 1.0 + float(self.scale),
+                "along_line_scale_sigma": None
+                if self.scale_sigma is None
+                else float(self.scale_sigma),
+            }
+        )
         return {
             "frame": base_frame,
             "centre": plain_floats(self.centre_m),
@@ -77,6 +100,7 @@ class SphereSection:
             "uncertainty_m": None
             if self.centre_sigma_m is None
             else plain_floats(self.centre_sigma_m),
+            **scale,
         }
 
     def quality_entries(self) -> dict[str, Any]:
@@ -96,6 +120,7 @@ class SphereSection:
             f"{self.radius_m * 1e3:.3f} mm ({'estimated' if self.radius_estimated else 'given'})"
             f", centre on the sensor's {SIDE_LABELS[self.centre_side]} side "
             f"({'from the data' if self.side_estimated else 'given'})"
+            + ("" if self.scale is None else f"; {scale_text(self.scale, self.scale_sigma)}")
         )
 
     def residual_kind(self, method: str) -> str:
@@ -110,7 +135,7 @@ class SphereSection:
 
     def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
         """Distance of the sample's points from the centre minus the radius (N,), m."""
-        points = apply_transform(T_base_sensor, fit.points)
+        points = apply_transform(T_base_sensor, self.sensor_points(fit.points))
         return np.asarray(np.linalg.norm(points - self.centre_m, axis=1) - self.radius_m)
 
     def surface_map(self, points_base: FloatArray) -> SurfaceMap:
@@ -129,5 +154,5 @@ class SphereSection:
         return {}
 
     def sensor_points(self, points: FloatArray) -> FloatArray:
-        """The points unchanged: this target estimates nothing of the sensor itself."""
-        return points
+        """The points with the estimated along-line scale error removed (x / (1 + s))."""
+        return points if self.scale is None else measured_to_true(points, self.scale)

@@ -1,11 +1,15 @@
 """The sphere target: a tooling ball seen from many flange poses.
 
 Per profile (:func:`extract_feature`): cleaning, then a RANSAC circle (centre, radius r) in
-the laser plane; a profile that a rival shape (a line, a V, an ellipse) fits clearly better
-is no circular arc and is rejected (:mod:`.shape`). Per recording (:meth:`SphereTarget.extract`):
-a profile whose circle leaves far more than the recording's other profiles is set aside, and a
-recording most of whose profiles a rival fits better is refused, naming what it shows. The
-sphere centre lies √(R² − r²) off the plane on one side.
+the laser plane; a profile without a circle that a rival shape (a line, a V) fits clearly
+better is rejected naming it (:mod:`.shape`). A profile whose circle a rival fits better one
+by one is kept: a real profiler's smooth shape error makes a conic beat a circle on almost
+any single profile. Per recording (:meth:`SphereTarget.extract`): a profile whose circle
+leaves far more than the recording's other profiles is set aside; a recording most of whose
+profiles fit a rival shape better puts the sphere in doubt (:meth:`SphereTarget.model_doubt`),
+and the whole recording decides: a cylinder fitted with the poses must explain it clearly
+better for the recording to be refused (:mod:`..rivals`). The sphere centre lies
+√(R² − r²) off the plane on one side.
 
 - ``paper``: the fixed-point linear solve of the tools that calibrate profilers on a
   sphere, projected onto SO(3) and polished (:mod:`.model`); the side resolved from the
@@ -38,7 +42,9 @@ from linelaser_calib.core.errors import (
     ProfileRejected,
 )
 from linelaser_calib.core.geometry import FloatArray
+from linelaser_calib.core.model_check import Comparison
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
+from linelaser_calib.core.profile.along_line import PLAUSIBLE_SCALE_ERROR
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
 from linelaser_calib.core.targets.base import (
@@ -57,7 +63,7 @@ from linelaser_calib.core.targets.sphere.circle import (
     fit_circle_geometric,
     fit_circle_ransac,
 )
-from linelaser_calib.core.targets.sphere.config import SphereConfig
+from linelaser_calib.core.targets.sphere.config import SphereConfig, estimates_scale
 from linelaser_calib.core.targets.sphere.model import (
     SIDE_LABELS,
     FixedPointSolution,
@@ -104,6 +110,11 @@ class SphereFeature:
     circle : CircleFit
     points : ndarray, shape (N, 3)
         The circle's inlier points, sensor frame, m, in scan order.
+    rival : Comparison or None
+        The comparison with the rival shapes when a rival fits this one profile clearly
+        better than its circle (a real profiler's smooth shape error makes a conic do so on
+        most profiles): it never rejects the profile, and only a majority of such profiles
+        puts the sphere in doubt (:meth:`SphereTarget.model_doubt`).
     """
 
     index: int
@@ -111,6 +122,7 @@ class SphereFeature:
     T_base_flange: FloatArray
     circle: CircleFit
     points: FloatArray
+    rival: Comparison | None = None
 
     def record(self) -> SampleFit:
         """The plain record kept in the result."""
@@ -123,8 +135,8 @@ def extract_feature(
     sample: Sample, config: SphereConfig, rng: np.random.Generator
 ) -> SphereFeature | Rejection:
     """Clean one profile, fit its circle and weigh it against the rival shapes; a rejection
-    says why it failed (a :class:`~linelaser_calib.core.model_check.RivalRejection` when a
-    rival fits clearly better)."""
+    says why it failed (a :class:`~linelaser_calib.core.model_check.RivalRejection` when no
+    circle was found and a rival fits clearly better)."""
     try:
         cleaned = clean_profile(sample.points, config.cleaning)
     except ProfileRejected as exc:
@@ -146,12 +158,19 @@ def extract_feature(
         except ValueError:
             return Rejection(sample.index, sample.stamp_ns, "circle", str(circle))
     comparison = compare_circle(xz, centre, radius)
-    if comparison.rival_wins:
-        return circle_rival_rejection(sample.index, sample.stamp_ns, comparison)
     if isinstance(circle, ProfileRejected):
+        if comparison.rival_wins:
+            return circle_rival_rejection(sample.index, sample.stamp_ns, comparison)
         return Rejection(sample.index, sample.stamp_ns, "circle", str(circle))
     points = cleaned.points[circle.inliers]
-    return SphereFeature(sample.index, sample.stamp_ns, sample.T_base_flange, circle, points)
+    return SphereFeature(
+        sample.index,
+        sample.stamp_ns,
+        sample.T_base_flange,
+        circle,
+        points,
+        comparison if comparison.rival_wins else None,
+    )
 
 
 def _fmt(v: FloatArray) -> str:
@@ -197,9 +216,12 @@ class SphereTarget:
         "robot_sigma_t_m": Option("refine.robot_sigma_t_m"),
         "robot_sigma_r_rad": Option("refine.robot_sigma_r_rad"),
         "min_samples": Option("min_samples"),
+        "scale": Option("scale", methods=("default",)),
     }
     #: Pose planning (:mod:`linelaser_calib.core.planning`).
     planner = SpherePlanner()
+    #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
+    rivals = ("cylinder",)
 
     def validate(
         self, sample: Sample, config: SphereConfig, rng: np.random.Generator
@@ -337,7 +359,12 @@ class SphereTarget:
         first round on.
         """
         self._require(features, config, context)
-        refine_config = replace(config.refine, estimate_radius=config.radius_m is None)
+        refine_config = replace(
+            config.refine,
+            estimate_radius=config.radius_m is None,
+            estimate_scale=estimates_scale(config),
+        )
+        scale = 0.0
         warm = context.warm_start
         if warm is not None and isinstance(warm.section, SphereSection):
             section = warm.section
@@ -348,6 +375,7 @@ class SphereTarget:
                 section.centre_side,
             )
             warnings: list[str] = []
+            scale = section.scale or 0.0
             levels = section.noise_levels or {}
             stated = refine_config
             refine_config = replace(
@@ -389,7 +417,13 @@ class SphereTarget:
                 )
             else:
                 T_start_k, centre_k, radius_k = T_start, centre, radius
-            start = SphereState(T_start_k, centre_k, radius_k, np.zeros((len(kept), N_LOCAL)))
+            start = SphereState(
+                T_start_k,
+                centre_k,
+                radius_k,
+                np.zeros((len(kept), N_LOCAL)),
+                scale if previous is None else previous.state.scale,
+            )
             return refine_sphere(
                 np.stack([f.T_base_flange for f in chosen]),
                 [f.points for f in chosen],
@@ -433,6 +467,14 @@ class SphereTarget:
         scatter = dispersion_warning(outcome.sample_dispersion)
         if scatter is not None:
             warnings.append(scatter)
+        if outcome.scale_index is not None and abs(state.scale) > PLAUSIBLE_SCALE_ERROR:
+            warnings.append(
+                f"the estimated along-line scale is {1.0 + state.scale:.4f} "
+                f"({100.0 * state.scale:+.2f} % from nominal): a scale error beyond "
+                f"{100.0 * PLAUSIBLE_SCALE_ERROR:.0f} % is implausible, and it likely takes up "
+                "something else, such as a ball that is not the given size (measure it, or "
+                "omit {setting:radius_m}); {setting:scale} fixed holds it at 1"
+            )
         rms = outcome.sample_rms_m()
         section = SphereSection(
             state.centre_m,
@@ -441,6 +483,8 @@ class SphereTarget:
             radius_estimated=config.radius_m is None,
             side_estimated=config.centre_side is None,
             centre_sigma_m=sigma[6:9],
+            scale=None if outcome.scale_index is None else state.scale,
+            scale_sigma=None if outcome.scale_index is None else float(sigma[outcome.scale_index]),
             noise_levels={
                 "sensor_sigma_m": outcome.sensor_sigma_m,
                 "robot_sigma_t_m": outcome.robot_sigma_t_m,
@@ -467,6 +511,7 @@ class SphereTarget:
             sigma_widening=None
             if outcome.sample_dispersion is None
             else widening(outcome.sample_dispersion[:6]),
+            converged=outcome.converged,
             robot_error=RobotError(
                 outcome.robot_sigma_t_m,
                 outcome.robot_sigma_r_rad,
@@ -502,6 +547,19 @@ class SphereTarget:
             f"{describe_direction(d.vector, d.status)}"
             for d in poor
         ]
+
+    def model_doubt(self, features: list[Any], config: SphereConfig) -> str | None:
+        """Why the profiles' own shapes put the sphere in doubt: at least half of them fit a
+        rival shape clearly better than a circle (:attr:`SphereFeature.rival`); None
+        otherwise. The whole recording decides then (:mod:`..rivals`)."""
+        shown = [f for f in features if f.rival is not None]
+        if not shown or 2 * len(shown) < len(features):
+            return None
+        example = shown[0]
+        return (
+            f"{len(shown)} of {len(features)} profiles fit a rival shape better than a circle "
+            f"one by one (profile {example.index}: {example.rival.describe()})"
+        )
 
     def check_features(self, features: list[Any], config: SphereConfig) -> None:
         """Nothing beyond extraction: each profile's shape is checked there, against rival

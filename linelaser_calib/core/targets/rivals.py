@@ -1,0 +1,244 @@
+"""Which target explains the whole recording: a target's fit against its rivals' full fits.
+
+One profile cannot tell a sphere from a cylinder: a real profiler's smooth shape error (tens
+of µm along the line) lets a 5-number conic beat a 3-number circle on almost any single
+profile. The evidence is in the whole recording: a sphere's cuts are circles whose radius
+changes with the plane's distance from one centre, a cylinder's are ellipses about one
+axis, each consistent only through the poses. So a recording is judged here, by the full
+models (:func:`check_model`, called by the pipeline after the solve):
+
+1. **Is the target's own model in doubt?** Its fit check (:meth:`Target.check_fit`) failed;
+   or its solve needs a robot pose error more than :data:`~.base.ROBOT_PRIOR_EXCESS` times
+   the prior, or did not converge; or the target's own per-profile shapes say so (the
+   optional ``model_doubt(features, config)`` capability: e.g. most profiles fit a rival
+   shape better).
+2. **If so, does a rival target explain the recording clearly better?** Each target the
+   target names as a rival (its optional ``rivals`` attribute: target names) is calibrated
+   from the same samples through the target protocol (its own extraction and default
+   solve). Both fits are judged alike: every point of the profiles either used is mapped
+   into the base frame with its *recorded* flange pose and each fit's hand-eye, and its
+   distance from each fit's target is taken (:meth:`~.base.ResultSection.surface_distances`;
+   the likelihood of the points under one common Gaussian noise). A rival whose RMS
+   distance is :data:`CLEAR_FACTOR` times smaller wins clearly: the recording is refused,
+   the rival named with both figures.
+3. **Otherwise** the data are still consistent with the target when a rival was fitted and
+   every rival leaves :data:`CLEAR_FACTOR` times more. A fit that needs a robot error
+   :data:`MISFIT_ROBOT_EXCESS` times the prior is refused as a misfit unless they are (its
+   warnings say how large the error is); a failed fit check is refused too unless they are
+   or no rival could be fitted at all (it then becomes a warning with the figures), but one
+   that failed on the robot's error is always refused, in the target's own words (e.g. a
+   sphere centre given on the wrong side). A target that names no rival keeps its fit
+   check's refusals.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibrationError, ModelMismatch
+from ..types import Sample, SampleFit
+from . import get_target
+from .base import ROBOT_PRIOR_EXCESS, SolveContext, Target, TargetSolution, _no_progress
+
+#: A rival whose points' RMS distance from its fitted target is this many times smaller than
+#: the target's own wins clearly (and the target is clearly better than a rival leaving this
+#: many times more).
+CLEAR_FACTOR = 2.0
+#: A fit that needs a robot pose error this many times the prior does not fit.
+MISFIT_ROBOT_EXCESS = 10.0
+
+
+@dataclass(frozen=True)
+class WholeFit:
+    """One target's full fit judged on the whole recording.
+
+    Attributes
+    ----------
+    title : str
+        The target's title.
+    name : str
+        Its ``--target`` value.
+    rms_m : float
+        RMS distance of the profiles' points from the fitted target, recorded poses, m.
+    n_points, n_profiles : int
+        What the RMS was taken over.
+    """
+
+    title: str
+    name: str
+    rms_m: float
+    n_points: int
+    n_profiles: int
+
+    def text(self) -> str:
+        """'the sphere fitted with the poses leaves 98.1 um RMS' for messages."""
+        return f"the {self.title} fitted with the poses leaves {self.rms_m * 1e6:.1f} um RMS"
+
+
+def whole_rms_m(solution: TargetSolution, fits: Sequence[SampleFit]) -> tuple[float, int]:
+    """RMS distance (m) of the fits' points, mapped with their recorded flange poses and the
+    solution's hand-eye, from the solution's target, and the number of points."""
+    distances = [
+        solution.section.surface_distances(fit, fit.T_base_flange @ solution.T_flange_sensor)
+        for fit in fits
+    ]
+    d = np.concatenate(distances) if distances else np.zeros(0)
+    return (float(np.sqrt(np.mean(d**2))) if len(d) else math.inf), len(d)
+
+
+def _judged(target: Target[Any], solution: TargetSolution, fits: Sequence[SampleFit]) -> WholeFit:
+    rms, n = whole_rms_m(solution, fits)
+    return WholeFit(target.title, target.name, rms, n, len(fits))
+
+
+def _rival_solution(
+    name: str, samples: list[Sample], context: SolveContext
+) -> tuple[Target[Any], TargetSolution] | None:
+    """The rival target's default fit of the samples with its default settings; None when
+    it cannot calibrate them."""
+    rival = get_target(name)
+    config = rival.config_type()
+    try:
+        features, rejections = rival.extract(samples, config, context.seed, _no_progress)
+        quiet = SolveContext(
+            seed=context.seed,
+            rejections=rejections,
+            n_samples=len(samples),
+            progress=_no_progress,
+        )
+        return rival, rival.solve_default(features, config, quiet)
+    except CalibrationError:
+        return None
+
+
+def _doubts(
+    target: Target[Any], config: Any, features: list[Any], solution: TargetSolution
+) -> list[str]:
+    """Why the target's own model is in doubt, in words (empty: it is not)."""
+    doubts = []
+    robot = solution.robot_error
+    if robot is not None and robot.excess > ROBOT_PRIOR_EXCESS:
+        doubts.append(f"its fit needs a robot pose error {robot.excess:.1f} times the prior")
+    if not solution.converged:
+        doubts.append("its refinement did not converge")
+    shape = getattr(target, "model_doubt", None)
+    if callable(shape):
+        said = shape(features, config)
+        if said:
+            doubts.append(said)
+    return doubts
+
+
+def _what(problem: ModelMismatch) -> str:
+    """What a fit check found, without its title, causes and ending."""
+    text = str(problem)
+    for end in (". Likely causes", ". No result"):
+        text = text.split(end)[0]
+    return text.split("does not fit these data: ", 1)[-1]
+
+
+def _inserted(text: str, more: str) -> str:
+    """A refusal's text with ``more`` (sentences) before its likely causes or its end."""
+    for mark in (" Likely causes", " No result was written"):
+        if mark in text:
+            head, _, tail = text.partition(mark)
+            return f"{head}{more}{mark}{tail}"
+    return text + more
+
+
+def check_model(
+    target: Target[Any],
+    config: Any,
+    samples: list[Sample],
+    features: list[Any],
+    solution: TargetSolution,
+    context: SolveContext,
+) -> None:
+    """Refuse a solution whose target a rival explains clearly better, or that does not fit
+    and is not consistent (see the module docstring); a failed fit check that every rival
+    explains clearly worse becomes a warning on the solution.
+
+    Raises
+    ------
+    ModelMismatch
+        Naming the rival with both figures, or the misfit.
+    """
+    problem: ModelMismatch | None = None
+    try:
+        target.check_fit(solution, config)
+    except ModelMismatch as exc:
+        problem = exc
+    doubts = _doubts(target, config, features, solution)
+    robot = solution.robot_error
+    robot_misfit = robot is not None and robot.excess > MISFIT_ROBOT_EXCESS
+    if problem is None and not doubts:
+        return
+    declared = tuple(getattr(target, "rivals", ()))
+    tried = {name: _rival_solution(name, samples, context) for name in declared}
+    rivals = [found for found in tried.values() if found is not None]
+    unfit = [get_target(name).title for name, found in tried.items() if found is None]
+    fits = {f.index: f for _, s in rivals for f in s.sample_fits}
+    fits.update({f.index: f for f in solution.sample_fits})
+    every = [fits[k] for k in sorted(fits)]
+    own = _judged(target, solution, every)
+    judged = sorted((_judged(t, s, every) for t, s in rivals), key=lambda w: w.rms_m)
+    misfit = [] if problem is None else [_what(problem)]
+    if any("flange-pose corrections" in m for m in misfit):
+        doubts = [d for d in doubts if not d.startswith("its fit needs a robot pose error")]
+    why = "; ".join(doubts + misfit)
+    figures = (
+        f"over {own.n_points} points of {own.n_profiles} profiles mapped with the recorded "
+        "flange poses"
+    )
+    if judged and judged[0].rms_m * CLEAR_FACTOR < own.rms_m:
+        best = judged[0]
+        raise ModelMismatch(
+            f"the {own.title} model does not explain these data ({why}): {best.text()} where "
+            f"{own.text()} ({figures}). The scans show a {best.title}: choose "
+            f"{{setting:target}} {best.name}. No result was written."
+        )
+    compared = (
+        " A rival fitted with the poses does no better: "
+        + "; ".join(w.text() for w in judged)
+        + f", {own.text()} ({figures})."
+        if judged
+        else ""
+    )
+    # Every rival fitted leaves CLEAR_FACTOR times more (and one at least was fitted) ...
+    consistent = bool(judged) and judged[0].rms_m >= CLEAR_FACTOR * own.rms_m
+    # ... or, for a failed residual check, no rival could be fitted at all.
+    unrivalled = bool(declared) and (consistent or not judged)
+    if problem is not None and (robot_misfit or not unrivalled):
+        raise ModelMismatch(_inserted(str(problem), compared))
+    if robot_misfit and not consistent:
+        assert robot is not None
+        raise ModelMismatch(
+            f"the {own.title} model does not fit these data: its fit needs flange-pose "
+            f"corrections of {robot.translation_m * 1e3:.3f} mm and "
+            f"{math.degrees(robot.rotation_rad):.4f} deg (1 sigma), {robot.excess:.0f} times "
+            "the robot's stated error"
+            + ("" if solution.converged else ", and its refinement did not converge")
+            + "."
+            + compared
+            + " Likely causes: the scans show another target ({setting:target}); the profile "
+            "and pose clocks are not synchronised ({setting:clock_offset_s}); the robot moved "
+            "during the scans; or the robot is less accurate than stated "
+            "({setting:robot_sigma_t_m}). No result was written."
+        )
+    if problem is None:
+        return
+    others = [w.text() for w in judged] + [
+        f"the {title} could not be fitted to these profiles" for title in unfit
+    ]
+    solution.warnings.append(
+        f"the {own.title} model does not fit these data: {_what(problem)}; but "
+        + (f"{own.text()} where " if judged else "")
+        + ", ".join(others)
+        + (f" ({figures})" if judged else "")
+        + f": these data are still best explained by a {own.title}, and the result is kept"
+    )
