@@ -22,6 +22,7 @@ than the corner and robot noise explain.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
@@ -334,7 +335,10 @@ class LineTarget:
             ]
             c, cov, T = _stack(moved)
             X_start, line_start = _start(moved, X0)
-            return refine_line(c, cov, T, X_start, line_start, X0, config).cost_history[-1]
+            try:
+                return refine_line(c, cov, T, X_start, line_start, X0, config).cost_history[-1]
+            except np.linalg.LinAlgError:  # views that determine nothing at this offset
+                return math.inf
 
         return cost
 
