@@ -433,7 +433,9 @@ def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Genera
         (o for o in outcomes if isinstance(o, CornerFit)), key=lambda f: -int(f.inliers.sum())
     )
     if not fits:
-        raise outcomes[0]
+        first = outcomes[0]
+        assert isinstance(first, ProfileRejected)  # no pair made a corner
+        raise first
     return replace(fits[0], alternatives=tuple(fits[1:]))
 
 
