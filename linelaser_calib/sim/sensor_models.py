@@ -280,7 +280,7 @@ def _gaps(rng: np.random.Generator, model: SensorModel, hit: BoolArray) -> BoolA
     ``hit`` marks the rays that meet a surface, where gaps are centred."""
     k, n = hit.shape
     gap = np.zeros((k, n), dtype=np.bool_)
-    counts: list[int] = rng.poisson(model.gap_rate, size=k).tolist()
+    counts: list[int] = np.asarray(rng.poisson(model.gap_rate, size=k)).tolist()
     for row, count in enumerate(counts):
         rays = np.flatnonzero(hit[row])
         if not len(rays):
