@@ -537,7 +537,7 @@ def _sszn_fanuc() -> ProfilerSpec:
 #: smooth shape error of 42 µm over 4 mm, as the SSZN profiler of a FANUC cell shows, with
 #: which a conic fits a single profile of a ball clearly better than a circle.
 REAL_FACES: dict[str, dict[str, float]] = {
-    "grazing": {"incidence_falloff": 1.0},
+    "grazing": {"incidence_falloff": 0.5},
     "gaps": {"gap_rate": 1.0, "gap_points": 30.0},
     "scales": {"x_scale_error": 0.006, "z_scale_error": -0.002},
     "shape": {"shape_sigma_m": 4.2e-5, "shape_length_m": 0.004},
