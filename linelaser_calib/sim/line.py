@@ -39,6 +39,17 @@ average (three S periods, tilts of ±30 deg along and ±15 deg across the seam, 
 ±35 deg); profiles at 25 Hz stamped 12 ms late; a 250 Hz (4 ms) pose stream with 0.25 ms
 stamp jitter; and a UR-class robot error of 0.02 mm and 0.002 deg per axis (1σ) drawn at
 each waypoint and blended between them.
+
+``line_ridge``: a straight ridge on a block seen as real recordings from an SSZN-type
+profiler showed it (issue 29): each profile an inverted V (``ridge``) with a long gentle
+flank (60 mm at 15 deg, 600-1000 points at the 0.05 mm pitch of ``sszn_fanuc``) and a steep
+one (20 mm at 80 deg, ``flank_turn_rad``) that the laser meets at 60-77 deg incidence, so
+that it holds 40-150 points, with a 10 mm floor beside it (a third straight segment); the
+profiler carries every one of :data:`~linelaser_calib.sim.sensor_models.REAL_FACES`
+(thinning at incidence, gaps, x/z scales 0.8 % apart, 42 µm shape error). 8 waypoints over
+±40 mm of ridge at 0.05 m/s, profiles at 5 Hz (about 50), the view turned 12 deg towards
+the steep flank, tilts of ±26 deg along and ±11 deg across, turns of ±29 deg; a FANUC-like
+robot error of 0.03 mm and 0.005 deg.
 """
 
 from __future__ import annotations

@@ -26,8 +26,8 @@ frame (x along the line, z depth), for K profiles of N rays each:
    ``cos(incidence) ** incidence_falloff``, so a steep flank met at grazing incidence holds
    few points (the spot smears over many pixels and the peak detector gives up on many).
 7. **Gaps**: per profile a Poisson number (mean ``gap_rate``) of runs of missing returns,
-   each centred on a random return and ``gap_points`` rays long on average (exponential):
-   a shadow, a dirty spot, a saturated patch.
+   each centred on a random return and ``gap_length_m`` long along the line on average
+   (exponential): a shadow, a dirty spot, a saturated patch.
 8. **Scales**: x measured as (1 + ``x_scale_error``) x, and z as
    (1 + ``z_scale_error``) (z − z_mid) + z_mid about the middle of the measuring range: a
    profiler whose two axes' calibrations are off by a little, and by different amounts.
@@ -95,8 +95,8 @@ class SensorModel:
         Exponent p of the share ``cos(incidence) ** p`` of returns kept; 0 keeps all.
     gap_rate : float
         Mean number of gaps (runs of missing returns) per profile.
-    gap_points : float
-        Mean length of a gap, in rays.
+    gap_length_m : float
+        Mean length of a gap along the line (sensor x), m.
     x_scale_error, z_scale_error : float
         Relative errors of the x and z scales (z about the middle of the range), signed.
     """
@@ -112,7 +112,7 @@ class SensorModel:
     signal_spread: float = 0.0
     incidence_falloff: float = 0.0
     gap_rate: float = 0.0
-    gap_points: float = 20.0
+    gap_length_m: float = 1e-3
     x_scale_error: float = 0.0
     z_scale_error: float = 0.0
 
@@ -127,7 +127,7 @@ class SensorModel:
             ):
                 bound = f"within +-{MAX_SCALE_ERROR}" if signed else ">= 0"
                 raise InputError(f"sensor model: {f.name} must be a number {bound}, got {value!r}")
-        for name in ("shape_length_m", "speckle_points", "gap_points"):
+        for name in ("shape_length_m", "speckle_points", "gap_length_m"):
             if getattr(self, name) <= 0.0:
                 raise InputError(f"sensor model: {name} must be > 0, got {getattr(self, name)}")
         if self.min_signal >= 1.0:
@@ -271,24 +271,25 @@ def apply_sensor_model(
         kept = np.clip(np.nan_to_num(cos_incidence), 0.0, 1.0) ** model.incidence_falloff
         weak |= thin_rng.random((k, n)) >= kept
     if model.gap_rate > 0.0:
-        weak |= _gaps(gap_rng, model, np.isfinite(truth[..., 0]))
+        weak |= _gaps(gap_rng, model, truth[..., 0])
     return p, weak
 
 
-def _gaps(rng: np.random.Generator, model: SensorModel, hit: BoolArray) -> BoolArray:
-    """Rays (K, N) inside the gaps of each profile (term 7 of the module docstring);
-    ``hit`` marks the rays that meet a surface, where gaps are centred."""
-    k, n = hit.shape
+def _gaps(rng: np.random.Generator, model: SensorModel, x_m: FloatArray) -> BoolArray:
+    """Rays (K, N) inside the gaps of each profile (term 7 of the module docstring); ``x_m``
+    (K, N) is where each ray meets a surface along the line (NaN: nowhere), m."""
+    k, n = x_m.shape
     gap = np.zeros((k, n), dtype=np.bool_)
     counts: list[int] = np.asarray(rng.poisson(model.gap_rate, size=k)).tolist()
     for row, count in enumerate(counts):
-        rays = np.flatnonzero(hit[row])
+        rays = np.flatnonzero(np.isfinite(x_m[row]))
         if not len(rays):
             continue
-        centres = rng.choice(rays, count)
-        halves = 0.5 * rng.exponential(model.gap_points, count)
-        for centre, half in zip(centres, halves, strict=True):
-            gap[row, max(0, round(centre - half)) : round(centre + half) + 1] = True
+        centres = x_m[row, rng.choice(rays, count)]
+        halves = 0.5 * rng.exponential(model.gap_length_m, count)
+        with np.errstate(invalid="ignore"):
+            for centre, half in zip(centres, halves, strict=True):
+                gap[row] |= np.abs(x_m[row] - centre) <= half
     return gap
 
 
@@ -532,13 +533,13 @@ def _sszn_fanuc() -> ProfilerSpec:
 
 #: Faces of a real profiler that the field showed (issue 29), as :class:`SensorModel` fields:
 #: ``grazing``: points thin out as the incidence grows (a steep flank met at grazing
-#: incidence holds a few dozen points); ``gaps``: about one run of 30 missing rays per
-#: profile; ``scales``: x and z scales off by +0.6 % and -0.2 % (0.8 % apart); ``shape``: a
+#: incidence holds a few dozen points); ``gaps``: about one run of missing returns 1.5 mm
+#: long per profile; ``scales``: x and z scales off by +0.6 % and -0.2 % (0.8 % apart); ``shape``: a
 #: smooth shape error of 42 µm over 4 mm, as the SSZN profiler of a FANUC cell shows, with
 #: which a conic fits a single profile of a ball clearly better than a circle.
 REAL_FACES: dict[str, dict[str, float]] = {
     "grazing": {"incidence_falloff": 0.5},
-    "gaps": {"gap_rate": 1.0, "gap_points": 30.0},
+    "gaps": {"gap_rate": 1.0, "gap_length_m": 1.5e-3},
     "scales": {"x_scale_error": 0.006, "z_scale_error": -0.002},
     "shape": {"shape_sigma_m": 4.2e-5, "shape_length_m": 0.004},
 }

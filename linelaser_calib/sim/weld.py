@@ -215,6 +215,9 @@ class WeldScenario(GrooveScene):
         1σ per axis of the taught point's error, m.
     min_flank_points : int
         Fewest noise-free returns on each flank for a view to be used.
+    floor_width_m : float
+        A floor this wide beyond the second flank's far edge, m (a third straight segment in
+        the profiles that reach it); 0: none.
     """
 
     name: str = "custom"
@@ -238,6 +241,7 @@ class WeldScenario(GrooveScene):
     aim_sigma_m: float = 0.0
     teach_sigma_m: float = 0.0
     min_flank_points: int = 40
+    floor_width_m: float = 0.0
 
     kind: ClassVar[str] = "weld"
     vectors: ClassVar[tuple[str, ...]] = (
@@ -252,7 +256,7 @@ class WeldScenario(GrooveScene):
         super().__post_init__()
         require = self.require
         require(self.first_depth_m > 0.0, f"first_depth_m must be > 0, got {self.first_depth_m}")
-        for name in ("step_m", "lateral_spread_m", "aim_sigma_m", "teach_sigma_m"):
+        for name in ("step_m", "lateral_spread_m", "aim_sigma_m", "teach_sigma_m", "floor_width_m"):
             require(getattr(self, name) >= 0.0, f"{name} must be >= 0, got {getattr(self, name)}")
         require(self.pose_pattern in POSE_PATTERNS, f"pose_pattern must be one of {POSE_PATTERNS}")
         require(
@@ -367,6 +371,7 @@ class Groove:
             scenario.opening_angle_rad,
             scenario.flank_width_m,
             scenario.seam_half_length_m,
+            GrooveShape(floor_width_m=scenario.floor_width_m),
         )
 
     def cast(

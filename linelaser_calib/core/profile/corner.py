@@ -56,8 +56,9 @@ from .corner_shape import (
 MAX_REFIT_ROUNDS = 10
 #: Smallest noise-adapted inlier threshold, m.
 MIN_NOISE_THRESHOLD_M = 1e-6
-#: Smallest tolerance of a corner's opening about the recording's median, rad.
-MIN_OPENING_SPREAD_RAD = math.radians(10.0)
+#: Smallest tolerance of a corner's opening about the recording's median, rad: the laser
+#: plane's tilt against the seam changes the flanks' angle in the profile by tens of degrees.
+MIN_OPENING_SPREAD_RAD = math.radians(30.0)
 #: Fewest cleaned points of a profile without a corner that are weighed against the rivals
 #: (a line pair needs 8).
 MIN_RIVAL_POINTS = 8
