@@ -62,7 +62,7 @@ def _recording(target: str, face: str, seed: int = 3) -> tuple[list[Any], Any, n
     floor = FLOOR_WIDTH_M if face == "floor" else 0.0
     offset = 0.0
     if target == "cylinder":
-        scenario = scenario_from_preset("ur_scancontrol", n_poses=16)
+        scenario = scenario_from_preset("ur_scancontrol", n_poses=12, resolution=320)
         scenario = replace(scenario, sensor=with_faces(scenario.sensor, *sensor_faces))
         data: Any = simulate(scenario, seed)
     elif target == "sphere":

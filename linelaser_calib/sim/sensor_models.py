@@ -255,9 +255,11 @@ def apply_sensor_model(
         p[..., 2] += model.speckle_sigma_m * _smoothed_noise(
             speckle_rng, (k, n), model.speckle_points
         )
-    p[..., 0] *= 1.0 + model.x_scale_error
-    z_mid = 0.5 * (z_range_m[0] + z_range_m[1])
-    p[..., 2] = z_mid + (1.0 + model.z_scale_error) * (p[..., 2] - z_mid)
+    if model.x_scale_error != 0.0:
+        p[..., 0] *= 1.0 + model.x_scale_error
+    if model.z_scale_error != 0.0:
+        z_mid = 0.5 * (z_range_m[0] + z_range_m[1])
+        p[..., 2] = z_mid + (1.0 + model.z_scale_error) * (p[..., 2] - z_mid)
     for axis, step in ((0, model.x_step_m), (2, model.z_step_m)):
         if step > 0.0:
             p[..., axis] = np.round(p[..., axis] / step) * step
