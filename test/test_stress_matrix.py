@@ -50,8 +50,6 @@ SCALE = (
     "none), so a 0.6 % scale error biases the hand-eye beyond its 1 sigma"
 )
 XFAIL: dict[tuple[str, str], str] = {(target, "scales"): SCALE for target in TARGETS}
-#: Wrong-target pairs whose refusal does not name the right target yet.
-XFAIL_WRONG: dict[tuple[str, str], str] = {}
 
 
 @cache
@@ -149,8 +147,6 @@ def test_each_target_calibrates_on_each_face_as_well_as_its_clean_twin(
 def test_each_recording_given_to_a_wrong_target_is_refused_naming_the_right_one(
     recording: str, target: str
 ) -> None:
-    if (recording, target) in XFAIL_WRONG:
-        pytest.xfail(XFAIL_WRONG[(recording, target)])
     with pytest.raises((ModelMismatch, DegenerateError)) as refused:
         _calibrate(target, recording, "")
     assert recording in str(refused.value), str(refused.value)
