@@ -43,12 +43,12 @@ each waypoint and blended between them.
 ``line_ridge``: a straight ridge on a block seen as real recordings from an SSZN-type
 profiler showed it (issue 29): each profile an inverted V (``ridge``) with a long gentle
 flank (60 mm at 15 deg, 600-1000 points at the 0.05 mm pitch of ``sszn_fanuc``) and a steep
-one (20 mm at 80 deg, ``flank_turn_rad``) that the laser meets at 60-77 deg incidence, so
-that it holds 40-150 points, with a 10 mm floor beside it (a third straight segment); the
-profiler carries every one of :data:`~linelaser_calib.sim.sensor_models.REAL_FACES`
+one (20 mm at 80 deg, ``flank_turn_rad``) that the laser meets at grazing incidence, so that
+it holds 30-250 points (median about 100), with a 10 mm floor beside it (a third straight
+segment); the profiler carries every one of :data:`~linelaser_calib.sim.sensor_models.REAL_FACES`
 (thinning at incidence, gaps, x/z scales 0.8 % apart, 42 µm shape error). 8 waypoints over
-±40 mm of ridge at 0.05 m/s, profiles at 5 Hz (about 50), the view turned 12 deg towards
-the steep flank, tilts of ±26 deg along and ±11 deg across, turns of ±29 deg; a FANUC-like
+±40 mm of ridge at 0.05 m/s, profiles at 5 Hz (about 50), the view turned 15 deg towards
+the steep flank, tilts of ±26 deg along and ±8 deg across, turns of ±29 deg; a FANUC-like
 robot error of 0.03 mm and 0.005 deg.
 """
 
@@ -444,13 +444,13 @@ def _ridge() -> LineScenario:
         flank_width_m=0.06,
         second_flank_width_m=0.02,
         floor_width_m=0.01,
-        view_tilt_rad=math.radians(12.0),
+        view_tilt_rad=math.radians(15.0),
         sweep_half_length_m=0.04,
         weaves=1.5,
         weave_fraction=0.35,
         depth_range_m=(rig.z_min_m + 0.004, middle - 0.004),
         tilt_along_rad=math.radians(26.0),
-        tilt_across_rad=math.radians(11.0),
+        tilt_across_rad=math.radians(8.0),
         yaw_rad=math.radians(29.0),
         stamp_jitter_s=2.5e-4,
         min_flank_points=15,
