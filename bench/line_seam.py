@@ -18,7 +18,7 @@ stamped 12 ms late, a 4 ms pose stream with 0.25 ms stamp jitter, robot error 0.
 Metrics: hand-eye rotation (deg) and translation (mm) error, clock offset error (ms; the
 truth is −12 ms), wall time (s). Refused runs are counted, not averaged.
 
-Run: ``.venv/bin/python bench/line_seam.py [--seeds N] [--preset line|line_features]``
+Run: ``.venv/bin/python bench/line_seam.py [--seeds N] [--preset line|line_features|line_ridge]``
 (defaults 10 seeds and ``line``; ~30 s per seed, most of it the paper's grid).
 """
 
@@ -42,7 +42,7 @@ from linelaser_calib.core.pipeline import (
 )
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SolveContext, configure
-from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
+from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.weld import bumped_hand_eye
 
 ROWS = ("default", "paper", "default, offset 0")
@@ -125,7 +125,7 @@ def print_table(table: dict[str, dict[str, list[float]]], seeds: int, preset: st
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--seeds", type=int, default=10)
-    parser.add_argument("--preset", default="line", choices=("line", "line_features"))
+    parser.add_argument("--preset", default="line", choices=sorted(LINE_PRESETS))
     args = parser.parse_args()
     print_table(run(args.seeds, args.preset), args.seeds, args.preset)
 

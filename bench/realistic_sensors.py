@@ -23,9 +23,12 @@ zeroed (white point noise only). Per preset and method, over seeds:
 - ``twin CRB``: the same bound for the white-noise twin.
 
 Run: ``.venv/bin/python bench/realistic_sensors.py [--seeds N] [--presets A,B]
-[--independent-points] [--no-bound]`` (default 20 seeds, all four presets; a few seconds per
-calibration). ``--independent-points`` runs the cylinder's default method without the
-learned line noise (``RefineConfig.learn_line_noise`` off), as it was before.
+[--independent-points] [--no-bound] [--faces F,G]`` (default 20 seeds, all four presets; a
+few seconds per calibration). ``--faces`` adds faces of a real profiler that the field showed
+(:data:`~linelaser_calib.sim.sensor_models.REAL_FACES`: grazing, gaps, scales, shape) to
+each preset's sensor; the twin stays white. ``--independent-points`` runs the cylinder's
+default method without the learned line noise (``RefineConfig.learn_line_noise`` off), as it
+was before.
 """
 
 from __future__ import annotations
@@ -44,7 +47,7 @@ from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder.config import CylinderConfig, RefineConfig
 from linelaser_calib.sim.presets import scenario_from_preset
-from linelaser_calib.sim.sensor_models import SensorModel
+from linelaser_calib.sim.sensor_models import SensorModel, with_faces
 from linelaser_calib.sim.simulate import simulate
 from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
 
@@ -97,17 +100,20 @@ class Tally:
         return float(100.0 * np.mean(np.abs(self.z()) < 1.0)) if self.sigmas else math.nan
 
 
-def _data(preset: str, seed: int, white: bool) -> tuple[Any, FloatArray, str]:
-    """Profiles, poses, true hand-eye (4, 4) and target of one simulated run."""
+def _data(
+    preset: str, seed: int, white: bool, faces: tuple[str, ...] = ()
+) -> tuple[Any, FloatArray, str]:
+    """Profiles, poses, true hand-eye (4, 4) and target of one simulated run (with
+    ``faces`` added to the sensor unless ``white``)."""
     if preset.startswith("sphere"):
         sphere = sphere_scenario_from_preset(preset)
-        if white:
-            sphere = replace(sphere, rig=replace(sphere.rig, sensor=SensorModel()))
-        data = simulate_sphere(sphere, seed)
+        sensor = SensorModel() if white else with_faces(sphere.rig.sensor, *faces)
+        data = simulate_sphere(replace(sphere, rig=replace(sphere.rig, sensor=sensor)), seed)
         return data, data.truth.T_flange_sensor, "sphere"
     scenario = scenario_from_preset(preset)
-    if white:
-        scenario = replace(scenario, sensor=SensorModel())
+    scenario = replace(
+        scenario, sensor=SensorModel() if white else with_faces(scenario.sensor, *faces)
+    )
     cylinder = simulate(scenario, seed)
     return cylinder, cylinder.truth.T_flange_sensor, "cylinder"
 
@@ -119,14 +125,19 @@ def _error(result: CalibrationResult, truth: FloatArray) -> FloatArray:
 
 
 def run(
-    preset: str, seeds: int, white: bool, independent: bool = False, bound: bool = True
+    preset: str,
+    seeds: int,
+    white: bool,
+    independent: bool = False,
+    bound: bool = True,
+    faces: tuple[str, ...] = (),
 ) -> dict[str, Tally]:
     """Both methods on ``seeds`` simulated runs of a preset (or its white-noise twin);
     ``independent`` weighs a cylinder's points as independent (no learned line noise);
     ``bound`` computes the Cramér–Rao bound of each (minutes per recording)."""
     tallies = {"paper": Tally(), "default": Tally()}
     for seed in range(seeds):
-        data, truth, target = _data(preset, seed, white)
+        data, truth, target = _data(preset, seed, white, faces)
         for method in (Method.PAPER, Method.DEFAULT):
             tally = tallies[method.value]
             tally.recorded += len(data.profiles)
@@ -175,7 +186,9 @@ def main() -> None:
         action="store_true",
         help="skip the Cramér–Rao bound (its dense covariances take most of the run)",
     )
+    parser.add_argument("--faces", default="", help="faces of a real profiler to add, F,G")
     args = parser.parse_args()
+    faces = tuple(f for f in args.faces.split(",") if f)
     print(
         f"{'preset':<22}{'method':<9}{'used %':>8}{'refused':>8}{'rot RMS deg':>12}"
         f"{'trans RMS mm':>13}{'x twin':>8}{'max |e|/σ':>10}{'RMS e/σ':>8}{'in 1σ %':>8}"
@@ -185,7 +198,7 @@ def main() -> None:
     notes, twin_notes = [], []
     for preset in args.presets.split(","):
         bound = not args.no_bound
-        real = run(preset, args.seeds, False, args.independent_points, bound)
+        real = run(preset, args.seeds, False, args.independent_points, bound, faces)
         twin = run(preset, args.seeds, True, args.independent_points, bound)
         for name, tally in real.items():
             rot, trans = tally.rms()

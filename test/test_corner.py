@@ -89,7 +89,7 @@ def test_shallow_bend_is_rejected() -> None:
 def test_lines_meeting_away_from_their_points_are_rejected() -> None:
     rng = np.random.default_rng(5)
     points = v_profile(rng)
-    near_corner = np.linalg.norm(points - [0.004, 0.1], axis=1) < 0.006
+    near_corner = np.linalg.norm(points - [0.004, 0.1], axis=1) < 0.012
     with pytest.raises(ProfileRejected, match=r"the lines meet .* mm from the nearest point"):
         fit_corner(points[~near_corner], CONFIG, rng)
 

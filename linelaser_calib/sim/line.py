@@ -39,6 +39,17 @@ average (three S periods, tilts of ±30 deg along and ±15 deg across the seam, 
 ±35 deg); profiles at 25 Hz stamped 12 ms late; a 250 Hz (4 ms) pose stream with 0.25 ms
 stamp jitter; and a UR-class robot error of 0.02 mm and 0.002 deg per axis (1σ) drawn at
 each waypoint and blended between them.
+
+``line_ridge``: a straight ridge on a block seen as real recordings from an SSZN-type
+profiler showed it (issue 29): each profile an inverted V (``ridge``) with a long gentle
+flank (60 mm at 15 deg, 600-1000 points at the 0.05 mm pitch of ``sszn_fanuc``) and a steep
+one (20 mm at 80 deg, ``flank_turn_rad``) that the laser meets at grazing incidence, so that
+it holds 30-250 points (median about 100), with a 10 mm floor beside it (a third straight
+segment); the profiler carries every one of :data:`~linelaser_calib.sim.sensor_models.REAL_FACES`
+(thinning at incidence, gaps, x/z scales 0.8 % apart, 42 µm shape error). 8 waypoints over
+±40 mm of ridge at 0.05 m/s, profiles at 5 Hz (about 50), the view turned 15 deg towards
+the steep flank, tilts of ±26 deg along and ±8 deg across, turns of ±29 deg; a FANUC-like
+robot error of 0.03 mm and 0.005 deg.
 """
 
 from __future__ import annotations
@@ -57,11 +68,13 @@ from linelaser_calib.sim.profiler import Measurement, measure
 from linelaser_calib.sim.robot import draw_errors, plan_motion, reported_flange
 from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import Int8Array, Int64Array
+from linelaser_calib.sim.sensor_models import PROFILERS, REAL_FACES, profiler_fields, with_faces
 from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
 from linelaser_calib.sim.weld import (
     WELD_PRESETS,
     Groove,
     GrooveScene,
+    GrooveShape,
     flank_counts,
     nominal_view,
     trace_groove,
@@ -107,6 +120,18 @@ class LineScenario(GrooveScene):
         Largest tilt about the sensor x axis (the laser plane tips along the seam), about its
         y axis (the view turns across the seam inside the laser plane), and turn about its
         z axis, rad.
+    ridge : bool
+        The flanks run down from the seam: a ridge on a block seen from outside (an inverted
+        V) instead of a groove.
+    flank_turn_rad : float
+        Both flanks turned about the seam by this angle, rad: one gentle, the other steep.
+    second_flank_width_m : float
+        Width of the second flank, m; 0: ``flank_width_m``.
+    floor_width_m : float
+        A floor this wide beyond the second flank's far edge (the table beside a block), m;
+        0: none. It is a third straight segment in the profiles that reach it.
+    view_tilt_rad : float
+        The nominal view turned about the seam by this angle, rad (towards a steep flank).
     stamp_jitter_s : float
         1σ error of the flange-pose stamps, s.
     feature_points : bool
@@ -130,6 +155,11 @@ class LineScenario(GrooveScene):
     tilt_along_rad: float = math.radians(30.0)
     tilt_across_rad: float = math.radians(15.0)
     yaw_rad: float = math.radians(35.0)
+    ridge: bool = False
+    flank_turn_rad: float = 0.0
+    second_flank_width_m: float = 0.0
+    floor_width_m: float = 0.0
+    view_tilt_rad: float = 0.0
     stamp_jitter_s: float = 0.0
     feature_points: bool = False
     min_flank_points: int = 15
@@ -154,6 +184,11 @@ class LineScenario(GrooveScene):
             value = getattr(self, name)
             require(0.0 <= value < math.pi / 2, f"{name} must be in [0, pi/2) rad, got {value}")
         require(self.stamp_jitter_s >= 0.0, "stamp_jitter_s must be >= 0")
+        for name in ("second_flank_width_m", "floor_width_m"):
+            require(getattr(self, name) >= 0.0, f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("flank_turn_rad", "view_tilt_rad"):
+            value = getattr(self, name)
+            require(abs(value) < math.pi / 2, f"{name} must be within +-pi/2 rad, got {value}")
         require(self.rig.n_poses >= 4, "the rig's n_poses (waypoints) must be >= 4")
         require(self.rig.motion == "continuous", "the rig's motion must be 'continuous'")
 
@@ -166,6 +201,9 @@ class LineScenario(GrooveScene):
             self.opening_angle_rad,
             self.flank_width_m,
             self.seam_half_length_m,
+            GrooveShape(
+                self.ridge, self.flank_turn_rad, self.second_flank_width_m, self.floor_width_m
+            ),
         )
 
 
@@ -188,7 +226,9 @@ def sweep_waypoints(scenario: LineScenario, groove: Groove, phases: FloatArray) 
         * np.sin(2.0 * math.pi * scenario.weaves * u + phases[1])
     )
     tilt_x = scenario.tilt_along_rad * np.sin(2.0 * math.pi * _TILT_X_CYCLES * u + phases[2])
-    tilt_y = scenario.tilt_across_rad * np.sin(2.0 * math.pi * _TILT_Y_CYCLES * u + phases[3])
+    tilt_y = scenario.view_tilt_rad + scenario.tilt_across_rad * np.sin(
+        2.0 * math.pi * _TILT_Y_CYCLES * u + phases[3]
+    )
     yaw = scenario.yaw_rad * np.sin(2.0 * math.pi * _YAW_CYCLES * u + phases[4])
     on_seam = groove.point + np.outer((2.0 * u - 1.0) * scenario.sweep_half_length_m, groove.seam)
     T = np.tile(np.eye(4), (len(u), 1, 1))
@@ -377,6 +417,46 @@ def _line_rig() -> Scenario:
     )
 
 
+def _ridge() -> LineScenario:
+    """A ridge on a block seen by an SSZN-class profiler with every face of reality."""
+    spec = PROFILERS["sszn_fanuc"]
+    rig = replace(
+        _line_rig(),
+        name="line_ridge",
+        **profiler_fields(replace(spec, model=with_faces(spec.model, *REAL_FACES))),
+        n_poses=8,
+        max_incidence_rad=math.radians(88.0),
+        camera_baseline_m=0.0,
+        spike_fraction=0.0,
+        dropout_fraction=0.0,
+        robot_sigma_translation_m=3e-5,
+        robot_sigma_rotation_rad=math.radians(0.005),
+        profile_rate_hz=5.0,
+        move_speed_m_s=0.05,
+    )
+    middle = 0.5 * (rig.z_min_m + rig.z_max_m)
+    return LineScenario(
+        name="line_ridge",
+        rig=rig,
+        opening_angle_rad=math.radians(85.0),
+        ridge=True,
+        flank_turn_rad=math.radians(32.5),
+        flank_width_m=0.06,
+        second_flank_width_m=0.02,
+        floor_width_m=0.01,
+        view_tilt_rad=math.radians(15.0),
+        sweep_half_length_m=0.04,
+        weaves=1.5,
+        weave_fraction=0.35,
+        depth_range_m=(rig.z_min_m + 0.004, middle - 0.004),
+        tilt_along_rad=math.radians(26.0),
+        tilt_across_rad=math.radians(8.0),
+        yaw_rad=math.radians(29.0),
+        stamp_jitter_s=2.5e-4,
+        min_flank_points=15,
+    )
+
+
 #: Named straight-seam scenarios; see the module docstring and :func:`line_scenario_from_preset`.
 LINE_PRESETS: dict[str, LineScenario] = {
     "line": LineScenario(name="line", rig=_line_rig(), stamp_jitter_s=2.5e-4),
@@ -386,6 +466,7 @@ LINE_PRESETS: dict[str, LineScenario] = {
         stamp_jitter_s=2.5e-4,
         feature_points=True,
     ),
+    "line_ridge": _ridge(),
 }
 
 

@@ -22,6 +22,15 @@ frame (x along the line, z depth), for K profiles of N rays each:
 5. **Weak returns**: the returned light ``reflectance · cos(incidence) · exp(signal_spread · n)``,
    n ~ N(0, 1) per point, must reach ``min_signal``; otherwise the return is lost. Steep
    (grazing) and dark surfaces therefore drop out more.
+6. **Thinning at incidence**: a return is kept with probability
+   ``cos(incidence) ** incidence_falloff``, so a steep flank met at grazing incidence holds
+   few points (the spot smears over many pixels and the peak detector gives up on many).
+7. **Gaps**: per profile a Poisson number (mean ``gap_rate``) of runs of missing returns,
+   each centred on a random return and ``gap_length_m`` long along the line on average
+   (exponential): a shadow, a dirty spot, a saturated patch.
+8. **Scales**: x measured as (1 + ``x_scale_error``) x, and z as
+   (1 + ``z_scale_error``) (z − z_mid) + z_mid about the middle of the measuring range: a
+   profiler whose two axes' calibrations are off by a little, and by different amounts.
 
 Each term draws from its own generator (spawned from the one passed in), so turning one
 on leaves the others' draws unchanged.
@@ -55,6 +64,8 @@ from linelaser_calib.core.types import BoolArray, FloatArray
 SHAPE_FEATURES = 64
 #: Half-width of the speckle kernel, in units of ``speckle_points``.
 SPECKLE_TRUNCATE = 4.0
+#: Fields of :class:`SensorModel` that may be negative, and their largest magnitude.
+SIGNED_FIELDS, MAX_SCALE_ERROR = ("x_scale_error", "z_scale_error"), 0.5
 
 
 @dataclass(frozen=True)
@@ -80,6 +91,14 @@ class SensorModel:
         gives a point; 0 disables weak-return dropouts.
     signal_spread : float
         1σ of the natural log of the per-point speckle factor of the returned light.
+    incidence_falloff : float
+        Exponent p of the share ``cos(incidence) ** p`` of returns kept; 0 keeps all.
+    gap_rate : float
+        Mean number of gaps (runs of missing returns) per profile.
+    gap_length_m : float
+        Mean length of a gap along the line (sensor x), m.
+    x_scale_error, z_scale_error : float
+        Relative errors of the x and z scales (z about the middle of the range), signed.
     """
 
     linearity_m: float = 0.0
@@ -91,13 +110,24 @@ class SensorModel:
     z_step_m: float = 0.0
     min_signal: float = 0.0
     signal_spread: float = 0.0
+    incidence_falloff: float = 0.0
+    gap_rate: float = 0.0
+    gap_length_m: float = 1e-3
+    x_scale_error: float = 0.0
+    z_scale_error: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0.0):
-                raise InputError(f"sensor model: {f.name} must be a number >= 0, got {value!r}")
-        for name in ("shape_length_m", "speckle_points"):
+            signed = f.name in SIGNED_FIELDS
+            if not (
+                isinstance(value, int | float)
+                and math.isfinite(value)
+                and (abs(value) < MAX_SCALE_ERROR if signed else value >= 0.0)
+            ):
+                bound = f"within +-{MAX_SCALE_ERROR}" if signed else ">= 0"
+                raise InputError(f"sensor model: {f.name} must be a number {bound}, got {value!r}")
+        for name in ("shape_length_m", "speckle_points", "gap_length_m"):
             if getattr(self, name) <= 0.0:
                 raise InputError(f"sensor model: {name} must be > 0, got {getattr(self, name)}")
         if self.min_signal >= 1.0:
@@ -115,8 +145,10 @@ class SensorModel:
                 "x_step_m",
                 "z_step_m",
                 "min_signal",
+                "incidence_falloff",
+                "gap_rate",
             )
-        )
+        ) or (self.x_scale_error != 0.0 or self.z_scale_error != 0.0)
 
 
 def sensor_model_from_mapping(values: Mapping[str, Any]) -> SensorModel:
@@ -223,6 +255,11 @@ def apply_sensor_model(
         p[..., 2] += model.speckle_sigma_m * _smoothed_noise(
             speckle_rng, (k, n), model.speckle_points
         )
+    if model.x_scale_error != 0.0:
+        p[..., 0] *= 1.0 + model.x_scale_error
+    if model.z_scale_error != 0.0:
+        z_mid = 0.5 * (z_range_m[0] + z_range_m[1])
+        p[..., 2] = z_mid + (1.0 + model.z_scale_error) * (p[..., 2] - z_mid)
     for axis, step in ((0, model.x_step_m), (2, model.z_step_m)):
         if step > 0.0:
             p[..., axis] = np.round(p[..., axis] / step) * step
@@ -231,7 +268,31 @@ def apply_sensor_model(
         speckle_factor = np.exp(model.signal_spread * signal_rng.normal(size=(k, n)))
         signal = reflectance * np.nan_to_num(cos_incidence) * speckle_factor
         weak = np.asarray(signal < model.min_signal)
+    thin_rng, gap_rng = rng.spawn(2)
+    if model.incidence_falloff > 0.0:
+        kept = np.clip(np.nan_to_num(cos_incidence), 0.0, 1.0) ** model.incidence_falloff
+        weak |= thin_rng.random((k, n)) >= kept
+    if model.gap_rate > 0.0:
+        weak |= _gaps(gap_rng, model, truth[..., 0])
     return p, weak
+
+
+def _gaps(rng: np.random.Generator, model: SensorModel, x_m: FloatArray) -> BoolArray:
+    """Rays (K, N) inside the gaps of each profile (term 7 of the module docstring); ``x_m``
+    (K, N) is where each ray meets a surface along the line (NaN: nowhere), m."""
+    k, n = x_m.shape
+    gap = np.zeros((k, n), dtype=np.bool_)
+    counts: list[int] = np.asarray(rng.poisson(model.gap_rate, size=k)).tolist()
+    for row, count in enumerate(counts):
+        rays = np.flatnonzero(np.isfinite(x_m[row]))
+        if not len(rays):
+            continue
+        centres = x_m[row, rng.choice(rays, count)]
+        halves = 0.5 * rng.exponential(model.gap_length_m, count)
+        with np.errstate(invalid="ignore"):
+            for centre, half in zip(centres, halves, strict=True):
+                gap[row] |= np.abs(x_m[row] - centre) <= half
+    return gap
 
 
 def second_difference_noise_m(points: FloatArray) -> float:
@@ -470,6 +531,28 @@ def _sszn_fanuc() -> ProfilerSpec:
         sigma_depth_m=3.9e-6,
         model=replace(_sszn_sr7140().model, shape_sigma_m=4.2e-5, speckle_sigma_m=2.5e-6),
     )
+
+
+#: Faces of a real profiler that the field showed (issue 29), as :class:`SensorModel` fields:
+#: ``grazing``: points thin out as the incidence grows (a steep flank met at grazing
+#: incidence holds a few dozen points); ``gaps``: about one run of missing returns 1.5 mm
+#: long per profile; ``scales``: x and z scales off by +0.6 % and -0.2 % (0.8 % apart); ``shape``: a
+#: smooth shape error of 42 µm over 4 mm, as the SSZN profiler of a FANUC cell shows, with
+#: which a conic fits a single profile of a ball clearly better than a circle.
+REAL_FACES: dict[str, dict[str, float]] = {
+    "grazing": {"incidence_falloff": 0.5},
+    "gaps": {"gap_rate": 1.0, "gap_length_m": 1.5e-3},
+    "scales": {"x_scale_error": 0.006, "z_scale_error": -0.002},
+    "shape": {"shape_sigma_m": 4.2e-5, "shape_length_m": 0.004},
+}
+
+
+def with_faces(model: SensorModel, *faces: str) -> SensorModel:
+    """``model`` with the named :data:`REAL_FACES` added (InputError for an unknown one)."""
+    unknown = sorted(set(faces) - set(REAL_FACES))
+    if unknown:
+        raise InputError(f"unknown profiler face(s) {unknown}; known: {sorted(REAL_FACES)}")
+    return replace(model, **{k: v for face in faces for k, v in REAL_FACES[face].items()})
 
 
 #: Named profilers (datasheet figures, sources and assumptions in each one's comment).

@@ -145,6 +145,31 @@ class GrooveScene:
 
 
 @dataclass(frozen=True)
+class GrooveShape:
+    """How a groove departs from a symmetric V of two equal flanks (SI units).
+
+    Attributes
+    ----------
+    ridge : bool
+        The flanks run from the seam away from the sensor's side (a ridge on a block, seen
+        from outside) instead of towards it.
+    turn_rad : float
+        Both flanks turned about the seam by this angle, rad (an asymmetric V: one flank
+        gentle, the other steep).
+    second_flank_width_m : float
+        Width of the second flank, m; 0: the first's.
+    floor_width_m : float
+        Width of a floor (perpendicular to the bisector, away from the first flank) from the
+        second flank's far edge, m; 0: none.
+    """
+
+    ridge: bool = False
+    turn_rad: float = 0.0
+    second_flank_width_m: float = 0.0
+    floor_width_m: float = 0.0
+
+
+@dataclass(frozen=True)
 class WeldScenario(GrooveScene):
     """Every parameter of one simulated weld-seam run (see the module docstring).
 
@@ -190,6 +215,9 @@ class WeldScenario(GrooveScene):
         1σ per axis of the taught point's error, m.
     min_flank_points : int
         Fewest noise-free returns on each flank for a view to be used.
+    floor_width_m : float
+        A floor this wide beyond the second flank's far edge, m (a third straight segment in
+        the profiles that reach it); 0: none.
     """
 
     name: str = "custom"
@@ -213,6 +241,7 @@ class WeldScenario(GrooveScene):
     aim_sigma_m: float = 0.0
     teach_sigma_m: float = 0.0
     min_flank_points: int = 40
+    floor_width_m: float = 0.0
 
     kind: ClassVar[str] = "weld"
     vectors: ClassVar[tuple[str, ...]] = (
@@ -227,7 +256,7 @@ class WeldScenario(GrooveScene):
         super().__post_init__()
         require = self.require
         require(self.first_depth_m > 0.0, f"first_depth_m must be > 0, got {self.first_depth_m}")
-        for name in ("step_m", "lateral_spread_m", "aim_sigma_m", "teach_sigma_m"):
+        for name in ("step_m", "lateral_spread_m", "aim_sigma_m", "teach_sigma_m", "floor_width_m"):
             require(getattr(self, name) >= 0.0, f"{name} must be >= 0, got {getattr(self, name)}")
         require(self.pose_pattern in POSE_PATTERNS, f"pose_pattern must be one of {POSE_PATTERNS}")
         require(
@@ -251,7 +280,10 @@ class WeldScenario(GrooveScene):
 
 @dataclass(frozen=True, eq=False)
 class Groove:
-    """The V-groove geometry in the base frame, ready for ray casting.
+    """The V-groove (or ridge) geometry in the base frame, ready for ray casting.
+
+    Its faces are strips: the two flanks from the seam, and optionally a floor from the far
+    edge of the second flank.
 
     Attributes
     ----------
@@ -260,21 +292,29 @@ class Groove:
     seam : ndarray, shape (3,)
         Unit seam direction s.
     bisector : ndarray, shape (3,)
-        Unit b, perpendicular to s, out of the groove.
-    flanks : ndarray, shape (2, 3)
-        Unit direction of each flank from the seam.
-    normals : ndarray, shape (2, 3)
-        Unit normal of each flank, facing the free side.
-    width_m, half_length_m : float
+        Unit b, perpendicular to s, towards the free side (the sensor's side).
+    origins : ndarray, shape (P, 3)
+        Where each face starts (p for the flanks), m.
+    flanks : ndarray, shape (P, 3)
+        Unit direction of each face from its origin, across the seam.
+    normals : ndarray, shape (P, 3)
+        Unit normal of each face, facing the free side.
+    widths : ndarray, shape (P,)
+        Extent of each face across the seam, m.
+    half_length_m : float
+    ridge : bool
+        The flanks run away from the free side (a ridge, convex) rather than towards it.
     """
 
     point: FloatArray
     seam: FloatArray
     bisector: FloatArray
+    origins: FloatArray
     flanks: FloatArray
     normals: FloatArray
-    width_m: float
+    widths: FloatArray
     half_length_m: float
+    ridge: bool = False
 
     @classmethod
     def build(
@@ -285,26 +325,40 @@ class Groove:
         opening_angle_rad: float,
         flank_width_m: float,
         seam_half_length_m: float,
+        shape: GrooveShape | None = None,
     ) -> Groove:
         """A groove through ``point`` (m) along ``seam_direction``, opening towards
-        ``groove_bisector`` (made perpendicular to the seam) by ``opening_angle_rad``."""
+        ``groove_bisector`` (made perpendicular to the seam) by ``opening_angle_rad``; a
+        ``shape`` makes it a ridge, turns it, sets the second flank's width or adds a floor.
+        """
+        shape = shape or GrooveShape()
         s = _unit(seam_direction)
         b = _unit(np.asarray(groove_bisector) - (s @ np.asarray(groove_bisector)) * s)
         m = np.cross(s, b)
-        half = 0.5 * opening_angle_rad
-        flanks = np.array([math.cos(half) * b + sign * math.sin(half) * m for sign in (1.0, -1.0)])
+        centre = (math.pi if shape.ridge else 0.0) + shape.turn_rad
+        angles = [centre + sign * 0.5 * opening_angle_rad for sign in (1.0, -1.0)]
+        flanks = np.array([math.cos(a) * b + math.sin(a) * m for a in angles])
+        widths = [flank_width_m, shape.second_flank_width_m or flank_width_m]
+        origins = np.tile(np.asarray(point, dtype=np.float64), (2, 1))
+        if shape.floor_width_m > 0.0:
+            away = math.copysign(1.0, float(flanks[1] @ m)) * m
+            origins = np.vstack([origins, origins[1] + widths[1] * flanks[1]])
+            flanks = np.vstack([flanks, away])
+            widths.append(shape.floor_width_m)
+        # Face the free side: the bisector's part perpendicular to each face.
         normals = np.cross(s, flanks)
-        # Face the free side: the bisector's part perpendicular to each flank.
         inward = b - np.einsum("ki,i->k", flanks, b)[:, None] * flanks
         normals *= np.sign(np.einsum("ki,ki->k", normals, inward))[:, None]
         return cls(
             np.asarray(point, dtype=np.float64).copy(),
             s,
             b,
+            origins,
             flanks,
             normals / np.linalg.norm(normals, axis=1, keepdims=True),
-            flank_width_m,
+            np.asarray(widths, dtype=np.float64),
             seam_half_length_m,
+            shape.ridge,
         )
 
     @classmethod
@@ -317,12 +371,13 @@ class Groove:
             scenario.opening_angle_rad,
             scenario.flank_width_m,
             scenario.seam_half_length_m,
+            GrooveShape(floor_width_m=scenario.floor_width_m),
         )
 
     def cast(
         self, origin: FloatArray, rays: FloatArray, t_min: float = T_MIN_M
     ) -> tuple[FloatArray, Int8Array]:
-        """Nearest flank hit of each ray ``origin + t · rays`` with ``t > t_min``.
+        """Nearest face hit of each ray ``origin + t · rays`` with ``t > t_min``.
 
         Parameters
         ----------
@@ -334,20 +389,20 @@ class Groove:
         t : ndarray, shape (...)
             Ray parameter of the nearest hit (inf: none).
         flank : ndarray of int8, shape (...)
-            1 or 2 for the flank hit, 0 for none.
+            1 or 2 for the flank hit, 3 for the floor, 0 for none.
         """
         best = np.full(np.broadcast_shapes(origin.shape, rays.shape)[:-1], np.inf)
         flank = np.zeros(best.shape, dtype=np.int8)
-        for k in range(2):
+        for k in range(len(self.flanks)):
             n = self.normals[k]
             denom = rays @ n
             ok = np.abs(denom) > 1e-18
-            t = np.where(ok, ((self.point - origin) @ n) / np.where(ok, denom, 1.0), np.inf)
-            hit = origin + np.where(np.isfinite(t), t, 0.0)[..., None] * rays - self.point
+            t = np.where(ok, ((self.origins[k] - origin) @ n) / np.where(ok, denom, 1.0), np.inf)
+            hit = origin + np.where(np.isfinite(t), t, 0.0)[..., None] * rays - self.origins[k]
             across = hit @ self.flanks[k]
-            along = hit @ self.seam
+            along = (hit + self.origins[k] - self.point) @ self.seam
             inside = (
-                (across >= 0.0) & (across <= self.width_m) & (np.abs(along) <= self.half_length_m)
+                (across >= 0.0) & (across <= self.widths[k]) & (np.abs(along) <= self.half_length_m)
             )
             take = ok & (t > t_min) & inside & (t < best)
             best = np.where(take, t, best)
@@ -355,8 +410,13 @@ class Groove:
         return best, flank
 
     def free_clearance(self, points: FloatArray) -> FloatArray:
-        """Signed distance (...,) of points from the nearer flank plane, positive in the air."""
-        return np.asarray(np.min((points - self.point) @ self.normals.T, axis=-1))
+        """Signed distance (...,) of points from the solid, positive in the air (the nearer
+        flank plane of a groove, the farther of a ridge; above a floor too)."""
+        flanks = (points - self.point) @ self.normals[:2].T
+        clear = np.max(flanks, axis=-1) if self.ridge else np.min(flanks, axis=-1)
+        if len(self.normals) > 2:
+            clear = np.minimum(clear, (points - self.origins[2]) @ self.normals[2])
+        return np.asarray(clear)
 
     def seam_point_in_plane(self, T_base_sensor: FloatArray) -> FloatArray:
         """Where each sensor's laser plane (y = 0) meets the seam line, base frame (K, 3), m."""

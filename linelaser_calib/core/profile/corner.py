@@ -34,7 +34,8 @@ local noise):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from itertools import combinations
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -42,7 +43,7 @@ from numpy.typing import ArrayLike
 from ..errors import InputError, ModelMismatch, ProfileRejected
 from ..model_check import recording_outliers
 from ..types import BoolArray, FloatArray, Rejection, Sample, SampleFit
-from .cleaning import CleaningConfig, clean_profile
+from .cleaning import MAD_TO_SIGMA, CleaningConfig, clean_profile
 from .corner_shape import (
     NOT_A_V,
     compare_corner,
@@ -55,6 +56,9 @@ from .corner_shape import (
 MAX_REFIT_ROUNDS = 10
 #: Smallest noise-adapted inlier threshold, m.
 MIN_NOISE_THRESHOLD_M = 1e-6
+#: Smallest tolerance of a corner's opening about the recording's median, rad: the laser
+#: plane's tilt against the seam changes the flanks' angle in the profile by tens of degrees.
+MIN_OPENING_SPREAD_RAD = math.radians(30.0)
 #: Fewest cleaned points of a profile without a corner that are weighed against the rivals
 #: (a line pair needs 8).
 MIN_RIVAL_POINTS = 8
@@ -81,14 +85,23 @@ class CornerConfig:
         clean pair is drawn with probability 1 − (1 − 0.09)^300 > 0.999999.
     min_line_points : int
         Fewest inliers of each line. Default 10.
-    min_line_fraction : float
-        Fewest inliers of each line as a share of the profile's points. Default 0.1.
+    min_flank_length_m : float
+        Shortest extent of a flank's inliers along its line, m. Default 1 mm.
+    max_flank_sigma_m : float
+        A flank is usable when its line fit pins the line at the corner to this 1σ, m
+        (from the line's points, their extent and its residual: ``_flank_sigma``), however
+        few its points are next to the other flank's. Default 30 µm: the robot's error.
+    max_lines : int
+        Most straight lines looked for in one profile (two flanks and, beside them, a
+        floor or a wall; a long flank bent by the profiler's shape error may take two).
+        Default 4.
     min_bend_rad : float
         Smallest angle between the two lines, rad: below it the profile is flat, not a V.
         Default 10 deg.
     max_corner_gap_m : float
         Largest distance from the corner to the nearest inlier of each line, m: the lines
-        must meet where the points are, not far outside them. Default 3 mm.
+        must meet near their points, not far outside them (a gap at the corner is fine as
+        long as each flank still pins its line there, ``max_flank_sigma_m``). Default 10 mm.
     max_wrong_side_fraction : float
         Largest share of a line's inliers lying on the far side of the corner (beyond a
         noise margin): a V has each flank on one side. Default 0.05.
@@ -102,9 +115,11 @@ class CornerConfig:
     noise_threshold_sigmas: float = 4.0
     hypotheses: int = 300
     min_line_points: int = 10
-    min_line_fraction: float = 0.1
+    min_flank_length_m: float = 1e-3
+    max_flank_sigma_m: float = 3e-5
+    max_lines: int = 4
     min_bend_rad: float = math.radians(10.0)
-    max_corner_gap_m: float = 3e-3
+    max_corner_gap_m: float = 1e-2
     max_wrong_side_fraction: float = 0.05
     profile_outlier_sigmas: float = 6.0
 
@@ -114,14 +129,16 @@ class CornerConfig:
             "noise_threshold_sigmas",
             "max_corner_gap_m",
             "profile_outlier_sigmas",
+            "min_flank_length_m",
+            "max_flank_sigma_m",
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise InputError(f"CornerConfig.{name} must be positive and finite, got {value}")
-        if self.hypotheses < 1 or self.min_line_points < 2:
-            raise InputError("CornerConfig.hypotheses must be >= 1 and min_line_points >= 2")
-        if not 0.0 <= self.min_line_fraction < 0.5:
-            raise InputError("CornerConfig.min_line_fraction must be in [0, 0.5)")
+        if self.hypotheses < 1 or self.min_line_points < 2 or self.max_lines < 2:
+            raise InputError(
+                "CornerConfig.hypotheses must be >= 1, min_line_points >= 2 and max_lines >= 2"
+            )
         if not 0.0 < self.min_bend_rad < math.pi / 2:
             raise InputError("CornerConfig.min_bend_rad must be in (0, pi/2) rad")
         if not 0.0 <= self.max_wrong_side_fraction < 0.5:
@@ -148,6 +165,12 @@ class CornerFit:
         Angle between the two lines, rad (0: parallel; π/2: perpendicular).
     rms_m : ndarray, shape (2,)
         RMS distance of each line's inliers from it, m.
+    opening_rad : float
+        Angle between the flanks, from the corner along their points, rad: positive for a
+        ridge (the flanks run away from the sensor), negative for a groove.
+    alternatives : tuple of CornerFit
+        The corners of other pairs of lines in the profile that make a usable V (a floor or
+        wall beside a flank), most points first.
     """
 
     corner_xz: FloatArray
@@ -157,6 +180,8 @@ class CornerFit:
     inliers: BoolArray
     bend_rad: float
     rms_m: FloatArray
+    opening_rad: float = math.nan
+    alternatives: tuple[CornerFit, ...] = ()
 
     @property
     def sigma_m(self) -> float:
@@ -225,6 +250,13 @@ def _intersection(a: _Line, b: _Line) -> FloatArray:
     return np.asarray(np.linalg.solve(N, [a.offset, b.offset]))
 
 
+def _flank_variance(line: _Line, corner: FloatArray) -> float:
+    """Variance of the line's offset at the corner, m² (see :func:`_corner_covariance`)."""
+    u = float(line.direction @ (corner - line.centroid))
+    sigma_sq = line.rms**2
+    return sigma_sq / line.count + u * u * sigma_sq / max(line.spread_sq, 1e-300)
+
+
 def _corner_covariance(lines: tuple[_Line, _Line], corner: FloatArray) -> FloatArray:
     """First-order covariance (2, 2) of the intersection from the two line fits.
 
@@ -235,11 +267,7 @@ def _corner_covariance(lines: tuple[_Line, _Line], corner: FloatArray) -> FloatA
     two rows are independent, so cov(q) = N⁻¹ diag(var_k) N⁻ᵀ.
     """
     N = np.vstack([line.normal for line in lines])
-    variances = []
-    for line in lines:
-        u = float(line.direction @ (corner - line.centroid))
-        sigma_sq = line.rms**2
-        variances.append(sigma_sq / line.count + u * u * sigma_sq / max(line.spread_sq, 1e-300))
+    variances = [_flank_variance(line, corner) for line in lines]
     N_inv = np.linalg.inv(N)
     return np.asarray(N_inv @ np.diag(variances) @ N_inv.T)
 
@@ -253,51 +281,25 @@ def _check_points(points_xz: ArrayLike) -> FloatArray:
     return p
 
 
-def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Generator) -> CornerFit:
-    """Fit two lines to a V profile and intersect them (see the module docstring).
-
-    Parameters
-    ----------
-    points_xz : array-like, shape (N, 2)
-        Cleaned profile points (x, z) in the sensor frame, m, finite.
-    config : CornerConfig
-    rng : numpy.random.Generator
-        For the RANSAC hypotheses.
-
-    Returns
-    -------
-    CornerFit
-
-    Raises
-    ------
-    InputError
-        Malformed points.
-    ProfileRejected
-        The profile shows no clear V; the message says which test failed, with numbers.
-    """
-    p = _check_points(points_xz)
+def _find_lines(p: FloatArray, config: CornerConfig, rng: np.random.Generator) -> list[BoolArray]:
+    """Up to ``max_lines`` lines by RANSAC, each on the points the earlier ones left, then
+    refitted: each point goes to the nearer line within a threshold that shrinks towards a
+    few sigma of that line's residual, until the assignment settles. Most points first."""
     n = len(p)
-    need = max(config.min_line_points, math.ceil(config.min_line_fraction * n))
-    if n < 2 * need:
-        raise ProfileRejected(
-            f"only {n} points, fewer than the {2 * need} two lines of a V need: aim the laser "
-            "line across the seam with both flanks in view"
-        )
-    first = _ransac_line(p, config.inlier_threshold_m, config.hypotheses, rng)
-    rest = np.flatnonzero(~first)
-    if len(rest) < need:
-        raise FlatProfile(
-            f"one straight line holds {int(first.sum())} of {n} points and only {len(rest)} "
-            f"are left for a second (at least {need} needed): the profile is flat, not a V; "
-            "aim the laser line across the seam"
-        )
-    second = np.zeros(n, dtype=np.bool_)
-    second[rest] = _ransac_line(p[rest], config.inlier_threshold_m, config.hypotheses, rng)
-    masks = np.vstack([first, second])
-    for _ in range(MAX_REFIT_ROUNDS):
-        if int(masks[0].sum()) < 2 or int(masks[1].sum()) < 2:
+    remaining = np.arange(n)
+    masks: list[BoolArray] = []
+    while len(masks) < config.max_lines and len(remaining) >= config.min_line_points:
+        inside = _ransac_line(p[remaining], config.inlier_threshold_m, config.hypotheses, rng)
+        if int(inside.sum()) < config.min_line_points:
             break
-        lines = (_fit_line(p[masks[0]]), _fit_line(p[masks[1]]))
+        mask = np.zeros(n, dtype=np.bool_)
+        mask[remaining[inside]] = True
+        masks.append(mask)
+        remaining = remaining[~inside]
+    for _ in range(MAX_REFIT_ROUNDS):
+        if len(masks) < 2 or min(int(m.sum()) for m in masks) < 2:
+            break
+        lines = [_fit_line(p[m]) for m in masks]
         distance = np.abs(
             p @ np.vstack([line.normal for line in lines]).T
             - np.array([line.offset for line in lines])
@@ -312,29 +314,31 @@ def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Genera
             ]
         )
         nearer = np.argmin(distance, axis=1)
-        new = np.vstack([(nearer == k) & (distance[:, k] < threshold[k]) for k in range(2)])
-        if np.array_equal(new, masks):
+        new = [(nearer == k) & (distance[:, k] < threshold[k]) for k in range(len(lines))]
+        if all(np.array_equal(a, b) for a, b in zip(new, masks, strict=True)):
             break
         masks = new
-    counts = masks.sum(axis=1)
-    if int(counts.min()) < need:
-        raise ProfileRejected(
-            f"the two lines hold {counts[0]} and {counts[1]} points, fewer than the {need} "
-            "each needs: the profile has no clear second flank"
-        )
+    return sorted(masks, key=lambda m: -int(m.sum()))
+
+
+def _pair_corner(
+    p: FloatArray, masks: tuple[BoolArray, BoolArray], config: CornerConfig
+) -> CornerFit | ProfileRejected:
+    """The corner of two lines' points, or why they make no usable V."""
     lines = (_fit_line(p[masks[0]]), _fit_line(p[masks[1]]))
     bend = math.acos(min(1.0, abs(float(lines[0].direction @ lines[1].direction))))
     if bend < config.min_bend_rad:
-        raise FlatProfile(
+        return FlatProfile(
             f"the two lines differ in direction by only {math.degrees(bend):.1f} deg (at least "
             f"{math.degrees(config.min_bend_rad):.1f} deg needed): the profile is flat, not a V"
         )
     corner = _intersection(*lines)
+    away = []
     for k, line in enumerate(lines):
         along = (p[masks[k]] - corner) @ line.direction
         gap = float(np.min(np.abs(along)))
         if gap > config.max_corner_gap_m:
-            raise ProfileRejected(
+            return ProfileRejected(
                 f"the lines meet {gap * 1e3:.2f} mm from the nearest point of line {k + 1} "
                 f"(at most {config.max_corner_gap_m * 1e3:.2f} mm): the profile is not a V "
                 "around its corner (a gap, or part of the joint out of view)"
@@ -344,20 +348,96 @@ def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Genera
         negative = int(np.sum(along < -margin))
         wrong = min(positive, negative) / len(along)
         if wrong > config.max_wrong_side_fraction:
-            raise ProfileRejected(
+            return ProfileRejected(
                 f"{wrong:.0%} of line {k + 1}'s points lie beyond the corner (at most "
                 f"{config.max_wrong_side_fraction:.0%}): the lines cross instead of meeting "
                 "in a V"
             )
+        extent = float(np.ptp(along))
+        sigma = math.sqrt(_flank_variance(line, corner))
+        if extent < config.min_flank_length_m or sigma > config.max_flank_sigma_m:
+            return ProfileRejected(
+                f"line {k + 1}'s {line.count} points over {extent * 1e3:.2f} mm pin it at the "
+                f"corner to {sigma * 1e6:.1f} um (at least {config.min_flank_length_m * 1e3:.1f}"
+                f" mm and at most {config.max_flank_sigma_m * 1e6:.0f} um needed): the flank is "
+                "too short or too rough to determine its line"
+            )
+        away.append(line.direction * math.copysign(1.0, float(np.median(along))))
+    interior = math.acos(float(np.clip(away[0] @ away[1], -1.0, 1.0)))
+    # Seen from the sensor (at the origin), a ridge's flanks run away from it, a groove's
+    # towards it.
+    convex = float((away[0] + away[1]) @ corner) >= 0.0
     return CornerFit(
         corner_xz=corner,
         covariance_xz=_corner_covariance(lines, corner),
         normals=np.vstack([line.normal for line in lines]),
         offsets=np.array([line.offset for line in lines]),
-        inliers=masks,
+        inliers=np.vstack(masks),
         bend_rad=bend,
         rms_m=np.array([line.rms for line in lines]),
+        opening_rad=interior if convex else -interior,
     )
+
+
+def fit_corner(points_xz: ArrayLike, config: CornerConfig, rng: np.random.Generator) -> CornerFit:
+    """Fit the lines of a V profile and intersect them (see the module docstring).
+
+    Parameters
+    ----------
+    points_xz : array-like, shape (N, 2)
+        Cleaned profile points (x, z) in the sensor frame, m, finite.
+    config : CornerConfig
+    rng : numpy.random.Generator
+        For the RANSAC hypotheses.
+
+    Returns
+    -------
+    CornerFit
+        The corner of the two lines holding the most points among the pairs that make a
+        usable V; the other such pairs' corners are its ``alternatives``.
+
+    Raises
+    ------
+    InputError
+        Malformed points.
+    ProfileRejected
+        The profile shows no clear V; the message says which test failed, with numbers (for
+        the pair of the two largest lines).
+    """
+    p = _check_points(points_xz)
+    n = len(p)
+    need = config.min_line_points
+    if n < 2 * need:
+        raise ProfileRejected(
+            f"only {n} points, fewer than the {2 * need} two lines of a V need: aim the laser "
+            "line across the seam with both flanks in view"
+        )
+    masks = _find_lines(p, config, rng)
+    if len(masks) < 2:
+        held = int(masks[0].sum()) if masks else 0
+        raise FlatProfile(
+            f"one straight line holds {held} of {n} points and the {n - held} left hold no "
+            f"second line of at least {need} points: the profile is flat, not a V; aim the "
+            "laser line across the seam"
+        )
+    counts = [int(m.sum()) for m in masks]
+    if counts[1] < need:
+        raise ProfileRejected(
+            f"the two largest lines hold {counts[0]} and {counts[1]} points, fewer than the "
+            f"{need} each needs: the profile has no clear second flank"
+        )
+    masks = [m for m in masks if int(m.sum()) >= need]
+    outcomes = [
+        _pair_corner(p, (masks[a], masks[b]), config) for a, b in combinations(range(len(masks)), 2)
+    ]
+    fits = sorted(
+        (o for o in outcomes if isinstance(o, CornerFit)), key=lambda f: -int(f.inliers.sum())
+    )
+    if not fits:
+        first = outcomes[0]
+        assert isinstance(first, ProfileRejected)  # no pair made a corner
+        raise first
+    return replace(fits[0], alternatives=tuple(fits[1:]))
 
 
 @dataclass(frozen=True)
@@ -380,6 +460,11 @@ class CornerSample:
     rms_m : float or None
         RMS distance of those points from their lines, m; None for a corner given as
         feature points (no profile to fit).
+    opening_rad : float
+        :attr:`CornerFit.opening_rad` (NaN for feature points).
+    alternatives : tuple of CornerSample
+        The profile's other usable corners (:attr:`CornerFit.alternatives`); the recording
+        chooses among them (:func:`check_corner_recording`).
     """
 
     index: int
@@ -389,6 +474,8 @@ class CornerSample:
     covariance_xz: FloatArray
     points: FloatArray
     rms_m: float | None = None
+    opening_rad: float = math.nan
+    alternatives: tuple[CornerSample, ...] = ()
 
     def record(self) -> SampleFit:
         """The plain record kept in the result (the V corner as the feature point)."""
@@ -432,20 +519,68 @@ def extract_corner_sample(
         if rival is not None:
             return corner_rival_rejection(sample.index, sample.stamp_ns, *rival)
         return Rejection(sample.index, sample.stamp_ns, "corner", str(exc))
-    inside = fit.inliers.any(axis=0)
-    residuals = fit.residuals_m(xz)
-    comparison = compare_corner(xz[inside], residuals)
+    comparison = compare_corner(xz[fit.inliers.any(axis=0)], fit.residuals_m(xz))
     if comparison.rival_wins:
         return corner_rival_rejection(sample.index, sample.stamp_ns, NOT_A_V, comparison)
-    return CornerSample(
-        sample.index,
-        sample.stamp_ns,
-        np.asarray(sample.T_base_flange, dtype=np.float64),
-        fit.corner_xz,
-        fit.covariance_xz,
-        cleaned.points[inside],
-        float(np.sqrt(np.mean(residuals**2))),
+
+    def sample_of(corner_fit: CornerFit) -> CornerSample:
+        residuals = corner_fit.residuals_m(xz)
+        return CornerSample(
+            sample.index,
+            sample.stamp_ns,
+            np.asarray(sample.T_base_flange, dtype=np.float64),
+            corner_fit.corner_xz,
+            corner_fit.covariance_xz,
+            cleaned.points[corner_fit.inliers.any(axis=0)],
+            float(np.sqrt(np.mean(residuals**2))),
+            corner_fit.opening_rad,
+        )
+
+    return replace(
+        sample_of(fit), alternatives=tuple(sample_of(other) for other in fit.alternatives)
     )
+
+
+def _consistent_corners(
+    corners: list[CornerSample], sigmas: float
+) -> tuple[list[CornerSample], dict[int, str]]:
+    """Each corner with alternatives replaced by the one whose opening (flank angle and
+    ridge or groove) is nearest the recording's median, taken over the profiles with one
+    usable corner (over every profile's first when fewer than three have one); and the
+    positions of the corners whose opening still lies more than ``sigmas`` robust spreads
+    (at least :data:`MIN_OPENING_SPREAD_RAD`) from it, with the reason (another corner of
+    the part, e.g. where a flank meets the floor)."""
+    single = [c.opening_rad for c in corners if not c.alternatives]
+    openings = np.array(single if len(single) >= 3 else [c.opening_rad for c in corners])
+    openings = openings[np.isfinite(openings)]
+    if len(openings) < 3:
+        return corners, {}
+    typical = float(np.median(openings))
+    chosen = [
+        min(
+            (replace(c, alternatives=()), *c.alternatives),
+            key=lambda option: abs(option.opening_rad - typical),
+        )
+        for c in corners
+    ]
+    off = np.array([abs(c.opening_rad - typical) for c in chosen])
+    spread = MAD_TO_SIGMA * float(np.nanmedian(off))
+    limit = max(sigmas * spread, MIN_OPENING_SPREAD_RAD)
+    aside = {
+        k: f"its flanks meet at {_angle_text(c.opening_rad)} where the recording's corners "
+        f"meet at {_angle_text(typical)} (at most {math.degrees(limit):.1f} deg apart, "
+        f"{sigmas:g} times their spread): another corner of the part (a flank meeting a floor "
+        "or a wall), or a flank out of view"
+        for k, c in enumerate(chosen)
+        if off[k] > limit
+    }
+    return chosen, aside
+
+
+def _angle_text(opening_rad: float) -> str:
+    """An opening in words: degrees and ridge or groove."""
+    kind = "a ridge" if opening_rad >= 0.0 else "a groove"
+    return f"{math.degrees(abs(opening_rad)):.1f} deg ({kind})"
 
 
 def check_corner_recording(
@@ -477,9 +612,10 @@ def check_corner_recording(
     verdict = corner_rival_verdict(title, rejections, len(corners))
     if verdict is not None:
         raise ModelMismatch(verdict)
+    corners, aside = _consistent_corners(corners, sigmas)
     fitted = [(k, c.rms_m) for k, c in enumerate(corners) if c.rms_m is not None]
     outliers = recording_outliers([rms for _, rms in fitted], sigmas, "line pair")
-    aside = {fitted[j][0]: reason for j, reason in outliers}
+    aside.update({fitted[j][0]: reason for j, reason in outliers if fitted[j][0] not in aside})
     rejections = rejections + [
         Rejection(corners[k].index, corners[k].stamp_ns, "corner", reason)
         for k, reason in aside.items()

@@ -33,7 +33,7 @@ from .lm import (
     widen_covariance,
     widening,
 )
-from .rejection import Flag, RejectionOutcome, solve_with_rejection
+from .rejection import Flag, RejectionOutcome, recording_chi2_scale, solve_with_rejection
 
 __all__ = [
     "LOSSES",
@@ -51,6 +51,7 @@ __all__ = [
     "dispersion_warning",
     "evaluate_loss",
     "normal_equations",
+    "recording_chi2_scale",
     "sample_dispersion",
     "solve",
     "solve_damped",

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Generic, NamedTuple, TypeVar
 
 import numpy as np
+from scipy.special import chdtri
 
 Outcome = TypeVar("Outcome")
 
@@ -55,6 +56,20 @@ class RejectionOutcome(Generic[Outcome]):
     kept: list[int]
     dropped: list[tuple[int, str]]
     left_flagged: list[tuple[int, str]]
+
+
+def recording_chi2_scale(chi2: np.ndarray, dof: int) -> float:
+    """How much wider the recording's own scatter is than its noise model: the median of
+    the samples' normalised residuals (chi2 with ``dof`` degrees of freedom, shape (N,)) over
+    the chi2 distribution's median, at least 1. Dividing a sample's chi2 by it judges the
+    sample against the recording's other samples (a real profiler's shape error widens
+    every corner's scatter beyond its line fits' covariance), not against the model alone.
+    """
+    values = np.asarray(chi2, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    if not len(values):
+        return 1.0
+    return max(1.0, float(np.median(values)) / float(chdtri(dof, 0.5)))
 
 
 def solve_with_rejection(

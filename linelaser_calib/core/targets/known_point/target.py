@@ -105,7 +105,7 @@ from ...errors import DegenerateError, InputError, ModelMismatch
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample
 from ...seam_grid import paper_correction, weld_points_base
-from ...solver import Flag, solve_with_rejection
+from ...solver import Flag, recording_chi2_scale, solve_with_rejection
 from ...types import Rejection, Sample
 from ..base import (
     Option,
@@ -374,7 +374,8 @@ def _default_result(
 
     def flag(refined: KnownPointRefinement, keep: list[int]) -> list[Flag]:
         flags = []
-        for j in np.flatnonzero(refined.view_chi2 > limit):
+        scale = recording_chi2_scale(refined.view_chi2, 3)
+        for j in np.flatnonzero(refined.view_chi2 / scale > limit):
             view = keep[int(j)]
             residual = float(
                 np.linalg.norm(
@@ -387,8 +388,9 @@ def _default_result(
                     float(refined.view_chi2[j]),
                     int(j),
                     f"the view's weld point lies {residual * 1e3:.3f} mm from the others' "
-                    f"(normalised chi2 {refined.view_chi2[j]:.1f} > {limit:.1f} for 3 dof at "
-                    f"the robot's 1 sigma {config.robot_sigma_t_m * 1e3:.3f} mm): wrong "
+                    f"(normalised chi2 {refined.view_chi2[j]:.1f} at the robot's 1 sigma "
+                    f"{config.robot_sigma_t_m * 1e3:.3f} mm, {refined.view_chi2[j] / scale:.1f} "
+                    f"on the scale of the recording's other views, > {limit:.1f} for 3 dof): wrong "
                     "corner, a miss of the taught point, or motion during the scan",
                 )
             )

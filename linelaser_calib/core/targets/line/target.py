@@ -22,6 +22,7 @@ than the corner and robot noise explain.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import replace
 from typing import Any
@@ -32,7 +33,7 @@ from scipy.special import chdtri
 from ...errors import DegenerateError, ModelMismatch
 from ...profile.corner import CornerSample, check_corner_recording
 from ...seam_grid import paper_correction, weld_points_base
-from ...solver import Flag, solve_with_rejection
+from ...solver import Flag, recording_chi2_scale, solve_with_rejection
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
     Option,
@@ -57,6 +58,9 @@ MISMATCH_FACTOR = 3.0
 #: The same for the paper method, whose grid correction leaves residuals of several tenths of
 #: a mm on data the line fits to the noise: only gross misfits (another target, units).
 PAPER_MISMATCH_FACTOR = 30.0
+#: Corners that one point explains to within this many times the line's residual (or the
+#: noise) are refused as the known point's recording.
+ONE_POINT_FACTOR = 3.0
 #: Typical distance from the flange to a corner, m: turns a flange rotation error into a
 #: corner displacement for the expected noise.
 FLANGE_LEVER_M = 0.2
@@ -110,6 +114,27 @@ def _solution(
             SampleFit(f.index, f.stamp_ns, f.T_base_flange, f.points, f.corner_xz) for f in features
         ],
         noise_m=_noise_m(config),
+    )
+
+
+def _one_point(solution: TargetSolution) -> str | None:
+    """The refusal of corners that one point explains about as well as the line: the whole
+    recording's rival, the known point, with the same hand-eye."""
+    fits = solution.sample_fits
+    corners = np.array([f.feature_xz for f in fits])
+    T = np.array([f.T_base_flange for f in fits])
+    points = weld_points_base(corners, T, solution.T_flange_sensor)
+    point_rms = float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1))))
+    line_rms = max(solution.rms_residual_m, solution.noise_m)
+    if point_rms > ONE_POINT_FACTOR * line_rms:
+        return None
+    return (
+        f"the profiles' corners lie around one point: one point explains them to "
+        f"{point_rms * 1e3:.3f} mm RMS where the straight line leaves "
+        f"{solution.rms_residual_m * 1e3:.3f} mm (noise {solution.noise_m * 1e3:.3f} mm), less "
+        f"than {ONE_POINT_FACTOR:g} times more, so no direction of a line is seen. The recording "
+        "shows one point from many poses: calibrate it with {setting:target} known_point, or "
+        "sweep the laser line along the seam. No result was written."
     )
 
 
@@ -240,16 +265,18 @@ class LineTarget:
             return refine_line(c[kept], cov[kept], T[kept], X, line, X0, config)
 
         def flag(outcome: LineRefinement, kept: list[int]) -> list[Flag]:
+            scale = recording_chi2_scale(outcome.view_chi2, 2)
             return [
                 Flag(
                     float(value),
                     j,
                     f"the corner lies {np.linalg.norm(outcome.offsets_xz[j]) * 1e3:.3f} mm from "
-                    f"the seam line in its laser plane (normalised chi2 {value:.1f} > "
+                    f"the seam line in its laser plane (normalised chi2 {value:.1f}, "
+                    f"{value / scale:.1f} on the scale of the recording's other corners, > "
                     f"{limit:.1f} for 2 dof): a wrong corner, spatter, or motion during the scan",
                 )
                 for j, value in enumerate(outcome.view_chi2)
-                if value > limit
+                if value / scale > limit
             ]
 
         context.progress("refine", 0, 1)
@@ -306,7 +333,11 @@ class LineTarget:
         """The corner extraction already refuses profiles that are not a V; nothing more."""
 
     def check_fit(self, solution: TargetSolution, config: LineConfig) -> None:
-        """Refuse corners that lie far off one line (another target, units, clocks)."""
+        """Refuse corners that lie around one point (the known-point target's recording) or
+        far off one line (another target, units, clocks)."""
+        one_point = _one_point(solution)
+        if one_point is not None:
+            raise ModelMismatch(one_point)
         factor = PAPER_MISMATCH_FACTOR if solution.method == "paper" else MISMATCH_FACTOR
         if solution.rms_residual_m > factor * solution.noise_m:
             raise ModelMismatch(
@@ -335,7 +366,10 @@ class LineTarget:
             ]
             c, cov, T = _stack(moved)
             X_start, line_start = _start(moved, X0)
-            return refine_line(c, cov, T, X_start, line_start, X0, config).cost_history[-1]
+            try:
+                return refine_line(c, cov, T, X_start, line_start, X0, config).cost_history[-1]
+            except np.linalg.LinAlgError:  # views that determine nothing at this offset
+                return math.inf
 
         return cost
 

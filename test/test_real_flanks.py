@@ -1,0 +1,149 @@
+"""Corners from real flanks (issue 29): a flank counts when it pins its line at the corner.
+
+Real evidence: an SSZN-type profiler on the straight ridge of a block gave inverted-V
+profiles with a long gentle flank (600-1500 points) and a steep flank 10-25 mm tall met at
+grazing incidence, holding 40-150 points, sometimes with gaps, a few with the floor beside
+the block in view. Judged by a share of the profile's points, half of such profiles were
+refused ("one straight line holds 1729 of 1784 points and only 55 are left for a second");
+every one shows its corner plainly.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from linelaser_calib.cli import main
+from linelaser_calib.core.errors import ProfileRejected
+from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.profile.cleaning import CleaningConfig
+from linelaser_calib.core.profile.corner import (
+    CornerConfig,
+    CornerSample,
+    check_corner_recording,
+    extract_corner_sample,
+    fit_corner,
+)
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.base import SolveContext
+from linelaser_calib.core.targets.line.config import LineConfig
+from linelaser_calib.core.types import Sample
+from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
+from linelaser_calib.sim.sensor_models import SensorModel, shape_error
+
+BAGS = Path(__file__).resolve().parent.parent / "bags"
+#: The apex of the synthetic ridge, sensor x-z, m.
+APEX = np.array([0.01, 0.12])
+
+
+def _ridge(
+    rng: np.random.Generator,
+    steep_points: int = 55,
+    floor: bool = False,
+    gentle: bool = True,
+    noise_m: float = 4e-6,
+) -> np.ndarray:
+    """An inverted V seen from above (z is depth): a gentle flank of 1729 points over 80 mm
+    at 15 deg, a steep one 20 mm tall at 80 deg holding ``steep_points`` (with a gap in the
+    middle), optionally a 10 mm floor at its foot; a smooth 30 µm shape error and white
+    noise; (N, 2), m, in x order."""
+    pieces = []
+    if gentle:
+        t = np.linspace(0.0, 0.08, 1729)
+        pieces.append(APEX + t[:, None] * [-math.cos(math.radians(15)), math.sin(math.radians(15))])
+    down = np.array([math.cos(math.radians(80)), math.sin(math.radians(80))])
+    t = np.linspace(0.0, 0.02, steep_points + 10)
+    t = np.concatenate([t[: steep_points // 2], t[steep_points // 2 + 10 :]])  # a gap
+    pieces.append(APEX + t[:, None] * down)
+    if floor:
+        foot = APEX + 0.02 * down
+        pieces.append(foot + np.linspace(2e-4, 0.01, 200)[:, None] * [1.0, 0.0])
+    p = np.vstack(pieces)
+    bow = shape_error(rng, SensorModel(shape_sigma_m=3e-5, shape_length_m=0.004), p[None, :, 0])
+    p[:, 1] += bow[0] + rng.normal(scale=noise_m, size=len(p))
+    return p[np.argsort(p[:, 0])]
+
+
+def _sample(points_xz: np.ndarray, index: int) -> Sample:
+    points = np.column_stack([points_xz[:, 0], np.zeros(len(points_xz)), points_xz[:, 1]])
+    return Sample(index, index, np.eye(4), points)
+
+
+def test_a_steep_flank_of_55_points_beside_1729_gives_the_corner() -> None:
+    rng = np.random.default_rng(29)
+    for _ in range(10):
+        fit = fit_corner(_ridge(rng), CornerConfig(), rng)
+        assert np.linalg.norm(fit.corner_xz - APEX) < 1e-4
+        assert fit.opening_rad == pytest.approx(math.radians(85.0), abs=math.radians(2.0))
+
+
+def test_a_flank_too_short_to_pin_its_line_is_refused_with_the_numbers() -> None:
+    rng = np.random.default_rng(30)
+    points = _ridge(rng, steep_points=400)
+    steep = points[points[:, 0] > APEX[0] + 1e-5]
+    near = steep[np.argsort(np.linalg.norm(steep - APEX, axis=1))[:12]]  # 0.6 mm of flank
+    stub = np.vstack([points[points[:, 0] <= APEX[0]], near])
+    with pytest.raises(ProfileRejected, match=r"points over 0\.\d+ mm pin it at the corner to"):
+        fit_corner(stub, CornerConfig(), rng)
+
+
+def test_the_recording_chooses_the_ridge_beside_a_floor_and_sets_aside_a_lone_floor_corner() -> (
+    None
+):
+    rng = np.random.default_rng(31)
+    profiles = [_ridge(rng, floor=True) for _ in range(8)] + [_ridge(rng, floor=False)]
+    profiles.append(_ridge(rng, floor=True, gentle=False))  # only the floor's corner shows
+    outcomes = [
+        extract_corner_sample(_sample(p, k), CleaningConfig(), CornerConfig(), rng)
+        for k, p in enumerate(profiles)
+    ]
+    corners = [c for c in outcomes if isinstance(c, CornerSample)]
+    assert len(corners) == 10
+    assert sum(1 for c in corners if c.alternatives) >= 8
+    kept, rejections = check_corner_recording("straight line", corners, [], 6.0)
+    assert [c.index for c in kept] == list(range(9))
+    for c in kept:
+        assert np.linalg.norm(c.corner_xz - APEX) < 1e-4 and not c.alternatives
+    assert len(rejections) == 1 and rejections[0].index == 9
+    assert "(a groove) where the recording's corners meet at" in rejections[0].reason
+    assert "(a ridge)" in rejections[0].reason
+
+
+def test_the_ridge_preset_uses_every_profile_and_finds_the_hand_eye() -> None:
+    """``line_ridge``: before issue 29, 6 of its 51 profiles gave a corner (refused)."""
+    scenario = line_scenario_from_preset("line_ridge")
+    data = simulate_line(scenario, 1)
+    pairing = PairingConfig(
+        max_linear_speed_m_s=0.0,
+        max_angular_speed_rad_s=0.0,
+        clock_offset_s=-scenario.rig.latency_s,
+    )
+    samples = pair_profiles(data.profiles, data.poses, pairing).samples
+    target, config = get_target("line"), LineConfig()
+    features, rejections = target.extract(samples, config, 0, lambda *_: None)
+    assert len(features) >= 0.98 * len(samples), [r.reason for r in rejections]
+    solution = target.solve_default(features, config, SolveContext(n_samples=len(samples)))
+    target.check_fit(solution, config)
+    assert len(solution.samples_used) == len(features)
+    rotation, translation = transform_error(solution.T_flange_sensor, data.truth.T_flange_sensor)
+    assert solution.sigma_translation_m is not None and solution.sigma_rotation_rad is not None
+    assert translation < 3.0 * float(np.linalg.norm(solution.sigma_translation_m))
+    assert rotation < 3.0 * float(np.linalg.norm(solution.sigma_rotation_rad))
+
+
+def test_a_line_target_on_a_recording_of_one_point_is_refused_naming_known_point(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    """Issue 30: ``bags/weld_seam --target line`` wrote a seam line in an arbitrary
+    direction."""
+    out = tmp_path / "result.yaml"
+    argv = ["calibrate", str(BAGS / "weld_seam"), "--target", "line", "--output", str(out)]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert not out.exists() and "No result was written" in err
+    assert "lie around one point" in err and "--target known_point" in err
+    assert "one point explains them to" in err and "where the straight line leaves" in err
