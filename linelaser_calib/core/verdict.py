@@ -185,6 +185,21 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
         "along the laser line",
     ),
     WarningKind(
+        "scale-implausible",
+        r"the estimated along-line scale is",
+        _CARE,
+        "the estimated along-line scale is implausible: it took up something else",
+        f"measure the target (or leave out {setting('radius_m')}), or hold the scale with "
+        f"{setting('scale')} fixed",
+    ),
+    WarningKind(
+        "model-misfit-kept",
+        r"the .+ model does not fit these data:.*the result is kept",
+        _CARE,
+        "the target's model leaves more residual than expected, though no rival target fits",
+        "look at the residual map for a shape error of the target or a systematic robot error",
+    ),
+    WarningKind(
         "centre-side",
         r"the data barely tell which side",
         _CARE,
