@@ -113,7 +113,7 @@ def test_a_nearly_orthonormal_matrix_is_projected_with_a_warning(tmp_path: Path)
 
 
 BAD = {
-    "far_from_unit_quaternion": ("0.1 0.2 0.3 1 2 3 4", InputError, "norm 5.4772"),
+    "far_from_unit_quaternion": ("0.1 0.2 0.3 1 2 3 4", InputError, "norm 5.477"),
     "too_few_numbers": ("0.1 0.2 0.3 0 0", InputError, "got 5"),
     "too_many_numbers": ("0.1 0.2 0.3 0 0 0 1 0", InputError, "got 8"),
     "millimetres": ("150 200 250 0 0 0 1", InputError, "millimetres"),

@@ -96,6 +96,8 @@ TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
 )
 
 
+_SYNC_HELP = "largest profile-to-pose stamp gap, s (default %(default)s)"
+
 #: Flags of :data:`CALIBRATE_NUMBERS` that set the pairing gate (shared with reconstruct).
 PAIRING_FLAGS = ("--max-speed", "--max-angular-speed")
 
@@ -110,17 +112,20 @@ PLAN_TARGET_OPTIONS = (
 )
 
 
-def _add_pairing_arguments(parser: argparse.ArgumentParser, clock_offset_help: str) -> None:
-    parser.add_argument(
-        "--sync-tolerance",
-        type=positive_float,
-        default=PairingConfig.sync_tolerance_s,
-        help="largest profile-to-pose stamp gap, s (default %(default)s)",
+def _add_pairing_arguments(
+    parser: argparse.ArgumentParser, clock_offset_help: str, *, from_result: bool = False
+) -> None:
+    """The pairing flags; with ``from_result`` an absent flag (None) takes the calibration's
+    value (``quality.pairing``)."""
+    numbers = (
+        ("--sync-tolerance", positive_float, PairingConfig.sync_tolerance_s, _SYNC_HELP),
+        *(entry for entry in CALIBRATE_NUMBERS if entry[0] in PAIRING_FLAGS),
     )
+    for flag, parse, default, text in numbers:
+        if from_result:
+            text = text.replace("%(default)s", f"the calibration's, else {default}")
+        parser.add_argument(flag, type=parse, default=None if from_result else default, help=text)
     parser.add_argument("--clock-offset", type=offset, default=None, help=clock_offset_help)
-    for flag, parse, default, text in CALIBRATE_NUMBERS:
-        if flag in PAIRING_FLAGS:
-            parser.add_argument(flag, type=parse, default=default, help=text)
 
 
 def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
@@ -464,6 +469,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pairing_arguments(
         rec_p,
         "added to profile stamps to reach the pose clock, s (default: the calibration's)",
+        from_result=True,
     )
     _add_pose_source_arguments(rec_p)
     rec_p.set_defaults(func=reconstruct.run)

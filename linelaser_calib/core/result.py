@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from .pairing import ClockOffsetDiagnosis, PairingConfig
 from .types import FloatArray, Rejection, SampleFit
 
 if TYPE_CHECKING:
@@ -69,6 +70,13 @@ class CalibrationResult:
     measuring_centre_depth_m : float or None
         Mean depth (sensor z, m) of the used profile points: the measuring centre (0, 0, z_c)
         of the sensor frame, where the hand-eye's 1σ is also given.
+    pairing : PairingConfig or None
+        The pairing the profiles were paired with (speed gate, sync tolerance, clock offset),
+        so that what maps the recording again pairs it alike; None where unknown (live
+        pairing by the collector).
+    clock_diagnosis : ClockOffsetDiagnosis or None
+        Whether the residual follows the flange's velocity (:mod:`.latency`); None where the
+        test did not run (step-and-shoot, an estimated offset, live pairing).
     """
 
     T_flange_sensor: FloatArray
@@ -95,3 +103,5 @@ class CalibrationResult:
     self_check: SelfCheck | None = None
     placement_sections: list[ResultSection] = field(default_factory=list)
     measuring_centre_depth_m: float | None = None
+    pairing: PairingConfig | None = None
+    clock_diagnosis: ClockOffsetDiagnosis | None = None
