@@ -7,7 +7,9 @@ from __future__ import annotations
 import argparse
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -27,6 +29,28 @@ from linelaser_calib.io.results import read_result_yaml
 from linelaser_calib.settings import Front, render, spelling
 
 PROG = "linelaser-calib"
+
+
+class HeldInterrupts:
+    """Ctrl-C (SIGINT) held once a verb writes its outputs: writing them and saying so is not
+    cut short, and the run ends as written (exit 0) with a note that the interrupt came too
+    late. :func:`~linelaser_calib.cli.parser.main` restores the handler when the verb ends."""
+
+    def __init__(self) -> None:
+        self.caught = 0
+
+    def hold(self) -> None:
+        """From now on Ctrl-C is counted, not raised (in the main thread only, where
+        signals arrive)."""
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, self._count)
+
+    def _count(self, signum: int, frame: object) -> None:
+        self.caught += 1
+
+
+#: The command line's held interrupts (one process, one command).
+INTERRUPTS = HeldInterrupts()
 
 
 def read_calibration(path: str, what: str) -> CalibrationResult:

@@ -39,7 +39,7 @@ def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
     return PlanConstraints(
         z_min_m=args.range[0],
         z_max_m=args.range[1],
-        fan_half_angle_rad=float(np.deg2rad(args.fan_deg)),
+        fan_half_angle_rad=args.fan_half_angle,
         reach_centre_m=args.reach_centre,
         reach_half_extent_m=args.reach,
         table_height_m=None if args.no_table else args.table_height,
@@ -122,10 +122,10 @@ def run(args: argparse.Namespace) -> int:
             + ("" if not unpaired else "; not paired: " + why_not_paired(unpaired))
         )
     goal = None
-    if args.goal_mm is not None or args.goal_deg is not None:
+    if args.goal_translation is not None or args.goal_rotation is not None:
         goal = (
-            np.inf if args.goal_mm is None else args.goal_mm * 1e-3,
-            np.inf if args.goal_deg is None else float(np.deg2rad(args.goal_deg)),
+            np.inf if args.goal_translation is None else args.goal_translation,
+            np.inf if args.goal_rotation is None else args.goal_rotation,
         )
     advice = (
         None

@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 from linelaser_calib.cli.common import (
+    INTERRUPTS,
     calibration_pairing,
     check_output,
     pose_source,
@@ -72,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         raise PairingError(
             f"{exc} (Options of reconstruct: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
+    INTERRUPTS.hold()
     if suffix == ".ply":
         written = write_ply(
             args.output, done.points, frame_id=done.base_frame, intensity=done.intensity
