@@ -12,11 +12,23 @@ not set it.
 from __future__ import annotations
 
 import os
+import signal
+import sys
 
 
 def main() -> int:
-    """Console-script entry point: :func:`linelaser_calib.cli.main` with one BLAS thread."""
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-    from linelaser_calib.cli import main as cli_main
+    """Console-script entry point: :func:`linelaser_calib.cli.main` with one BLAS thread.
 
-    return cli_main()
+    Ctrl-C while the libraries load (the first half-second) ends the run as Ctrl-C later
+    does: one line, exit 130, no traceback; once the command has ended, its exit code
+    stands."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    try:
+        from linelaser_calib.cli import main as cli_main
+
+        code = cli_main()
+    except KeyboardInterrupt:
+        print("linelaser-calib: interrupted", file=sys.stderr)
+        return 130
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return code

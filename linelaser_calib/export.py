@@ -81,7 +81,8 @@ def _sigma_note(result: CalibrationResult) -> str:
 
 
 def urdf_joint(result: CalibrationResult) -> str:
-    """A fixed URDF ``<joint>`` from the flange link to the sensor link.
+    """The sensor's URDF ``<link>`` and the fixed ``<joint>`` from the flange link to it, to
+    paste inside the robot's ``<robot>`` element (which holds the flange link).
 
     ``xyz`` in m and ``rpy`` in rad (fixed axes x-y-z, R = Rz(yaw) Ry(pitch) Rx(roll)).
     """
@@ -93,6 +94,9 @@ def urdf_joint(result: CalibrationResult) -> str:
     return "\n".join(
         [
             comment,
+            f"<!-- paste both inside the <robot> element that holds the link "
+            f"{result.parent_frame} -->",
+            f'<link name="{result.child_frame}"/>',
             f'<joint name="{result.child_frame}_joint" type="fixed">',
             f'  <parent link="{result.parent_frame}"/>',
             f'  <child link="{result.child_frame}"/>',

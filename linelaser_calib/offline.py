@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
+from linelaser_calib.core.latency import add_clock_diagnosis
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import (
     OFFSET_COSTS,
@@ -213,6 +214,9 @@ def calibrate_bag(
     if finite:
         result.history[OFFSET_TRIALS] = [t for t, _ in finite]
         result.history[OFFSET_COSTS] = [c for _, c in finite]
+    result.pairing = config.pairing
+    if not estimate_offset:
+        add_clock_diagnosis(result, flange_poses.poses, config.pairing)
     result.parent_frame = reading.flange_frame
     result.child_frame = bag.sensor_frame
     result.base_frame = flange_poses.base_frame
@@ -267,8 +271,10 @@ def bag_samples(
     *,
     profile_topic: str | None = None,
     pose_topic: str | None = None,
+    rejected: list[Rejection] | None = None,
 ) -> list[Sample]:
-    """The paired samples of a bag or session (e.g. exploratory scans to plan from).
+    """The paired samples of a bag or session (e.g. exploratory scans to plan from); the
+    profiles that did not pair are appended to ``rejected`` (when given).
 
     Raises
     ------
@@ -282,4 +288,6 @@ def bag_samples(
             f"no profile of {bag.path} pairs with a flange pose: "
             + paired.explain_nothing_paired(pairing)
         )
+    if rejected is not None:
+        rejected.extend(paired.rejected)
     return paired.samples

@@ -479,6 +479,19 @@ def truth_rows(result: CalibrationResult, truth: Truth) -> Rows:
         ("rotation per axis", f"{deg_text(error.rotation_axes_rad)} ({ROTATION_AXES})"),
         ("translation per axis", f"{mm_text(error.translation_axes_m)} (flange x, y, z)"),
     ]
+    depth = result.measuring_centre_depth_m
+    if depth is not None:
+        # Where the points are: the measuring centre mapped by both hand-eyes.
+        centre = np.array([0.0, 0.0, depth, 1.0])
+        moved = (result.T_flange_sensor - hand_eye_seen(truth, result.kinematics)) @ centre
+        rows.append(
+            (
+                "at the points",
+                f"{np.linalg.norm(moved[:3]) * 1e3:.4f} mm (at the measuring centre, "
+                f"{depth * 1e3:.1f} mm along the sensor z; the translation above is the "
+                "sensor origin's)",
+            )
+        )
     sigma_t, sigma_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
     if sigma_t is not None and sigma_r is not None:
         ratios = np.abs(

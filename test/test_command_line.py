@@ -8,16 +8,20 @@ or default fails here.
 from __future__ import annotations
 
 import argparse
+import os
 import re
+import signal
 import subprocess
 import sys
+import time
 import xml.etree.ElementTree as ET
 from dataclasses import fields
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from linelaser_calib.cli import build_parser, main
+from linelaser_calib.cli import build_parser, calibrate, main
 from linelaser_calib.cli.simulate import SCENARIO_PRESETS
 from linelaser_calib.core.targets import plannable_target_names, target_names
 from linelaser_calib.sim import Scenario
@@ -145,3 +149,45 @@ def test_a_reader_that_leaves_early_ends_the_output_quietly(tmp_path: Path) -> N
     err = child.stderr.read()
     assert child.wait(timeout=60) == 0
     assert err == b""
+
+
+def test_ctrl_c_while_loading_ends_in_one_line(tmp_path: Path) -> None:
+    """Ctrl-C in the first second (the libraries loading, or the bag being read): one line on
+    stderr, exit 130, no traceback, no output."""
+    out = tmp_path / "result.yaml"
+    command = [str(Path(sys.executable).parent / "linelaser-calib"), "calibrate"]
+    child = subprocess.Popen(
+        [*command, str(REPO_ROOT / "bags" / "ur_scancontrol"), "--output", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    time.sleep(1.0)
+    child.send_signal(signal.SIGINT)
+    _, err = child.communicate(timeout=60)
+    assert child.returncode == 130
+    assert err == "linelaser-calib: interrupted\n"
+    assert not out.exists()
+
+
+def test_ctrl_c_once_the_result_is_written_keeps_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C just after the result file is written: the run ends as written (exit 0, the
+    file and its "Wrote" line), with a note that the interrupt came too late."""
+    write = calibrate.write_result_yaml
+
+    def write_then_interrupt(result: Any, path: Any) -> Path:
+        written = write(result, path)
+        os.kill(os.getpid(), signal.SIGINT)
+        return written
+
+    monkeypatch.setattr(calibrate, "write_result_yaml", write_then_interrupt)
+    out = tmp_path / "result.yaml"
+    bag = REPO_ROOT / "bags" / "weld_seam"
+    argv = ["calibrate", str(bag), "--target", "known_point", "--output", str(out)]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert f"Wrote {out}" in captured.out and out.exists()
+    assert "interrupted after the outputs were written" in captured.err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -68,7 +68,11 @@ def test_urdf_rpy_gives_the_matrix_back(
     path = write_result_yaml(result_of(T), tmp_path / "result.yaml")
     assert main(["export", str(path), "--format", "urdf"]) == 0
     text = capsys.readouterr().out
-    joint = ET.fromstring(text[text.index("<joint") :])
+    # Pasted into a robot that has the flange link, every link a joint names exists.
+    robot = ET.fromstring(f'<robot name="arm"><link name="flange"/>{text}</robot>')
+    links = {link.attrib["name"] for link in robot.iter("link")}
+    (joint,) = robot.iter("joint")
+    assert {joint.find(end).attrib["link"] for end in ("parent", "child")} <= links  # type: ignore[union-attr]
     assert joint.attrib == {"name": "scanner_joint", "type": "fixed"}
     assert joint.find("parent").attrib["link"] == "flange"  # type: ignore[union-attr]
     assert joint.find("child").attrib["link"] == "scanner"  # type: ignore[union-attr]

@@ -113,7 +113,7 @@ def test_a_nearly_orthonormal_matrix_is_projected_with_a_warning(tmp_path: Path)
 
 
 BAD = {
-    "far_from_unit_quaternion": ("0.1 0.2 0.3 1 2 3 4", InputError, "norm 5.4772"),
+    "far_from_unit_quaternion": ("0.1 0.2 0.3 1 2 3 4", InputError, "norm 5.477"),
     "too_few_numbers": ("0.1 0.2 0.3 0 0", InputError, "got 5"),
     "too_many_numbers": ("0.1 0.2 0.3 0 0 0 1 0", InputError, "got 8"),
     "millimetres": ("150 200 250 0 0 0 1", InputError, "millimetres"),
@@ -187,3 +187,39 @@ def test_calibrate_takes_the_numbers_of_a_static_transform(
     capsys.readouterr()
     assert main([*argv, "--initial", "0.1 0.2 0.3 0 0 0.5 0.5"]) == 1
     assert "--initial" in capsys.readouterr().err
+
+
+def test_every_verb_refuses_a_quaternion_typo_and_notes_a_rounded_one(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One digit typed wrong (0.156664 for 0.056664: 11 deg, norm 1.0106) after deleting the
+    matrix is refused by export, plan --from, reconstruct and --initial alike, naming the
+    field; the same quaternion rounded to 4 decimals is normalised with a note by each."""
+    data = yaml.safe_load((WELD / "initial.yaml").read_text(encoding="utf-8"))
+    del data["hand_eye"]["matrix"]
+    q = np.array([-0.192126, -0.056664, 0.733059, 0.650001])
+    typo = [-0.192126, -0.156664, 0.733059, 0.650001]
+    for name, rotation in (("typo", typo), ("rounded", np.round(q / np.linalg.norm(q), 4))):
+        data["hand_eye"]["rotation_xyzw"] = [float(v) for v in rotation]
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(data), encoding="utf-8")
+        cloud = str(tmp_path / f"{name}.ply")
+        verbs = [
+            ["export", str(path), "--format", "urdf"],
+            ["plan", "--target", "cylinder", "--from", str(path), "--n", "1"],
+            ["reconstruct", str(WELD), "--calibration", str(path), "--output", cloud],
+        ]
+        for argv in verbs:
+            code = main(argv)
+            err = capsys.readouterr().err
+            assert "hand_eye.rotation_xyzw" in err, argv
+            if name == "typo":
+                assert code == 1 and "more than rounding its digits explains" in err, argv
+            else:
+                assert "normalised" in err, argv
+        if name == "typo":
+            with pytest.raises(ResultFileError, match=r"hand_eye.rotation_xyzw .* norm 1.0106"):
+                read_initial_hand_eye(str(path))
+        else:
+            _, warnings = read_initial_hand_eye(str(path))
+            assert len(warnings) == 1 and "normalised" in warnings[0]

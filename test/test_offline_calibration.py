@@ -6,11 +6,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.latency import CLOCK_OFFSET_CODE
+from linelaser_calib.core.pairing import PairingConfig
+from linelaser_calib.core.pipeline import PipelineConfig
 from linelaser_calib.core.targets.cylinder import CylinderSection
-from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
+from linelaser_calib.io.results import read_result_yaml, read_truth_yaml, result_to_dict
+from linelaser_calib.offline import calibrate_bag
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"
 
@@ -60,18 +65,71 @@ def test_other_names_radius_and_axis(tmp_path: Path) -> None:
     assert read_result_yaml(out).target.cylinder.radius == 0.03
 
 
-def test_continuous_motion_needs_the_speed_gate_opened_and_the_latency(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def continuous(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """A continuous scan (4 ms profile latency) and its calibration with the gate open and the
+    true clock offset given."""
+    bag = tmp_path_factory.mktemp("continuous") / "continuous"
+    assert main(["simulate", str(bag), "--scenario", "continuous", "--seed", "3"]) == 0
+    out = bag.parent / "result.yaml"
+    args = ["calibrate", str(bag), *OPEN_GATE, "--clock-offset", "-0.004", "--output", str(out)]
+    assert main(args) == 0
+    return bag, out
+
+
+#: The speed gate opened, for a scan in motion.
+OPEN_GATE = ["--max-speed", "0", "--max-angular-speed", "0"]
+
+
+def test_continuous_motion_needs_the_speed_gate_opened_and_the_latency(
+    continuous: tuple[Path, Path], tmp_path: Path
+) -> None:
     """Continuous scanning (4 ms profile latency): rejected as moving by default; with the
     gate open and the clock offset given, the hand-eye is recovered."""
-    bag = tmp_path / "continuous"
-    assert main(["simulate", str(bag), "--scenario", "continuous", "--seed", "3"]) == 0
+    bag, result = continuous
     truth = read_truth_yaml(bag / "truth.yaml")
-    out = tmp_path / "result.yaml"
-    assert main(["calibrate", str(bag), "--output", str(out)]) == 1
-    args = ["calibrate", str(bag), "--max-speed", "0", "--max-angular-speed", "0"]
-    assert main([*args, "--clock-offset", "-0.004", "--output", str(out)]) == 0
-    rot, trans = transform_error(read_result_yaml(out).T_flange_sensor, truth.T_flange_sensor)
+    assert main(["calibrate", str(bag), "--output", str(tmp_path / "result.yaml")]) == 1
+    rot, trans = transform_error(read_result_yaml(result).T_flange_sensor, truth.T_flange_sensor)
     assert np.degrees(rot) < 0.05 and trans < 1e-4
+
+
+def test_a_clock_offset_left_out_is_named_before_the_robot(continuous: tuple[Path, Path]) -> None:
+    """The residual follows the flange's velocity: without the 4 ms offset the first warning
+    names the clock and about 4 ms; with the true offset given the test finds nothing."""
+    bag, given = continuous
+    pairing = PairingConfig(max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
+    forgotten = calibrate_bag(bag, PipelineConfig(pairing=pairing, self_check_folds=0)).result
+    assert forgotten.clock_diagnosis is not None and forgotten.clock_diagnosis.significant
+    assert forgotten.clock_diagnosis.offset_s == pytest.approx(-0.004, abs=1e-3)
+    assert forgotten.warnings[0].startswith("the clocks look offset by about -")
+    assert "{setting:clock_offset_s} auto" in forgotten.warnings[0]
+    section = result_to_dict(forgotten)["quality"]["pairing"]["clock_offset_diagnosis"]
+    assert section["code"] == CLOCK_OFFSET_CODE
+    written = yaml.safe_load(given.read_text(encoding="utf-8"))["quality"]
+    assert not written["pairing"]["clock_offset_diagnosis"]["significant"]
+    assert not any("clocks look offset" in w for w in written["warnings"])
+
+
+def test_reconstruct_pairs_as_the_calibration_did(
+    continuous: tuple[Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """quality.pairing travels with the result: reconstruct maps every profile of the scan in
+    motion the calibration used, and says how many and with what pairing; a flag given
+    overrides it and the profiles left out are counted with the reason."""
+    bag, result = continuous
+    pairing = read_result_yaml(result).pairing
+    assert pairing is not None and pairing.max_linear_speed_m_s == 0.0
+    assert pairing.clock_offset_s == -0.004
+    out = tmp_path / "cloud.ply"
+    assert main(["reconstruct", str(bag), "--calibration", str(result), "--output", str(out)]) == 0
+    text = capsys.readouterr().out
+    n = len(read_result_yaml(result).samples_used) + len(read_result_yaml(result).samples_rejected)
+    assert f": {n} of {n} profiles mapped" in text
+    assert "paired with the calibration's pairing: no speed gate" in text
+    args = ["reconstruct", str(bag), "--calibration", str(result), "--max-speed", "0.005"]
+    assert main([*args, "--output", str(tmp_path / "gated.ply")]) == 0
+    text = capsys.readouterr().out
+    assert "--max-speed as given" in text and "x pairing: robot moving" in text
 
 
 def test_clock_offset_is_estimated_for_continuous_scanning(tmp_path: Path) -> None:

@@ -555,3 +555,21 @@ def test_sphere_surface_map_recovers_longitude_and_latitude() -> None:
     assert mapped is not None and mapped.along_unit == "rad"
     np.testing.assert_allclose(mapped.across, longitude, atol=1e-12)
     np.testing.assert_allclose(mapped.along, latitude, atol=1e-12)
+
+
+def test_the_error_against_truth_is_also_given_where_the_points_are(
+    result: CalibrationResult, truth: Truth
+) -> None:
+    """Issue 30: a hand-eye turned 0.1 deg about the measuring centre (100 mm along the
+    sensor z) moves the sensor origin by 0.175 mm, the points not at all; the summary says
+    both."""
+    turn = np.eye(4)
+    turn[:3, :3] = Rotation.from_rotvec([np.radians(0.1), 0.0, 0.0]).as_matrix()
+    centre = np.eye(4)
+    centre[2, 3] = 0.1
+    T = truth.T_flange_sensor @ centre @ turn @ np.linalg.inv(centre)
+    text = format_summary(replace(result, T_flange_sensor=T, measuring_centre_depth_m=0.1), truth)
+    origin = float(re.search(r"  translation +([\d.]+) mm", text).group(1))  # type: ignore[union-attr]
+    points = float(re.search(r"at the points +([\d.]+) mm", text).group(1))  # type: ignore[union-attr]
+    assert origin == pytest.approx(100.0 * np.radians(0.1), abs=1e-3)
+    assert points < 1e-4

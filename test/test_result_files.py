@@ -224,7 +224,10 @@ def test_truth_extras_cannot_replace_the_truth_or_hold_objects(tmp_path: Path) -
             "set hand_eye.translation [1, 2]",
             "key hand_eye.translation must be finite numbers of shape",
         ),
-        ("set hand_eye.rotation_xyzw [0, 0, 0, 0]", "has norm 0.0000, not 1"),
+        (
+            "set hand_eye.rotation_xyzw [0, 0, 0, 0]",
+            "hand_eye.rotation_xyzw [0.0, 0.0, 0.0, 0.0] (xyzw) has norm 0.000000",
+        ),
         ("set hand_eye.rotation_xyzw [0, 0, a, 1]", "key hand_eye.rotation_xyzw must be numbers"),
         ("set hand_eye.translation [0.5, 0, 0]", "hand_eye.matrix disagrees"),
         ("set cylinder.radius 0", "radius > 0 m"),

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from linelaser_calib.cli.common import (
+    INTERRUPTS,
     StagedOutputs,
     StderrProgress,
     check_output,
@@ -128,6 +129,7 @@ def run(args: argparse.Namespace) -> int:
     truth, note = truth_beside(args.bag)
     if note:
         print(note, file=sys.stderr)
+    INTERRUPTS.hold()
     written = _write_outputs(args, run, truth)
     if args.json:
         print(json.dumps(result_to_dict(run.result), indent=2))

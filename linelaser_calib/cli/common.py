@@ -1,25 +1,66 @@
-"""What several verbs of the command line share: the program name, the initial hand-eye,
-progress on stderr, the check of an output path, outputs written all or none, and the pose
-source."""
+"""What several verbs of the command line share: the program name, the result file and the
+initial hand-eye as read, progress on stderr, the check of an output path, outputs written
+all or none, the pose source, and the pairing a calibration was made with."""
 
 from __future__ import annotations
 
 import argparse
 import os
 import shutil
+import signal
 import sys
+import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError, InputError
+from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicModel
+from linelaser_calib.core.targets.base import rejection_digest
+from linelaser_calib.core.types import Rejection
 from linelaser_calib.io.initial import read_initial_hand_eye
 from linelaser_calib.io.kinematics import load_model
+from linelaser_calib.io.results import read_result_yaml
+from linelaser_calib.settings import Front, render, spelling
 
 PROG = "linelaser-calib"
+
+
+class HeldInterrupts:
+    """Ctrl-C (SIGINT) held once a verb writes its outputs: writing them and saying so is not
+    cut short, and the run ends as written (exit 0) with a note that the interrupt came too
+    late. :func:`~linelaser_calib.cli.parser.main` restores the handler when the verb ends."""
+
+    def __init__(self) -> None:
+        self.caught = 0
+
+    def hold(self) -> None:
+        """From now on Ctrl-C is counted, not raised (in the main thread only, where
+        signals arrive)."""
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, self._count)
+
+    def _count(self, signum: int, frame: object) -> None:
+        self.caught += 1
+
+
+#: The command line's held interrupts (one process, one command).
+INTERRUPTS = HeldInterrupts()
+
+
+def read_calibration(path: str, what: str) -> CalibrationResult:
+    """The result file ``path`` that a verb maps or exports with (``what``: the flag or
+    argument naming it); what was normalised on reading goes to stderr, one line each."""
+    notes: list[str] = []
+    result = read_result_yaml(path, notes)
+    for note in notes:
+        print(f"{PROG}: warning: {what}: {note}", file=sys.stderr)
+    return result
 
 
 def initial_hand_eye(text: str) -> np.ndarray:
@@ -145,3 +186,40 @@ def pose_source(args: argparse.Namespace) -> tuple[PoseSource, KinematicModel | 
     return source, load_model(
         args.kinematics, base_frame=args.base_frame, flange_frame=args.flange_frame
     )
+
+
+def calibration_pairing(
+    result: CalibrationResult, overrides: dict[str, float | None]
+) -> tuple[PairingConfig, str]:
+    """The pairing to map a recording with as the calibration did (``quality.pairing``),
+    with the fields of ``overrides`` that are not None (PairingConfig field names), and a
+    phrase saying which it is."""
+    given = {name: float(value) for name, value in overrides.items() if value is not None}
+    if result.pairing is not None:
+        base, source = result.pairing, "the calibration's pairing"
+    else:
+        base = PairingConfig(clock_offset_s=result.clock_offset_s)
+        source = "the default pairing (the calibration file has no quality.pairing)"
+    pairing = replace(base, **given)
+    gate = (
+        "no speed gate"
+        if pairing.max_linear_speed_m_s == 0.0 and pairing.max_angular_speed_rad_s == 0.0
+        else f"speed gate {pairing.max_linear_speed_m_s} m/s and "
+        f"{pairing.max_angular_speed_rad_s} rad/s"
+    )
+    changed = (
+        f", {', '.join(spelling(name, Front.CLI) for name in sorted(given))} as given"
+        if given
+        else ""
+    )
+    return pairing, (
+        f"paired with {source}{changed}: {gate}, sync tolerance "
+        f"{pairing.sync_tolerance_s * 1e3:.1f} ms, clock offset "
+        f"{pairing.clock_offset_s * 1e3:+.2f} ms"
+    )
+
+
+def why_not_paired(rejected: list[Rejection]) -> str:
+    """The pairing rejections grouped with counts ('3 x pairing: ...; ...'), for the user."""
+    digest = rejection_digest(rejected, advise_motion=False)
+    return render(digest, Front.CLI).removeprefix("Rejected: ").strip()

@@ -6,9 +6,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from linelaser_calib.cli.common import read_calibration
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.io.kinematics import read_kinematics
-from linelaser_calib.io.results import read_result_yaml
 
 
 def run(args: argparse.Namespace) -> int:
@@ -24,7 +24,7 @@ def run(args: argparse.Namespace) -> int:
             )
         print(ur_kinematics_yaml(corrections))
         return 0
-    result = read_result_yaml(args.result)
+    result = read_calibration(args.result, "result")
     print(export_text(result, form))
     note = scale_note(result)
     if note:

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from importlib.metadata import PackageNotFoundError, version
 from typing import NoReturn
-
-import numpy as np
 
 from linelaser_calib.cli import calibrate, convert, demo, export, info, plan, reconstruct, simulate
 from linelaser_calib.cli.arguments import (
@@ -24,14 +24,19 @@ from linelaser_calib.cli.arguments import (
     span,
     xyz,
 )
-from linelaser_calib.cli.common import PROG
+from linelaser_calib.cli.common import INTERRUPTS, PROG
 from linelaser_calib.cli.simulate import SCENARIO_PRESETS, SIMULATE_OPTIONS
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import Method
 from linelaser_calib.core.planning import PlanConstraints
 from linelaser_calib.core.pose_source import PoseSource
-from linelaser_calib.core.targets import DEFAULT_TARGET, plannable_target_names, target_names
+from linelaser_calib.core.targets import (
+    DEFAULT_TARGET,
+    all_targets,
+    plannable_target_names,
+    target_names,
+)
 from linelaser_calib.io.initial import FORMS
 from linelaser_calib.settings import Front, render
 
@@ -96,6 +101,8 @@ TARGET_OPTIONS: tuple[tuple[str, Callable[[str], object], str], ...] = (
 )
 
 
+_SYNC_HELP = "largest profile-to-pose stamp gap, s (default %(default)s)"
+
 #: Flags of :data:`CALIBRATE_NUMBERS` that set the pairing gate (shared with reconstruct).
 PAIRING_FLAGS = ("--max-speed", "--max-angular-speed")
 
@@ -110,17 +117,20 @@ PLAN_TARGET_OPTIONS = (
 )
 
 
-def _add_pairing_arguments(parser: argparse.ArgumentParser, clock_offset_help: str) -> None:
-    parser.add_argument(
-        "--sync-tolerance",
-        type=positive_float,
-        default=PairingConfig.sync_tolerance_s,
-        help="largest profile-to-pose stamp gap, s (default %(default)s)",
+def _add_pairing_arguments(
+    parser: argparse.ArgumentParser, clock_offset_help: str, *, from_result: bool = False
+) -> None:
+    """The pairing flags; with ``from_result`` an absent flag (None) takes the calibration's
+    value (``quality.pairing``)."""
+    numbers = (
+        ("--sync-tolerance", positive_float, PairingConfig.sync_tolerance_s, _SYNC_HELP),
+        *(entry for entry in CALIBRATE_NUMBERS if entry[0] in PAIRING_FLAGS),
     )
+    for flag, parse, default, text in numbers:
+        if from_result:
+            text = text.replace("%(default)s", f"the calibration's, else {default}")
+        parser.add_argument(flag, type=parse, default=None if from_result else default, help=text)
     parser.add_argument("--clock-offset", type=offset, default=None, help=clock_offset_help)
-    for flag, parse, default, text in CALIBRATE_NUMBERS:
-        if flag in PAIRING_FLAGS:
-            parser.add_argument(flag, type=parse, default=default, help=text)
 
 
 def _add_pose_source_arguments(cal: argparse.ArgumentParser) -> None:
@@ -279,16 +289,15 @@ def build_parser() -> argparse.ArgumentParser:
         "--method",
         choices=[m.value for m in Method],
         default=Method.DEFAULT.value,
-        help="default: maximum likelihood on every inlier point with the robot's pose error "
-        "modelled; paper: the source paper's method (default %(default)s)",
+        help="default (the default): maximum likelihood on every inlier point with the robot's "
+        "pose error modelled; paper: the target's source paper's method",
     )
     cal_p.add_argument(
         "--target",
         choices=target_names(),
         default=DEFAULT_TARGET,
-        help=f"what was scanned (default {DEFAULT_TARGET}): cylinder, a cylinder of known or "
-        "estimated radius; known_point, one fixed point such as a weld-seam corner; each "
-        "registered target is a choice",
+        help=f"what was scanned (default {DEFAULT_TARGET}): "
+        + "; ".join(f"{t.name}, {t.summary}" for t in all_targets()),
     )
     cal_p.add_argument("--output", help="result YAML to write (its directory must exist)")
     cal_p.add_argument(
@@ -396,10 +405,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--n", type=int, default=10, help="poses to plan, unitless (default %(default)s)"
     )
     plan_p.add_argument(
-        "--goal-mm", type=positive_float, help="stop at this 1 sigma, mm (default: none)"
+        "--goal-translation",
+        type=positive_float,
+        help="stop when the predicted translation 1 sigma is within this on every axis, m "
+        "(default: none)",
     )
     plan_p.add_argument(
-        "--goal-deg", type=positive_float, help="stop at this 1 sigma, deg (default: none)"
+        "--goal-rotation",
+        type=positive_float,
+        help="stop when the predicted rotation 1 sigma is within this on every axis, rad "
+        "(default: none)",
     )
     plan_p.add_argument(
         "--range",
@@ -409,10 +424,10 @@ def build_parser() -> argparse.ArgumentParser:
         f"{PlanConstraints.z_min_m},{PlanConstraints.z_max_m})",
     )
     plan_p.add_argument(
-        "--fan-deg",
+        "--fan-half-angle",
         type=positive_float,
-        default=float(np.rad2deg(PlanConstraints.fan_half_angle_rad)),
-        help="half opening of the laser fan, deg (default %(default)g)",
+        default=PlanConstraints.fan_half_angle_rad,
+        help="half opening of the laser fan, rad (default %(default).4f, 25 deg)",
     )
     plan_p.add_argument(
         "--reach-centre",
@@ -464,6 +479,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_pairing_arguments(
         rec_p,
         "added to profile stamps to reach the pose clock, s (default: the calibration's)",
+        from_result=True,
     )
     _add_pose_source_arguments(rec_p)
     rec_p.set_defaults(func=reconstruct.run)
@@ -508,9 +524,17 @@ def _quiet_broken_pipe() -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code."""
     args = build_parser().parse_args(argv)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    handler = signal.getsignal(signal.SIGINT) if in_main_thread else None
+    INTERRUPTS.caught = 0
     try:
         code = int(args.func(args))
         sys.stdout.flush()
+        if INTERRUPTS.caught:
+            print(
+                f"{PROG}: interrupted after the outputs were written; they are complete",
+                file=sys.stderr,
+            )
         return code
     except BrokenPipeError:
         return _quiet_broken_pipe()
@@ -523,3 +547,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
+    finally:
+        if in_main_thread:
+            signal.signal(signal.SIGINT, handler)

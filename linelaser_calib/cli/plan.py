@@ -9,7 +9,13 @@ from typing import Any
 
 import numpy as np
 
-from linelaser_calib.cli.common import check_output, initial_hand_eye
+from linelaser_calib.cli.common import (
+    calibration_pairing,
+    check_output,
+    initial_hand_eye,
+    read_calibration,
+    why_not_paired,
+)
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.planning import (
@@ -22,9 +28,9 @@ from linelaser_calib.core.planning import (
 )
 from linelaser_calib.core.targets import all_targets, get_target
 from linelaser_calib.core.targets.base import ResultSection, Target, placement_adviser
-from linelaser_calib.core.types import Sample
+from linelaser_calib.core.types import Rejection, Sample
 from linelaser_calib.io.kinematics import load_model, read_kinematics
-from linelaser_calib.io.results import read_result_yaml, write_plan_yaml
+from linelaser_calib.io.results import write_plan_yaml
 from linelaser_calib.offline import bag_samples
 from linelaser_calib.settings import Front, given_from_arguments, spelling, target_config
 
@@ -33,7 +39,7 @@ def _plan_constraints(args: argparse.Namespace) -> PlanConstraints:
     return PlanConstraints(
         z_min_m=args.range[0],
         z_max_m=args.range[1],
-        fan_half_angle_rad=float(np.deg2rad(args.fan_deg)),
+        fan_half_angle_rad=args.fan_half_angle,
         reach_centre_m=args.reach_centre,
         reach_half_extent_m=args.reach,
         table_height_m=None if args.no_table else args.table_height,
@@ -62,13 +68,14 @@ def run(args: argparse.Namespace) -> int:
                 f"give its placement with {numbers_flag} ({planner.numbers_help})"
             )
     numbers = given_numbers.get(numbers_flag)
+    result = None
     if args.from_result is not None:
         if args.initial is not None or numbers is not None:
             raise InputError(
                 "--from gives the hand-eye and the target's placement; omit --initial and "
                 f"{numbers_flag}"
             )
-        result = read_result_yaml(args.from_result)
+        result = read_calibration(args.from_result, "--from")
         if result.target.key != target.name:
             raise InputError(
                 f"{args.from_result} holds a {result.target.key} result, not a {target.name} "
@@ -95,21 +102,30 @@ def run(args: argparse.Namespace) -> int:
             "scans"
         )
     config = target_config(target.name, "default", given_from_arguments(args), Front.CLI)
-    samples = (
-        []
-        if args.bag is None
-        else bag_samples(
+    samples: list[Sample] = []
+    if args.bag is not None:
+        pairing, paired_how = (
+            (PairingConfig(), "paired with the default pairing")
+            if result is None
+            else calibration_pairing(result, {})
+        )
+        unpaired: list[Rejection] = []
+        samples = bag_samples(
             args.bag,
-            PairingConfig(),
+            pairing,
             profile_topic=args.profile_topic,
             pose_topic=args.pose_topic,
+            rejected=unpaired,
         )
-    )
+        print(
+            f"{args.bag}: {len(samples)} of {len(samples) + len(unpaired)} profiles {paired_how}"
+            + ("" if not unpaired else "; not paired: " + why_not_paired(unpaired))
+        )
     goal = None
-    if args.goal_mm is not None or args.goal_deg is not None:
+    if args.goal_translation is not None or args.goal_rotation is not None:
         goal = (
-            np.inf if args.goal_mm is None else args.goal_mm * 1e-3,
-            np.inf if args.goal_deg is None else float(np.deg2rad(args.goal_deg)),
+            np.inf if args.goal_translation is None else args.goal_translation,
+            np.inf if args.goal_rotation is None else args.goal_rotation,
         )
     advice = (
         None

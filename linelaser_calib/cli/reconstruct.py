@@ -6,12 +6,17 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from linelaser_calib.cli.common import check_output, pose_source
+from linelaser_calib.cli.common import (
+    INTERRUPTS,
+    calibration_pairing,
+    check_output,
+    pose_source,
+    read_calibration,
+    why_not_paired,
+)
 from linelaser_calib.core.errors import InputError, PairingError
-from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.kinematics import read_kinematics
-from linelaser_calib.io.results import read_result_yaml
 
 
 def run(args: argparse.Namespace) -> int:
@@ -27,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
         )
     check_output(args.output, "point cloud (--output)")
     try:
-        calibration = read_result_yaml(args.calibration)
+        calibration = read_calibration(args.calibration, "--calibration")
         corrections = read_kinematics(args.calibration)
     except ResultFileError as exc:
         raise ResultFileError(
@@ -37,15 +42,17 @@ def run(args: argparse.Namespace) -> int:
     source, model = pose_source(args)
     if args.clock_offset == "auto":
         raise InputError(
-            "reconstruct takes the clock offset from the calibration (quality.clock_offset_s) "
+            "reconstruct takes the clock offset from the calibration (quality.pairing) "
             "or as --clock-offset SECONDS; 'auto' applies to calibrate only"
         )
-    offset = calibration.clock_offset_s if args.clock_offset is None else args.clock_offset
-    pairing = PairingConfig(
-        sync_tolerance_s=args.sync_tolerance,
-        clock_offset_s=float(offset),
-        max_linear_speed_m_s=args.max_speed,
-        max_angular_speed_rad_s=args.max_angular_speed,
+    pairing, paired_how = calibration_pairing(
+        calibration,
+        {
+            "sync_tolerance_s": args.sync_tolerance,
+            "clock_offset_s": args.clock_offset,
+            "max_linear_speed_m_s": args.max_speed,
+            "max_angular_speed_rad_s": args.max_angular_speed,
+        },
     )
     try:
         done = reconstruct_bag(
@@ -66,6 +73,7 @@ def run(args: argparse.Namespace) -> int:
         raise PairingError(
             f"{exc} (Options of reconstruct: --clock-offset SECONDS, --sync-tolerance SECONDS.)"
         ) from exc
+    INTERRUPTS.hold()
     if suffix == ".ply":
         written = write_ply(
             args.output, done.points, frame_id=done.base_frame, intensity=done.intensity
@@ -77,8 +85,8 @@ def run(args: argparse.Namespace) -> int:
         f"{done.bag.path}: {len(done.clouds)} of {len(done.bag.profiles)} profiles mapped into "
         f"{done.base_frame} with {done.poses.description}{corrected}; {len(done.points)} points"
     )
+    print(f"  {paired_how}")
     if done.rejected:
-        reasons = sorted({r.reason.split(" (")[0] for r in done.rejected})
-        print(f"  {len(done.rejected)} profiles not paired: {'; '.join(reasons[:3])}")
+        print(f"  {len(done.rejected)} profiles not mapped: {why_not_paired(done.rejected)}")
     print(f"Wrote {written}")
     return 0

@@ -61,6 +61,30 @@ class PairingConfig:
             raise ValueError(f"speed_window_s must be >= 0 s, got {self.speed_window_s}")
 
 
+@dataclass(frozen=True)
+class ClockOffsetDiagnosis:
+    """What a calibration's residual says about the clock offset it was paired with
+    (:func:`~.latency.diagnose_clock_offset`).
+
+    Attributes
+    ----------
+    offset_s : float
+        The clock offset the residual points to, s: the one used plus the correction.
+    correction_s, sigma_s : float
+        The correction to the offset used and its 1σ, s.
+    moving : int
+        Profiles taken while the flange moved (the test's evidence).
+    significant : bool
+        The correction differs from zero at :data:`~.latency.LATENCY_FALSE_ALARM`.
+    """
+
+    offset_s: float
+    correction_s: float
+    sigma_s: float
+    moving: int
+    significant: bool
+
+
 @dataclass
 class PairingResult:
     """Outcome of pairing a batch of profiles.

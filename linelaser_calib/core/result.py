@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
+from .pairing import ClockOffsetDiagnosis, PairingConfig
 from .types import FloatArray, Rejection, SampleFit, Verdict
 
 if TYPE_CHECKING:
@@ -77,6 +78,13 @@ class CalibrationResult:
     verdict : Verdict or None
         The verdict (:mod:`linelaser_calib.core.verdict`), once judged with every warning in
         (``settings.render_warnings``) or as read from a result file; None before.
+    pairing : PairingConfig or None
+        The pairing the profiles were paired with (speed gate, sync tolerance, clock offset),
+        so that what maps the recording again pairs it alike; None where unknown (live
+        pairing by the collector).
+    clock_diagnosis : ClockOffsetDiagnosis or None
+        Whether the residual follows the flange's velocity (:mod:`.latency`); None where the
+        test did not run (step-and-shoot, an estimated offset, live pairing).
     """
 
     T_flange_sensor: FloatArray
@@ -106,3 +114,5 @@ class CalibrationResult:
     initial_T_flange_sensor: FloatArray | None = None
     self_check_skipped_because: str = ""
     verdict: Verdict | None = None
+    pairing: PairingConfig | None = None
+    clock_diagnosis: ClockOffsetDiagnosis | None = None

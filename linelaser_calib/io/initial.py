@@ -68,7 +68,7 @@ def _from_numbers(values: list[float]) -> InitialHandEye:
     """The hand-eye from 7 numbers (x y z qx qy qz qw) or 6 (x y z roll pitch yaw)."""
     warnings: list[str] = []
     if len(values) == 7:
-        R = rotation_from_quaternion(np.array(values[3:]), warnings)
+        R = rotation_from_quaternion(np.array(values[3:]), warnings, "the quaternion qx qy qz qw")
     elif len(values) == 6:
         angles = np.array(values[3:])
         if np.max(np.abs(angles)) > 2.0 * math.pi:

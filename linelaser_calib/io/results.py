@@ -16,7 +16,9 @@ The result file layout (the README's "Result file")::
     cylinder: {frame: base_link, point: [x, y, z], direction: [x, y, z], radius: r}
     quality: {verdict: {level: good|use_with_care|do_not_use, reason, next_step, warnings: [ids]},
               method: ..., samples_used: N, samples_rejected: [...], rms_residual_m: ...,
-              warnings: [...], accuracy_in_use_m: ..., accuracy_in_use: {...}, self_check: {...}}
+              warnings: [...], accuracy_in_use_m: ..., accuracy_in_use: {...}, self_check: {...},
+              pairing: {sync_tolerance_s, clock_offset_s, max_linear_speed_m_s,
+                        max_angular_speed_rad_s, speed_window_s, clock_offset_diagnosis: {...}}}
 
 The target's section (``cylinder`` above; ``known_point``, ...) is the target's own: its
 name, content and extra ``quality`` entries (the cylinder's ``radius_estimated``) come from
@@ -53,6 +55,8 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
     translation_quaternion_from_transform,
 )
+from linelaser_calib.core.latency import CLOCK_OFFSET_CODE
+from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.planning import Plan
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections
@@ -228,6 +232,49 @@ def _read_verdict(quality: _Fields) -> Verdict | None:
     )
 
 
+def _pairing_entry(result: CalibrationResult) -> dict[str, Any]:
+    """``quality.pairing``: the pairing the profiles were paired with (s, m/s, rad/s) and
+    the clock-offset diagnosis (:mod:`~linelaser_calib.core.latency`), when known."""
+    pairing = result.pairing
+    if pairing is None:
+        return {}
+    section: dict[str, Any] = {
+        "sync_tolerance_s": float(pairing.sync_tolerance_s),
+        "clock_offset_s": float(pairing.clock_offset_s),
+        "max_linear_speed_m_s": float(pairing.max_linear_speed_m_s),
+        "max_angular_speed_rad_s": float(pairing.max_angular_speed_rad_s),
+        "speed_window_s": float(pairing.speed_window_s),
+    }
+    diagnosis = result.clock_diagnosis
+    if diagnosis is not None:
+        section["clock_offset_diagnosis"] = {
+            "code": CLOCK_OFFSET_CODE,
+            "significant": bool(diagnosis.significant),
+            "offset_s": float(diagnosis.offset_s),
+            "correction_s": float(diagnosis.correction_s),
+            "sigma_s": float(diagnosis.sigma_s),
+            "moving_profiles": int(diagnosis.moving),
+        }
+    return {"pairing": section}
+
+
+def _read_pairing(quality: _Fields) -> PairingConfig | None:
+    """The result's ``quality.pairing`` (None when the file has none)."""
+    if not quality.has("pairing"):
+        return None
+    section = quality.section("pairing")
+    try:
+        return PairingConfig(
+            sync_tolerance_s=section.number("sync_tolerance_s"),
+            clock_offset_s=section.number("clock_offset_s"),
+            max_linear_speed_m_s=section.number("max_linear_speed_m_s"),
+            max_angular_speed_rad_s=section.number("max_angular_speed_rad_s"),
+            speed_window_s=section.number("speed_window_s"),
+        )
+    except ValueError as err:
+        raise ResultFileError(f"{section.path}: quality.pairing: {err}") from None
+
+
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     """The result in the contract layout (plain lists and numbers), for YAML and JSON."""
     unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
@@ -279,6 +326,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 )
                 if value is not None
             },
+            **_pairing_entry(result),
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
@@ -519,7 +567,9 @@ def hand_eye_transform(fields: _Fields) -> tuple[FloatArray, list[str]]:
         )
     try:
         if has_pose:
-            R = rotation_from_quaternion(hand_eye.array("rotation_xyzw", (4,)), warnings)
+            R = rotation_from_quaternion(
+                hand_eye.array("rotation_xyzw", (4,)), warnings, "hand_eye.rotation_xyzw"
+            )
             T = transform_from_rotation_translation(R, hand_eye.array("translation", (3,)))
             if (
                 hand_eye.has("matrix")
@@ -534,19 +584,22 @@ def hand_eye_transform(fields: _Fields) -> tuple[FloatArray, list[str]]:
             if np.max(np.abs(M[3] - [0.0, 0.0, 0.0, 1.0])) > MATRIX_TOLERANCE:
                 raise ResultFileError(f"{path}: the last row of hand_eye.matrix must be 0 0 0 1")
             T = transform_from_rotation_translation(
-                rotation_from_matrix(M[:3, :3], warnings), M[:3, 3]
+                rotation_from_matrix(M[:3, :3], warnings, "hand_eye.matrix's rotation"), M[:3, 3]
             )
         check_translation(T[:3, 3])
     except ResultFileError:
         raise
     except InputError as err:
-        raise ResultFileError(f"{path}: hand_eye: {err}") from None
-    return T, warnings
+        raise ResultFileError(f"{path}: {err}") from None
+    return T, [f"{path}: {warning}" for warning in warnings]
 
 
-def _read_hand_eye(fields: _Fields) -> tuple[FloatArray, str, str]:
-    """``T_flange_sensor`` (4, 4), parent frame, child frame from the ``hand_eye`` section."""
-    T, _ = hand_eye_transform(fields)
+def _read_hand_eye(fields: _Fields, notes: list[str] | None = None) -> tuple[FloatArray, str, str]:
+    """``T_flange_sensor`` (4, 4), parent frame, child frame from the ``hand_eye`` section;
+    what was normalised is appended to ``notes`` (when given)."""
+    T, normalised = hand_eye_transform(fields)
+    if notes is not None:
+        notes.extend(normalised)
     hand_eye = fields.section("hand_eye")
     return T, hand_eye.text("parent_frame"), hand_eye.text("child_frame")
 
@@ -582,8 +635,12 @@ def _read_measuring_centre(hand_eye: _Fields) -> float | None:
     return None if centre is None else float(centre[2])
 
 
-def read_result_yaml(path: str | Path) -> CalibrationResult:
+def read_result_yaml(path: str | Path, notes: list[str] | None = None) -> CalibrationResult:
     """Read a result file written by :func:`write_result_yaml` (or by hand, same keys).
+
+    A hand-eye rotation normalised on reading (:mod:`~linelaser_calib.io.hand_eye`) is said
+    in one line each appended to ``notes``, when given; every verb that reads a result
+    passes them on to the user.
 
     ``samples_used`` is restored from ``quality.samples_used_indices`` (empty if absent);
     optional keys (``warnings``, ``samples_rejected``, ``uncertainty``, ...) default to empty.
@@ -595,7 +652,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         Missing file, invalid YAML, or a missing or malformed key (named in the message).
     """
     path, fields = _load(path)
-    T, parent_frame, child_frame = _read_hand_eye(fields)
+    T, parent_frame, child_frame = _read_hand_eye(fields, notes)
     target, base_frame = _read_target(fields)
     hand_eye = fields.section("hand_eye")
     quality = fields.section("quality")
@@ -643,6 +700,7 @@ def read_result_yaml(path: str | Path) -> CalibrationResult:
         ),
         warnings=[str(w) for w in quality.items("warnings")],
         verdict=_read_verdict(quality),
+        pairing=_read_pairing(quality),
         parent_frame=parent_frame,
         child_frame=child_frame,
         base_frame=base_frame,

@@ -1,0 +1,134 @@
+"""Whether a calibration's residual follows the flange's velocity: a clock offset left out.
+
+A profile stamped τ late is paired with the pose the flange had τ after the profile was
+taken, so each profile lands off the target by about τ times the velocity of its points.
+The per-pose robot-error model absorbs much of that as pose corrections, and the self-check
+then calls the robot's error systematic; the cause is the clock.
+
+The test (:func:`diagnose_clock_offset`), for any target, through its result section only:
+each used profile's points are mapped into the base frame with the flange pose at its stamp
+(shifted by the clock offset the calibration used) and with the poses ``step_s`` before and
+after; their signed distances ``d`` from the fitted target and the derivative ``g = ∂d/∂τ``
+(central difference) give the least-squares offset that the residual points to,
+τ̂ = −Σ d g / Σ g². Its standard error is cluster-robust with the profile as the cluster
+(the points of a profile share one pose error), and the offset is reported when it
+differs from zero at :data:`LATENCY_FALSE_ALARM` (two-sided), the 3σ convention of
+:mod:`.selfcheck`. Where the flange stands still at the profiles (step-and-shoot) ``g`` is
+zero and there is nothing to test: the test runs only when at least
+:data:`MIN_MOVING_PROFILES` profiles were taken while the flange moved faster than the
+pairing's default speed gate.
+
+All times in s, lengths in m.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.stats import norm
+
+from .pairing import NS_PER_S, ClockOffsetDiagnosis, PairingConfig, PoseBuffer
+from .result import CalibrationResult
+from .types import FlangePose
+
+#: Warning code of the diagnosis (the result file's ``quality.pairing.clock_offset_diagnosis``):
+#: the residual follows the flange's velocity, so the clocks look offset.
+CLOCK_OFFSET_CODE = "clock_offset"
+#: False-alarm probability of the test under no offset (two-sided; the 3σ convention).
+LATENCY_FALSE_ALARM = 0.0027
+#: Profiles taken while the flange moved that the test needs (the poses stream).
+MIN_MOVING_PROFILES = 10
+#: Half-step of the central difference in the offset, s.
+STEP_S = 0.005
+
+
+def clock_offset_warning(diagnosis: ClockOffsetDiagnosis) -> str:
+    """The warning that names the cause and the next step (ms in text)."""
+    return (
+        f"the clocks look offset by about {diagnosis.offset_s * 1e3:.1f} ms: the residual "
+        f"follows the flange's velocity ({diagnosis.moving} profiles taken while moving point "
+        f"to {diagnosis.correction_s * 1e3:+.1f} ms +- {diagnosis.sigma_s * 1e3:.1f} ms on "
+        "the clock offset used), and a clock offset left out looks like a robot error: read "
+        "any robot-error warning below as this one's. Give {setting:clock_offset_s} auto and "
+        "calibrate again"
+    )
+
+
+def diagnose_clock_offset(
+    result: CalibrationResult,
+    poses: list[FlangePose],
+    pairing: PairingConfig,
+    step_s: float = STEP_S,
+) -> ClockOffsetDiagnosis | None:
+    """Test whether the residual follows the flange's velocity (see the module docstring).
+
+    Parameters
+    ----------
+    result : CalibrationResult
+        A calibration with its ``sample_fits``.
+    poses : list of FlangePose
+        The flange pose stream the profiles were paired with.
+    pairing : PairingConfig
+        The pairing the calibration used (its clock offset and sync tolerance).
+    step_s : float
+        Half-step of the central difference in the offset, s.
+
+    Returns
+    -------
+    ClockOffsetDiagnosis or None
+        None when fewer than :data:`MIN_MOVING_PROFILES` profiles were taken while moving.
+    """
+    buffer = PoseBuffer()
+    buffer.extend(poses)
+    gate = PairingConfig()
+    tolerance_ns = round(pairing.sync_tolerance_s * NS_PER_S)
+    window_ns = round(gate.speed_window_s * NS_PER_S)
+    step_ns = round(step_s * NS_PER_S)
+    shift_ns = round(pairing.clock_offset_s * NS_PER_S)
+    T_fs = result.T_flange_sensor
+    scores, curvatures, profiles = [], [], []
+    moving = 0
+    for fit in result.sample_fits:
+        t = fit.stamp_ns + shift_ns
+        found = [buffer.pose_at(t + k * step_ns, tolerance_ns) for k in (-1, 0, 1)]
+        if any(isinstance(T, str) for T in found):
+            continue
+        before, at, after = (np.asarray(T) @ T_fs for T in found)
+        d = result.target.surface_distances(fit, at)
+        g = (
+            result.target.surface_distances(fit, after)
+            - result.target.surface_distances(fit, before)
+        ) / (2.0 * step_s)
+        speed = buffer.speed_at(t, window_ns)
+        if speed is not None and (
+            speed[0] > gate.max_linear_speed_m_s or speed[1] > gate.max_angular_speed_rad_s
+        ):
+            moving += 1
+        profiles.append((d, g))
+        scores.append(float(g @ d))
+        curvatures.append(float(g @ g))
+    total = float(np.sum(curvatures))
+    if moving < MIN_MOVING_PROFILES or not total > 0.0:
+        return None
+    correction = -float(np.sum(scores)) / total
+    clusters = np.array([float(g @ (d + correction * g)) for d, g in profiles])
+    n = len(clusters)
+    sigma = float(np.sqrt(n / (n - 1) * np.sum(clusters**2))) / total
+    limit = float(norm.isf(LATENCY_FALSE_ALARM / 2.0))
+    return ClockOffsetDiagnosis(
+        offset_s=pairing.clock_offset_s + correction,
+        correction_s=correction,
+        sigma_s=sigma,
+        moving=moving,
+        significant=abs(correction) > limit * sigma,
+    )
+
+
+def add_clock_diagnosis(
+    result: CalibrationResult, poses: list[FlangePose], pairing: PairingConfig
+) -> None:
+    """Run :func:`diagnose_clock_offset` on a result paired with ``pairing`` and keep it as
+    ``result.clock_diagnosis``; a significant offset puts its warning first, before any
+    robot-error warning it explains."""
+    result.clock_diagnosis = diagnose_clock_offset(result, poses, pairing)
+    if result.clock_diagnosis is not None and result.clock_diagnosis.significant:
+        result.warnings.insert(0, clock_offset_warning(result.clock_diagnosis))
