@@ -8,7 +8,12 @@ from pathlib import Path
 
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset, run_pipeline
+from linelaser_calib.core.pipeline import (
+    Extracted,
+    PipelineConfig,
+    run_pipeline,
+    search_clock_offset,
+)
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig, KinematicSetup
@@ -148,7 +153,7 @@ def calibrate_bag(
     config : PipelineConfig
     estimate_offset : bool
         Estimate the clock offset between profile and pose stamps (continuous scanning,
-        :func:`~linelaser_calib.core.pipeline.estimate_clock_offset`), starting from the
+        :func:`~linelaser_calib.core.pipeline.search_clock_offset`), starting from the
         configured one.
     progress : callable, optional
         Called as ``progress(stage, done, total)``.
@@ -177,11 +182,12 @@ def calibrate_bag(
             "{setting:nominal_kinematics}): give one recording, or the robot model"
         )
     bag, flange_poses = reading.read(config.pairing.sync_tolerance_s, progress)
+    extracted: Extracted | None = None
     if estimate_offset:
-        progress("clock offset", 0, 1)
-        offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config)
+        offset, extracted = search_clock_offset(
+            bag.profiles, flange_poses.poses, config, progress=progress
+        )
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
-        progress("clock offset", 1, 1)
     others = []
     unpaired = []
     if kinematic_calibration is not None and reading.model is not None:
@@ -198,7 +204,7 @@ def calibrate_bag(
                     f"{len(samples) + len(rejected)} profiles did not pair with a flange pose "
                     f"and were left out. {rejection_digest(rejected)}".rstrip()
                 )
-    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others)
+    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others, extracted)
     result.warnings.extend(unpaired)
     result.clock_offset_estimated = estimate_offset
     result.parent_frame = reading.flange_frame
