@@ -11,6 +11,8 @@ prints, per recording (the continuous preset with ``--max-speed 0 --max-angular-
   as 7 float64;
 - ``wall s``, ``x paper``: the calibration's wall time and its ratio to ``calibrate
   bags/paper`` timed in the same run (the median of three; the yardstick of the goals);
+- ``CPU s``, ``x paper``: the same for its CPU time (user + system, the forked child's
+  included), which the machine's other load disturbs less;
 - ``peak MB``: the process's peak resident memory (``ru_maxrss``);
 - ``above MB``, ``x raw``: the peak above the start-up baseline (the peak of a process that
   imports what ``calibrate`` imports and stops) and its ratio to the raw data;
@@ -64,9 +66,11 @@ BASELINE_IMPORTS = (
 
 @dataclass(frozen=True)
 class Run:
-    """One child process: wall time, s, and peak resident memory, MB."""
+    """One child process: wall and CPU (user + system) time, s, and peak resident memory,
+    MB."""
 
     wall_s: float
+    cpu_s: float
     peak_mb: float
 
 
@@ -80,7 +84,8 @@ def measured(argv: list[str]) -> Run:
     stderr = child.stderr.read().decode() if child.stderr else ""
     if child.returncode != 0:
         raise RuntimeError(f"{' '.join(argv)} failed ({child.returncode}): {stderr}")
-    return Run(wall, usage.ru_maxrss / 1024.0)  # ru_maxrss is in KiB on Linux
+    cpu = usage.ru_utime + usage.ru_stime
+    return Run(wall, cpu, usage.ru_maxrss / 1024.0)  # ru_maxrss is in KiB on Linux
 
 
 def raw_mb(bag: Path) -> tuple[int, int, float]:
@@ -130,11 +135,15 @@ def main() -> int:
         out = Path(tmp) / "result.yaml"
         paper = [measured([cli, "calibrate", "bags/paper", "--output", str(out)]) for _ in "abc"]
         paper_wall = statistics.median(r.wall_s for r in paper)
-        print(f"start-up baseline {baseline:.0f} MB; calibrate bags/paper {paper_wall:.2f} s")
+        paper_cpu = statistics.median(r.cpu_s for r in paper)
+        print(
+            f"start-up baseline {baseline:.0f} MB; calibrate bags/paper {paper_wall:.2f} s wall, "
+            f"{paper_cpu:.2f} s CPU"
+        )
         print(
             f"{'preset':<16}{'--poses':>8}{'profiles':>9}{'poses':>8}{'raw MB':>8}{'wall s':>8}"
-            f"{'x paper':>8}{'peak MB':>8}{'above MB':>9}{'x raw':>7}{'rot deg':>9}"
-            f"{'trans mm':>9}{'max e/σ':>8}"
+            f"{'x paper':>8}{'CPU s':>7}{'x paper':>8}{'peak MB':>8}{'above MB':>9}{'x raw':>7}"
+            f"{'rot deg':>9}{'trans mm':>9}{'max e/σ':>8}"
         )
         for item in sizes.split(","):
             preset, n = item.split(":")
@@ -156,7 +165,8 @@ def main() -> int:
             above = run.peak_mb - baseline
             print(
                 f"{preset:<16}{n:>8}{profiles:>9}{poses:>8}{raw:>8.1f}{run.wall_s:>8.1f}"
-                f"{run.wall_s / paper_wall:>8.1f}{run.peak_mb:>8.0f}{above:>9.0f}"
+                f"{run.wall_s / paper_wall:>8.1f}{run.cpu_s:>7.1f}{run.cpu_s / paper_cpu:>8.1f}"
+                f"{run.peak_mb:>8.0f}{above:>9.0f}"
                 f"{above / raw:>7.1f}{rot:>9.4f}{trans:>9.3f}{ratio:>8.2f}",
                 flush=True,
             )
