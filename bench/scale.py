@@ -26,7 +26,8 @@ baseline.
 
 Run from the repository root (not part of the test suite)::
 
-    .venv/bin/python bench/scale.py [--sizes ur_scancontrol:100,continuous:200] [--large]
+    .venv/bin/python bench/scale.py [--sizes ur_scancontrol:100,continuous:1000] [--large]
+        [--recordings DIR] [--source DIR]
 
 The default sizes take a few minutes; ``--large`` adds ``ur_scancontrol`` at 1,600 and
 ``continuous`` at 2,000 poses (the goals' sizes, several minutes more).
@@ -74,10 +75,10 @@ class Run:
     peak_mb: float
 
 
-def measured(argv: list[str]) -> Run:
+def measured(argv: list[str], env: dict[str, str] | None = None) -> Run:
     """Run ``argv`` to completion (it must succeed) and measure it alone (``wait4``)."""
     started = time.perf_counter()
-    child = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    child = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
     _, status, usage = os.wait4(child.pid, 0)
     wall = time.perf_counter() - started
     child.returncode = os.waitstatus_to_exitcode(status)
@@ -123,17 +124,27 @@ def main() -> int:
     parser.add_argument("--large", action="store_true", help="add " + LARGE_SIZES)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument(
+        "--source",
+        help="calibrate with the package in this directory (e.g. an export of an earlier "
+        "commit: git archive COMMIT | tar -x -C DIR) instead of the installed one",
+    )
+    parser.add_argument(
         "--recordings",
         help="directory to simulate the recordings into and reuse them from (default: a "
         "temporary one)",
     )
     args = parser.parse_args()
     cli = str(Path(sys.executable).parent / "linelaser-calib")
+    calibrate, env = [cli, "calibrate"], None
+    if args.source:
+        entry = "import sys; from linelaser_calib.entry import main; sys.exit(main())"
+        calibrate = [sys.executable, "-c", entry, "calibrate"]
+        env = {**os.environ, "PYTHONPATH": str(Path(args.source).resolve())}
     sizes = args.sizes + ("," + LARGE_SIZES if args.large else "")
-    baseline = measured([sys.executable, "-c", BASELINE_IMPORTS]).peak_mb
+    baseline = measured([sys.executable, "-c", BASELINE_IMPORTS], env).peak_mb
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "result.yaml"
-        paper = [measured([cli, "calibrate", "bags/paper", "--output", str(out)]) for _ in "abc"]
+        paper = [measured([*calibrate, "bags/paper", "--output", str(out)], env) for _ in "abc"]
         paper_wall = statistics.median(r.wall_s for r in paper)
         paper_cpu = statistics.median(r.cpu_s for r in paper)
         print(
@@ -157,7 +168,7 @@ def main() -> int:
             out.unlink(missing_ok=True)
             try:
                 options = OPTIONS.get(preset, [])
-                run = measured([cli, "calibrate", str(bag), "--output", str(out), *options])
+                run = measured([*calibrate, str(bag), "--output", str(out), *options], env)
             except RuntimeError as refused:
                 print(f"{preset:<16}{n:>8}{profiles:>9}{poses:>8}{raw:>8.1f}  refused: {refused}")
                 continue
