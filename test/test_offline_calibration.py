@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -10,6 +11,8 @@ import pytest
 from linelaser_calib.cli import main
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.targets.cylinder import target as cylinder_target
+from linelaser_calib.core.targets.cylinder.features import fit_samples
 from linelaser_calib.io.results import read_result_yaml, read_truth_yaml
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"
@@ -74,14 +77,25 @@ def test_continuous_motion_needs_the_speed_gate_opened_and_the_latency(tmp_path:
     assert np.degrees(rot) < 0.05 and trans < 1e-4
 
 
-def test_clock_offset_is_estimated_for_continuous_scanning(tmp_path: Path) -> None:
+def test_clock_offset_is_estimated_for_continuous_scanning(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """--clock-offset auto finds the 4 ms profile latency and gives the accuracy of the true
-    offset; a step-and-shoot bag keeps 0 (nothing moves during a profile)."""
+    offset, fitting each profile's ellipse once (the search's are used again at the offset
+    found); a step-and-shoot bag keeps 0 (nothing moves during a profile)."""
     bag = tmp_path / "continuous"
     assert main(["simulate", str(bag), "--scenario", "continuous", "--seed", "5"]) == 0
+    fitted: list[int] = []
+
+    def counted(samples: list[Any], *args: Any, **kwargs: Any) -> Any:
+        fitted.extend(s.index for s in samples)
+        return fit_samples(samples, *args, **kwargs)
+
+    monkeypatch.setattr(cylinder_target, "fit_samples", counted)
     out = tmp_path / "result.yaml"
     args = ["calibrate", str(bag), "--max-speed", "0", "--max-angular-speed", "0"]
     assert main([*args, "--clock-offset", "auto", "--output", str(out)]) == 0
+    assert fitted and len(fitted) == len(set(fitted))
     result = read_result_yaml(out)
     assert result.clock_offset_estimated
     assert result.clock_offset_s == pytest.approx(-0.004, abs=2e-4)
