@@ -75,10 +75,12 @@ class Run:
     peak_mb: float
 
 
-def measured(argv: list[str], env: dict[str, str] | None = None) -> Run:
+def measured(argv: list[str], env: dict[str, str] | None = None, cwd: str | None = None) -> Run:
     """Run ``argv`` to completion (it must succeed) and measure it alone (``wait4``)."""
     started = time.perf_counter()
-    child = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    child = subprocess.Popen(
+        argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, cwd=cwd
+    )
     _, status, usage = os.wait4(child.pid, 0)
     wall = time.perf_counter() - started
     child.returncode = os.waitstatus_to_exitcode(status)
@@ -135,16 +137,18 @@ def main() -> int:
     )
     args = parser.parse_args()
     cli = str(Path(sys.executable).parent / "linelaser-calib")
-    calibrate, env = [cli, "calibrate"], None
-    if args.source:
+    calibrate, env, cwd = [cli, "calibrate"], None, None
+    if args.source:  # run there: the current directory comes first on the module path
+        cwd = str(Path(args.source).resolve())
         entry = "import sys; from linelaser_calib.entry import main; sys.exit(main())"
         calibrate = [sys.executable, "-c", entry, "calibrate"]
         env = {**os.environ, "PYTHONPATH": str(Path(args.source).resolve())}
     sizes = args.sizes + ("," + LARGE_SIZES if args.large else "")
-    baseline = measured([sys.executable, "-c", BASELINE_IMPORTS], env).peak_mb
+    baseline = measured([sys.executable, "-c", BASELINE_IMPORTS], env, cwd).peak_mb
+    paper_bag = str(Path("bags/paper").resolve())
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "result.yaml"
-        paper = [measured([*calibrate, "bags/paper", "--output", str(out)], env) for _ in "abc"]
+        paper = [measured([*calibrate, paper_bag, "--output", str(out)], env, cwd) for _ in "abc"]
         paper_wall = statistics.median(r.wall_s for r in paper)
         paper_cpu = statistics.median(r.cpu_s for r in paper)
         print(
@@ -158,7 +162,7 @@ def main() -> int:
         )
         for item in sizes.split(","):
             preset, n = item.split(":")
-            bag = Path(args.recordings or tmp) / f"{preset}_{n}_seed{args.seed}"
+            bag = Path(args.recordings or tmp).resolve() / f"{preset}_{n}_seed{args.seed}"
             if not bag.exists():
                 simulate = [cli, "simulate", str(bag), "--scenario", preset, "--poses", n]
                 subprocess.run(
@@ -168,7 +172,7 @@ def main() -> int:
             out.unlink(missing_ok=True)
             try:
                 options = OPTIONS.get(preset, [])
-                run = measured([*calibrate, str(bag), "--output", str(out), *options], env)
+                run = measured([*calibrate, str(bag), "--output", str(out), *options], env, cwd)
             except RuntimeError as refused:
                 print(f"{preset:<16}{n:>8}{profiles:>9}{poses:>8}{raw:>8.1f}  refused: {refused}")
                 continue
