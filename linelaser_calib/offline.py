@@ -13,9 +13,10 @@ from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import (
     OFFSET_COSTS,
     OFFSET_TRIALS,
+    Extracted,
     PipelineConfig,
-    estimate_clock_offset,
     run_pipeline,
+    search_clock_offset,
 )
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
@@ -156,7 +157,7 @@ def calibrate_bag(
     config : PipelineConfig
     estimate_offset : bool
         Estimate the clock offset between profile and pose stamps (continuous scanning,
-        :func:`~linelaser_calib.core.pipeline.estimate_clock_offset`), starting from the
+        :func:`~linelaser_calib.core.pipeline.search_clock_offset`), starting from the
         configured one.
     progress : callable, optional
         Called as ``progress(stage, done, total)``.
@@ -186,11 +187,12 @@ def calibrate_bag(
         )
     bag, flange_poses = reading.read(config.pairing.sync_tolerance_s, progress)
     trace: list[tuple[float, float]] = []
+    extracted: Extracted | None = None
     if estimate_offset:
-        progress("clock offset", 0, 1)
-        offset = estimate_clock_offset(bag.profiles, flange_poses.poses, config, trace=trace)
+        offset, extracted = search_clock_offset(
+            bag.profiles, flange_poses.poses, config, progress=progress, trace=trace
+        )
         config = replace(config, pairing=replace(config.pairing, clock_offset_s=offset))
-        progress("clock offset", 1, 1)
     others = []
     unpaired = []
     if kinematic_calibration is not None and reading.model is not None:
@@ -207,7 +209,7 @@ def calibrate_bag(
                     f"{len(samples) + len(rejected)} profiles did not pair with a flange pose "
                     f"and were left out. {rejection_digest(rejected)}".rstrip()
                 )
-    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others)
+    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others, extracted)
     result.warnings.extend(unpaired)
     result.clock_offset_estimated = estimate_offset
     finite = sorted((t, c) for t, c in trace if math.isfinite(c))

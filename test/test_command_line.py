@@ -8,6 +8,7 @@ or default fails here.
 from __future__ import annotations
 
 import argparse
+import io
 import os
 import re
 import signal
@@ -22,6 +23,7 @@ from typing import Any
 import pytest
 
 from linelaser_calib.cli import build_parser, calibrate, main
+from linelaser_calib.cli.common import StderrProgress
 from linelaser_calib.cli.simulate import SCENARIO_PRESETS
 from linelaser_calib.core.targets import plannable_target_names, target_names
 from linelaser_calib.sim import Scenario
@@ -191,3 +193,57 @@ def test_ctrl_c_once_the_result_is_written_keeps_it(
     assert f"Wrote {out}" in captured.out and out.exists()
     assert "interrupted after the outputs were written" in captured.err
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+class _Terminal(io.StringIO):
+    """A stream that says it is a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+class _Clock:
+    """A clock that advances by ``tick`` s at every reading."""
+
+    def __init__(self, tick: float) -> None:
+        self.now, self.tick = 0.0, tick
+
+    def __call__(self) -> float:
+        self.now += self.tick
+        return self.now
+
+
+def test_progress_on_a_terminal_rewrites_one_line_and_estimates_the_time_left() -> None:
+    """Each item of a 200-item stage takes 0.1 s: once the stage has run a second, the line
+    says how long it has left (the truth, (200 - done) x 0.1 s, to a second); a line is
+    drawn at most every half second and ends when its stage does."""
+    terminal = _Terminal()
+    progress = StderrProgress(True, terminal, _Clock(0.1))
+    for done in range(201):
+        progress("ellipse", done, 200)
+    progress("refine", 0, 1)
+    progress("refine", 1, 1)
+    text = terminal.getvalue()
+    updates = text.split("\r")[1:]
+    assert 30 <= len(updates) <= 50  # 20 s of updates, every 0.5 s, plus the ends
+    for update in updates:
+        found = re.search(r"ellipse: (\d+)/200, about (\d+) s left", update)
+        if found:
+            done, left = int(found[1]), int(found[2])
+            assert abs(left - (200 - done) * 0.1) <= 1.0
+    assert "ellipse: 200/200\x1b[K\n" in text
+    assert text.endswith("refine: 1/1\x1b[K\n")
+
+
+def test_progress_elsewhere_writes_a_line_per_stage_start_and_end() -> None:
+    """Redirected (a log, a pipe): no carriage return, no estimate; disabled: nothing."""
+    log = io.StringIO()
+    progress = StderrProgress(True, log, _Clock(0.1))
+    for done in range(11):
+        progress("ellipse", done, 10)
+    lines = log.getvalue().splitlines()
+    assert [line.split("] ")[1] for line in lines] == ["ellipse: 0/10", "ellipse: 10/10"]
+    quiet = _Terminal()
+    off = StderrProgress(False, quiet, _Clock(0.1))
+    off("ellipse", 0, 10)
+    assert quiet.getvalue() == ""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -14,6 +15,8 @@ from linelaser_calib.core.latency import CLOCK_OFFSET_CODE
 from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.pipeline import PipelineConfig
 from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.core.targets.cylinder import target as cylinder_target
+from linelaser_calib.core.targets.cylinder.features import fit_samples
 from linelaser_calib.io.results import read_result_yaml, read_truth_yaml, result_to_dict
 from linelaser_calib.offline import calibrate_bag
 
@@ -132,14 +135,25 @@ def test_reconstruct_pairs_as_the_calibration_did(
     assert "--max-speed as given" in text and "x pairing: robot moving" in text
 
 
-def test_clock_offset_is_estimated_for_continuous_scanning(tmp_path: Path) -> None:
+def test_clock_offset_is_estimated_for_continuous_scanning(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """--clock-offset auto finds the 4 ms profile latency and gives the accuracy of the true
-    offset; a step-and-shoot bag keeps 0 (nothing moves during a profile)."""
+    offset, fitting each profile's ellipse once (the search's are used again at the offset
+    found); a step-and-shoot bag keeps 0 (nothing moves during a profile)."""
     bag = tmp_path / "continuous"
     assert main(["simulate", str(bag), "--scenario", "continuous", "--seed", "5"]) == 0
+    fitted: list[int] = []
+
+    def counted(samples: list[Any], *args: Any, **kwargs: Any) -> Any:
+        fitted.extend(s.index for s in samples)
+        return fit_samples(samples, *args, **kwargs)
+
+    monkeypatch.setattr(cylinder_target, "fit_samples", counted)
     out = tmp_path / "result.yaml"
     args = ["calibrate", str(bag), "--max-speed", "0", "--max-angular-speed", "0"]
     assert main([*args, "--clock-offset", "auto", "--output", str(out)]) == 0
+    assert fitted and len(fitted) == len(set(fitted))
     result = read_result_yaml(out)
     assert result.clock_offset_estimated
     assert result.clock_offset_s == pytest.approx(-0.004, abs=2e-4)

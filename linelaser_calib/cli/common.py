@@ -5,14 +5,17 @@ all or none, the pose source, and the pairing a calibration was made with."""
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -74,21 +77,70 @@ def initial_hand_eye(text: str) -> np.ndarray:
     return initial
 
 
-class StderrProgress:
-    """Progress on stderr, one line per stage, for long bags."""
+#: Seconds between two updates of the progress line on a terminal.
+PROGRESS_INTERVAL_S = 0.5
+#: Seconds a stage must have run before its rate gives an estimate of the time it has left.
+ESTIMATE_AFTER_S = 1.0
 
-    def __init__(self, enabled: bool) -> None:
+
+class StderrProgress:
+    """Progress on stderr for long recordings.
+
+    On a terminal, one line per stage, rewritten in place at most every
+    :data:`PROGRESS_INTERVAL_S`: the elapsed time, the stage, how far it is and, once it has
+    run :data:`ESTIMATE_AFTER_S`, the time it has left at its rate so far. Elsewhere (stderr
+    redirected, ``--progress`` given) a line when a stage starts and when it ends, so that a
+    log holds no carriage returns.
+    """
+
+    def __init__(
+        self,
+        enabled: bool,
+        stream: TextIO | None = None,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.enabled = enabled
-        self.started = time.monotonic()
+        self.stream = sys.stderr if stream is None else stream
+        self.live = enabled and self.stream.isatty()
+        self.clock = clock
+        self.started = clock()
         self.last_stage = ""
+        self.stage_started = self.started
+        self.stage_first = 0
+        self.shown = -math.inf
+        self.open_line = False
 
     def __call__(self, stage: str, done: int, total: int) -> None:
         if not self.enabled:
             return
-        if stage != self.last_stage or done == total:
-            elapsed = time.monotonic() - self.started
-            print(f"  [{elapsed:6.2f} s] {stage}: {done}/{total}", file=sys.stderr)
-            self.last_stage = stage
+        now = self.clock()
+        new = stage != self.last_stage
+        if new:
+            self.last_stage, self.stage_started, self.stage_first = stage, now, done
+        finished = done >= total
+        if not self.live:
+            if new or finished:
+                print(self._text(now, stage, done, total, ""), file=self.stream)
+            return
+        if not (new or finished) and now - self.shown < PROGRESS_INTERVAL_S:
+            return
+        self.shown = now
+        if new and self.open_line:
+            self.stream.write("\n")
+        text = self._text(now, stage, done, total, self._left(now, done, total))
+        self.stream.write("\r" + text + "\033[K" + ("\n" if finished else ""))
+        self.stream.flush()
+        self.open_line = not finished
+
+    def _text(self, now: float, stage: str, done: int, total: int, left: str) -> str:
+        return f"  [{now - self.started:6.2f} s] {stage}: {done}/{total}{left}"
+
+    def _left(self, now: float, done: int, total: int) -> str:
+        """``, about N s left`` from the stage's rate so far, or nothing yet."""
+        elapsed, progressed = now - self.stage_started, done - self.stage_first
+        if done >= total or progressed <= 0 or elapsed < ESTIMATE_AFTER_S:
+            return ""
+        return f", about {math.ceil(elapsed / progressed * (total - done))} s left"
 
 
 def check_output(path: str, what: str, *, directory: bool = False) -> Path:

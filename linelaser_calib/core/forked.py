@@ -79,7 +79,10 @@ def _child(function: Callable[[Item], Value], items: Sequence[Item], pipe: int) 
 
 
 def map_forked(
-    function: Callable[[Item], Value], items: Sequence[Item], workers: int = 1
+    function: Callable[[Item], Value],
+    items: Sequence[Item],
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[Value | CalibrationError]:
     """``function`` of every item, or the CalibrationError it raised, in the items' order.
 
@@ -91,9 +94,20 @@ def map_forked(
     workers : int
         1 runs everything here; 2 shares the items with a forked child when this process
         runs no other thread (see the module docstring).
+    progress : callable, optional
+        ``progress(done, total)`` after each item this process finishes (with a child: the
+        items both have finished, counting the child's pace as this one's).
     """
+    total = len(items)
+
+    def reported(k: int, item: Item, per_item: int) -> Value | CalibrationError:
+        outcome = _outcome(function, item)
+        if progress is not None:
+            progress(min(per_item * (k + 1), total), total)
+        return outcome
+
     if workers < 2 or len(items) < 2 or not hasattr(os, "fork") or not alone():
-        return [_outcome(function, item) for item in items]
+        return [reported(k, item, 1) for k, item in enumerate(items)]
     read, write = os.pipe()
     try:
         pid = os.fork()
@@ -108,7 +122,7 @@ def map_forked(
     with os.fdopen(read, "rb") as stream:
         finished = False
         try:
-            mine = [_outcome(function, item) for item in items[0::2]]
+            mine = [reported(k, item, 2) for k, item in enumerate(items[0::2])]
             data = stream.read()
             _, status = os.waitpid(pid, 0)
             finished = True

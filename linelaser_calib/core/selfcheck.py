@@ -105,7 +105,7 @@ from .regions import (
     pose_distances,
     workspace_regions,
 )
-from .targets.base import ROBOT_PRIOR_EXCESS, RobotError, TargetSolution
+from .targets.base import ROBOT_PRIOR_EXCESS, Progress, RobotError, TargetSolution
 from .types import SampleFit
 
 #: Folds of the pose-interleaved cross-validation, and the most regions of the workspace.
@@ -523,6 +523,7 @@ def self_check(
     plain: Callable[[], tuple[TargetSolution, Callable[[list[Any]], TargetSolution]] | None]
     | None = None,
     arm_accuracy_m: float = DEFAULT_ARM_ACCURACY_M,
+    progress: Progress | None = None,
 ) -> SelfCheck | None:
     """Cross-validate a solution by region and by interleaved poses, choose the model, and
     widen its 1σ when the robot's error looks systematic (see the module docstring).
@@ -554,6 +555,9 @@ def self_check(
     arm_accuracy_m : float
         Prior 1σ per axis of the robot error common to all regions, m (applied to the 1σ of
         a systematic error; not with ``flange_poses``).
+    progress : callable, optional
+        Hears of each subset solve, as the stage ``self-check`` (and ``self-check, plain
+        model`` for the plain model's).
 
     Returns
     -------
@@ -567,7 +571,7 @@ def self_check(
         return None
     T_kept = np.stack([f.T_base_flange for f in kept])
     label, clusters = workspace_regions(T_kept, folds)
-    solved = solve_subsets(kept, folds, solve, label, workers)
+    solved = solve_subsets(kept, folds, solve, label, workers, _reporting(progress, "self-check"))
     interleaved, solved = solved[:folds], solved[folds:]
     (even, odd), solved = solved[:2], solved[2:]
     if any(isinstance(fold, CalibrationError) for fold in interleaved):
@@ -617,7 +621,12 @@ def self_check(
             model = choose_model(blocked, None)
         else:
             plain_solution, plain_solve = tried
-            plain_solved = map_forked(plain_solve, region_subsets(kept, label), workers)
+            plain_solved = map_forked(
+                plain_solve,
+                region_subsets(kept, label),
+                workers,
+                _reporting(progress, "self-check, plain model"),
+            )
             plain_blocked = blocked_accuracy(plain_solved, held_sets, plain_solution, flange_poses)
             model = choose_model(blocked, plain_blocked)
             sigma_plain = _sigma(plain_solution)
@@ -691,12 +700,21 @@ def self_check(
     return check
 
 
+def _reporting(progress: Progress | None, stage: str) -> Callable[[int, int], None] | None:
+    """``progress`` of ``stage`` as :func:`~.forked.map_forked` reports it."""
+    if progress is None:
+        return None
+    report = progress
+    return lambda done, total: report(stage, done, total)
+
+
 def solve_subsets(
     kept: list[Any],
     folds: int,
     solve: Callable[[list[Any]], TargetSolution],
     label: NDArray[np.int64] | None = None,
     workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[TargetSolution | CalibrationError]:
     """The solves of the self-check, each a solution or the CalibrationError it raised: every
     interleaved fold's training features (all but every ``folds``-th from k), the even and
@@ -710,7 +728,7 @@ def solve_subsets(
     jobs += [(solve, kept[0::2]), (solve, kept[1::2])]
     if label is not None:
         jobs += [(solve, subset) for subset in region_subsets(kept, label)]
-    return map_forked(lambda job: job[0](job[1]), jobs, workers)
+    return map_forked(lambda job: job[0](job[1]), jobs, workers, progress)
 
 
 def _halves(

@@ -273,25 +273,26 @@ def normal_equations(
     r = linearisation.residuals
     if weights is None:
         _, weights = evaluate_loss(r.points, config)
-    G = linearisation.J_global.shape[2]
-    J = np.concatenate([linearisation.J_global, linearisation.J_local], axis=2)
-    WJ = J * weights[..., None]
-    H = J.transpose(0, 2, 1) @ WJ
-    gradient = np.einsum("mkp,mk->mp", WJ, r.points)
-    A = H[:, :G, :G].sum(axis=0)
-    g_global = gradient[:, :G].sum(axis=0)
+    # The global and local columns apart (no stacked copy of the Jacobian): the global block
+    # A is one product over all points, B and C one small product per sample.
+    J_global, J_local = linearisation.J_global, linearisation.J_local
+    G = J_global.shape[2]
+    WJ_global = J_global * weights[..., None]
+    WJ_local = J_local * weights[..., None]
+    A = WJ_global.reshape(-1, G).T @ J_global.reshape(-1, G)
+    g_global = WJ_global.reshape(-1, G).T @ r.points.reshape(-1)
     Jp = linearisation.global_prior_jacobian
     if Jp is not None and len(Jp):
         A = A + Jp.T @ Jp
         g_global = g_global + Jp.T @ r.global_prior
     sqrt_info = linearisation.pose_prior_sqrt_information
     return BlockNormal(
-        A=A,
-        B=H[:, :G, G:],
-        C_data=H[:, G:, G:],
+        A=0.5 * (A + A.T),
+        B=WJ_global.transpose(0, 2, 1) @ J_local,
+        C_data=WJ_local.transpose(0, 2, 1) @ J_local,
         prior_precision=sqrt_info**2,
         g_global=g_global,
-        g_local=gradient[:, G:] + r.pose_prior * sqrt_info,
+        g_local=np.einsum("mkl,mk->ml", WJ_local, r.points) + r.pose_prior * sqrt_info,
     )
 
 

@@ -44,10 +44,11 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
    a ``placement_adviser`` (:func:`placement_adviser`); ``rivals`` (names of the targets whose
    full model may explain its recordings instead) and ``model_doubt(features, config)`` (why
    its own per-profile shapes put its model in doubt, or None), with which
-   :func:`~linelaser_calib.core.targets.rivals.check_model` judges the whole recording; on
-   the section, ``surface_map`` (its
-   surface unrolled for the report, :func:`surface_map`) and ``feature_distances`` with
-   ``feature_kind`` (the paper's per-sample residual, :func:`feature_residuals`).
+   :func:`~linelaser_calib.core.targets.rivals.check_model` judges the whole recording;
+   ``with_samples`` (features that do not depend on the poses, re-paired:
+   :func:`feature_repairing`); on the section, ``surface_map`` (its surface unrolled for the
+   report, :func:`surface_map`) and ``feature_distances`` with ``feature_kind`` (the paper's
+   per-sample residual, :func:`feature_residuals`).
 
 Everything is in SI units (m, rad); mm and degrees appear only in human text, labelled.
 """
@@ -482,6 +483,19 @@ def placement_adviser(target: Target[Any]) -> PlacementAdviser | None:
     """The target's placement adviser; None (the default) for a target without one."""
     adviser: PlacementAdviser | None = getattr(target, "placement_adviser", None)
     return adviser
+
+
+#: Optional capability of a target (see :func:`feature_repairing`): its features re-paired
+#: with other samples of the same profiles (same points, other flange poses), in order.
+Repairing = Callable[[list[Any], list[Sample]], list[Any]]
+
+
+def feature_repairing(target: Target[Any]) -> Repairing | None:
+    """The target's ``with_samples`` (:data:`Repairing`), for a target whose features do not
+    depend on the flange poses: the features of a clock-offset search are then used again at
+    the offset found, not extracted twice. None (the default) extracts them again."""
+    repairing: Repairing | None = getattr(target, "with_samples", None)
+    return repairing
 
 
 @dataclass(frozen=True)

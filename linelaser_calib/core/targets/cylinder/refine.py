@@ -421,18 +421,44 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
         whitening=None if full.whitening is None else full.whitening.take(keep),
     )
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
-    solution = solve(
-        problem,
-        start,
-        replace(
-            full.config.solver,
-            step_tolerance_m=SUBSET_STEP_TOLERANCE_M,
-            tolerance=SUBSET_COST_TOLERANCE,
-        ),
-    )
-    if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
-        raise SolverError("the refinement of a subset produced non-finite values")
+    solution = _solve_near(problem, start, "of a subset")
     return summarise(problem, solution, solved.noise)
+
+
+def _solve_near(
+    problem: CylinderProblem, start: CylinderState, what: str
+) -> Solution[CylinderState]:
+    """The solve of a problem from a state near its optimum, to :data:`SUBSET_STEP_TOLERANCE_M`
+    and :data:`SUBSET_COST_TOLERANCE` (SolverError on non-finite numbers, naming ``what``)."""
+    tolerances = replace(
+        problem.config.solver,
+        step_tolerance_m=SUBSET_STEP_TOLERANCE_M,
+        tolerance=SUBSET_COST_TOLERANCE,
+    )
+    solution = solve(problem, start, tolerances)
+    if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
+        raise SolverError(f"the refinement {what} produced non-finite values")
+    return solution
+
+
+def refine_at_poses(
+    solved: SolvedProblem, T_base_flange: FloatArray
+) -> tuple[SolvedProblem, float]:
+    """The refinement of a solved problem's samples at other flange poses (M, 4, 4), started
+    at its solution, and its final cost (dimensionless, as :attr:`RefineResult.cost_history`).
+
+    The clock-offset search re-pairs the same points with poses a few ms away, which moves
+    the optimum little: from the last solution the solve converges (to the tolerances of
+    :func:`refine_subset`) without a new problem, seed or observability check.
+
+    Raises
+    ------
+    SolverError
+        The solve produced non-finite numbers.
+    """
+    problem = solved.problem.with_flange_poses(np.asarray(T_base_flange, dtype=np.float64))
+    solution = _solve_near(problem, solved.state, "at other flange poses")
+    return replace(solved, problem=problem, state=solution.state), solution.cost_history[-1]
 
 
 def summarise(

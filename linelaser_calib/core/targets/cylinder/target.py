@@ -76,6 +76,7 @@ from .refine import (
     RefineResult,
     SolvedProblem,
     refine,
+    refine_at_poses,
     refine_subset,
     refine_with_outlier_rejection,
 )
@@ -137,19 +138,23 @@ class _SubsetStart:
     rows: Mapping[int, int]
 
 
-def _subset_start(features: list[FittedSample], context: SolveContext) -> _SubsetStart | None:
+def _subset_start(
+    features: list[FittedSample], context: SolveContext
+) -> tuple[_SubsetStart, list[FittedSample], list[Rejection]] | None:
     """Where a solve of ``features`` starts when they are a subset of the warm start's (the
-    self-check's solves): its solved problem, or None for a solve of its own (no warm
-    start, a joint kinematic calibration, a feature the warm start did not use)."""
+    self-check's solves): its solved problem, the features it used and the warm start's
+    rejections of the others (outliers it dropped, dropped again without a solve: the full
+    solve screened them under the same model); None for a solve of its own (no warm start,
+    a joint kinematic calibration, a feature the warm start never saw)."""
     warm = context.warm_start
     start = None if warm is None else warm.subset_start
-    if (
-        not isinstance(start, _SubsetStart)
-        or context.kinematics is not None
-        or any(f.index not in start.rows for f in features)
-    ):
+    if warm is None or not isinstance(start, _SubsetStart) or context.kinematics is not None:
         return None
-    return start
+    dropped = {r.index: r for r in warm.rejections if r.stage == "outlier"}
+    if any(f.index not in start.rows and f.index not in dropped for f in features):
+        return None
+    kept = [f for f in features if f.index in start.rows]
+    return start, kept, [dropped[f.index] for f in features if f.index not in start.rows]
 
 
 def recording_scale_m(features: list[FittedSample], floor_m: float) -> float:
@@ -224,6 +229,13 @@ class CylinderTarget:
         """Every sample's ellipse (:func:`.features.fit_samples`)."""
         fitted, rejections = fit_samples(samples, config, seed, progress, workers)
         return list(fitted), rejections
+
+    @staticmethod
+    def with_samples(features: list[Any], samples: list[Sample]) -> list[Any]:
+        """The ellipses re-paired with other samples of their profiles (the ellipse is fitted
+        in the sensor frame: it does not depend on the flange pose)."""
+        by_index = {s.index: s for s in samples}
+        return [replace(f, sample=by_index[f.index]) for f in features]
 
     def _checked(
         self, features: list[FittedSample], config: CylinderConfig, context: SolveContext
@@ -366,9 +378,11 @@ class CylinderTarget:
         config = replace(
             config, refine=replace(config.refine, estimate_scale=estimates_scale(config))
         )
-        start = _subset_start(features, context)
+        subset = _subset_start(features, context)
         seed_history: dict[str, Any] = {}
-        if start is not None:
+        screened: list[Rejection] = []
+        if subset is not None:
+            start, features, screened = subset
             context.progress("refine", 0, 1)
             refined = refine_subset(start.solved, [start.rows[f.index] for f in features])
         else:
@@ -393,7 +407,7 @@ class CylinderTarget:
             joint.dropped = refined.dropped
             joint.warnings[:0] = [outcome.identifiability.describe()]
             refined = joint
-        rejections = [
+        rejections = screened + [
             Rejection(features[j].index, features[j].stamp_ns, "outlier", reason)
             for j, reason in refined.dropped
         ]
@@ -443,7 +457,7 @@ class CylinderTarget:
             else None,
             subset_start=(
                 None
-                if start is not None or outcome is not None or refined.solved is None
+                if subset is not None or outcome is not None or refined.solved is None
                 else _SubsetStart(
                     refined.solved, {features[j].index: k for k, j in enumerate(refined.used)}
                 )
@@ -521,7 +535,9 @@ class CylinderTarget:
         """The refinement's final cost with the ellipses re-paired with other flange poses.
 
         The ellipses and the seed solve do not depend on the poses' offset and are computed
-        once; a few dozen points per profile pin the offset as well as all of them.
+        once; a few dozen points per profile pin the offset as well as all of them. The first
+        refinement starts at the seed; each later one at the solution before it
+        (:func:`.refine.refine_at_poses`), the same points at other poses.
         """
         if len(features) < config.min_samples:
             raise DegenerateError(
@@ -535,14 +551,27 @@ class CylinderTarget:
         points = [f.inlier_points for f in features]
         light = replace(config.refine, max_points_per_profile=OFFSET_SEARCH_POINTS)
 
+        solved: list[SolvedProblem] = []
+
         def cost(T_base_flange: FloatArray) -> float:
             try:
-                refined = refine(
-                    points, T_base_flange, seed.T_flange_sensor, cylinder0, light, config.radius_m
-                )
+                if solved:
+                    again, value = refine_at_poses(solved[0], T_base_flange)
+                else:
+                    refined = refine(
+                        points,
+                        T_base_flange,
+                        seed.T_flange_sensor,
+                        cylinder0,
+                        light,
+                        config.radius_m,
+                    )
+                    assert refined.solved is not None  # refine() always keeps it
+                    again, value = refined.solved, refined.cost_history[-1]
             except CalibrationError:
                 return float("inf")
-            return refined.cost_history[-1]
+            solved[:] = [again]
+            return value
 
         return cost
 
