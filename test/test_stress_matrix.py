@@ -45,11 +45,14 @@ FACES = (*REAL_FACES, "floor")
 #: Width of the plate beside the seam targets' flank (the ``floor`` face), m.
 FLOOR_WIDTH_M = 0.01
 SCALE = (
-    "no target estimates the profiler's x and z scales by default (issue 29 part 2 adds the "
-    "sphere's; the cylinder's --scale is the along-line scale only; the seam targets have "
-    "none), so a 0.6 % scale error biases the hand-eye beyond its 1 sigma"
+    "the seam targets estimate no profiler scale: an x scale 0.8 % off the z scale moves "
+    "the line's hand-eye 0.47 mm (1 sigma 0.07 mm, clean twin 0.05 mm) and the known "
+    "point's 0.14 mm (clean twin 0.02 mm); the cylinder and the sphere estimate the "
+    "along-line scale by default (--scale auto) and pass"
 )
-XFAIL: dict[tuple[str, str], str] = {(target, "scales"): SCALE for target in TARGETS}
+XFAIL: dict[tuple[str, str], str] = {
+    (target, "scales"): SCALE for target in ("line", "known_point")
+}
 
 
 @cache
