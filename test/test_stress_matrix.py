@@ -45,14 +45,13 @@ FACES = (*REAL_FACES, "floor")
 #: Width of the plate beside the seam targets' flank (the ``floor`` face), m.
 FLOOR_WIDTH_M = 0.01
 SCALE = (
-    "the seam targets estimate no profiler scale: an x scale 0.8 % off the z scale moves "
-    "the line's hand-eye 0.47 mm (1 sigma 0.07 mm, clean twin 0.05 mm) and the known "
-    "point's 0.14 mm (clean twin 0.02 mm); the cylinder and the sphere estimate the "
-    "along-line scale by default (--scale auto) and pass"
+    "the line target estimates no profiler scale: an x scale 0.8 % off the z scale moves its "
+    "hand-eye 0.47 mm (clean twin 0.05 mm); its 1 sigma is widened by the recording's "
+    "variance factor to 0.20 mm (2.4 sigma; seeds 4 and 5: 2.1 and 5.5 sigma, 18 of 93 "
+    "profiles set aside on seed 5). The cylinder and the sphere estimate the along-line scale "
+    "by default (--scale auto); the known point's widened 1 sigma covers the face"
 )
-XFAIL: dict[tuple[str, str], str] = {
-    (target, "scales"): SCALE for target in ("line", "known_point")
-}
+XFAIL: dict[tuple[str, str], str] = {("line", "scales"): SCALE}
 
 
 @cache
