@@ -10,10 +10,12 @@ from linelaser_calib.core.solver import (
     Solution,
     SolverConfig,
     normal_equations,
+    recording_widening,
     sample_dispersion,
     solve_damped,
     widen_covariance,
 )
+from linelaser_calib.core.verdict import warning_kind
 
 G, K = 4, 40
 LINEAR = SolverConfig(loss="linear")
@@ -126,3 +128,15 @@ def test_a_warning_names_the_axis_that_scatters_beyond_twice_its_sigma() -> None
     assert dispersion_warning(np.array([1.0, 3.9, 1.0, 1.0, 1.0, 1.0, 50.0])) is None
     text = dispersion_warning(np.array([1.0, 1.0, 1.0, 1.0, 9.0, 1.0]))
     assert text is not None and "3.0 times" in text and "translation along y" in text
+
+
+def test_the_recordings_variance_factor_widens_the_seam_targets_1_sigma() -> None:
+    """A recording whose views scatter as modelled widens nothing; one whose views scatter
+    4 times the modelled variance doubles the 1σ and says so as profile scatter."""
+    rng = np.random.default_rng(0)
+    modelled = rng.chisquare(2, 200)
+    assert recording_widening(modelled, 2, 10)[0] < 1.2
+    assert recording_widening(modelled, 2, 10)[1] is None
+    factor, text = recording_widening(4.5 * modelled, 2, 10)
+    assert 1.8 < factor < 2.4
+    assert text is not None and warning_kind(text).id == "profile-scatter"

@@ -163,7 +163,7 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
     ),
     WarningKind(
         "profile-scatter",
-        r"the hand-eye moves from profile to profile",
+        r"(the hand-eye moves from profile to profile|the views lie off the fit)",
         _CARE,
         "the profiles scatter the hand-eye more than the noise model predicts",
         "check the exposure and the target's surface; the 1 sigma already covers it",
@@ -191,6 +191,14 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
         "the estimated along-line scale is implausible: it took up something else",
         f"measure the target (or leave out {setting('radius_m')}), or hold the scale with "
         f"{setting('scale')} fixed",
+    ),
+    WarningKind(
+        "scale-held",
+        r"the along-line scale, estimated by default, read",
+        _CARE,
+        "the along-line scale read implausibly far from 1, so it was held at 1",
+        f"give the measured {setting('radius_m')}; the hand-eye's 1 sigma does not cover "
+        "whatever stretches the profiles",
     ),
     WarningKind(
         "model-misfit-kept",

@@ -46,3 +46,17 @@ def scale_text(scale: float, sigma: float | None) -> str:
         "anything else that stretches the profiles, such as grazing-angle smear, goes into it "
         "too)"
     )
+
+
+def implausible_scale_held(scale: float) -> str:
+    """The warning of a target that estimated the along-line scale by default (``auto``),
+    found it implausible (beyond :data:`PLAUSIBLE_SCALE_ERROR`) and solved again with it
+    held at 1."""
+    return (
+        f"the along-line scale, estimated by default, read {1.0 + scale:.4f} "
+        f"({100.0 * scale:+.2f} % from nominal): a scale error beyond "
+        f"{100.0 * PLAUSIBLE_SCALE_ERROR:.0f} % is implausible, so it was held at 1 and the "
+        "hand-eye solved again. Something else stretches the profiles along the line, such as "
+        "a target that is not the given size or the profiler's own shape error; "
+        "{setting:scale} free keeps the estimate"
+    )

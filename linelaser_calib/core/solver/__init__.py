@@ -33,7 +33,13 @@ from .lm import (
     widen_covariance,
     widening,
 )
-from .rejection import Flag, RejectionOutcome, recording_chi2_scale, solve_with_rejection
+from .rejection import (
+    Flag,
+    RejectionOutcome,
+    recording_chi2_scale,
+    recording_widening,
+    solve_with_rejection,
+)
 
 __all__ = [
     "LOSSES",
@@ -52,6 +58,7 @@ __all__ = [
     "evaluate_loss",
     "normal_equations",
     "recording_chi2_scale",
+    "recording_widening",
     "sample_dispersion",
     "solve",
     "solve_damped",

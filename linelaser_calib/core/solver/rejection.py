@@ -8,6 +8,7 @@ budget (at most ``max_fraction`` of the samples over all rounds, never below
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Generic, NamedTuple, TypeVar
@@ -70,6 +71,32 @@ def recording_chi2_scale(chi2: np.ndarray, dof: int) -> float:
     if not len(values):
         return 1.0
     return max(1.0, float(np.median(values)) / float(chdtri(dof, 0.5)))
+
+
+def recording_widening(chi2: np.ndarray, dof: int, n_global: int) -> tuple[float, str | None]:
+    """The factor (>= 1) by which a solve's 1σ is widened for the recording's own scatter,
+    and a warning when it at least doubles it (else None).
+
+    The a-posteriori variance factor: the samples' chi2 (each with ``dof`` degrees of
+    freedom, shape (M,)) summed over the redundancy ``dof`` M − ``n_global``; its root where
+    it exceeds 1. A profiler whose x and z scales differ by 0.8 % (the stress matrix's
+    ``scales`` face) gives the line target's corners 1.9-7.5 times their modelled variance
+    (clean twins 0.1-0.3, so no widening there).
+    """
+    values = np.asarray(chi2, dtype=np.float64)
+    redundancy = dof * len(values) - n_global
+    if redundancy <= 0 or not np.all(np.isfinite(values)):
+        return 1.0, None
+    factor = math.sqrt(max(1.0, float(np.sum(values)) / redundancy))
+    if factor < 2.0:
+        return factor, None
+    return factor, (
+        f"the views lie off the fit {factor:.1f} times farther than their corner fits and the "
+        f"robot's prior predict (chi2 {float(np.sum(values)):.0f} over {redundancy} degrees "
+        "of freedom): something the model lacks moves every corner, such as a profiler whose "
+        "x and z scales differ, its shape error or a robot error. The 1 sigma is widened by "
+        "that factor"
+    )
 
 
 def solve_with_rejection(

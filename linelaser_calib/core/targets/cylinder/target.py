@@ -42,7 +42,7 @@ import numpy as np
 
 from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
-from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, scale_text
+from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held, scale_text
 from ...robot.joint_calibration import KinematicSetup
 from ...solver import widening
 from ...types import Rejection, Sample
@@ -73,6 +73,7 @@ from .model import Cylinder, centre_distances
 from .plan import CylinderPlanner
 from .pso_alm import PaperSolution, solve_pso_galm
 from .refine import (
+    MAX_SCALE_SIGMA,
     RefineResult,
     SolvedProblem,
     refine,
@@ -96,7 +97,8 @@ PAPER_MISFIT_FACTOR = 100.0
 
 def estimates_scale(config: CylinderConfig) -> bool:
     """Whether the default method estimates the sensor's along-line scale: as ``config.scale``
-    says, and with ``auto`` when the radius is given.
+    says, and with ``auto`` (default) yes, :meth:`CylinderTarget.solve_default` holding it
+    at 1 again with the radius free when the estimate is implausible or poorly determined.
 
     With the radius given the scale is determined by the arcs' shape alone (within ±0.003 %
     of 1 on the ``paper`` and ``ur_scancontrol`` presets, 20 seeds) and costs no accuracy
@@ -104,11 +106,12 @@ def estimates_scale(config: CylinderConfig) -> bool:
     radius, and the hand-eye absorbs the misfit: RMS 19.6 mm (2.7-35 mm) over 20 seeds of
     ``cluttered_camera`` (0.5 % scale error) against 1.8 mm (0.08-3.1 mm) with the scale
     estimated (bench/accuracy.py ``scale``). With the radius estimated the two are ~99 %
-    correlated, and estimating the scale moved no preset's error (1.69 -> 1.70 mm on
-    ``cluttered_camera``), so it is held fixed unless asked.
+    correlated, yet an x scale 0.8 % off the z scale (the stress matrix's ``scales`` face)
+    moved ``ur_scancontrol``'s hand-eye 0.31 mm with the scale held and 0.04 mm estimated
+    (clean twin 0.024 mm either way).
     """
     if config.scale == "auto":
-        return config.radius_m is not None or config.refine.estimate_scale
+        return True
     return config.scale == "free"
 
 
@@ -370,14 +373,42 @@ class CylinderTarget:
         self, features: list[Any], config: CylinderConfig, context: SolveContext
     ) -> TargetSolution:
         """Maximum likelihood on every inlier point, seeded by the paper's solve (or started
-        at the context's warm start)."""
+        at the context's warm start). With ``{setting:scale} auto`` and the radius free the
+        along-line scale is estimated and held at 1 again when the estimate is implausible
+        or poorly determined (:func:`estimates_scale`); a warm start keeps its own choice."""
         radius = self._checked(features, config, context)
+        free = estimates_scale(config)
+        warm = context.warm_start
+        if config.scale != "auto" or config.radius_m is not None:
+            return self._solve_default(features, config, context, radius, free)
+        if warm is not None and isinstance(warm.section, CylinderSection):
+            free = warm.section.scale is not None
+            return self._solve_default(features, config, context, radius, free)
+        solution = self._solve_default(features, config, context, radius, True)
+        assert isinstance(solution.section, CylinderSection)
+        scale, sigma = solution.section.scale, solution.section.scale_sigma
+        if scale is None or sigma is None:
+            return solution
+        if abs(scale) <= PLAUSIBLE_SCALE_ERROR and sigma <= MAX_SCALE_SIGMA:
+            return solution
+        held = self._solve_default(features, config, context, radius, False)
+        if abs(scale) > PLAUSIBLE_SCALE_ERROR:
+            held.warnings.append(implausible_scale_held(scale))
+        return held
+
+    def _solve_default(
+        self,
+        features: list[Any],
+        config: CylinderConfig,
+        context: SolveContext,
+        radius: float,
+        free: bool,
+    ) -> TargetSolution:
+        """:meth:`solve_default` with the along-line scale estimated (``free``) or held."""
         mismatch = radius_mismatch(
             [f.ellipse.semi_axes[1] for f in long_arcs(features)], config.radius_m
         )
-        config = replace(
-            config, refine=replace(config.refine, estimate_scale=estimates_scale(config))
-        )
+        config = replace(config, refine=replace(config.refine, estimate_scale=free))
         subset = _subset_start(features, context)
         seed_history: dict[str, Any] = {}
         screened: list[Rejection] = []

@@ -105,7 +105,13 @@ from ...errors import DegenerateError, InputError, ModelMismatch
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample
 from ...seam_grid import paper_correction, weld_points_base
-from ...solver import Flag, recording_chi2_scale, solve_with_rejection
+from ...solver import (
+    N_HAND_EYE,
+    Flag,
+    recording_chi2_scale,
+    recording_widening,
+    solve_with_rejection,
+)
 from ...types import Rejection, Sample
 from ..base import (
     Option,
@@ -433,7 +439,12 @@ def _default_result(
             "the result may be inaccurate"
         )
     residuals, rms = _residuals_m(used, X, point)
-    sigma = np.sqrt(np.diag(refined.covariance))
+    widen, scatter = recording_widening(
+        refined.view_chi2, 3, N_HAND_EYE + (3 if estimate_point else 0)
+    )
+    if scatter is not None:
+        warnings.append(scatter)
+    sigma = widen * np.sqrt(np.diag(refined.covariance))
     return KnownPointResult(
         T_flange_sensor=X,
         point_base=point,

@@ -33,7 +33,12 @@ from scipy.special import chdtri
 from ...errors import DegenerateError, ModelMismatch
 from ...profile.corner import CornerSample, check_corner_recording
 from ...seam_grid import paper_correction, weld_points_base
-from ...solver import Flag, recording_chi2_scale, solve_with_rejection
+from ...solver import (
+    Flag,
+    recording_chi2_scale,
+    recording_widening,
+    solve_with_rejection,
+)
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
     Option,
@@ -49,7 +54,7 @@ from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
-from .refine import LineRefinement, refine_line
+from .refine import N_GLOBAL, LineRefinement, refine_line
 from .section import LineSection
 
 #: A default-method fit whose RMS residual exceeds this many times the noise the model
@@ -311,7 +316,10 @@ class LineTarget:
                 f"the refinement stopped after {refined.iterations} iterations without "
                 "converging; the result may be inaccurate"
             )
-        sigma = np.sqrt(np.diag(refined.covariance))
+        widen, scatter = recording_widening(refined.view_chi2, 2, N_GLOBAL)
+        if scatter is not None:
+            warnings.append(scatter)
+        sigma = widen * np.sqrt(np.diag(refined.covariance))
         rejections = [
             Rejection(features[i].index, features[i].stamp_ns, "outlier", reason)
             for i, reason in outcome.dropped

@@ -44,7 +44,7 @@ from linelaser_calib.core.errors import (
 from linelaser_calib.core.geometry import FloatArray
 from linelaser_calib.core.model_check import Comparison
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
-from linelaser_calib.core.profile.along_line import PLAUSIBLE_SCALE_ERROR
+from linelaser_calib.core.profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
 from linelaser_calib.core.targets.base import (
@@ -356,13 +356,36 @@ class SphereTarget:
 
         Started at the fixed-point solve, or at the context's warm start (the self-check's
         solves of subsets), whose noise levels then weight the points and poses from the
-        first round on.
+        first round on. With ``{setting:scale} auto`` and the radius free the along-line scale
+        is estimated and kept when plausible, else held at 1 and solved again
+        (:func:`estimates_scale`); a warm start keeps its own choice.
         """
         self._require(features, config, context)
+        warm = context.warm_start
+        if (
+            config.scale != "auto"
+            or config.radius_m is not None
+            or (warm is not None and isinstance(warm.section, SphereSection))
+        ):
+            free = estimates_scale(
+                config, None if warm is None else getattr(warm.section, "scale", None) is not None
+            )
+            return self._solve_default(features, config, context, free)
+        solution = self._solve_default(features, config, context, True)
+        assert isinstance(solution.section, SphereSection)
+        scale = solution.section.scale or 0.0
+        if abs(scale) <= PLAUSIBLE_SCALE_ERROR:
+            return solution
+        held = self._solve_default(features, config, context, False)
+        held.warnings.append(implausible_scale_held(scale))
+        return held
+
+    def _solve_default(
+        self, features: list[Any], config: SphereConfig, context: SolveContext, free: bool
+    ) -> TargetSolution:
+        """:meth:`solve_default` with the along-line scale estimated (``free``) or held."""
         refine_config = replace(
-            config.refine,
-            estimate_radius=config.radius_m is None,
-            estimate_scale=estimates_scale(config),
+            config.refine, estimate_radius=config.radius_m is None, estimate_scale=free
         )
         scale = 0.0
         warm = context.warm_start
