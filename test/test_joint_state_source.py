@@ -121,7 +121,7 @@ def test_joint_states_ending_before_the_last_profile_drop_it_and_say_so(
     assert any(
         f"outside the joint-state stream and were left out (#{last})" in w for w in result.warnings
     )
-    assert f"[profiles {last}]" in printed
+    assert f"after the joint-state stream (at pairing; #{last})" in printed
     sigma_t = result.uncertainty_translation_m
     assert sigma_t is not None
     error = result.T_flange_sensor[:3, 3] - data.truth.T_flange_sensor[:3, 3]

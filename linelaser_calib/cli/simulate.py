@@ -21,6 +21,7 @@ SCENARIO_PRESETS = (
     "cylinder_scancontrol",
     "line",
     "line_features",
+    "line_ridge",
     "paper",
     "sphere",
     "sphere_sszn",

@@ -285,6 +285,13 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
         "nothing: the joint states were used with the nominal model",
     ),
     WarningKind(
+        "kinematic-identifiability",
+        r"\d+ of \d+ kinematic parameters are identifiable",
+        NOTE,
+        "",
+        "nothing: the parameters these scans cannot tell apart are kept nominal",
+    ),
+    WarningKind(
         "placement-advice",
         r"\d+ placements? of the",
         NOTE,

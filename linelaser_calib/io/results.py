@@ -276,7 +276,8 @@ def _read_pairing(quality: _Fields) -> PairingConfig | None:
 
 
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
-    """The result in the contract layout (plain lists and numbers), for YAML and JSON."""
+    """The result in the contract layout (plain lists and numbers), for YAML and JSON;
+    ``quality.verdict`` once judged (:func:`~linelaser_calib.settings.render_warnings`)."""
     unc_t, unc_r = result.uncertainty_translation_m, result.uncertainty_rotation_rad
     verdict = verdict_of(result)
     hand_eye = _hand_eye_section(result.T_flange_sensor, result.parent_frame, result.child_frame)
@@ -293,7 +294,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
         "hand_eye": hand_eye,
         **_target_section(result.target, result.base_frame),
         "quality": {
-            "verdict": _verdict_section(verdict),
+            **({} if result.verdict is None else {"verdict": _verdict_section(result.verdict)}),
             "method": result.method,
             "samples_used": len(result.samples_used),
             "samples_rejected": [
