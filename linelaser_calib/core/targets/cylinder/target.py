@@ -42,7 +42,12 @@ import numpy as np
 
 from ...errors import CalibrationError, DegenerateError, ModelMismatch
 from ...geometry import FloatArray
-from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held, scale_text
+from ...profile.along_line import (
+    PLAUSIBLE_SCALE_ERROR,
+    implausible_scale_held,
+    scale_significant,
+    scale_text,
+)
 from ...robot.joint_calibration import KinematicSetup
 from ...solver import widening
 from ...types import Rejection, Sample
@@ -374,8 +379,9 @@ class CylinderTarget:
     ) -> TargetSolution:
         """Maximum likelihood on every inlier point, seeded by the paper's solve (or started
         at the context's warm start). With ``{setting:scale} auto`` and the radius free the
-        along-line scale is estimated and held at 1 again when the estimate is implausible
-        or poorly determined (:func:`estimates_scale`); a warm start keeps its own choice."""
+        along-line scale is estimated and held at 1 again when the estimate is implausible,
+        poorly determined or not clearly off 1 (:func:`scale_significant`); a warm start keeps
+        its own choice."""
         radius = self._checked(features, config, context)
         free = estimates_scale(config)
         warm = context.warm_start
@@ -389,7 +395,11 @@ class CylinderTarget:
         scale, sigma = solution.section.scale, solution.section.scale_sigma
         if scale is None or sigma is None:
             return solution
-        if abs(scale) <= PLAUSIBLE_SCALE_ERROR and sigma <= MAX_SCALE_SIGMA:
+        if (
+            abs(scale) <= PLAUSIBLE_SCALE_ERROR
+            and sigma <= MAX_SCALE_SIGMA
+            and scale_significant(scale, sigma)
+        ):
             return solution
         held = self._solve_default(features, config, context, radius, False)
         if abs(scale) > PLAUSIBLE_SCALE_ERROR:

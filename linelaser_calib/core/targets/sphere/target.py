@@ -44,7 +44,11 @@ from linelaser_calib.core.errors import (
 from linelaser_calib.core.geometry import FloatArray
 from linelaser_calib.core.model_check import Comparison
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
-from linelaser_calib.core.profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held
+from linelaser_calib.core.profile.along_line import (
+    PLAUSIBLE_SCALE_ERROR,
+    implausible_scale_held,
+    scale_significant,
+)
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
 from linelaser_calib.core.targets.base import (
@@ -357,7 +361,7 @@ class SphereTarget:
         Started at the fixed-point solve, or at the context's warm start (the self-check's
         solves of subsets), whose noise levels then weight the points and poses from the
         first round on. With ``{setting:scale} auto`` and the radius free the along-line scale
-        is estimated and kept when plausible, else held at 1 and solved again
+        is estimated and kept when plausible and clearly off 1, else held at 1 and solved again
         (:func:`estimates_scale`); a warm start keeps its own choice.
         """
         self._require(features, config, context)
@@ -374,10 +378,13 @@ class SphereTarget:
         solution = self._solve_default(features, config, context, True)
         assert isinstance(solution.section, SphereSection)
         scale = solution.section.scale or 0.0
-        if abs(scale) <= PLAUSIBLE_SCALE_ERROR:
+        if abs(scale) <= PLAUSIBLE_SCALE_ERROR and scale_significant(
+            scale, solution.section.scale_sigma
+        ):
             return solution
         held = self._solve_default(features, config, context, False)
-        held.warnings.append(implausible_scale_held(scale))
+        if abs(scale) > PLAUSIBLE_SCALE_ERROR:
+            held.warnings.append(implausible_scale_held(scale))
         return held
 
     def _solve_default(
