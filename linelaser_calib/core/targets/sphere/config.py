@@ -25,8 +25,7 @@ class SphereConfig:
         The sphere radius, m (``--radius``); None estimates it.
     scale : str
         The sensor's along-line scale in the default method: ``free`` estimates it with the
-        hand-eye; ``fixed`` holds it at 1; ``auto`` (default) estimates it when the radius is
-        free and holds it at 1 when the estimate is implausible (:func:`estimates_scale`).
+        hand-eye; ``fixed`` and ``auto`` (default) hold it at 1 (:func:`estimates_scale`).
     centre_side : str or None
         ``+y`` or ``-y``: the side of the laser plane (sensor y) the sphere centre lies on,
         when the user knows it; None resolves it from the data.
@@ -101,25 +100,21 @@ class SphereConfig:
 
 
 def estimates_scale(config: SphereConfig, warm_estimated: bool | None = None) -> bool:
-    """Whether the default method estimates the sensor's along-line scale: ``free`` always,
-    ``fixed`` never, and ``auto`` (default) with the radius free, as a warm start did
-    (``warm_estimated``; the self-check's subsets follow the whole recording), the target
-    holding it at 1 again when the estimate is implausible
-    (:meth:`.target.SphereTarget.solve_default`).
+    """Whether the default method estimates the sensor's along-line scale: ``free`` always
+    (or as a warm start did, ``warm_estimated``: the self-check's subsets follow the whole
+    recording), ``fixed`` and ``auto`` (default) never.
 
-    An x scale 0.8 % off the z scale (the stress matrix's ``scales`` face) moved the
-    ``sphere`` preset's hand-eye 0.30 mm with the scale held, 0.19 mm estimated (clean
-    twin 0.19 mm either way). On the real 40 mm ball set with the radius free it reads
-    0.99911 ± 0.00012 (centre scatter 0.262 mm, 0.244 mm held). With the radius given a
-    free scale also takes up a ball that is not the given size: on the real 12.7 mm ball set
-    it read 0.958 ± 0.003, the profiles' circles being 5 % smaller than the given ball, and
-    scattered the ball's centres more (1.10 mm against 0.78 mm); on the 40 mm set it read
-    0.99917 ± 0.00027 and halved the self-check's held-out 1σ, which then no longer covers
-    the authors' published hand-eye (6σ). So with the radius given it is held unless asked.
-    On the 12.7 mm set with the radius free it reads 0.940, implausible, and is held.
+    ``auto`` holds it because the real scans say so. On the real 40 mm ball set with the
+    radius free a free scale reads 0.99911 ± 0.00012, clearly off 1, yet the centres then
+    scatter more (0.262 mm against 0.244 mm held) and the free radius moves from the
+    independent circle fits' 39.977 mm to 40.034 mm: the scale takes up the profiler's own
+    shape error. With the radius given it also takes up a ball that is not the given size
+    (the 12.7 mm set: 0.958 ± 0.003, scatter 1.10 mm against 0.78 mm held), and on the 40 mm
+    set it halved the self-check's held-out 1σ until the authors' published hand-eye lay 6σ
+    away. On the simulator an x scale 0.8 % off the z scale (the stress matrix's ``scales``
+    face) moves the ``sphere`` preset's hand-eye 0.30 mm with the scale held and 0.19 mm
+    estimated; ``{setting:scale} free`` is there for a profiler known to be off.
     """
-    if config.scale == "auto":
-        if config.radius_m is not None:
-            return False
+    if config.scale == "free":
         return True if warm_estimated is None else warm_estimated
-    return config.scale == "free"
+    return False

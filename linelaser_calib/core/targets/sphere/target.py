@@ -46,8 +46,6 @@ from linelaser_calib.core.model_check import Comparison
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
-    implausible_scale_held,
-    scale_significant,
 )
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
@@ -360,32 +358,15 @@ class SphereTarget:
 
         Started at the fixed-point solve, or at the context's warm start (the self-check's
         solves of subsets), whose noise levels then weight the points and poses from the
-        first round on. With ``{setting:scale} auto`` and the radius free the along-line scale
-        is estimated and kept when plausible and clearly off 1, else held at 1 and solved again
+        first round on. The along-line scale is estimated with ``{setting:scale} free`` only
         (:func:`estimates_scale`); a warm start keeps its own choice.
         """
         self._require(features, config, context)
         warm = context.warm_start
-        if (
-            config.scale != "auto"
-            or config.radius_m is not None
-            or (warm is not None and isinstance(warm.section, SphereSection))
-        ):
-            free = estimates_scale(
-                config, None if warm is None else getattr(warm.section, "scale", None) is not None
-            )
-            return self._solve_default(features, config, context, free)
-        solution = self._solve_default(features, config, context, True)
-        assert isinstance(solution.section, SphereSection)
-        scale = solution.section.scale or 0.0
-        if abs(scale) <= PLAUSIBLE_SCALE_ERROR and scale_significant(
-            scale, solution.section.scale_sigma
-        ):
-            return solution
-        held = self._solve_default(features, config, context, False)
-        if abs(scale) > PLAUSIBLE_SCALE_ERROR:
-            held.warnings.append(implausible_scale_held(scale))
-        return held
+        free = estimates_scale(
+            config, None if warm is None else getattr(warm.section, "scale", None) is not None
+        )
+        return self._solve_default(features, config, context, free)
 
     def _solve_default(
         self, features: list[Any], config: SphereConfig, context: SolveContext, free: bool
