@@ -331,7 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="auto|fixed|free",
         help="cylinder and sphere targets, default method: the sensor's along-line (x) scale, "
         "unitless, estimated with the hand-eye (free) or held at 1 (fixed); default auto: for "
-        "the cylinder free when --radius is given, for the sphere fixed",
+        "the cylinder free where it lies clearly off 1, for the sphere fixed",
     )
     _add_pose_source_arguments(cal_p)
     cal_p.add_argument(

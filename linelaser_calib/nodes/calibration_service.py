@@ -142,8 +142,8 @@ PARAMETERS = (
         "scale",
         "",
         "The sensor's along-line (x) scale (cylinder and sphere targets, default method): "
-        "free estimates it with the hand-eye, fixed holds it at 1, auto (or '') is free when "
-        "a cylinder's radius is given and fixed for the sphere; the result's "
+        "free estimates it with the hand-eye, fixed holds it at 1, auto (or '') is free for "
+        "the cylinder where it lies clearly off 1 and fixed for the sphere; the result's "
         "along_line_scale and its 1 sigma. Refused by the other targets and the paper method.",
         choices=("", "auto", "fixed", "free"),
     ),
