@@ -53,6 +53,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial.distance import cdist
 from scipy.special import stdtrit
 
 from .errors import CalibrationError
@@ -97,7 +98,7 @@ def pose_clusters(T_base_flange: FloatArray) -> int:
     link into one group across the whole workspace, counts by its extent."""
     t = T_base_flange[:, :3, 3]
     z = T_base_flange[:, :3, 2]
-    step = np.linalg.norm(t[:, None] - t[None], axis=2)
+    step = cdist(t, t)
     cosine = np.clip(z @ z.T, -1.0, 1.0)
     near = (step < CLUSTER_RADIUS_M) & (cosine > np.cos(CLUSTER_ANGLE_RAD))
     within = (step < CLUSTER_SPAN * CLUSTER_RADIUS_M) & (
@@ -126,7 +127,7 @@ def pose_distances(T_base_flange: FloatArray) -> FloatArray:
     t = T_base_flange[:, :3, 3]
     z = T_base_flange[:, :3, 2]
     angle = np.arccos(np.clip(z @ z.T, -1.0, 1.0))
-    step = np.linalg.norm(t[:, None] - t[None], axis=2)
+    step = cdist(t, t)  # (M, M) without the (M, M, 3) differences
     return np.asarray(step / CLUSTER_RADIUS_M + angle / CLUSTER_ANGLE_RAD)
 
 

@@ -70,6 +70,9 @@ MIN_DISPERSION_REDUNDANCY = 5
 #: solve warns that its noise model understates the profiles' errors: its 1σ doubled.
 #: With 30 profiles the ratio scatters by about ±0.3 where the model holds.
 DISPERSION_WARNING = 4.0
+#: Points per chunk of samples :func:`normal_equations` sums over: its weighted copies of the
+#: Jacobians stay a few MB however long the recording.
+CHUNK_POINTS = 1 << 15
 #: Names of the hand-eye parameters, for messages.
 HAND_EYE_AXES = (
     "rotation about x",
@@ -269,18 +272,34 @@ class BlockNormal:
 def normal_equations(
     linearisation: Linearisation, config: SolverConfig, weights: FloatArray | None = None
 ) -> BlockNormal:
-    """Weighted normal equations; ``weights`` (M, K) None uses the robust IRLS weights."""
+    """Weighted normal equations; ``weights`` (M, K) None uses the robust IRLS weights.
+
+    Summed over chunks of samples (:data:`CHUNK_POINTS`), so the weighted copies of the
+    Jacobians never span the whole recording.
+    """
     r = linearisation.residuals
-    if weights is None:
-        _, weights = evaluate_loss(r.points, config)
-    # The global and local columns apart (no stacked copy of the Jacobian): the global block
-    # A is one product over all points, B and C one small product per sample.
     J_global, J_local = linearisation.J_global, linearisation.J_local
-    G = J_global.shape[2]
-    WJ_global = J_global * weights[..., None]
-    WJ_local = J_local * weights[..., None]
-    A = WJ_global.reshape(-1, G).T @ J_global.reshape(-1, G)
-    g_global = WJ_global.reshape(-1, G).T @ r.points.reshape(-1)
+    M, K, G = J_global.shape
+    A = np.zeros((G, G))
+    g_global = np.zeros(G)
+    B = np.empty((M, G, N_LOCAL))
+    C_data = np.empty((M, N_LOCAL, N_LOCAL))
+    g_local = np.empty((M, N_LOCAL))
+    step = max(1, CHUNK_POINTS // max(K, 1))
+    for start in range(0, M, step):
+        rows = slice(start, start + step)
+        e = r.points[rows]
+        w = evaluate_loss(e, config)[1] if weights is None else weights[rows]
+        # The global and local columns apart (no stacked copy of the Jacobian): the global
+        # block A is one product over the chunk's points, B and C one small product per
+        # sample.
+        WJ_global = J_global[rows] * w[..., None]
+        WJ_local = J_local[rows] * w[..., None]
+        A += WJ_global.reshape(-1, G).T @ J_global[rows].reshape(-1, G)
+        g_global += WJ_global.reshape(-1, G).T @ e.reshape(-1)
+        B[rows] = WJ_global.transpose(0, 2, 1) @ J_local[rows]
+        C_data[rows] = WJ_local.transpose(0, 2, 1) @ J_local[rows]
+        g_local[rows] = np.einsum("mkl,mk->ml", WJ_local, e)
     Jp = linearisation.global_prior_jacobian
     if Jp is not None and len(Jp):
         A = A + Jp.T @ Jp
@@ -288,11 +307,11 @@ def normal_equations(
     sqrt_info = linearisation.pose_prior_sqrt_information
     return BlockNormal(
         A=0.5 * (A + A.T),
-        B=WJ_global.transpose(0, 2, 1) @ J_local,
-        C_data=WJ_local.transpose(0, 2, 1) @ J_local,
+        B=B,
+        C_data=C_data,
         prior_precision=sqrt_info**2,
         g_global=g_global,
-        g_local=np.einsum("mkl,mk->ml", WJ_local, r.points) + r.pose_prior * sqrt_info,
+        g_local=g_local + r.pose_prior * sqrt_info,
     )
 
 

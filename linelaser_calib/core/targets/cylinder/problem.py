@@ -65,12 +65,15 @@ from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
 from ...profile.along_line import measured_to_true
 from ...profile.noise import Whitening
-from ...solver import N_HAND_EYE, Linearisation, Residuals
+from ...solver import N_HAND_EYE, N_LOCAL, Linearisation, Residuals
 from .config import RefineConfig
 from .model import Cylinder
 
 #: Axis parameters (a, b) in the global block, after the hand-eye's 6.
 N_AXIS = 4
+#: Points per chunk of samples :meth:`CylinderProblem.linearise` builds its Jacobians from:
+#: its per-point intermediates (about twenty arrays of 3 to 12 columns) stay a few MB each.
+CHUNK_POINTS = 1 << 15
 
 
 # --------------------------------------------------------------------------------------
@@ -198,20 +201,53 @@ class CylinderProblem:
         return np.asarray((geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m))
 
     def _residuals(self, state: CylinderState, geo: _Geometry) -> Residuals:
+        return Residuals(self._point_residuals(state, geo), self._pose_prior(state))
+
+    def _point_residuals(self, state: CylinderState, geo: _Geometry) -> FloatArray:
+        e = (geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m)
+        return e if self.whitening is None else self.whitening.apply(e)
+
+    def _pose_prior(self, state: CylinderState) -> FloatArray:
         cfg = self.config
-        e = (geo.distance - state.radius) * (self.mask / cfg.sensor_sigma_m)
-        if self.whitening is not None:
-            e = self.whitening.apply(e)
-        prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
-        return Residuals(e, prior)
+        return np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
 
     def linearise(self, state: CylinderState) -> Linearisation:
         """Residuals and their analytic Jacobians.
 
         ``J_global`` (M, K, G) has the columns θ (3), ρ (3), a (2), b (2) and, when
         estimated, the radius and the along-line scale; ``J_local`` (M, K, 6) the columns
-        ω (3), τ (3) of the point's own sample; both zero on padding.
+        ω (3), τ (3) of the point's own sample; both zero on padding. Built a chunk of
+        samples at a time (:data:`CHUNK_POINTS`), so the per-point intermediates never
+        span the whole recording.
         """
+        M, K, _ = self.points.shape
+        e = np.empty((M, K))
+        J_global = np.empty((M, K, self.n_global))
+        J_local = np.empty((M, K, N_LOCAL))
+        step = max(1, CHUNK_POINTS // K)
+        for start in range(0, M, step):
+            rows = np.arange(start, min(start + step, M))
+            part = replace(
+                self,
+                points=self.points[rows],
+                mask=self.mask[rows],
+                counts=self.counts[rows],
+                R_bf=self.R_bf[rows],
+                t_bf=self.t_bf[rows],
+                whitening=None if self.whitening is None else self.whitening.take(rows),
+            )
+            chunk = replace(state, omega=state.omega[rows], tau=state.tau[rows])
+            e[rows], J_global[rows], J_local[rows] = part._jacobians(chunk)
+        return Linearisation(
+            residuals=Residuals(e, self._pose_prior(state)),
+            J_global=J_global,
+            J_local=J_local,
+            pose_prior_sqrt_information=self._prior_sqrt_information(),
+        )
+
+    def _jacobians(self, state: CylinderState) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Point residuals (M, K) and their Jacobians (M, K, G) and (M, K, 6) of all samples
+        at once (see :meth:`linearise`)."""
         geo = _geometry(self, state)
         scale = (self.mask / self.config.sensor_sigma_m)[..., None]
         n_base = geo.normal * scale
@@ -232,12 +268,7 @@ class CylinderProblem:
         if self.whitening is not None:
             J_global = self.whitening.apply(J_global)
             J_local = self.whitening.apply(J_local)
-        return Linearisation(
-            residuals=self._residuals(state, geo),
-            J_global=J_global,
-            J_local=J_local,
-            pose_prior_sqrt_information=self._prior_sqrt_information(),
-        )
+        return self._point_residuals(state, geo), J_global, J_local
 
     def depth_cosines(self, state: CylinderState) -> FloatArray:
         """|cosine| (M, K) between each point's surface normal and the sensor's depth axis."""
