@@ -6,7 +6,7 @@ stamped 12 ms late, a 4 ms pose stream with 0.25 ms stamp jitter, robot error 0.
 0.002 deg per axis). Through the pipeline, as ``linelaser-calib calibrate --target line
 --max-speed 0 --max-angular-speed 0 --clock-offset auto`` does:
 
-- the clock offset is estimated (:func:`~linelaser_calib.core.pipeline.estimate_clock_offset`,
+- the clock offset is estimated (:func:`~linelaser_calib.core.pipeline.search_clock_offset`,
   the line target's maximum-likelihood cost);
 - ``default``: closed form, then maximum likelihood with the robot's pose error;
 - ``paper``: the weld-seam paper's grid correction with the line's closest point, from the
@@ -37,8 +37,8 @@ from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import (
     Method,
     PipelineConfig,
-    estimate_clock_offset,
     run_pipeline,
+    search_clock_offset,
 )
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SolveContext, configure
@@ -61,7 +61,7 @@ def run(seeds: int, preset: str) -> dict[str, dict[str, list[float]]]:
         truth = data.truth
         latency = truth.scenario.rig.latency_s
         started = time.perf_counter()
-        offset = estimate_clock_offset(
+        offset, _ = search_clock_offset(
             data.profiles, data.poses, PipelineConfig(target="line", pairing=MOVING)
         )
         offset_seconds = time.perf_counter() - started

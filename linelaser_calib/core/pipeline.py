@@ -495,20 +495,8 @@ def run_pipeline(
 
 
 #: History keys (``CalibrationResult.history``) of the clock offsets tried by
-#: :func:`estimate_clock_offset`, s, in increasing order, and their costs.
+#: :func:`search_clock_offset`, s, in increasing order, and their costs.
 OFFSET_TRIALS, OFFSET_COSTS = "clock_offset_trial_s", "clock_offset_cost"
-
-
-def estimate_clock_offset(
-    profiles: list[Profile],
-    poses: list[FlangePose],
-    config: PipelineConfig,
-    half_range_s: float = 0.05,
-    tolerance_s: float = 1e-4,
-) -> float:
-    """The clock offset (s) between profile and pose stamps that fits the target best
-    (:func:`search_clock_offset`)."""
-    return search_clock_offset(profiles, poses, config, half_range_s, tolerance_s)[0]
 
 
 def search_clock_offset(

@@ -15,7 +15,7 @@ import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.pairing import NS_PER_S
-from linelaser_calib.core.pipeline import PipelineConfig, estimate_clock_offset
+from linelaser_calib.core.pipeline import PipelineConfig, search_clock_offset
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.settings import Front, render
 
@@ -56,7 +56,7 @@ class ClockOffsetTracker:
     Samples are kept at most ``samples_per_batch`` per ``period_s`` of stamps, evenly
     spaced, with the flange poses around them. When the pose stream has passed the end of a
     period, :meth:`take_batch` hands out the batch; the node runs
-    :func:`~linelaser_calib.core.pipeline.estimate_clock_offset` on it (seconds of CPU,
+    :func:`~linelaser_calib.core.pipeline.search_clock_offset` on it (seconds of CPU,
     outside the receive path) and reports the result with :meth:`add_estimate`, which
     tells when the offset drifts.
 
@@ -68,7 +68,8 @@ class ClockOffsetTracker:
         Stamp span of each batch, s.
     samples_per_batch : int
     half_range_s : float
-        Half-width of the offset search, s (as :func:`estimate_clock_offset`).
+        Half-width of the offset search, s (as
+        :func:`~linelaser_calib.core.pipeline.search_clock_offset`).
     delay_s : float
         Longest delay from a sample's stamp to its :meth:`add_sample` (pairing, storing), s:
         the poses that far back are kept before the first batch starts.
@@ -141,7 +142,7 @@ class ClockOffsetTracker:
         if len(profiles) < self.config.target_config.min_samples:
             return f"only {len(profiles)} samples in the batch"
         try:
-            return float(estimate_clock_offset(profiles, poses, self.config, self.half_range_s))
+            return float(search_clock_offset(profiles, poses, self.config, self.half_range_s)[0])
         except CalibrationError as err:
             return render(str(err), Front.NODE)
 

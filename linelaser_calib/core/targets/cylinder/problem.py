@@ -150,6 +150,18 @@ class CylinderProblem:
     def n_samples(self) -> int:
         return int(self.R_bf.shape[0])
 
+    def take(self, rows: np.ndarray) -> CylinderProblem:
+        """The problem of the samples ``rows`` (indices into the sample axis), m as before."""
+        return replace(
+            self,
+            points=self.points[rows],
+            mask=self.mask[rows],
+            counts=self.counts[rows],
+            R_bf=self.R_bf[rows],
+            t_bf=self.t_bf[rows],
+            whitening=None if self.whitening is None else self.whitening.take(rows),
+        )
+
     @property
     def n_global(self) -> int:
         return N_HAND_EYE + N_AXIS + int(self.estimate_radius) + int(self.estimate_scale)
@@ -227,17 +239,8 @@ class CylinderProblem:
         step = max(1, CHUNK_POINTS // K)
         for start in range(0, M, step):
             rows = np.arange(start, min(start + step, M))
-            part = replace(
-                self,
-                points=self.points[rows],
-                mask=self.mask[rows],
-                counts=self.counts[rows],
-                R_bf=self.R_bf[rows],
-                t_bf=self.t_bf[rows],
-                whitening=None if self.whitening is None else self.whitening.take(rows),
-            )
             chunk = replace(state, omega=state.omega[rows], tau=state.tau[rows])
-            e[rows], J_global[rows], J_local[rows] = part._jacobians(chunk)
+            e[rows], J_global[rows], J_local[rows] = self.take(rows)._jacobians(chunk)
         return Linearisation(
             residuals=Residuals(e, self._pose_prior(state)),
             J_global=J_global,

@@ -411,15 +411,7 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
             f"{len(keep)} samples given, but the refinement needs at least "
             f"{full.config.min_samples}"
         )
-    problem = replace(
-        full,
-        points=full.points[keep],
-        mask=full.mask[keep],
-        counts=full.counts[keep],
-        R_bf=full.R_bf[keep],
-        t_bf=full.t_bf[keep],
-        whitening=None if full.whitening is None else full.whitening.take(keep),
-    )
+    problem = full.take(keep)
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
     solution = _solve_near(problem, start, "of a subset")
     return summarise(problem, solution, solved.noise)
