@@ -56,6 +56,7 @@ from linelaser_calib.io.bags import read_bag
 from linelaser_calib.io.results import read_reference_yaml
 from linelaser_calib.io.robcalibrator import convert_robcalibrator
 from linelaser_calib.offline import calibrate_bag
+from linelaser_calib.settings import Front, render
 from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
 
 REAL = Path(__file__).resolve().parent.parent / "bags" / "robcalibrator_sphere"
@@ -156,7 +157,7 @@ def ball_table() -> None:
             try:
                 result = calibrate_bag(bag, _config(Method.DEFAULT, **settings)).result
             except CalibrationError as exc:
-                print(f"{label}: refused: {exc}")
+                print(f"{label}: refused: {render(str(exc), Front.CLI)}")
                 continue
             section = result.target
             assert isinstance(section, SphereSection)
@@ -166,7 +167,7 @@ def ball_table() -> None:
             calibrate_bag(bag, PipelineConfig(method=Method.DEFAULT, target="cylinder"))
             cylinder = "a result (exit 0)"
         except CalibrationError as exc:
-            cylinder = f"refused: {exc}"
+            cylinder = f"refused: {render(str(exc), Front.CLI)}"
     features, _ = get_target("sphere").extract(
         samples, SphereConfig(radius_m=0.0127), 0, lambda *_: None
     )
