@@ -71,6 +71,18 @@ def centre_side(text: str) -> str:
     return text
 
 
+def fields(text: str) -> dict[str, float]:
+    """Parse ``NAME=VALUE,NAME=VALUE`` (numbers, SI)."""
+    try:
+        pairs = [part.split("=") for part in text.split(",")]
+        values = {name.strip(): float(value) for name, value in pairs}
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE,NAME=VALUE, got {text!r}") from None
+    if not all(np.isfinite(list(values.values()))):
+        raise argparse.ArgumentTypeError(f"expected finite values, got {text!r}")
+    return values
+
+
 def xyz(text: str) -> tuple[float, float, float]:
     """Parse ``x,y,z`` (m)."""
     try:

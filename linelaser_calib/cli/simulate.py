@@ -7,7 +7,7 @@ import argparse
 from collections.abc import Callable
 from pathlib import Path
 
-from linelaser_calib.cli.arguments import xyz
+from linelaser_calib.cli.arguments import fields, xyz
 from linelaser_calib.cli.common import PROG
 from linelaser_calib.io.bags import bag_info, format_bag_info
 
@@ -70,6 +70,14 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, Callable[[str], object], str], ...] = (
         "another placement of the cylinder: its base point x,y,z, m, base frame",
     ),
     ("--axis", "axis_direction", xyz, "direction of the cylinder axis x,y,z, unitless"),
+    (
+        "--profiler-errors",
+        "sensor",
+        fields,
+        "terms of the profiler's error model to change, NAME=VALUE,... (SI; the simulator's "
+        "profiler-model fields, e.g. gap_rate=0,x_scale_error=0 leaves out the gaps and the "
+        "x scale error of a real profiler's preset)",
+    ),
     ("--profile-topic", "profile_topic", str, "PointCloud2 topic to write"),
     ("--pose-topic", "pose_topic", str, "PoseStamped flange-pose topic to write"),
     ("--sensor-frame", "sensor_frame", str, "frame id of the profiles"),
@@ -89,6 +97,8 @@ def simulate_command(
             words.append("--organised" if value else "--dense")
         elif isinstance(value, tuple):
             words += [flags[field], ",".join(f"{v:g}" for v in value)]
+        elif isinstance(value, dict):
+            words += [flags[field], ",".join(f"{k}={v!r}" for k, v in value.items())]
         else:
             words += [flags[field], str(value)]
     if tf:

@@ -67,7 +67,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import fields, replace
+from dataclasses import asdict, fields, replace
 from math import radians as _deg
 from typing import Any, Protocol, TypeVar
 
@@ -77,7 +77,7 @@ from scipy.spatial.transform import Rotation
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import project_to_so3, quaternion_xyzw_from_matrix
 from linelaser_calib.sim.scenario import Scenario, Vec3
-from linelaser_calib.sim.sensor_models import PROFILERS, profiler_fields
+from linelaser_calib.sim.sensor_models import PROFILERS, profiler_fields, sensor_model_from_mapping
 
 
 def _paper_hand_eye() -> tuple[Vec3, tuple[float, float, float, float]]:
@@ -316,7 +316,9 @@ def scenario_from_preset(name: str, **overrides: Any) -> Scenario:
     name : str
         A key of :data:`PRESETS`.
     **overrides
-        Scenario fields to replace (SI units, see :class:`Scenario`).
+        Scenario fields to replace (SI units, see :class:`Scenario`); a mapping ``sensor``
+        changes only the :class:`~linelaser_calib.sim.sensor_models.SensorModel` fields it
+        names.
 
     Raises
     ------
@@ -332,7 +334,16 @@ def scenario_from_preset(name: str, **overrides: Any) -> Scenario:
             f"unknown scenario field(s) {unknown}; see linelaser_calib.sim.Scenario for the "
             "list of fields"
         )
-    return replace(PRESETS[name], **overrides)
+    return replace(PRESETS[name], **_sensor_merged(PRESETS[name], overrides))
+
+
+def _sensor_merged(rig: Scenario, overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """``overrides`` with a mapping ``sensor`` (some :class:`SensorModel` fields) merged into
+    the rig's sensor model, so that it changes only the fields it names."""
+    sensor = overrides.get("sensor")
+    if not isinstance(sensor, Mapping):
+        return dict(overrides)
+    return {**overrides, "sensor": sensor_model_from_mapping({**asdict(rig.sensor), **sensor})}
 
 
 class _HasRig(Protocol):
@@ -376,7 +387,11 @@ def rig_scene_from_preset(
         )
     rig_overrides = {k: v for k, v in overrides.items() if k in rig_fields}
     own_overrides = {k: v for k, v in overrides.items() if k in own}
-    rig = replace(preset.rig, **rig_overrides) if rig_overrides else preset.rig
+    rig = (
+        replace(preset.rig, **_sensor_merged(preset.rig, rig_overrides))
+        if rig_overrides
+        else preset.rig
+    )
     return replace(preset, rig=rig, **own_overrides)  # type: ignore[type-var]
 
 
