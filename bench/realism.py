@@ -1,0 +1,295 @@
+"""Goals of issue 29 on the faces of a real profiler: the real scans, the realistic presets,
+and each target on each face.
+
+``real``
+    The faces as the real scans in ``../shared/external/robcalibrator`` show them (skipped
+    where absent): per set, the points per profile, the local noise (RMS of second
+    differences / √6), the RMS about each profile's best circle and its smooth part (the
+    residual smoothed over 10 points), the gaps inside an arc (runs of missing columns
+    longer than 2 pitches) per profile and their mean length, and the share of the columns
+    that return in each band of surface slope (against the ray fan's own count for a circle
+    of the profile's radius: 100 % means no thinning beyond the geometry's).
+``presets``
+    Each realistic preset (a real profiler's datasheet geometry and shape errors:
+    ``cylinder_keyence``, ``cylinder_scancontrol``, ``cylinder_gocator``, ``sphere_sszn``,
+    and ``line_ridge``, a ridge seen with every face at full size) before and after the
+    faces were added: ``before`` turns the gaps and the x/z scale errors off (and, on
+    ``line_ridge``, the thinning at incidence), ``after`` is the preset as it is.
+``faces``
+    Each target on each face of :data:`~linelaser_calib.sim.sensor_models.REAL_FACES` at
+    full size, beside its clean twin (the stress matrix's scenes: ``ur_scancontrol`` 12 poses
+    of 320 points, ``sphere`` 14 views, ``line`` 24 waypoints, ``weld_seam_general`` 20
+    poses).
+
+Per row, over seeds: profiles used of those recorded (pooled), refused runs, the hand-eye
+error against truth (RMS over seeds, deg and mm), the 1σ as reported (RMS over seeds of the
+length of the rotation and translation 1σ, self-check widening included), and the largest
+per-axis |error| / 1σ. The goals: ≥ 98 % of profiles used, no refusal, |error|/σ ≤ 3.
+
+Run: ``.venv/bin/python bench/realism.py [--seeds N] [--only real|presets|faces]
+[--presets A,B] [--targets A,B]`` (default 3 seeds; a calibration takes 5-40 s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import math
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pipeline import Method, calibrate_samples
+from linelaser_calib.core.targets.sphere.circle import (
+    circle_residuals,
+    fit_circle_algebraic,
+    fit_circle_geometric,
+)
+from linelaser_calib.io.robcalibrator import read_robcalibrator
+from linelaser_calib.settings import Front, pipeline_config, render
+from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
+from linelaser_calib.sim.presets import scenario_from_preset
+from linelaser_calib.sim.sensor_models import REAL_FACES, second_difference_noise_m, with_faces
+from linelaser_calib.sim.simulate import simulate
+from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
+from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
+
+EXTERNAL = Path(__file__).resolve().parents[2] / "shared" / "external" / "robcalibrator"
+#: Realistic presets and their target.
+PRESETS = {
+    "cylinder_keyence": "cylinder",
+    "cylinder_scancontrol": "cylinder",
+    "cylinder_gocator": "cylinder",
+    "sphere_sszn": "sphere",
+    "line_ridge": "line",
+}
+#: The sensor-model terms turned off for a preset's ``before`` row.
+BEFORE = {"gap_rate": 0.0, "x_scale_error": 0.0, "z_scale_error": 0.0}
+TARGETS = ("cylinder", "sphere", "line", "known_point")
+SLOPE_BANDS_DEG = (0.0, 30.0, 50.0, 60.0, 70.0, 80.0)
+#: A gap is a run of missing columns longer than this many pitches.
+GAP_PITCHES = 2.0
+
+
+def real_table() -> None:
+    """The faces on the real sphere scans (see the module docstring)."""
+    if not EXTERNAL.is_dir():
+        print(f"real scans: not here ({EXTERNAL}); skipped")
+        return
+    print(
+        f"{'set':<10}{'profiles':>9}{'points':>8}{'local um':>9}{'circle um':>10}{'smooth um':>10}"
+        f"{'gaps/prof':>10}{'gap mm':>8}  columns returned by slope band (deg), %"
+    )
+    for name, folder in (("40 mm", EXTERNAL), ("12.7 mm", EXTERNAL / "ball")):
+        scans = read_robcalibrator(folder)
+        stats: list[tuple[float, ...]] = []
+        gaps: list[float] = []
+        seen = np.zeros(len(SLOPE_BANDS_DEG) - 1)
+        expected = np.zeros(len(SLOPE_BANDS_DEG) - 1)
+        for profile in scans.profiles:
+            points = profile.points[np.all(np.isfinite(profile.points), axis=1)]
+            xz = points[:, [0, 2]]
+            centre, radius = fit_circle_algebraic(xz)
+            centre, radius = fit_circle_geometric(xz, centre, radius)
+            if radius > 2.0 * scans.sphere_radius_m:
+                continue  # a profile of the table and the stem, not the ball's arc
+            residual = circle_residuals(xz, centre, radius)
+            smooth = gaussian_filter1d(residual, 10.0)
+            stats.append(
+                (
+                    len(points),
+                    second_difference_noise_m(points),
+                    float(np.sqrt(np.mean(residual**2))),
+                    float(np.sqrt(np.mean(smooth**2))),
+                )
+            )
+            pitch = float(np.median(np.diff(xz[:, 0])))
+            steps = np.diff(xz[:, 0])
+            gaps.extend((steps[steps > (GAP_PITCHES + 1.0) * pitch] - pitch).tolist())
+            slope = np.degrees(np.arccos(np.clip(np.abs(xz[:, 1] - centre[1]) / radius, 0, 1)))
+            left = xz[:, 0] < centre[0]
+            for b, (low, high) in enumerate(itertools.pairwise(SLOPE_BANDS_DEG)):
+                for side in (left, ~left):
+                    in_band = side & (slope >= low) & (slope < high)
+                    reach = min(high, float(slope[side].max())) if side.any() else low
+                    if reach <= low:
+                        continue
+                    seen[b] += in_band.sum()
+                    span = radius * (math.sin(math.radians(reach)) - math.sin(math.radians(low)))
+                    expected[b] += span / pitch
+        s = np.array(stats)
+        bands = " ".join(
+            f"{lo:.0f}-{hi:.0f}: {100.0 * n / e:.0f}"
+            for (lo, hi), n, e in zip(
+                itertools.pairwise(SLOPE_BANDS_DEG), seen, expected, strict=True
+            )
+        )
+        mean_gap = np.mean(gaps) * 1e3 if gaps else 0.0
+        print(
+            f"{name:<10}{len(s):>9}{np.median(s[:, 0]):>8.0f}{np.median(s[:, 1]) * 1e6:>9.1f}"
+            f"{np.median(s[:, 2]) * 1e6:>10.1f}{np.median(s[:, 3]) * 1e6:>10.1f}"
+            f"{len(gaps) / len(s):>10.2f}{mean_gap:>8.2f}  {bands}"
+        )
+    print(
+        "medians over the ball's profiles; the 12.7 mm set's 3 profiles with other "
+        "surfaces beside the ball skipped"
+    )
+
+
+@dataclass
+class Tally:
+    """Outcomes of one row over seeds."""
+
+    used: int = 0
+    recorded: int = 0
+    refused: list[str] = field(default_factory=list)
+    errors: list[FloatArray] = field(default_factory=list)  # (6,) rotvec rad, translation m
+    sigmas: list[FloatArray] = field(default_factory=list)  # (6,) 1σ
+
+    def cells(self) -> str:
+        if not self.errors:
+            return f"{'-':>10}{'-':>10}{'-':>9}{'-':>9}{'-':>9}"
+        e, s = np.array(self.errors), np.array(self.sigmas)
+
+        def rms(block: FloatArray) -> float:
+            return float(np.sqrt(np.mean(np.sum(block**2, axis=1))))
+
+        return (
+            f"{math.degrees(rms(e[:, :3])):>10.4f}{rms(e[:, 3:]) * 1e3:>10.4f}"
+            f"{math.degrees(rms(s[:, :3])):>9.4f}{rms(s[:, 3:]) * 1e3:>9.4f}"
+            f"{float(np.max(np.abs(e) / s)):>9.2f}"
+        )
+
+
+def _error(T: FloatArray, truth: FloatArray) -> FloatArray:
+    rotation = rotvec_from_matrix(truth[:3, :3].T @ T[:3, :3])
+    return np.concatenate([rotation, T[:3, 3] - truth[:3, 3]])
+
+
+def _preset_data(preset: str, before: bool, seed: int) -> Any:
+    off: dict[str, float] = dict(BEFORE) if before else {}
+    if preset == "line_ridge" and before:
+        off["incidence_falloff"] = 0.0
+    sensor = {"sensor": off} if off else {}
+    target = PRESETS[preset]
+    if target == "cylinder":
+        return simulate(scenario_from_preset(preset, **sensor), seed)
+    if target == "sphere":
+        return simulate_sphere(sphere_scenario_from_preset(preset, **sensor), seed)
+    return simulate_line(line_scenario_from_preset(preset, **sensor), seed)
+
+
+def _face_data(target: str, face: str, seed: int) -> Any:
+    """The stress matrix's small scene of ``target`` with one ``face`` ('' for clean)."""
+    faces = (face,) if face else ()
+    if target == "cylinder":
+        scenario = scenario_from_preset("ur_scancontrol", n_poses=12, resolution=320)
+        return simulate(replace(scenario, sensor=with_faces(scenario.sensor, *faces)), seed)
+    if target == "sphere":
+        sphere = sphere_scenario_from_preset("sphere", n_poses=14)
+        rig = replace(sphere.rig, sensor=with_faces(sphere.rig.sensor, *faces))
+        return simulate_sphere(replace(sphere, rig=rig), seed)
+    if target == "line":
+        line = line_scenario_from_preset("line", n_poses=24, resolution=640, profile_rate_hz=10.0)
+        rig = replace(line.rig, sensor=with_faces(line.rig.sensor, *faces))
+        return simulate_line(replace(line, rig=rig), seed)
+    weld = weld_scenario_from_preset("weld_seam_general", n_poses=20)
+    rig = replace(weld.rig, sensor=with_faces(weld.rig.sensor, *faces))
+    return simulate_weld(replace(weld, rig=rig), seed)
+
+
+def calibrate(data: Any, target: str, tally: Tally, seed: int) -> None:
+    """Calibrate one simulated recording as the command line does (the robot moving while a
+    seam is swept, its latency known) and add the outcome to ``tally``."""
+    moving = target == "line"
+    pairing = PairingConfig(
+        max_linear_speed_m_s=0.0 if moving else PairingConfig().max_linear_speed_m_s,
+        max_angular_speed_rad_s=0.0 if moving else PairingConfig().max_angular_speed_rad_s,
+        clock_offset_s=-data.truth.scenario.rig.latency_s if moving else 0.0,
+    )
+    paired = pair_profiles(data.profiles, data.poses, pairing)
+    config = pipeline_config(target, Method.DEFAULT, {}, Front.CLI, seed=0, pairing=pairing)
+    tally.recorded += len(data.profiles)
+    try:
+        result = calibrate_samples(list(paired.samples), config, list(paired.rejected))
+    except CalibrationError as exc:
+        tally.refused.append(f"seed {seed}: {render(str(exc), Front.CLI)[:200]}")
+        return
+    tally.used += len(result.samples_used)
+    tally.errors.append(_error(result.T_flange_sensor, data.truth.T_flange_sensor))
+    assert result.uncertainty_rotation_rad is not None
+    assert result.uncertainty_translation_m is not None
+    tally.sigmas.append(
+        np.concatenate([result.uncertainty_rotation_rad, result.uncertainty_translation_m])
+    )
+
+
+HEAD = (
+    f"{'used':>12}{'refused':>8}{'rot deg':>10}{'trans mm':>10}{'1σ deg':>9}{'1σ mm':>9}"
+    f"{'|e|/σ':>9}"
+)
+
+
+def _row(label: str, tally: Tally) -> str:
+    used = f"{tally.used}/{tally.recorded}"
+    return f"{label:<34}{used:>12}{len(tally.refused):>8}{tally.cells()}"
+
+
+def presets_table(presets: list[str], seeds: int) -> list[str]:
+    print(f"Realistic presets, {seeds} seeds (before: gaps and x/z scale errors off)")
+    print(f"{'preset':<34}{HEAD}")
+    notes = []
+    for preset in presets:
+        for before in (True, False):
+            tally = Tally()
+            for seed in range(seeds):
+                calibrate(_preset_data(preset, before, seed), PRESETS[preset], tally, seed)
+            label = f"{preset} {'before' if before else 'after'}"
+            print(_row(label, tally), flush=True)
+            notes.extend(f"{label} refused {text}" for text in tally.refused)
+    return notes
+
+
+def faces_table(targets: list[str], seeds: int) -> list[str]:
+    print(f"Each target on each face at full size, {seeds} seeds (the stress matrix's scenes)")
+    print(f"{'target, face':<34}{HEAD}")
+    notes = []
+    for target in targets:
+        for face in ("", *REAL_FACES):
+            tally = Tally()
+            for seed in range(seeds):
+                calibrate(_face_data(target, face, seed), target, tally, seed)
+            label = f"{target}, {face or 'clean'}"
+            print(_row(label, tally), flush=True)
+            notes.extend(f"{label} refused {text}" for text in tally.refused)
+    return notes
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--only", choices=("real", "presets", "faces"))
+    parser.add_argument("--presets", default=",".join(PRESETS))
+    parser.add_argument("--targets", default=",".join(TARGETS))
+    args = parser.parse_args()
+    notes: list[str] = []
+    if args.only in (None, "real"):
+        real_table()
+        print()
+    if args.only in (None, "presets"):
+        notes += presets_table(args.presets.split(","), args.seeds)
+        print()
+    if args.only in (None, "faces"):
+        notes += faces_table(args.targets.split(","), args.seeds)
+    for note in notes:
+        print(note)
+
+
+if __name__ == "__main__":
+    main()
