@@ -32,6 +32,7 @@ from linelaser_calib.sim import (
     simulate,
 )
 from linelaser_calib.sim.sensor_models import SensorModel
+from linelaser_calib.sim.sphere import SPHERE_PRESETS, sphere_scenario_from_preset
 
 PRESET_NAMES = sorted(PRESETS)
 
@@ -124,11 +125,15 @@ def sensor_poses(data: SimulatedData) -> np.ndarray:
 
 def sigma_3d(s: Scenario) -> float:
     """The white noise's 3-D σ, with a real profiler's shape errors (bow, smooth error,
-    speckle, output steps) counted as one more σ each, so that 6 of them bound a point."""
+    speckle, output steps) counted as one more σ each, so that 6 of them bound a point, and
+    its scale errors as a sixth of the most they move a point in the range."""
     m = s.sensor
     shape = (m.linearity_m / 3.0) ** 2 + m.shape_sigma_m**2 + m.speckle_sigma_m**2
     steps = (m.x_step_m**2 + m.z_step_m**2) / 12.0
-    return math.sqrt(s.sigma_depth_m**2 + s.sigma_lateral_m**2 + s.sigma_y_m**2 + shape + steps)
+    reach = abs(m.x_scale_error) * math.tan(s.fan_half_angle_rad) + abs(m.z_scale_error)
+    scales = (reach * s.z_max_m / 6.0) ** 2
+    white = s.sigma_depth_m**2 + s.sigma_lateral_m**2 + s.sigma_y_m**2
+    return math.sqrt(white + shape + steps + scales)
 
 
 def check_on_surfaces(data: SimulatedData, tolerance: float) -> int:
@@ -412,6 +417,19 @@ def test_continuous_truth_is_taken_at_the_true_acquisition_time() -> None:
     shift = np.linalg.norm(p_stamped - recorded, axis=1)
     assert np.max(shift) > 1e-4  # the robot moves: a 4 ms latency shifts the pose visibly
     assert len(data.profiles) > 2 * s.n_poses
+
+
+def test_a_sensor_override_changes_only_the_terms_it_names() -> None:
+    """``simulate --profiler-errors gap_rate=0`` (how the committed bags of the real
+    profilers' presets are regenerated without the faces added later)."""
+    preset = PRESETS["cylinder_gocator"]
+    assert preset.sensor.gap_rate > 0.0
+    changed = scenario_from_preset("cylinder_gocator", sensor={"gap_rate": 0.0})
+    assert changed.sensor == replace(preset.sensor, gap_rate=0.0)
+    sphere = sphere_scenario_from_preset("sphere_sszn", sensor={"x_scale_error": 0.0})
+    assert sphere.rig.sensor == replace(SPHERE_PRESETS["sphere_sszn"].rig.sensor, x_scale_error=0.0)
+    with pytest.raises(InputError, match="bow"):
+        scenario_from_preset("cylinder_gocator", sensor={"bow": 1.0})
 
 
 def test_same_seed_same_output_other_seed_other_output() -> None:
