@@ -54,7 +54,8 @@ Presets (:data:`PRESETS`, :func:`scenario_from_preset`):
     robot_state_publisher-style ``/tf`` chain and ``/tf_static``.
 ``cylinder_keyence``, ``cylinder_scancontrol``, ``cylinder_gocator``
     ``ur_scancontrol``'s cell with a real profiler's datasheet geometry and shape errors
-    (:mod:`~linelaser_calib.sim.sensor_models`), see :func:`_real_profiler_scenario`.
+    and the faces the real scans show (gaps, a scale 0.1 % off;
+    :mod:`~linelaser_calib.sim.sensor_models`), see :func:`_real_profiler_scenario`.
 
 Bag size: a streamed pose costs ~120 bytes and a point 12-16 bytes in a rosbag2 MCAP file,
 so ``resolution``, ``n_poses``, ``dwell_s``, the move speeds, ``robot_rate_hz`` and

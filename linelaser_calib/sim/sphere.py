@@ -27,10 +27,11 @@ Presets (:data:`SPHERE_PRESETS`): ``sphere``: a Ø50.8 mm (2 in) tooling ball, a
 scanCONTROL-class profiler (70-150 mm, ±25 deg, 640 points, σ 8/6 µm, spikes, dropouts,
 camera shadowing), a UR-class arm (0.03 mm, 0.003 deg), 30 views tilted up to 35 deg, the
 centre on the sensor's −y side. ``sphere_sszn``: a FANUC-like cell, a 40 mm-radius ball
-scanned by an SSZN-class profiler with its measured local noise and smooth shape error
-(``sszn_fanuc`` in :mod:`~linelaser_calib.sim.sensor_models`; 0.05 mm pitch, dense
-profiles), robot σ 0.03 mm and 0.005 deg, 20 views tilted up to 20 deg, the centre
-20-30 mm beyond the middle of the range, the laser plane up to 0.5 R from the centre.
+scanned by an SSZN-class profiler with its measured local noise and smooth shape error,
+short gaps and an x scale 0.3 % off (``sszn_fanuc`` in
+:mod:`~linelaser_calib.sim.sensor_models`; 0.05 mm pitch, dense profiles), robot σ
+0.03 mm and 0.005 deg, 20 views tilted up to 20 deg, the centre 20-30 mm beyond the middle
+of the range, the laser plane up to 0.5 R from the centre.
 """
 
 from __future__ import annotations
