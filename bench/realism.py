@@ -35,11 +35,12 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from realistic_sensors import Tally
 from scipy.ndimage import gaussian_filter1d
 
 from linelaser_calib.core.errors import CalibrationError
@@ -142,29 +143,18 @@ def real_table() -> None:
     )
 
 
-@dataclass
-class Tally:
-    """Outcomes of one row over seeds."""
-
-    used: int = 0
-    recorded: int = 0
-    refused: list[str] = field(default_factory=list)
-    errors: list[FloatArray] = field(default_factory=list)  # (6,) rotvec rad, translation m
-    sigmas: list[FloatArray] = field(default_factory=list)  # (6,) 1σ
-
-    def cells(self) -> str:
-        if not self.errors:
-            return f"{'-':>10}{'-':>10}{'-':>9}{'-':>9}{'-':>9}"
-        e, s = np.array(self.errors), np.array(self.sigmas)
-
-        def rms(block: FloatArray) -> float:
-            return float(np.sqrt(np.mean(np.sum(block**2, axis=1))))
-
-        return (
-            f"{math.degrees(rms(e[:, :3])):>10.4f}{rms(e[:, 3:]) * 1e3:>10.4f}"
-            f"{math.degrees(rms(s[:, :3])):>9.4f}{rms(s[:, 3:]) * 1e3:>9.4f}"
-            f"{float(np.max(np.abs(e) / s)):>9.2f}"
-        )
+def cells(tally: Tally) -> str:
+    """Error RMS (deg, mm), 1σ RMS (deg, mm; each the length over the axes) and the largest
+    per-axis |error| / 1σ of a row."""
+    if not tally.errors:
+        return f"{'-':>10}{'-':>10}{'-':>9}{'-':>9}{'-':>9}"
+    rot, trans = tally.rms()
+    s = np.array(tally.sigmas)
+    sigma_rot = math.degrees(float(np.sqrt(np.mean(np.sum(s[:, :3] ** 2, axis=1)))))
+    sigma_trans = float(np.sqrt(np.mean(np.sum(s[:, 3:] ** 2, axis=1)))) * 1e3
+    return (
+        f"{rot:>10.4f}{trans:>10.4f}{sigma_rot:>9.4f}{sigma_trans:>9.4f}{tally.worst_ratio():>9.2f}"
+    )
 
 
 def _error(T: FloatArray, truth: FloatArray) -> FloatArray:
@@ -238,7 +228,7 @@ HEAD = (
 
 def _row(label: str, tally: Tally) -> str:
     used = f"{tally.used}/{tally.recorded}"
-    return f"{label:<34}{used:>12}{len(tally.refused):>8}{tally.cells()}"
+    return f"{label:<34}{used:>12}{len(tally.refused):>8}{cells(tally)}"
 
 
 def presets_table(presets: list[str], seeds: int) -> list[str]:
