@@ -71,7 +71,7 @@ def centre_side(text: str) -> str:
     return text
 
 
-def fields(text: str) -> dict[str, float]:
+def named_numbers(text: str) -> dict[str, float]:
     """Parse ``NAME=VALUE,NAME=VALUE`` (numbers, SI)."""
     try:
         pairs = [part.split("=") for part in text.split(",")]

@@ -7,7 +7,7 @@ import argparse
 from collections.abc import Callable
 from pathlib import Path
 
-from linelaser_calib.cli.arguments import fields, xyz
+from linelaser_calib.cli.arguments import named_numbers, xyz
 from linelaser_calib.cli.common import PROG
 from linelaser_calib.io.bags import bag_info, format_bag_info
 
@@ -73,7 +73,7 @@ SIMULATE_OPTIONS: tuple[tuple[str, str, Callable[[str], object], str], ...] = (
     (
         "--profiler-errors",
         "sensor",
-        fields,
+        named_numbers,
         "terms of the profiler's error model to change, NAME=VALUE,... (SI; the simulator's "
         "profiler-model fields, e.g. gap_rate=0,x_scale_error=0 leaves out the gaps and the "
         "x scale error of a real profiler's preset)",
