@@ -68,12 +68,12 @@ def scale_significant(scale: float, sigma: float | None) -> bool:
     return sigma is None or abs(scale) >= SIGNIFICANT_SCALE_SIGMAS * sigma
 
 
-def implausible_scale_held(scale: float) -> str:
-    """The warning of a target that estimated the along-line scale by default (``auto``),
+def implausible_scale_held(scale: float, axis: str = "along-line") -> str:
+    """The warning of a target that estimated the ``axis`` scale by default (``auto``),
     found it implausible (beyond :data:`PLAUSIBLE_SCALE_ERROR`) and solved again with it
     held at 1."""
     return (
-        f"the along-line scale, estimated by default, read {1.0 + scale:.4f} "
+        f"the {axis} scale, estimated by default, read {1.0 + scale:.4f} "
         f"({100.0 * scale:+.2f} % from nominal): a scale error beyond "
         f"{100.0 * PLAUSIBLE_SCALE_ERROR:.0f} % is implausible, so it was held at 1 and the "
         "hand-eye solved again. Something else stretches the profiles along the line, such as "
