@@ -57,6 +57,26 @@ class LineSection:
     scale_sigmas: tuple[float | None, float | None] = (None, None)
 
     @property
+    def scale(self) -> float | None:
+        """The x (along-line) scale error, as the cylinder and the sphere name it."""
+        return self.scales[0]
+
+    @property
+    def scale_sigma(self) -> float | None:
+        """Its 1σ."""
+        return self.scale_sigmas[0]
+
+    @property
+    def depth_scale(self) -> float | None:
+        """The z (depth) scale error, as the cylinder names it."""
+        return self.scales[1]
+
+    @property
+    def depth_scale_sigma(self) -> float | None:
+        """Its 1σ."""
+        return self.scale_sigmas[1]
+
+    @property
     def free_scales(self) -> tuple[bool, bool]:
         """Whether the x and the z scale were estimated."""
         return (self.scales[0] is not None, self.scales[1] is not None)
