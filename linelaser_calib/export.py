@@ -228,19 +228,27 @@ def ur_kinematics_yaml(corrections: KinematicCorrections) -> str:
 
 
 def scale_note(result: CalibrationResult) -> str:
-    """What no transform can carry: the sensor's along-line scale, when the result estimated
-    it (cylinder target), as one line for people (%), or ''."""
-    scale = getattr(result.target, "scale", None)
-    if scale is None:
-        return ""
-    sigma = getattr(result.target, "scale_sigma", None)
-    spread = "" if sigma is None else f" +- {100.0 * sigma:.2f} %"
-    return (
-        f"note: the sensor's along-line (x) scale was estimated as {1.0 + scale:.5f} "
-        f"(x reads {100.0 * scale:+.2f} %{spread} of the true length); no transform carries "
-        f"it, so this export does not: divide the profiles' x by {1.0 + scale:.5f} in the "
-        "driver or its configuration if the error is real (its 1 sigma is the noise model's)"
-    )
+    """What no transform can carry: the sensor's along-line (x) and depth (z) scales, where
+    the result estimated them (cylinder, sphere and line targets), one line each for people
+    (%), or ''."""
+    notes = []
+    for name, axis, coordinate in (
+        ("scale", "along-line (x)", "x"),
+        ("depth_scale", "depth (z)", "z"),
+    ):
+        scale = getattr(result.target, name, None)
+        if scale is None:
+            continue
+        sigma = getattr(result.target, f"{name}_sigma", None)
+        spread = "" if sigma is None else f" +- {100.0 * sigma:.2f} %"
+        notes.append(
+            f"note: the sensor's {axis} scale was estimated as {1.0 + scale:.5f} "
+            f"({coordinate} reads {100.0 * scale:+.2f} %{spread} of the true length); no "
+            f"transform carries it, so this export does not: divide the profiles' {coordinate} "
+            f"by {1.0 + scale:.5f} in the driver or its configuration if the error is real (its "
+            "1 sigma is the noise model's)"
+        )
+    return "\n".join(notes)
 
 
 def export_text(result: CalibrationResult, form: ExportFormat) -> str:

@@ -163,7 +163,11 @@ def test_an_estimated_along_line_scale_is_named_beside_the_export(
     plain = result_of(hand_eyes()[0])
     scaled = result_of(hand_eyes()[0])
     scaled.target = CylinderSection(
-        Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02), scale=0.0081, scale_sigma=2e-4
+        Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02),
+        scale=0.0081,
+        scale_sigma=2e-4,
+        depth_scale=-0.002,
+        depth_scale_sigma=5e-4,
     )
     outputs = []
     for name, result in (("plain", plain), ("scaled", scaled)):
@@ -175,3 +179,4 @@ def test_an_estimated_along_line_scale_is_named_beside_the_export(
     assert outputs[0].err == ""
     assert "along-line (x) scale was estimated as 1.00810" in outputs[1].err
     assert "+0.81 % +- 0.02 %" in outputs[1].err
+    assert "depth (z) scale was estimated as 0.99800" in outputs[1].err
