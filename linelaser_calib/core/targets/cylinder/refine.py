@@ -418,14 +418,16 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
 
 
 def _solve_near(
-    problem: CylinderProblem, start: CylinderState, what: str
+    problem: CylinderProblem, start: CylinderState, what: str, max_iterations: int | None = None
 ) -> Solution[CylinderState]:
     """The solve of a problem from a state near its optimum, to :data:`SUBSET_STEP_TOLERANCE_M`
-    and :data:`SUBSET_COST_TOLERANCE` (SolverError on non-finite numbers, naming ``what``)."""
+    and :data:`SUBSET_COST_TOLERANCE` or ``max_iterations`` linearisations (None: the
+    problem's solver's), SolverError on non-finite numbers, naming ``what``."""
     tolerances = replace(
         problem.config.solver,
         step_tolerance_m=SUBSET_STEP_TOLERANCE_M,
         tolerance=SUBSET_COST_TOLERANCE,
+        max_iterations=max_iterations or problem.config.solver.max_iterations,
     )
     solution = solve(problem, start, tolerances)
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
@@ -434,14 +436,15 @@ def _solve_near(
 
 
 def refine_at_poses(
-    solved: SolvedProblem, T_base_flange: FloatArray
+    solved: SolvedProblem, T_base_flange: FloatArray, max_iterations: int | None = None
 ) -> tuple[SolvedProblem, float]:
     """The refinement of a solved problem's samples at other flange poses (M, 4, 4), started
     at its solution, and its final cost (dimensionless, as :attr:`RefineResult.cost_history`).
 
     The clock-offset search re-pairs the same points with poses a few ms away, which moves
-    the optimum little: from the last solution the solve converges (to the tolerances of
-    :func:`refine_subset`) without a new problem, seed or observability check.
+    the optimum little: from a nearby solution the solve converges (to the tolerances of
+    :func:`refine_subset`) without a new problem, seed or observability check;
+    ``max_iterations`` bounds its linearisations (None: the solver's bound).
 
     Raises
     ------
@@ -449,7 +452,7 @@ def refine_at_poses(
         The solve produced non-finite numbers.
     """
     problem = solved.problem.with_flange_poses(np.asarray(T_base_flange, dtype=np.float64))
-    solution = _solve_near(problem, solved.state, "at other flange poses")
+    solution = _solve_near(problem, solved.state, "at other flange poses", max_iterations)
     return replace(solved, problem=problem, state=solution.state), solution.cost_history[-1]
 
 
