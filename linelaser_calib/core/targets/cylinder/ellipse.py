@@ -463,13 +463,9 @@ def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[f
     residual, jacobian = sampson_jacobian(conic, u, design_rows(u))
     scale_sq = robust_scale_m(residual) ** 2 * len(u) / effective_count(residual)
     covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
-    gradient = np.empty((2, 6))
-    for k in range(6):
-        step = np.zeros(6)
-        step[k] = AXIS_GRADIENT_STEP
-        forward = ellipse_geometry(conic + step).semi_axes
-        backward = ellipse_geometry(conic - step).semi_axes
-        gradient[:, k] = (forward - backward) / (2.0 * AXIS_GRADIENT_STEP)
+    steps = AXIS_GRADIENT_STEP * np.eye(6)
+    axes = ellipse_geometry(np.concatenate([conic + steps, conic - steps])).semi_axes
+    gradient = (axes[:6] - axes[6:]).T / (2.0 * AXIS_GRADIENT_STEP)
     sigma = np.sqrt(np.maximum(np.einsum("ik,kl,il->i", gradient, covariance, gradient), 0.0))
     if not np.all(np.isfinite(sigma)):
         return 0.0, 0.0
