@@ -261,13 +261,8 @@ def sampson_jacobian(
     gx, gz = 2 * a * x + b * z + d, b * x + 2 * c * z + e
     norm = np.hypot(gx, gz)
     w = q / norm**3
-    jacobian = design / norm[:, None]
-    jacobian[:, 0] -= w * 2 * x * gx
-    jacobian[:, 1] -= w * (z * gx + x * gz)
-    jacobian[:, 2] -= w * 2 * z * gz
-    jacobian[:, 3] -= w * gx
-    jacobian[:, 4] -= w * gz
-    return q / norm, jacobian
+    g_dg = np.column_stack([2 * x * gx, z * gx + x * gz, 2 * z * gz, gx, gz, np.zeros_like(x)])
+    return q / norm, design / norm[:, None] - w[:, None] * g_dg
 
 
 def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
@@ -285,15 +280,16 @@ def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
     residual, jacobian = sampson_jacobian(conic, u, design)
     cost = float(residual @ residual)
     damping = 1e-6
+    diagonal = np.diag_indices(6)
     for _ in range(LM_MAX_ITERATIONS):
         hessian = jacobian.T @ jacobian
-        scaled = (
-            hessian + damping * np.diag(np.diag(hessian)) + 1e-12 * np.trace(hessian) * np.eye(6)
-        )
+        scaled = hessian.copy()
+        scaled[diagonal] += damping * hessian[diagonal] + 1e-12 * np.trace(hessian)
         step = np.linalg.solve(scaled, -jacobian.T @ residual)
-        if np.linalg.norm(step) <= LM_STEP_TOLERANCE:
+        if math.sqrt(step @ step) <= LM_STEP_TOLERANCE:
             break
-        trial = (conic + step) / np.linalg.norm(conic + step)
+        trial = conic + step
+        trial /= math.sqrt(trial @ trial)
         trial_residual, trial_jacobian = sampson_jacobian(trial, u, design)
         trial_cost = float(trial_residual @ trial_residual)
         if trial_cost < cost:
