@@ -738,8 +738,13 @@ def refine_with_outlier_rejection(
             points, trimmed_any = trimmed, True
         T0, start = first.T_flange_sensor, first.cylinder
 
+    solved_rows: dict[int, int] = {}  # sample -> its row in the last solve's result
+
     def solve_subset(keep: list[int], previous: RefineResult | None) -> RefineResult:
-        return _solve_subset(keep, previous, noise)
+        result = _solve_subset(keep, previous, noise)
+        solved_rows.clear()
+        solved_rows.update((i, row) for row, i in enumerate(keep))
+        return result
 
     def _solve_subset(
         keep: list[int], previous: RefineResult | None, noise: LineNoise | None
@@ -766,10 +771,21 @@ def refine_with_outlier_rejection(
                 first.scale,
                 noise,
             )
-        T_start = T0 if previous is None else previous.T_flange_sensor
-        axis = start if previous is None else previous.cylinder
+        if previous is None:
+            return refine(
+                [points[i] for i in keep], T_all[keep], T0, start, cfg_solve, radius_m, noise=noise
+            )
+        # A later round: from the last solution, its pose corrections included.
         return refine(
-            [points[i] for i in keep], T_all[keep], T_start, axis, cfg_solve, radius_m, noise=noise
+            [points[i] for i in keep],
+            T_all[keep],
+            previous.T_flange_sensor,
+            previous.cylinder,
+            cfg_solve,
+            radius_m,
+            previous.pose_corrections[[solved_rows[i] for i in keep]],
+            previous.scale,
+            noise,
         )
 
     def with_rejection() -> RejectionOutcome[RefineResult]:
