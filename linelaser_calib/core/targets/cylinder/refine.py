@@ -430,14 +430,16 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
 
 
 def _solve_near(
-    problem: CylinderProblem, start: CylinderState, what: str
+    problem: CylinderProblem, start: CylinderState, what: str, max_iterations: int | None = None
 ) -> Solution[CylinderState]:
     """The solve of a problem from a state near its optimum, to :data:`SUBSET_STEP_TOLERANCE_M`
-    and :data:`SUBSET_COST_TOLERANCE` (SolverError on non-finite numbers, naming ``what``)."""
+    and :data:`SUBSET_COST_TOLERANCE` or ``max_iterations`` linearisations (None: the
+    problem's solver's), SolverError on non-finite numbers, naming ``what``."""
     tolerances = replace(
         problem.config.solver,
         step_tolerance_m=SUBSET_STEP_TOLERANCE_M,
         tolerance=SUBSET_COST_TOLERANCE,
+        max_iterations=max_iterations or problem.config.solver.max_iterations,
     )
     solution = solve(problem, start, tolerances)
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
@@ -446,14 +448,15 @@ def _solve_near(
 
 
 def refine_at_poses(
-    solved: SolvedProblem, T_base_flange: FloatArray
+    solved: SolvedProblem, T_base_flange: FloatArray, max_iterations: int | None = None
 ) -> tuple[SolvedProblem, float]:
     """The refinement of a solved problem's samples at other flange poses (M, 4, 4), started
     at its solution, and its final cost (dimensionless, as :attr:`RefineResult.cost_history`).
 
     The clock-offset search re-pairs the same points with poses a few ms away, which moves
-    the optimum little: from the last solution the solve converges (to the tolerances of
-    :func:`refine_subset`) without a new problem, seed or observability check.
+    the optimum little: from a nearby solution the solve converges (to the tolerances of
+    :func:`refine_subset`) without a new problem, seed or observability check;
+    ``max_iterations`` bounds its linearisations (None: the solver's bound).
 
     Raises
     ------
@@ -461,7 +464,7 @@ def refine_at_poses(
         The solve produced non-finite numbers.
     """
     problem = solved.problem.with_flange_poses(np.asarray(T_base_flange, dtype=np.float64))
-    solution = _solve_near(problem, solved.state, "at other flange poses")
+    solution = _solve_near(problem, solved.state, "at other flange poses", max_iterations)
     return replace(solved, problem=problem, state=solution.state), solution.cost_history[-1]
 
 
@@ -749,8 +752,13 @@ def refine_with_outlier_rejection(
             points, trimmed_any = trimmed, True
         T0, start = first.T_flange_sensor, first.cylinder
 
+    solved_rows: dict[int, int] = {}  # sample -> its row in the last solve's result
+
     def solve_subset(keep: list[int], previous: RefineResult | None) -> RefineResult:
-        return _solve_subset(keep, previous, noise)
+        result = _solve_subset(keep, previous, noise)
+        solved_rows.clear()
+        solved_rows.update((i, row) for row, i in enumerate(keep))
+        return result
 
     def _solve_subset(
         keep: list[int], previous: RefineResult | None, noise: LineNoise | None
@@ -778,10 +786,21 @@ def refine_with_outlier_rejection(
                 noise,
                 first.depth_scale,
             )
-        T_start = T0 if previous is None else previous.T_flange_sensor
-        axis = start if previous is None else previous.cylinder
+        if previous is None:
+            return refine(
+                [points[i] for i in keep], T_all[keep], T0, start, cfg_solve, radius_m, noise=noise
+            )
+        # A later round: from the last solution, its pose corrections included.
         return refine(
-            [points[i] for i in keep], T_all[keep], T_start, axis, cfg_solve, radius_m, noise=noise
+            [points[i] for i in keep],
+            T_all[keep],
+            previous.T_flange_sensor,
+            previous.cylinder,
+            cfg_solve,
+            radius_m,
+            previous.pose_corrections[[solved_rows[i] for i in keep]],
+            previous.scale,
+            noise,
         )
 
     def with_rejection() -> RejectionOutcome[RefineResult]:

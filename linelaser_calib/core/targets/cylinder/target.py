@@ -88,8 +88,9 @@ from .refine import (
 )
 from .section import CylinderSection, read_cylinder_section
 
-#: Points per profile in the refinements of the clock-offset search.
-OFFSET_SEARCH_POINTS = 50
+#: Points per profile in the refinements of the clock-offset search, and the most
+#: linearisations of each refinement after the first (:meth:`CylinderTarget.offset_cost`).
+OFFSET_SEARCH_POINTS, OFFSET_SEARCH_ITERATIONS = 50, 3
 #: A default-method solution whose RMS point residual exceeds this multiple of the
 #: recording's scale (:func:`recording_scale_m`: what each profile's own free ellipse
 #: leaves) does not fit: 0.8-1.4 on the committed cylinder bags (the cluttered camera's
@@ -598,9 +599,15 @@ class CylinderTarget:
         """The refinement's final cost with the ellipses re-paired with other flange poses.
 
         The ellipses and the seed solve do not depend on the poses' offset and are computed
-        once; a few dozen points per profile pin the offset as well as all of them. The first
-        refinement starts at the seed; each later one at the solution before it
-        (:func:`.refine.refine_at_poses`), the same points at other poses.
+        once; a few dozen points per profile pin the offset as well as all of them. The
+        first evaluation refines the seed at the features' own poses (the offset the search
+        is centred on); each evaluation then starts at the solution of the lowest cost so
+        far (:func:`.refine.refine_at_poses`: the same points at other poses) and runs at
+        most :data:`OFFSET_SEARCH_ITERATIONS` linearisations. Near the optimum that
+        converges; far from it (the search's first grid, 10 ms apart) the cost is an upper
+        bound, high above the optimum's, which is all the grid needs to find the optimum's
+        neighbours. Where the refinement at the features' poses fails (too few samples,
+        an unobservable motion), every offset costs infinity.
         """
         if len(features) < config.min_samples:
             raise DegenerateError(
@@ -613,27 +620,27 @@ class CylinderTarget:
         cylinder0 = replace(seed.cylinder, radius=radius)
         points = [f.inlier_points for f in features]
         light = replace(config.refine, max_points_per_profile=OFFSET_SEARCH_POINTS)
-
-        solved: list[SolvedProblem] = []
+        try:
+            refined = refine(
+                points,
+                np.stack([f.T_base_flange for f in features]),
+                seed.T_flange_sensor,
+                cylinder0,
+                light,
+                config.radius_m,
+            )
+        except CalibrationError:
+            return lambda T_base_flange: float("inf")
+        assert refined.solved is not None  # refine() always keeps it
+        best = [(refined.cost_history[-1], refined.solved)]
 
         def cost(T_base_flange: FloatArray) -> float:
             try:
-                if solved:
-                    again, value = refine_at_poses(solved[0], T_base_flange)
-                else:
-                    refined = refine(
-                        points,
-                        T_base_flange,
-                        seed.T_flange_sensor,
-                        cylinder0,
-                        light,
-                        config.radius_m,
-                    )
-                    assert refined.solved is not None  # refine() always keeps it
-                    again, value = refined.solved, refined.cost_history[-1]
+                again, value = refine_at_poses(best[0][1], T_base_flange, OFFSET_SEARCH_ITERATIONS)
             except CalibrationError:
                 return float("inf")
-            solved[:] = [again]
+            if value < best[0][0]:
+                best[:] = [(value, again)]
             return value
 
         return cost
