@@ -891,7 +891,7 @@ def test_a_second_call_during_a_solve_is_refused_and_failures_keep_the_last_file
     release = threading.Event()
     behaviour: dict[str, Any] = {"raise": None}
 
-    def fake_calibrate(samples: list[Any], config: Any, **_: Any) -> CalibrationResult:
+    def fake_calibrate(samples: list[Any], *_: Any) -> CalibrationResult:
         assert len(samples) == len(real_samples)
         if behaviour["raise"] is not None:
             raise behaviour["raise"]
@@ -899,7 +899,7 @@ def test_a_second_call_during_a_solve_is_refused_and_failures_keep_the_last_file
         truth.samples_used = [s.index for s in samples]
         return truth
 
-    monkeypatch.setattr(calibration_service, "calibrate_samples", fake_calibrate)
+    monkeypatch.setattr(calibration_service, "calibrate_live", fake_calibrate)
     service.send(real_samples)
     first = service.probe.call_async("calibrate")
     time.sleep(0.3)
