@@ -17,18 +17,17 @@ import yaml
 from _compare import assert_floats_close
 from geometry_msgs.msg import PoseStamped
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.parameter import Parameter
 from ros_helpers import (
     REPO_ROOT,
     RosProbe,
+    ServiceUnderTest,
     init_context,
     new_domain_id,
     reliable_qos,
     wait_for,
 )
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import PointCloud2
 
 from linelaser_calib.core.errors import CalibrationError, DegenerateError, InputError
 from linelaser_calib.core.geometry import (
@@ -72,7 +71,6 @@ from linelaser_calib.nodes.sample_store import (
 from linelaser_calib.sim import scenario_from_preset, simulate
 from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
 from linelaser_calib.summary import one_line_summary
-from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
 
 T0 = 1_700_000_000 * NS_PER_S
 T_REST = transform_from_rotvec_translation([0.1, -0.2, 0.3], [0.4, 0.1, 0.5])
@@ -808,36 +806,6 @@ def real_samples() -> list[tuple[Profile, FlangePose]]:
         (p, FlangePose(p.stamp_ns, T, "base_link"))
         for p, T in zip(data.profiles, data.truth.T_base_flange_recorded, strict=True)
     ]
-
-
-class ServiceUnderTest:
-    """A calibration_service node spun in-process, with a probe to call it."""
-
-    def __init__(self, context: Context, domain: int, output: Path) -> None:
-        self.node = calibration_service.CalibrationServiceNode(
-            context=context, parameter_overrides=[Parameter("output_path", value=str(output))]
-        )
-        self.executor = MultiThreadedExecutor(context=context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-        self.probe = RosProbe(domain)
-
-    def send(self, samples: list[tuple[Profile, FlangePose]]) -> None:
-        types = rclpy_types()
-        node = self.probe.node
-        qos = reliable_qos(100, latched=True)
-        profiles = node.create_publisher(PointCloud2, "linelaser_calib/samples/profile", qos)
-        poses = node.create_publisher(PoseStamped, "linelaser_calib/samples/flange_pose", qos)
-        for p, pose in samples:
-            profiles.publish(pointcloud2_from_points(p.points, p.stamp_ns, "laser", types=types))
-            poses.publish(pose_stamped_from_flange_pose(pose, types=types))
-        wait_for(lambda: self.node.sample_count == len(samples), 20.0, "the samples")
-
-    def close(self) -> None:
-        self.probe.close()
-        self.executor.shutdown()
-        self.node.destroy_node()
 
 
 @pytest.fixture
