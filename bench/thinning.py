@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from scale import OPTIONS, measured
+from scale import OPTIONS, errors, measured
 
 from linelaser_calib.core.geometry import rotvec_from_matrix
 from linelaser_calib.sim.bag_writer import simulate_to_bag
@@ -57,16 +57,16 @@ def recording(root: Path, size: str, seed: int) -> Path:
     return bag
 
 
-def read(result_path: Path, truth_path: Path) -> dict[str, object]:
-    """Errors, 1σ and thinning of a result against the truth."""
+def read(result_path: Path) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """A result's hand-eye (4, 4), its 1σ per axis (rotation rad, translation m) and its
+    ``quality.thinning`` (empty when off)."""
     result = yaml.safe_load(result_path.read_text())
-    truth = yaml.safe_load(truth_path.read_text())["hand_eye"]
-    X, T = np.array(result["hand_eye"]["matrix"]), np.array(truth["matrix"])
-    e = np.concatenate([rotvec_from_matrix(T[:3, :3].T @ X[:3, :3]), X[:3, 3] - T[:3, 3]])
     sigma = result["hand_eye"]["uncertainty"]
-    s = np.concatenate([sigma["rotation_rad"], sigma["translation_m"]])
-    thinning = result["quality"].get("thinning") or {}
-    return {"estimate": X, "error": e, "sigma": s, "thinning": thinning}
+    return (
+        np.array(result["hand_eye"]["matrix"]),
+        np.concatenate([sigma["rotation_rad"], sigma["translation_m"]]),
+        result["quality"].get("thinning") or {},
+    )
 
 
 def difference(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
@@ -97,19 +97,16 @@ def main() -> int:
                 out.unlink(missing_ok=True)
                 options = [*OPTIONS["continuous"], "--per-neighbourhood", cap]
                 run = measured([cli, "calibrate", str(bag), "--output", str(out), *options])
-                got = read(out, bag / "truth.yaml")
-                first = first or got
-                e, s = np.asarray(got["error"]), np.asarray(got["sigma"])
-                delta = difference(np.asarray(got["estimate"]), np.asarray(first["estimate"]))
-                thin = dict(got["thinning"])  # type: ignore[call-overload]
+                estimate, sigma, thin = read(out)
+                rot, trans, ratio = errors(out, bag / "truth.yaml")
+                first = first or (estimate, sigma)
+                shift = np.max(np.abs(difference(estimate, first[0])) / first[1])
                 kept = f"{thin['samples_kept']}/{thin['samples_given']}" if thin else "all"
                 print(
                     f"{size:<20}{cap:>5}{kept:>13}{run.wall_s:>8.1f}{run.cpu_s:>7.1f}"
-                    f"{run.peak_mb:>8.0f}{math.degrees(float(np.linalg.norm(e[:3]))):>9.4f}"
-                    f"{float(np.linalg.norm(e[3:])) * 1e3:>9.4f}"
-                    f"{math.degrees(float(np.max(s[:3]))):>8.4f}{float(np.max(s[3:])) * 1e3:>8.4f}"
-                    f"{float(np.max(np.abs(e) / s)):>8.2f}"
-                    f"{float(np.max(np.abs(delta) / np.asarray(first['sigma']))):>6.2f}",
+                    f"{run.peak_mb:>8.0f}{rot:>9.4f}{trans:>9.4f}"
+                    f"{math.degrees(float(np.max(sigma[:3]))):>8.4f}"
+                    f"{float(np.max(sigma[3:])) * 1e3:>8.4f}{ratio:>8.2f}{shift:>6.2f}",
                     flush=True,
                 )
     return 0

@@ -143,6 +143,7 @@ class CollectorNode(Node):
             if pose_source is PoseSource.JOINT_STATES
             else None
         )
+        # Every sample of a live clock-offset batch counts (a batch is short already).
         self._pipeline = pipeline_config(
             p["target"],
             Method.DEFAULT,
@@ -150,6 +151,7 @@ class CollectorNode(Node):
             Front.NODE,
             seed=p["seed"],
             pairing=pairing,
+            per_neighbourhood=0,
         )
         self._types = rclpy_types()
         self._collector = LiveCollector(config, self._log_new_reason)
