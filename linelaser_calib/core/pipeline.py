@@ -164,8 +164,8 @@ class PipelineConfig:
 class Extracted:
     """Features already extracted from samples (by :func:`search_clock_offset`), for
     :func:`calibrate_samples` to use again where the target's features do not depend on the
-    flange poses (:func:`~.targets.base.feature_repairing`) and the samples are of the same
-    profiles.
+    flange poses (:func:`~.targets.base.feature_repairing`) and the samples are of profiles
+    among them.
 
     Attributes
     ----------
@@ -178,6 +178,18 @@ class Extracted:
     indices: tuple[int, ...]
     features: list[Any]
     rejections: list[Rejection]
+
+    def of(self, samples: list[Sample]) -> tuple[list[Any], list[Rejection]] | None:
+        """The features and rejections of the profiles of ``samples``, when every one of
+        them was extracted (a few at the ends of the recording may pair at the search's
+        offset only); None otherwise."""
+        wanted = {s.index for s in samples}
+        if not wanted <= set(self.indices):
+            return None
+        return (
+            [f for f in self.features if f.index in wanted],
+            [r for r in self.rejections if r.index in wanted],
+        )
 
 
 def _no_progress(stage: str, done: int, total: int) -> None:
@@ -312,12 +324,9 @@ def calibrate_samples(
     chosen = None if extracted is None else extracted.indices
     samples, thinning = thin_samples(samples, config.per_neighbourhood, chosen)
     repairing = feature_repairing(target)
-    if (
-        extracted is not None
-        and repairing is not None
-        and extracted.indices == tuple(s.index for s in samples)
-    ):
-        features, feature_rejections = repairing(extracted.features, samples), extracted.rejections
+    reused = None if extracted is None or repairing is None else extracted.of(samples)
+    if repairing is not None and reused is not None:
+        features, feature_rejections = repairing(reused[0], samples), reused[1]
     else:
         features, feature_rejections = target.extract(
             samples, target_config, config.seed, progress, config.workers

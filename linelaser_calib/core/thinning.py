@@ -42,7 +42,7 @@ from .regions import CLUSTER_ANGLE_RAD, CLUSTER_RADIUS_M
 from .types import Sample
 
 #: Default most samples kept per neighbourhood of flange poses (:func:`thin_samples`).
-DEFAULT_PER_NEIGHBOURHOOD = 40
+DEFAULT_PER_NEIGHBOURHOOD = 20
 
 
 @dataclass(frozen=True)
