@@ -1,7 +1,9 @@
 """The calibration pipeline: pair, extract features, solve, check the model, diagnose.
 
-This is the one pipeline. The CLI (offline, from a bag) and the calibration_service node
-(online, from collected samples) both call :func:`run_pipeline` or :func:`calibrate_samples`.
+This is the one pipeline. The CLI (offline, from a bag: :func:`run_pipeline`) and the
+calibration_service node (online, from collected samples) both enter it through
+:func:`calibrate_paired`; where a recording holds many profiles from nearly the same flange
+pose, a representative subset is kept (:mod:`.thinning`).
 What is scanned is a target (:mod:`linelaser_calib.core.targets`): the pipeline hands the
 samples to the chosen target's feature extraction, its ``paper`` or ``default`` solve and its
 model-fit checks, and never asks which target it is.
