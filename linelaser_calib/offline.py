@@ -8,7 +8,6 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
-from linelaser_calib.core.latency import add_clock_diagnosis
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import (
     OFFSET_COSTS,
@@ -209,16 +208,21 @@ def calibrate_bag(
                     f"{len(samples) + len(rejected)} profiles did not pair with a flange pose "
                     f"and were left out. {rejection_digest(rejected)}".rstrip()
                 )
-    result = run_pipeline(bag.profiles, flange_poses.poses, config, progress, others, extracted)
+    result = run_pipeline(
+        bag.profiles,
+        flange_poses.poses,
+        config,
+        progress,
+        others,
+        extracted,
+        diagnose_clock=not estimate_offset,
+    )
     result.warnings.extend(unpaired)
     result.clock_offset_estimated = estimate_offset
     finite = sorted((t, c) for t, c in trace if math.isfinite(c))
     if finite:
         result.history[OFFSET_TRIALS] = [t for t, _ in finite]
         result.history[OFFSET_COSTS] = [c for _, c in finite]
-    result.pairing = config.pairing
-    if not estimate_offset:
-        add_clock_diagnosis(result, flange_poses.poses, config.pairing)
     result.parent_frame = reading.flange_frame
     result.child_frame = bag.sensor_frame
     result.base_frame = flange_poses.base_frame

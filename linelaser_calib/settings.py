@@ -28,6 +28,7 @@ from linelaser_calib.core.settings_text import PLACEHOLDER
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SETTINGS as TARGET_SETTINGS
 from linelaser_calib.core.targets.base import configure
+from linelaser_calib.core.thinning import DEFAULT_PER_NEIGHBOURHOOD
 from linelaser_calib.core.types import FloatArray
 from linelaser_calib.core.verdict import judge
 
@@ -82,6 +83,7 @@ SETTINGS: tuple[Setting, ...] = (
     Setting("kinematics", "--kinematics", "kinematics"),
     Setting("nominal_kinematics", "--nominal-kinematics", None),
     Setting("arm_accuracy_m", "--arm-accuracy", "arm_accuracy"),
+    Setting("per_neighbourhood", "--per-neighbourhood", "per_neighbourhood"),
     Setting("pose_source", "--pose-source", "the collector's pose_source"),
     Setting("base_frame", "--base-frame", "base_frame"),
     Setting("flange_frame", "--flange-frame", "flange_frame"),
@@ -155,6 +157,7 @@ def pipeline_config(
     pairing: PairingConfig | None = None,
     workers: int = 1,
     arm_accuracy_m: float = DEFAULT_ARM_ACCURACY_M,
+    per_neighbourhood: int = DEFAULT_PER_NEIGHBOURHOOD,
 ) -> PipelineConfig:
     """The pipeline configuration from the user's settings.
 
@@ -175,6 +178,9 @@ def pipeline_config(
         Processes for the per-sample work.
     arm_accuracy_m : float
         Prior 1σ per axis of the robot's error common to the whole scanned workspace, m.
+    per_neighbourhood : int
+        Most samples kept per neighbourhood of flange poses
+        (:mod:`~linelaser_calib.core.thinning`); 0 keeps every sample.
 
     Raises
     ------
@@ -192,6 +198,7 @@ def pipeline_config(
         initial_T_flange_sensor=None if initial is None else np.asarray(initial),
         workers=workers,
         arm_accuracy_m=arm_accuracy_m,
+        per_neighbourhood=per_neighbourhood,
     )
 
 

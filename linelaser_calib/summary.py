@@ -80,9 +80,11 @@ def one_line_summary(result: CalibrationResult, samples_total: int) -> str:
             f", 1-sigma (largest axis) {float(np.max(sigma_t)) * 1e3:.4f} mm, "
             f"{float(np.degrees(np.max(sigma_r))):.4f} deg"
         )
+    aside = 0 if result.thinning is None else result.thinning.set_aside
     text += (
-        f"; {len(result.samples_used)} of {samples_total} samples used, "
-        f"rms residual {result.rms_residual_m * 1e6:.1f} um, method {result.method}"
+        f"; {len(result.samples_used)} of {samples_total} samples used"
+        + (f" ({aside} set aside as near-duplicates)" if aside else "")
+        + f", rms residual {result.rms_residual_m * 1e6:.1f} um, method {result.method}"
     )
     verdict = verdict_of(result)
     if verdict.warning_ids:
@@ -393,9 +395,11 @@ def rejection_lines(result: CalibrationResult) -> list[str]:
 
 
 def samples_line(result: CalibrationResult) -> str:
-    """How many profiles were recorded, used and rejected."""
+    """How many profiles were recorded, used, set aside as near-duplicates and rejected."""
     used, rejected = len(result.samples_used), len(result.samples_rejected)
-    return f"Profiles: {used} used of {used + rejected} recorded, {rejected} rejected"
+    aside = 0 if result.thinning is None else result.thinning.set_aside
+    text = f"Profiles: {used} used of {used + aside + rejected} recorded, {rejected} rejected"
+    return text + (f", {aside} set aside as near-duplicates" if aside else "")
 
 
 @dataclass(frozen=True)
@@ -535,6 +539,8 @@ def format_summary(
     elif result.self_check_skipped_because:
         lines.append(f"Self-check: not run: {result.self_check_skipped_because}")
     lines.append(samples_line(result))
+    if result.thinning is not None and result.thinning.set_aside:
+        lines.append(f"  {result.thinning.sentence()} (the result's quality.thinning)")
     lines += [f"  {line}" for line in rejection_lines(result)]
     if result.clock_offset_s or result.clock_offset_estimated:
         how = "estimated from the data" if result.clock_offset_estimated else "given"

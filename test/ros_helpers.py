@@ -30,7 +30,8 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, TransformStamped
 from rclpy.context import Context
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import PointCloud2
@@ -531,3 +532,40 @@ class Player:
 
     def publish_pose(self, msg: PoseStamped) -> None:
         self.pose_pub.publish(msg)
+
+
+class ServiceUnderTest:
+    """A calibration_service node spun in-process (its own MultiThreadedExecutor thread), with
+    a probe to call it; ``overrides`` are its parameters besides ``output_path``."""
+
+    def __init__(self, context: Context, domain: int, output: Path, **overrides: Any) -> None:
+        from linelaser_calib.nodes.calibration_service import CalibrationServiceNode
+
+        parameters = {"output_path": str(output), **overrides}
+        self.node = CalibrationServiceNode(
+            context=context,
+            parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()],
+        )
+        self.executor = MultiThreadedExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.thread.start()
+        self.probe = RosProbe(domain)
+
+    def send(self, samples: list[tuple[Profile, FlangePose]], timeout_s: float = 20.0) -> None:
+        """Publish the samples as the collector does (latched, deep enough to lose none) and
+        wait until the node holds them all."""
+        types = rclpy_types()
+        node = self.probe.node
+        qos = reliable_qos(max(100, len(samples)), latched=True)
+        profiles = node.create_publisher(PointCloud2, "linelaser_calib/samples/profile", qos)
+        poses = node.create_publisher(PoseStamped, "linelaser_calib/samples/flange_pose", qos)
+        for p, pose in samples:
+            profiles.publish(pointcloud2_from_points(p.points, p.stamp_ns, "laser", types=types))
+            poses.publish(pose_stamped_from_flange_pose(pose, types=types))
+        wait_for(lambda: self.node.sample_count == len(samples), timeout_s, "the samples")
+
+    def close(self) -> None:
+        self.probe.close()
+        self.executor.shutdown()
+        self.node.destroy_node()

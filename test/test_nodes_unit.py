@@ -17,18 +17,17 @@ import yaml
 from _compare import assert_floats_close
 from geometry_msgs.msg import PoseStamped
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.parameter import Parameter
 from ros_helpers import (
     REPO_ROOT,
     RosProbe,
+    ServiceUnderTest,
     init_context,
     new_domain_id,
     reliable_qos,
     wait_for,
 )
 from scipy.spatial.transform import Rotation
-from sensor_msgs.msg import PointCloud2
 
 from linelaser_calib.core.errors import CalibrationError, DegenerateError, InputError
 from linelaser_calib.core.geometry import (
@@ -72,7 +71,6 @@ from linelaser_calib.nodes.sample_store import (
 from linelaser_calib.sim import scenario_from_preset, simulate
 from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
 from linelaser_calib.summary import one_line_summary
-from msg_adapters import pointcloud2_from_points, pose_stamped_from_flange_pose, rclpy_types
 
 T0 = 1_700_000_000 * NS_PER_S
 T_REST = transform_from_rotvec_translation([0.1, -0.2, 0.3], [0.4, 0.1, 0.5])
@@ -810,36 +808,6 @@ def real_samples() -> list[tuple[Profile, FlangePose]]:
     ]
 
 
-class ServiceUnderTest:
-    """A calibration_service node spun in-process, with a probe to call it."""
-
-    def __init__(self, context: Context, domain: int, output: Path) -> None:
-        self.node = calibration_service.CalibrationServiceNode(
-            context=context, parameter_overrides=[Parameter("output_path", value=str(output))]
-        )
-        self.executor = MultiThreadedExecutor(context=context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
-        self.thread.start()
-        self.probe = RosProbe(domain)
-
-    def send(self, samples: list[tuple[Profile, FlangePose]]) -> None:
-        types = rclpy_types()
-        node = self.probe.node
-        qos = reliable_qos(100, latched=True)
-        profiles = node.create_publisher(PointCloud2, "linelaser_calib/samples/profile", qos)
-        poses = node.create_publisher(PoseStamped, "linelaser_calib/samples/flange_pose", qos)
-        for p, pose in samples:
-            profiles.publish(pointcloud2_from_points(p.points, p.stamp_ns, "laser", types=types))
-            poses.publish(pose_stamped_from_flange_pose(pose, types=types))
-        wait_for(lambda: self.node.sample_count == len(samples), 20.0, "the samples")
-
-    def close(self) -> None:
-        self.probe.close()
-        self.executor.shutdown()
-        self.node.destroy_node()
-
-
 @pytest.fixture
 def service(ros_context: tuple[Context, int], tmp_path: Path) -> Iterator[ServiceUnderTest]:
     context, domain = ros_context
@@ -891,7 +859,7 @@ def test_a_second_call_during_a_solve_is_refused_and_failures_keep_the_last_file
     release = threading.Event()
     behaviour: dict[str, Any] = {"raise": None}
 
-    def fake_calibrate(samples: list[Any], config: Any, **_: Any) -> CalibrationResult:
+    def fake_calibrate(samples: list[Any], *_: Any) -> CalibrationResult:
         assert len(samples) == len(real_samples)
         if behaviour["raise"] is not None:
             raise behaviour["raise"]
@@ -899,7 +867,7 @@ def test_a_second_call_during_a_solve_is_refused_and_failures_keep_the_last_file
         truth.samples_used = [s.index for s in samples]
         return truth
 
-    monkeypatch.setattr(calibration_service, "calibrate_samples", fake_calibrate)
+    monkeypatch.setattr(calibration_service, "calibrate_live", fake_calibrate)
     service.send(real_samples)
     first = service.probe.call_async("calibrate")
     time.sleep(0.3)

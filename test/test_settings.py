@@ -98,7 +98,7 @@ def test_a_node_refusal_names_the_parameter_and_the_cli_refusal_the_flag() -> No
 
 
 def test_the_node_and_the_command_line_build_the_same_configuration() -> None:
-    values = service_values(radius=0.0125, min_samples=9, scale="free", seed=4)
+    values = service_values(radius=0.0125, min_samples=9, scale="free", seed=4, per_neighbourhood=7)
     node = service_config(values)
     cli = pipeline_config(
         "cylinder",
@@ -106,8 +106,9 @@ def test_the_node_and_the_command_line_build_the_same_configuration() -> None:
         {"radius_m": 0.0125, "min_samples": 9, "scale": "free"},
         Front.CLI,
         seed=4,
+        per_neighbourhood=7,
     )
-    assert node == cli
+    assert node == cli and node.per_neighbourhood == 7
     assert node.target_config.radius_m == 0.0125 and node.target_config.scale == "free"
 
 

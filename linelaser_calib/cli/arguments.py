@@ -40,15 +40,25 @@ def non_negative_float(text: str) -> float:
     return value
 
 
-def min_samples(text: str) -> int:
-    """Parse a sample count >= 3."""
+def _whole(text: str, low: int) -> int:
+    """Parse a whole number >= ``low``."""
+    expected = f"expected a whole number >= {low}"
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {text!r}") from None
-    if value < 3:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 3, got {value}")
+        raise argparse.ArgumentTypeError(f"{expected}, got {text!r}") from None
+    if value < low:
+        raise argparse.ArgumentTypeError(f"{expected}, got {value}")
     return value
+
+
+def non_negative_int(text: str) -> int:
+    return _whole(text, 0)
+
+
+def min_samples(text: str) -> int:
+    """Parse a sample count >= 3."""
+    return _whole(text, 3)
 
 
 def offset(text: str) -> float | str:

@@ -51,6 +51,7 @@ def calibrate_config(args: argparse.Namespace) -> PipelineConfig:
         ),
         workers=available_workers(),
         arm_accuracy_m=arm_accuracy(args),
+        per_neighbourhood=args.per_neighbourhood,
     )
 
 

@@ -16,6 +16,7 @@ from linelaser_calib.cli.arguments import (
     centre_side,
     min_samples,
     non_negative_float,
+    non_negative_int,
     numbers,
     offset,
     positive_float,
@@ -37,6 +38,7 @@ from linelaser_calib.core.targets import (
     plannable_target_names,
     target_names,
 )
+from linelaser_calib.core.thinning import DEFAULT_PER_NEIGHBOURHOOD
 from linelaser_calib.io.initial import FORMS
 from linelaser_calib.settings import Front, render
 
@@ -343,6 +345,15 @@ def build_parser() -> argparse.ArgumentParser:
         "workspace (its absolute accuracy there), which no subset of the poses can see: part "
         "of the hand-eye's 1 sigma when the robot's error looks systematic (default 0.0001; "
         "not with --kinematics, whose joint calibration estimates that error)",
+    )
+    cal_p.add_argument(
+        "--per-neighbourhood",
+        type=non_negative_int,
+        default=DEFAULT_PER_NEIGHBOURHOOD,
+        metavar="N",
+        help="most profiles kept from one neighbourhood of flange poses (50 mm x 8 deg), "
+        "evenly spaced in time, where a long recording holds more from nearly the same pose; "
+        "unitless, 0 keeps every profile (default %(default)s)",
     )
     cal_p.add_argument(
         "--nominal-kinematics",

@@ -1,7 +1,9 @@
 """The calibration pipeline: pair, extract features, solve, check the model, diagnose.
 
-This is the one pipeline. The CLI (offline, from a bag) and the calibration_service node
-(online, from collected samples) both call :func:`run_pipeline` or :func:`calibrate_samples`.
+This is the one pipeline. The CLI (offline, from a bag: :func:`run_pipeline`) and the
+calibration_service node (online, from collected samples) both enter it through
+:func:`calibrate_paired`; where a recording holds many profiles from nearly the same flange
+pose, a representative subset is kept (:mod:`.thinning`).
 What is scanned is a target (:mod:`linelaser_calib.core.targets`): the pipeline hands the
 samples to the chosen target's feature extraction, its ``paper`` or ``default`` solve and its
 model-fit checks, and never asks which target it is.
@@ -30,6 +32,7 @@ from scipy.optimize import minimize_scalar
 
 from .errors import CalibrationError, DegenerateError, InputError, PairingError
 from .geometry import FloatArray, check_transform
+from .latency import add_clock_diagnosis
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .regions import PLAIN_PRIOR_SCALE
 from .result import CalibrationResult
@@ -49,6 +52,7 @@ from .targets.base import (
     sample_rng,
 )
 from .targets.rivals import check_model
+from .thinning import DEFAULT_PER_NEIGHBOURHOOD, thin_samples
 from .types import FlangePose, Profile, Rejection, Sample
 from .verdict import no_self_check_reason
 
@@ -103,6 +107,10 @@ class PipelineConfig:
         Processes for the self-check's solves: 1, or 2 to share them with a forked child
         (:mod:`.forked`: same result, less wall time on a second core). Not for a process
         with threads that hold locks (a ROS node).
+    per_neighbourhood : int
+        Most samples kept from one neighbourhood of flange poses, evenly spaced in time
+        (:mod:`.thinning`: where thousands of profiles come from nearly the same pose); 0
+        keeps every sample.
     """
 
     method: Method = Method.DEFAULT
@@ -115,6 +123,7 @@ class PipelineConfig:
     self_check_folds: int = DEFAULT_FOLDS
     arm_accuracy_m: float = DEFAULT_ARM_ACCURACY_M
     workers: int = 1
+    per_neighbourhood: int = DEFAULT_PER_NEIGHBOURHOOD
 
     def __post_init__(self) -> None:
         if not (isinstance(self.seed, (int, np.integer)) and 0 <= self.seed < 2**32):
@@ -123,6 +132,12 @@ class PipelineConfig:
             )
         if self.self_check_folds < 0 or self.self_check_folds == 1:
             raise InputError(f"self_check_folds must be 0 or >= 2, got {self.self_check_folds}")
+        kept = self.per_neighbourhood
+        if not (isinstance(kept, (int, np.integer)) and kept >= 0):
+            raise InputError(
+                "the samples kept per neighbourhood of flange poses must be a whole number, 0 "
+                f"(keep all) or more, got {kept!r}"
+            )
         if not (np.isfinite(self.arm_accuracy_m) and self.arm_accuracy_m >= 0.0):
             raise InputError(
                 f"the arm accuracy must be a length of 0 m or more, got {self.arm_accuracy_m}"
@@ -151,8 +166,8 @@ class PipelineConfig:
 class Extracted:
     """Features already extracted from samples (by :func:`search_clock_offset`), for
     :func:`calibrate_samples` to use again where the target's features do not depend on the
-    flange poses (:func:`~.targets.base.feature_repairing`) and the samples are of the same
-    profiles.
+    flange poses (:func:`~.targets.base.feature_repairing`) and the samples are of profiles
+    among them.
 
     Attributes
     ----------
@@ -165,6 +180,18 @@ class Extracted:
     indices: tuple[int, ...]
     features: list[Any]
     rejections: list[Rejection]
+
+    def of(self, samples: list[Sample]) -> tuple[list[Any], list[Rejection]] | None:
+        """The features and rejections of the profiles of ``samples``, when every one of
+        them was extracted (a few at the ends of the recording may pair at the search's
+        offset only); None otherwise."""
+        wanted = {s.index for s in samples}
+        if not wanted <= set(self.indices):
+            return None
+        return (
+            [f for f in self.features if f.index in wanted],
+            [r for r in self.rejections if r.index in wanted],
+        )
 
 
 def _no_progress(stage: str, done: int, total: int) -> None:
@@ -296,13 +323,12 @@ def calibrate_samples(
         rejections += outside
         if outside:
             joint_notes.append(_outside_note(outside, "the recording"))
+    chosen = None if extracted is None else extracted.indices
+    samples, thinning = thin_samples(samples, config.per_neighbourhood, chosen)
     repairing = feature_repairing(target)
-    if (
-        extracted is not None
-        and repairing is not None
-        and extracted.indices == tuple(s.index for s in samples)
-    ):
-        features, feature_rejections = repairing(extracted.features, samples), extracted.rejections
+    reused = None if extracted is None or repairing is None else extracted.of(samples)
+    if repairing is not None and reused is not None:
+        features, feature_rejections = repairing(reused[0], samples), reused[1]
     else:
         features, feature_rejections = target.extract(
             samples, target_config, config.seed, progress, config.workers
@@ -400,6 +426,7 @@ def calibrate_samples(
             len(solution.samples_used),
             solution.sigma_translation_m is not None,
         ),
+        thinning=thinning,
     )
 
 
@@ -460,6 +487,36 @@ def _corrected_poses(
     return poses
 
 
+def calibrate_paired(
+    samples: list[Sample],
+    poses: list[FlangePose] | None,
+    config: PipelineConfig,
+    rejected: list[Rejection] | None = None,
+    notes: Sequence[str] = (),
+    progress: Progress = _no_progress,
+    placements: Sequence[tuple[list[Sample], KinematicSetup]] = (),
+    extracted: Extracted | None = None,
+    diagnose_clock: bool = True,
+) -> CalibrationResult:
+    """:func:`calibrate_samples` of samples paired with ``config.pairing`` from the flange
+    pose stream ``poses``, and what that pairing tells: its ``notes`` (warnings) first, the
+    pairing itself (``result.pairing``, its clock offset) and, with ``diagnose_clock``, the
+    test of a clock offset left out (:func:`~.latency.add_clock_diagnosis`, whose warning
+    goes first; off where the offset was estimated). Both paths enter here:
+    :func:`run_pipeline` with the recording's pose stream, the calibration service with the
+    poses of its samples. ``poses`` None: the pairing is not known (samples paired
+    elsewhere), and neither is recorded or tested."""
+    result = calibrate_samples(samples, config, rejected, progress, placements, extracted)
+    result.warnings[:0] = notes
+    if poses is None:
+        return result
+    result.clock_offset_s = config.pairing.clock_offset_s
+    result.pairing = config.pairing
+    if diagnose_clock:
+        add_clock_diagnosis(result, poses, config.pairing)
+    return result
+
+
 def run_pipeline(
     profiles: list[Profile],
     poses: list[FlangePose],
@@ -467,11 +524,13 @@ def run_pipeline(
     progress: Progress = _no_progress,
     placements: Sequence[tuple[list[Sample], KinematicSetup]] = (),
     extracted: Extracted | None = None,
+    diagnose_clock: bool = True,
 ) -> CalibrationResult:
-    """Pair profiles with flange poses, then :func:`calibrate_samples` (the offline path).
+    """Pair profiles with flange poses, then :func:`calibrate_paired` (the offline path).
 
     ``placements`` are other recordings' samples for a joint calibration, ``extracted`` the
-    features of a clock-offset search (:func:`calibrate_samples`).
+    features of a clock-offset search (:func:`calibrate_samples`); ``diagnose_clock`` False
+    where the clock offset was estimated.
 
     Raises
     ------
@@ -486,12 +545,17 @@ def run_pipeline(
     progress("pairing", len(profiles), len(profiles))
     if not paired.samples:
         raise PairingError(paired.explain_nothing_paired(config.pairing))
-    result = calibrate_samples(
-        paired.samples, config, paired.rejected, progress, placements, extracted
+    return calibrate_paired(
+        paired.samples,
+        poses,
+        config,
+        paired.rejected,
+        paired.notes,
+        progress,
+        placements,
+        extracted,
+        diagnose_clock,
     )
-    result.warnings[:0] = paired.notes
-    result.clock_offset_s = config.pairing.clock_offset_s
-    return result
 
 
 #: History keys (``CalibrationResult.history``) of the clock offsets tried by
@@ -536,11 +600,12 @@ def search_clock_offset(
     paired = pair_profiles(profiles, poses, moving)
     if not paired.samples:
         raise PairingError(paired.explain_nothing_paired(config.pairing))
+    samples, _ = thin_samples(paired.samples, config.per_neighbourhood)
     features, rejections = target.extract(
-        paired.samples, target_config, config.seed, progress, config.workers
+        samples, target_config, config.seed, progress, config.workers
     )
     context = SolveContext(seed=config.seed, rejections=rejections, n_samples=len(paired.samples))
-    extracted = Extracted(tuple(s.index for s in paired.samples), features, rejections)
+    extracted = Extracted(tuple(s.index for s in samples), features, rejections)
     cost_of_poses = target.offset_cost(features, target_config, context)
     if cost_of_poses is None:
         raise InputError(

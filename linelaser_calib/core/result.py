@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from .robot.kinematics import KinematicCorrections
     from .selfcheck import SelfCheck
     from .targets.base import ResultSection
+    from .thinning import Thinning
 
 
 @dataclass
@@ -85,6 +86,9 @@ class CalibrationResult:
     clock_diagnosis : ClockOffsetDiagnosis or None
         Whether the residual follows the flange's velocity (:mod:`.latency`); None where the
         test did not run (step-and-shoot, an estimated offset, live pairing).
+    thinning : Thinning or None
+        The near-duplicate samples set aside before the solve (:mod:`.thinning`): how many
+        were kept of how many, and the rule; None where every sample was kept.
     """
 
     T_flange_sensor: FloatArray
@@ -116,3 +120,4 @@ class CalibrationResult:
     verdict: Verdict | None = None
     pairing: PairingConfig | None = None
     clock_diagnosis: ClockOffsetDiagnosis | None = None
+    thinning: Thinning | None = None

@@ -18,7 +18,9 @@ The result file layout (the README's "Result file")::
               method: ..., samples_used: N, samples_rejected: [...], rms_residual_m: ...,
               warnings: [...], accuracy_in_use_m: ..., accuracy_in_use: {...}, self_check: {...},
               pairing: {sync_tolerance_s, clock_offset_s, max_linear_speed_m_s,
-                        max_angular_speed_rad_s, speed_window_s, clock_offset_diagnosis: {...}}}
+                        max_angular_speed_rad_s, speed_window_s, clock_offset_diagnosis: {...}},
+              thinning: {samples_kept, samples_given, neighbourhoods, neighbourhoods_thinned,
+                         per_neighbourhood, cell_m, cell_rad}}
 
 The target's section (``cylinder`` above; ``known_point``, ...) is the target's own: its
 name, content and extra ``quality`` entries (the cylinder's ``radius_estimated``) come from
@@ -258,6 +260,26 @@ def _pairing_entry(result: CalibrationResult) -> dict[str, Any]:
     return {"pairing": section}
 
 
+def _thinning_entry(result: CalibrationResult) -> dict[str, Any]:
+    """``quality.thinning``: the near-duplicate samples set aside before the solve
+    (:mod:`~linelaser_calib.core.thinning`): counts and the rule (m, rad); absent where the
+    rule was off."""
+    thinning = result.thinning
+    if thinning is None:
+        return {}
+    return {
+        "thinning": {
+            "samples_kept": int(thinning.kept),
+            "samples_given": int(thinning.total),
+            "neighbourhoods": int(thinning.neighbourhoods),
+            "neighbourhoods_thinned": int(thinning.thinned),
+            "per_neighbourhood": int(thinning.per_neighbourhood),
+            "cell_m": float(thinning.cell_m),
+            "cell_rad": float(thinning.cell_rad),
+        }
+    }
+
+
 def _read_pairing(quality: _Fields) -> PairingConfig | None:
     """The result's ``quality.pairing`` (None when the file has none)."""
     if not quality.has("pairing"):
@@ -328,6 +350,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
                 if value is not None
             },
             **_pairing_entry(result),
+            **_thinning_entry(result),
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())

@@ -7,13 +7,15 @@
   whole session again) and joins them by exact stamp in a bounded
   :class:`~linelaser_calib.nodes.sample_store.SampleStore`. A new collector session
   (``linelaser_calib/session``) drops the samples of the previous one.
-- ``calibrate`` (std_srvs/Trigger) runs
-  :func:`~linelaser_calib.core.pipeline.calibrate_samples` in its own callback group on a
-  MultiThreadedExecutor, so samples keep arriving during a solve. The pipeline
-  configuration is built from the parameters at each call (:func:`pipeline_config`):
-  ``target`` (a registered target: cylinder, known_point, ...), ``method``, the target's
-  settings (``radius``, ``known_point``, ``min_samples``; one that does not act on the target
-  and method is refused), and an optional initial hand-eye read from
+- ``calibrate`` (std_srvs/Trigger) runs the one pipeline as offline
+  (:func:`~linelaser_calib.nodes.live_calibration.calibrate_live`: the collector's pairing,
+  the near-duplicate rule ``per_neighbourhood``, the test of a clock offset left out) in
+  its own callback group on a MultiThreadedExecutor, so samples keep arriving during a
+  solve. The pipeline configuration is built from the parameters at each call
+  (:func:`~linelaser_calib.nodes.live_calibration.pipeline_config`): ``target`` (a
+  registered target: cylinder, known_point, ...), ``method``, the target's settings
+  (``radius``, ``known_point``, ``min_samples``; one that does not act on the target and
+  method is refused), and an optional initial hand-eye read from
   ``initial_hand_eye_path``. A second call during a solve, no samples, too few or
   degenerate samples, data the target's model does not fit, or an unusable initial hand-eye
   file answer ``success: false`` with the reason; the node keeps running.
@@ -28,12 +30,14 @@
   result YAML to
   ``output_path`` atomically. A failed calibration leaves the last good file.
 - With ``kinematics`` set (a robot model: ur5e, ur10e, a URDF), ``calibrate`` runs the joint
-  kinematic + hand-eye calibration instead (:func:`calibrate_session`): the offline path on
+  kinematic + hand-eye calibration instead
+  (:func:`~linelaser_calib.nodes.live_calibration.calibrate_session`): the offline path on
   the collector's session bag, whose samples carry the joint vectors the collector stored
   (pose_source joint_states). The answer says how many kinematic corrections were estimated;
   the result YAML has its ``kinematics`` section. A session without joint states is refused.
   ``~/plan`` then also says whether another placement of the cylinder would determine more
-  of the kinematics, and how to move it (:func:`session_placement_advice`).
+  of the kinematics, and how to move it
+  (:func:`~linelaser_calib.nodes.live_calibration.session_placement_advice`).
 - ``~/plan`` (std_srvs/Trigger) plans the next ``plan_poses`` flange poses that most reduce
   the hand-eye's predicted uncertainty (:func:`~linelaser_calib.core.planning.plan_for_target`),
   from the last calibration (or, before one, from ``initial_hand_eye_path`` with the samples
@@ -45,11 +49,9 @@
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 import traceback
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -64,20 +66,14 @@ from std_msgs.msg import Float64MultiArray, String
 from std_srvs.srv import Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
-from linelaser_calib.core.errors import CalibrationError, InputError
-from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.pipeline import Method, PipelineConfig, calibrate_samples
+from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.pipeline import Method, PipelineConfig
 from linelaser_calib.core.planning import Plan, PlanConstraints, fan_shape, plan_for_target
-from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
-from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig
 from linelaser_calib.core.selfcheck import DEFAULT_ARM_ACCURACY_M
-from linelaser_calib.core.targets import DEFAULT_TARGET, get_target
-from linelaser_calib.core.targets.base import placement_adviser
+from linelaser_calib.core.targets import DEFAULT_TARGET
+from linelaser_calib.core.thinning import DEFAULT_PER_NEIGHBOURHOOD
 from linelaser_calib.io import write_result_yaml
-from linelaser_calib.io.bags import JOINT_STATE_TYPE, bag_info, read_joint_states
-from linelaser_calib.io.initial import read_initial_hand_eye
-from linelaser_calib.nodes.clock_offset import DRIFT_FLOOR_S
 from linelaser_calib.nodes.collection import COLLECTION_STATUS, KEY_NOTHING_ACCEPTED
 from linelaser_calib.nodes.common import (
     CALIBRATE_SERVICE,
@@ -93,12 +89,16 @@ from linelaser_calib.nodes.common import (
     parameter_values,
     run_node,
 )
-from linelaser_calib.nodes.joint_state_input import live_kinematic_model
+from linelaser_calib.nodes.live_calibration import (
+    add_live_clock_offset,
+    calibrate_live,
+    calibrate_session,
+    pipeline_config,
+    session_placement_advice,
+)
 from linelaser_calib.nodes.sample_store import SampleStore, points_in_base
 from linelaser_calib.nodes.tf_output import static_tf_publisher
-from linelaser_calib.offline import Recording, bag_samples, calibrate_bag
-from linelaser_calib.settings import Front, given_from_parameters, render, render_warnings
-from linelaser_calib.settings import pipeline_config as settings_pipeline_config
+from linelaser_calib.settings import Front, render, render_warnings
 from linelaser_calib.summary import one_line_summary, self_check_rows
 from msg_adapters import (
     MessageError,
@@ -207,6 +207,14 @@ PARAMETERS = (
         bounds=(0.0, 1.0),
     ),
     ParamSpec(
+        "per_neighbourhood",
+        DEFAULT_PER_NEIGHBOURHOOD,
+        "Most samples kept from one neighbourhood of flange poses (50 mm x 8 deg), evenly "
+        "spaced in time, where a long session holds more from nearly the same pose (the "
+        "result's quality.thinning); 0 keeps every sample.",
+        bounds=(0, 100000),
+    ),
+    ParamSpec(
         "diagnostics_period_s",
         1.0,
         "Period of the /diagnostics status (samples held), s.",
@@ -267,110 +275,6 @@ PARAMETERS = (
 )
 
 
-def pipeline_config(
-    values: dict[str, Any], warn: Callable[[str], None] = lambda line: None
-) -> PipelineConfig:
-    """The pipeline configuration from the parameter values in effect (by name).
-
-    ``radius`` 0, ``known_point`` [], ``min_samples`` 0, ``scale`` '' and
-    ``initial_hand_eye_path`` '' mean "not given"; a given one that does not act on the
-    target and method is refused. ``warn`` receives one line per value of the initial
-    hand-eye that was normalised.
-
-    Raises
-    ------
-    CalibrationError
-        ``initial_hand_eye_path`` cannot be read as a result file, a setting does not apply,
-        or the method needs a setting that is not given (e.g. paper with known_point).
-    """
-    settings: dict[str, Any] = {}
-    if values["initial_hand_eye_path"]:
-        try:
-            initial, warnings = read_initial_hand_eye(values["initial_hand_eye_path"])
-        except CalibrationError as err:
-            raise type(err)(
-                f"cannot use initial_hand_eye_path: {err} (or set it to '' for none)"
-            ) from err
-        for line in warnings:
-            warn(f"initial_hand_eye_path: {line}")
-        settings["initial"] = initial
-    settings.update(given_from_parameters(values))
-    return settings_pipeline_config(
-        values["target"],
-        Method(values["method"]),
-        settings,
-        Front.NODE,
-        seed=values["seed"],
-        arm_accuracy_m=float(values["arm_accuracy"]),
-    )
-
-
-def calibrate_session(
-    session: str | None, values: dict[str, Any], warn: Callable[[str], None] = lambda line: None
-) -> CalibrationResult:
-    """The joint kinematic + hand-eye calibration of the collector's session (the
-    ``kinematics`` parameter set): the offline path on the session bag
-    (:func:`~linelaser_calib.offline.calibrate_bag`), the flange poses the model's forward
-    kinematics of the joint states the collector stored with each sample.
-
-    Raises
-    ------
-    CalibrationError
-        No session known, a session without joint states, an unusable model, or what the
-        calibration itself refuses.
-    """
-    model_spec = str(values["kinematics"])
-    if session is None:
-        raise InputError(
-            f"kinematics is {model_spec!r}, so the calibration reads the collector's session, "
-            "but no collector has announced one: start the collector (pose_source "
-            "joint_states) and scan the target"
-        )
-    if not any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(session).topics):
-        raise InputError(
-            f"kinematics is {model_spec!r} but the session {session} holds no joint states: "
-            "run the collector with pose_source joint_states (it stores each sample's joint "
-            "vector), or set kinematics to '' for the hand-eye alone"
-        )
-    model = live_kinematic_model(model_spec, values["base_frame"], values["flange_frame"])
-    recording = Recording(
-        session,
-        pose_source=PoseSource.JOINT_STATES,
-        base_frame=values["base_frame"],
-        flange_frame=values["flange_frame"],
-        model=model,
-    )
-    run = calibrate_bag(
-        recording, pipeline_config(values, warn), kinematic_calibration=JointCalibrationConfig()
-    )
-    return run.result
-
-
-def session_placement_advice(
-    session: str | None, values: dict[str, Any], result: CalibrationResult | None
-) -> str:
-    """``~/plan`` with ``kinematics`` set: whether another placement of the cylinder would
-    determine more of the robot's kinematics, from the session's samples and joint states
-    and the last calibration (its cylinder and corrections); a clause saying what is
-    missing otherwise."""
-    adviser = None if result is None else placement_adviser(get_target(result.target.key))
-    placement = None if result is None or adviser is None else adviser.placement_of(result.target)
-    if result is None or adviser is None or placement is None:
-        return "placements: calibrate the cylinder first to learn how many are needed"
-    if session is None or not any(t.msgtype == JOINT_STATE_TYPE for t in bag_info(session).topics):
-        return "placements: the session holds no joint states (collector pose_source joint_states)"
-    model = live_kinematic_model(
-        str(values["kinematics"]), values["base_frame"], values["flange_frame"]
-    )
-    if result.kinematics is not None:
-        model = result.kinematics.apply(model)
-    samples = bag_samples(session, PairingConfig())
-    states = read_joint_states(session)
-    return "placements: " + adviser.advise(
-        [(samples, states, placement)], model, result.T_flange_sensor
-    )
-
-
 def kinematics_summary(result: CalibrationResult) -> str:
     """What a joint calibration estimated, in one clause ('' without one)."""
     corrections = result.kinematics
@@ -402,30 +306,6 @@ def second_parent_warning(parents: dict[str, str], child: str, parent: str) -> s
         f"tree. Remove the other transform (replace the URDF joint with `linelaser-calib "
         f"export RESULT.yaml --format urdf`), or give the sensor another frame name "
         f"(sensor_frame)"
-    )
-
-
-def add_live_clock_offset(
-    result: CalibrationResult, used_s: float, estimate_s: float, sigma_s: float
-) -> None:
-    """Put the collector's clock offsets in the result (NaN: no estimate, or no 1σ yet).
-
-    ``used_s`` is what the collector added to the profile stamps when pairing. A warning
-    says so when the live estimate disagrees with it by more than three sigma and
-    ``DRIFT_FLOOR_S``: the samples were then paired with poses from the wrong moment.
-    """
-    result.clock_offset_s = used_s
-    if math.isnan(estimate_s):
-        return
-    result.clock_offset_live_s = estimate_s
-    result.clock_offset_live_sigma_s = None if math.isnan(sigma_s) else sigma_s
-    if math.isnan(sigma_s) or abs(estimate_s - used_s) <= max(3.0 * sigma_s, DRIFT_FLOOR_S):
-        return
-    result.warnings.append(
-        f"the collector estimates the profile-to-pose clock offset live at "
-        f"{estimate_s * 1e3:+.2f} +- {sigma_s * 1e3:.2f} ms (1 sigma) but paired the samples "
-        f"with {used_s * 1e3:+.2f} ms: set the collector's clock_offset_s to "
-        f"{estimate_s:.4f} and collect again"
     )
 
 
@@ -643,18 +523,19 @@ class CalibrationServiceNode(Node):
             f"calibrating from {len(samples)} samples (target {p['target']}, method {p['method']})"
         )
         start = time.monotonic()
+        live = list(self._clock_offset)
         try:
             if p["kinematics"]:
                 result = calibrate_session(self._store.session, p, self._warn)
             else:
-                result = calibrate_samples(samples, pipeline_config(p, self._warn))
+                result = calibrate_live(samples, live, p, self._warn)
         except CalibrationError as err:
             return False, str(err)
         result.parent_frame = p["flange_frame"]
         result.child_frame = p["sensor_frame"]
         result.base_frame = p["base_frame"]
-        if len(self._clock_offset) == 4:
-            add_live_clock_offset(result, *self._clock_offset[:3])
+        if len(live) >= 4:
+            add_live_clock_offset(result, *live[:3])
         render_warnings(result, Front.NODE)
         summary = one_line_summary(result, len(samples)) + kinematics_summary(result)
         self._self_check = self_check_rows(result, Front.NODE)

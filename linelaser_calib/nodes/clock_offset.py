@@ -8,13 +8,14 @@ values.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError
-from linelaser_calib.core.pairing import NS_PER_S
+from linelaser_calib.core.pairing import NS_PER_S, PairingConfig
 from linelaser_calib.core.pipeline import PipelineConfig, search_clock_offset
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.settings import Front, render
@@ -191,3 +192,36 @@ def offset_values(estimate: OffsetEstimate) -> dict[str, str]:
         "clock offset batches": str(estimate.batches),
         "clock offset latest batch (ms)": f"{estimate.latest_s * 1e3:+.3f}",
     }
+
+
+def offset_message(pairing: PairingConfig, estimate: OffsetEstimate | None) -> list[float]:
+    """The data of the collector's ``linelaser_calib/clock_offset`` message: the clock offset
+    it pairs with, the live estimate, its 1σ (s; NaN where none yet) and the batches, then
+    the rest of its pairing: sync tolerance (s), speed limits (m/s, rad/s), speed window (s)."""
+    if estimate is None:
+        head = [pairing.clock_offset_s, math.nan, math.nan, 0.0]
+    else:
+        sigma = math.nan if estimate.sigma_s is None else estimate.sigma_s
+        head = [pairing.clock_offset_s, estimate.offset_s, sigma, float(estimate.batches)]
+    return [
+        *head,
+        pairing.sync_tolerance_s,
+        pairing.max_linear_speed_m_s,
+        pairing.max_angular_speed_rad_s,
+        pairing.speed_window_s,
+    ]
+
+
+def pairing_of_message(data: list[float]) -> PairingConfig | None:
+    """The collector's pairing from the data of :func:`offset_message` (None before one
+    arrived, or from a collector that does not send it)."""
+    if len(data) != 8:
+        return None
+    offset, _, _, _, tolerance, linear, angular, window = data
+    return PairingConfig(
+        sync_tolerance_s=tolerance,
+        clock_offset_s=offset,
+        max_linear_speed_m_s=linear,
+        max_angular_speed_rad_s=angular,
+        speed_window_s=window,
+    )

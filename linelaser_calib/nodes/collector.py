@@ -37,7 +37,6 @@ topics. The logic lives in
 from __future__ import annotations
 
 import datetime
-import math
 import threading
 import time
 from collections.abc import Generator
@@ -61,7 +60,12 @@ from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.tf import base_frame_warning
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.io import BagError, SessionBagWriter
-from linelaser_calib.nodes.clock_offset import ClockOffsetTracker, OffsetEstimate, offset_values
+from linelaser_calib.nodes.clock_offset import (
+    ClockOffsetTracker,
+    OffsetEstimate,
+    offset_message,
+    offset_values,
+)
 from linelaser_calib.nodes.collection import (
     COLLECTION_STATUS,
     KEY_NOTHING_ACCEPTED,
@@ -139,6 +143,7 @@ class CollectorNode(Node):
             if pose_source is PoseSource.JOINT_STATES
             else None
         )
+        # Every sample of a live clock-offset batch counts (a batch is short already).
         self._pipeline = pipeline_config(
             p["target"],
             Method.DEFAULT,
@@ -146,6 +151,7 @@ class CollectorNode(Node):
             Front.NODE,
             seed=p["seed"],
             pairing=pairing,
+            per_neighbourhood=0,
         )
         self._types = rclpy_types()
         self._collector = LiveCollector(config, self._log_new_reason)
@@ -483,13 +489,9 @@ class CollectorNode(Node):
         self._publish_offset(estimate)
 
     def _publish_offset(self, estimate: OffsetEstimate | None) -> None:
-        """Publish the pairing's clock offset and the live estimate (see CLOCK_OFFSET_TOPIC)."""
-        used = self._pipeline.pairing.clock_offset_s
-        if estimate is None:
-            data = [used, math.nan, math.nan, 0.0]
-        else:
-            sigma = math.nan if estimate.sigma_s is None else estimate.sigma_s
-            data = [used, estimate.offset_s, sigma, float(estimate.batches)]
+        """Publish the pairing's clock offset, the live estimate and the rest of the pairing
+        (see CLOCK_OFFSET_TOPIC)."""
+        data = offset_message(self._pipeline.pairing, estimate)
         self._offset_pub.publish(Float64MultiArray(data=data))
 
     # -- capture -------------------------------------------------------------------------

@@ -51,8 +51,10 @@ SAMPLE_POSE_TOPIC = "linelaser_calib/samples/flange_pose"
 #: The collector's current session directory (std_msgs/String, latched).
 SESSION_TOPIC = "linelaser_calib/session"
 #: The collector's clock offset (std_msgs/Float64MultiArray, latched): [offset it adds to
-#: profile stamps for pairing (s), live estimate (s), its 1 sigma (s), batches]; NaN where
-#: there is no estimate (yet) or fewer than two batches.
+#: profile stamps for pairing (s), live estimate (s), its 1 sigma (s), batches, then the rest
+#: of its pairing: sync tolerance (s), speed limits (m/s, rad/s), speed window (s)]; NaN where
+#: there is no estimate (yet) or fewer than two batches (:mod:`.clock_offset` writes and
+#: reads it).
 CLOCK_OFFSET_TOPIC = "linelaser_calib/clock_offset"
 #: Results of the calibration service.
 HAND_EYE_TOPIC = "linelaser_calib/hand_eye"
