@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .errors import CalibrationError, DegenerateError, InputError, PairingError
+from .errors import CalibrationError, DegenerateError, InputError, PairingError, TooFewFeatures
 from .geometry import FloatArray, check_transform
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
 from .regions import PLAIN_PRIOR_SCALE
@@ -48,7 +48,7 @@ from .targets.base import (
     rejection_digest,
     sample_rng,
 )
-from .targets.rivals import check_model
+from .targets.rivals import check_model, refuse_without_fit
 from .types import FlangePose, Profile, Rejection, Sample
 from .verdict import no_self_check_reason
 
@@ -334,7 +334,11 @@ def calibrate_samples(
         placements=others,
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
-    solution = solve[config.method](features, target_config, context)
+    try:
+        solution = solve[config.method](features, target_config, context)
+    except TooFewFeatures as refusal:
+        refuse_without_fit(target, samples, refusal, context)
+        raise
     check_model(target, target_config, samples, features, solution, context)
     if placements and solution.kinematics is None:
         raise InputError(
