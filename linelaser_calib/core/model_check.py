@@ -356,18 +356,8 @@ def recording_outliers(values_m: ArrayLike, sigmas: float, model: str) -> list[t
 
 @dataclass(frozen=True)
 class RivalRejection(Rejection):
-    """A profile a rival shape fits clearly better than the target's model.
-
-    Attributes
-    ----------
-    rival : str
-        The rival's name (:attr:`ShapeFit.name`).
-    detail : str
-        The comparison in words (:meth:`Comparison.describe`).
-    """
-
-    rival: str = ""
-    detail: str = ""
+    """A profile a rival shape fits clearly better than the target's model (its reason gives
+    the comparison's numbers)."""
 
 
 def rival_rejection(
@@ -376,10 +366,7 @@ def rival_rejection(
     """The rejection of a profile whose rival fits clearly better: ``not_the_shape`` (what
     the profile is not, e.g. "no circular arc") and the comparison's numbers."""
     assert comparison.rival is not None
-    detail = comparison.describe()
-    return RivalRejection(
-        index, stamp_ns, stage, f"{not_the_shape}: {detail}", comparison.rival.name, detail
-    )
+    return RivalRejection(index, stamp_ns, stage, f"{not_the_shape}: {comparison.describe()}")
 
 
 def shape_doubt(comparisons: Sequence[tuple[int, Comparison | None]], shape: str) -> str | None:

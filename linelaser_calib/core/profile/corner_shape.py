@@ -94,9 +94,5 @@ def corner_rival_rejection(
 ) -> RivalRejection:
     """The rejection of a profile that a rival describes better than a V (``not_the_shape``:
     :data:`NOT_A_V` when the rival fits clearly better, :data:`NOT_TWO_LINES` when one line
-    fits as well as the two); its detail says which."""
-    rejection = rival_rejection(index, stamp_ns, "corner", not_the_shape, comparison)
-    if not_the_shape == NOT_A_V:
-        return rejection
-    detail = f"one straight line fits it as well as two: {rejection.detail}"
-    return replace(rejection, detail=detail)
+    fits as well as the two)."""
+    return rival_rejection(index, stamp_ns, "corner", not_the_shape, comparison)
