@@ -65,6 +65,7 @@ class Target:
     name = "ball"
     title = "ball"
     rivals = ("tube",)
+    soft_fit_check = True
 
     def __init__(self, check_fails: bool = False, shapes_doubt: bool = False) -> None:
         self.check_fails = check_fails
@@ -142,6 +143,10 @@ def test_a_failed_check_that_the_rival_explains_far_worse_is_a_warning(
     assert (
         "5 times the noise" in warning and "the tube fitted with the poses leaves 5000.0" in warning
     )
+    hard = Target(check_fails=True)
+    hard.soft_fit_check = False  # e.g. the seam targets: their check is never overruled
+    with pytest.raises(ModelMismatch, match="5 times the noise"):
+        check(hard, solution(1e-4))
     rival_leaves["distance_m"] = 1.5e-4  # no clear winner either way: the check refuses
     with pytest.raises(ModelMismatch, match="On the whole recording, the tube fitted"):
         check(Target(check_fails=True), solution(1e-4))

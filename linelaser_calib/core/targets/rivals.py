@@ -25,11 +25,13 @@ models (:func:`check_model`, called by the pipeline after the solve; and
 3. **Otherwise** the data are still consistent with the target when a rival was fitted and
    every rival leaves :data:`CLEAR_FACTOR` times more. A fit that needs a robot error
    :data:`MISFIT_ROBOT_EXCESS` times the prior is refused as a misfit unless they are (its
-   warnings say how large the error is); a failed fit check is refused too unless they are
-   or no rival could be fitted at all (it then becomes a warning with the figures), but one
-   that failed on the robot's error is always refused, in the target's own words (e.g. a
-   sphere centre given on the wrong side). A target that names no rival keeps its fit
-   check's refusals.
+   warnings say how large the error is). A failed fit check is refused too, in the target's
+   own words with the figures; only a target whose check a real profiler's shape error
+   alone may fail (its optional ``soft_fit_check``: the sphere's and the cylinder's residual
+   against what each profile's own shape fit leaves) keeps a result whose check failed where
+   every rival is clearly worse or none could be fitted at all (it then becomes a warning
+   with the figures), but never one that failed on the robot's error (e.g. a sphere centre
+   given on the wrong side). A target that names no rival keeps its fit check's refusals.
 
 Where too few profiles show the target's feature to solve at all (a ball's arcs given to the
 line target, a V given to the sphere; :class:`~linelaser_calib.core.errors.TooFewFeatures`),
@@ -221,8 +223,10 @@ def check_model(
     )
     # Every rival fitted leaves CLEAR_FACTOR times more (and one at least was fitted) ...
     consistent = bool(judged) and judged[0].rms_m >= CLEAR_FACTOR * own.rms_m
-    # ... or, for a failed residual check, no rival could be fitted at all.
-    unrivalled = bool(declared) and (consistent or not judged)
+    # ... or, for a failed residual check, no rival could be fitted at all; kept only where
+    # the target's check is a soft one.
+    soft = bool(getattr(target, "soft_fit_check", False))
+    unrivalled = soft and bool(declared) and (consistent or not judged)
     if problem is not None and (robot_misfit or not unrivalled):
         raise ModelMismatch(_inserted(str(problem), compared))
     if robot_misfit and not consistent:
