@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linelaser_calib.cli import main
 from linelaser_calib.core.errors import CalibrationError, DegenerateError
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
@@ -48,19 +47,6 @@ def test_a_real_like_profile_with_shape_error_is_an_arc(radius_m: float | None) 
     assert fitted.ellipse.inliers.mean() > 0.9
     # One partial arc with a bow pins its semi-minor axis only loosely (here 12 % off).
     assert fitted.ellipse.semi_axes[1] == pytest.approx(RADIUS, rel=0.2)
-
-
-def test_v_seam_scans_given_to_the_cylinder_are_refused_naming_the_seam(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    out = tmp_path / "result.yaml"
-    code = main(
-        ["calibrate", str(BAGS / "weld_seam"), "--target", "cylinder", "--output", str(out)]
-    )
-    assert code == 1 and not out.exists()
-    err = capsys.readouterr().err
-    assert "no elliptical arc" in err and "line pair" in err and "--target known_point" in err
-    assert "Traceback" not in err
 
 
 def test_partial_arcs_with_a_free_radius_calibrate() -> None:

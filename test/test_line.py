@@ -322,28 +322,3 @@ def test_calibrate_the_committed_line_bag(tmp_path: Path) -> None:
     line = result.target.line  # type: ignore[attr-defined]
     truth_line = truth.target.line  # type: ignore[attr-defined]
     np.testing.assert_allclose(line.point, truth_line.point, atol=5e-4)
-
-
-def test_known_point_on_a_straight_seam_s_sweep_is_refused(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    out = tmp_path / "result.yaml"
-    code = main(
-        [
-            "calibrate",
-            str(BAG),
-            "--target",
-            "known_point",
-            "--max-speed",
-            "0",
-            "--max-angular-speed",
-            "0",
-            "--clock-offset",
-            "-0.012",
-            "--output",
-            str(out),
-        ]
-    )
-    assert code == 1 and not out.exists()
-    err = capsys.readouterr().err
-    assert "does not fit" in err and "line target" in err

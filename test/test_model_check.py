@@ -128,7 +128,8 @@ def test_v_seam_scans_given_to_the_sphere_are_refused_naming_the_seam(
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert not out.exists() and "No result was written" in err
-    assert "better described by a line pair" in err and "--target known_point" in err
+    assert "only 0 profiles show a usable circle" in err and "--target known_point" in err
+    assert "the known point fitted with the poses explains 20 of the 20 recorded" in err
 
 
 def test_the_recording_scale_sets_aside_only_its_own_outliers() -> None:

@@ -104,7 +104,7 @@ def test_the_recording_chooses_the_ridge_beside_a_floor_and_sets_aside_a_lone_fl
     corners = [c for c in outcomes if isinstance(c, CornerSample)]
     assert len(corners) == 10
     assert sum(1 for c in corners if c.alternatives) >= 8
-    kept, rejections = check_corner_recording("straight line", corners, [], 6.0)
+    kept, rejections = check_corner_recording(corners, [], 6.0)
     assert [c.index for c in kept] == list(range(9))
     for c in kept:
         assert np.linalg.norm(c.corner_xz - APEX) < 1e-4 and not c.alternatives

@@ -1,21 +1,32 @@
 """The whole recording decides the target (core/targets/rivals.py): a rival's full fit is
-compared only where the target's own fit is in doubt, refuses only when it is clearly better
-(naming it with both figures), and a failed check that every rival explains clearly worse is
-kept with a warning. The real cases (a ball given to the cylinder, cylinder scans given to the
-sphere) are in test_robcalibrator.py and test_sphere.py; here the decisions, on stand-ins."""
+compared only where the target's own fit is in doubt or too few profiles show its feature,
+refuses only when it is clearly better (naming it with both figures), and a failed check
+that every rival explains clearly worse is kept with a warning. The decisions on stand-ins;
+then the seam targets' recordings given to each other, and arcs given to the line target,
+through the pipeline. The real cases (a ball given to the cylinder, whose single profiles
+mostly prefer a conic yet which calibrates as a sphere; cylinder scans given to the sphere)
+are in test_robcalibrator.py and test_sphere.py; every wrong-target pair of the simulator is
+in test_stress_matrix.py (slow)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import pytest
 
-from linelaser_calib.core.errors import ModelMismatch
+from linelaser_calib.core.errors import ModelMismatch, TooFewFeatures
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pipeline import Method, calibrate_samples
 from linelaser_calib.core.targets import rivals
 from linelaser_calib.core.targets.base import RobotError, SolveContext, TargetSolution
 from linelaser_calib.core.types import SampleFit
+from linelaser_calib.settings import Front, pipeline_config
+from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
+from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
+from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
 
 
 @dataclass
@@ -54,6 +65,7 @@ class Target:
     name = "ball"
     title = "ball"
     rivals = ("tube",)
+    soft_fit_check = True
 
     def __init__(self, check_fails: bool = False, shapes_doubt: bool = False) -> None:
         self.check_fails = check_fails
@@ -73,11 +85,16 @@ class Target:
 @pytest.fixture
 def rival_leaves(monkeypatch: pytest.MonkeyPatch) -> Any:
     """Set what the rival's full fit leaves (None: it cannot be fitted); counts its fits."""
-    state: dict[str, Any] = {"distance_m": None, "fits": 0}
+    state: dict[str, Any] = {"distance_m": None, "fits": 0, "check_fails": False}
 
     class Tube:
         name = "tube"
         title = "tube"
+        config_type = dict
+
+        def check_fit(self, solution: TargetSolution, config: Any) -> None:
+            if state["check_fails"]:
+                raise ModelMismatch("the tube model does not fit these data")
 
     def fit(name: str, samples: Any, context: Any) -> Any:
         state["fits"] += 1
@@ -126,8 +143,12 @@ def test_a_failed_check_that_the_rival_explains_far_worse_is_a_warning(
     assert (
         "5 times the noise" in warning and "the tube fitted with the poses leaves 5000.0" in warning
     )
+    hard = Target(check_fails=True)
+    hard.soft_fit_check = False  # e.g. the seam targets: their check is never overruled
+    with pytest.raises(ModelMismatch, match="5 times the noise"):
+        check(hard, solution(1e-4))
     rival_leaves["distance_m"] = 1.5e-4  # no clear winner either way: the check refuses
-    with pytest.raises(ModelMismatch, match="A rival fitted with the poses does no better"):
+    with pytest.raises(ModelMismatch, match="On the whole recording, the tube fitted"):
         check(Target(check_fails=True), solution(1e-4))
 
 
@@ -142,3 +163,81 @@ def test_a_robot_error_twenty_times_the_prior_is_a_misfit_unless_the_rival_is_fa
 
 def test_a_rival_that_cannot_calibrate_is_not_a_winner() -> None:
     assert rivals._rival_solution("sphere", [], SolveContext()) is None
+
+
+def refuse(found: int) -> None:
+    """The ball target's refusal for want of features, ``found`` of 10 showing one."""
+    refusal = TooFewFeatures(
+        f"only {found} of 10 recorded profiles show a ball, and at least 6 are needed. "
+        "Rejected: ...",
+        found,
+    )
+    rivals.refuse_without_fit(Target(), [], refusal, SolveContext(n_samples=10))  # type: ignore[arg-type]
+
+
+def test_too_few_features_name_only_a_rival_that_explains_clearly_more(rival_leaves: Any) -> None:
+    refuse(found=0)  # no rival could be fitted: the ball's own refusal stands
+    rival_leaves["distance_m"] = 2e-5
+    with pytest.raises(ModelMismatch) as refused:
+        refuse(found=2)
+    text = str(refused.value)
+    assert "only 2 of 10 recorded profiles show a ball, and at least 6 are needed; but" in text
+    assert "the tube fitted with the poses explains 10 of the 10 recorded profiles and " in text
+    assert "leaves 20.0 um RMS" in text and "choose {setting:target} tube" in text
+    refuse(found=6)  # the tube explains fewer than twice as many profiles
+    rival_leaves["check_fails"] = True
+    refuse(found=0)  # the tube's fit fails its own check: it explains nothing
+
+
+def _samples(recording: str) -> tuple[list[Any], PairingConfig]:
+    """Paired samples of a small simulated recording, and its pairing: a straight seam swept
+    in motion (``line``), one weld point (``known_point``) or a ball (``sphere``)."""
+    if recording == "line":
+        scenario = line_scenario_from_preset(
+            "line", n_poses=12, resolution=640, profile_rate_hz=10.0
+        )
+        data: Any = simulate_line(scenario, 3)
+        pairing = PairingConfig(
+            max_linear_speed_m_s=0.0,
+            max_angular_speed_rad_s=0.0,
+            clock_offset_s=-scenario.rig.latency_s,
+        )
+    elif recording == "known_point":
+        data, pairing = simulate_weld(weld_scenario_from_preset("weld_seam_general"), 3), None
+    else:
+        data = simulate_sphere(sphere_scenario_from_preset("sphere", n_poses=8), 3)
+        pairing = None
+    pairing = pairing or PairingConfig()
+    return pair_profiles(data.profiles, data.poses, pairing).samples, pairing
+
+
+def _refusal(recording: str, target: str) -> str:
+    samples, pairing = _samples(recording)
+    config = pipeline_config(target, Method.DEFAULT, {}, Front.CLI, pairing=pairing)
+    with pytest.raises(ModelMismatch) as refused:
+        calibrate_samples(samples, replace(config, self_check_folds=0))
+    return str(refused.value)
+
+
+def test_a_line_sweep_given_to_the_known_point_is_refused_naming_the_line() -> None:
+    text = _refusal("line", "known_point")
+    line = re.search(r"the straight line fitted with the poses leaves ([0-9.]+) um RMS", text)
+    point = re.search(r"the known point fitted with the poses leaves ([0-9.]+) um RMS", text)
+    assert line is not None and point is not None, text
+    assert 10.0 * float(line[1]) < float(point[1]) and "choose {setting:target} line" in text
+
+
+def test_one_weld_point_given_to_the_line_is_refused_naming_the_known_point() -> None:
+    """A line through one point explains the corners as well as the point does; the simpler
+    model is named, with both whole-recording figures."""
+    text = _refusal("known_point", "line")
+    assert "one point explains them to" in text and "{setting:target} known_point" in text
+    assert "the known point fitted with the poses leaves" in text
+    assert "the straight line fitted with the poses leaves" in text
+
+
+def test_a_balls_arcs_given_to_the_line_are_refused_naming_the_sphere() -> None:
+    text = _refusal("sphere", "line")
+    assert "only 0 of 8 recorded profiles show a seam corner" in text
+    assert "the sphere fitted with the poses explains 8 of the 8 recorded profiles" in text
+    assert "choose {setting:target} sphere" in text

@@ -4,9 +4,10 @@ A real profiler leaves tens of µm of smooth shape error on a flank over a few �
 noise, so a V profile is judged against rival shapes (a plane's line, a cylinder's or
 sphere's arc) and against its own recording's profiles, never against the local noise.
 These tests build V profiles with such shape error (the simulator's smooth per-profile
-error, :mod:`linelaser_calib.sim.sensor_models`) and check that every one is used, that arcs
-and planes are refused naming what they show, and that a profile is set aside only as an
-outlier among its recording's profiles, with the numbers.
+error, :mod:`linelaser_calib.sim.sensor_models`) and check that every one is used, that a
+plane's profiles are rejected saying so, and that a profile is set aside only as an outlier
+among its recording's profiles, with the numbers. Which target a recording shows is decided
+on the whole recording (test_rivals.py).
 """
 
 from __future__ import annotations
@@ -14,16 +15,15 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from linelaser_calib.cli import main
-from linelaser_calib.core.errors import ModelMismatch
+from linelaser_calib.core.errors import TooFewFeatures
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.model_check import RivalRejection
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.pipeline import Method, calibrate_samples
 from linelaser_calib.core.profile.cleaning import CleaningConfig
 from linelaser_calib.core.profile.corner import (
     CornerConfig,
@@ -36,11 +36,11 @@ from linelaser_calib.core.targets.base import SolveContext
 from linelaser_calib.core.targets.known_point import KnownPointConfig, calibrate_known_point
 from linelaser_calib.core.targets.line.config import LineConfig
 from linelaser_calib.core.types import Rejection, Sample
+from linelaser_calib.settings import Front, pipeline_config
 from linelaser_calib.sim.line import LineSimulatedData, line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.sensor_models import SensorModel, second_difference_noise_m, shape_error
 from linelaser_calib.sim.weld import WeldSimulatedData, simulate_weld, weld_scenario_from_preset
 
-BAGS = Path(__file__).resolve().parent.parent / "bags"
 #: Local (point-to-point) noise of the real-like profiles, m.
 NOISE_M = 4e-6
 #: A real profiler's smooth shape error: 30 µm (1 sigma) with a 4 mm correlation length.
@@ -95,7 +95,7 @@ def test_real_like_v_profiles_with_smooth_shape_error_are_all_vs(bow_m: float) -
     rms = np.array([c.rms_m for c in corners], dtype=np.float64)
     assert np.max(rms) > 2.0 * local
     # ... and the recording's own scale sets none of them aside.
-    kept, rejections = check_corner_recording("known point", corners, [], 6.0)
+    kept, rejections = check_corner_recording(corners, [], 6.0)
     assert len(kept) == 20 and not rejections
 
 
@@ -133,24 +133,6 @@ def test_a_real_like_line_recording_sets_no_profile_aside_for_its_shape() -> Non
     assert math.degrees(rotation) < 0.3 and translation < 5e-4
 
 
-@pytest.mark.parametrize(
-    ("bag", "target"),
-    [("sphere", "known_point"), ("sphere", "line"), ("robcalibrator_sphere", "known_point")],
-)
-def test_arcs_given_to_the_seam_targets_are_refused_naming_the_curved_targets(
-    bag: str, target: str, capsys: pytest.CaptureFixture[str], tmp_path: Path
-) -> None:
-    """Simulated sphere scans, and the real ones of the RobCalibrator ball."""
-    out = tmp_path / "result.yaml"
-    argv = ["calibrate", str(BAGS / bag), "--target", target, "--output", str(out)]
-    assert main(argv) == 1
-    err = capsys.readouterr().err
-    assert not out.exists() and "No result was written" in err
-    assert "profiles are no V" in err and "better described by an arc" in err
-    assert "--target cylinder" in err and "--target sphere" in err
-    assert "BIC" in err and "um" in err
-
-
 def _planes(rng: np.random.Generator, count: int) -> list[Sample]:
     """Profiles of a tilted plane (a line in the laser plane) with 5 µm white noise."""
     x = np.linspace(-0.02, 0.02, 500)
@@ -160,17 +142,17 @@ def _planes(rng: np.random.Generator, count: int) -> list[Sample]:
     ]
 
 
-@pytest.mark.parametrize("target", ["known_point", "line"])
-def test_planes_given_to_the_seam_targets_are_refused_naming_the_plane(target: str) -> None:
-    plugin = get_target(target)
-    config = KnownPointConfig() if target == "known_point" else LineConfig()
+def test_planes_given_to_a_seam_target_are_refused_in_its_own_words() -> None:
+    """No rival target explains a plane either: the known point's own refusal stands, with
+    each profile's rejection (not a V), and no target named."""
     samples = _planes(np.random.default_rng(4), 20)
-    with pytest.raises(ModelMismatch) as refused:
-        plugin.extract(samples, config, 0, lambda *_: None)
+    config = pipeline_config("known_point", Method.DEFAULT, {}, Front.CLI)
+    with pytest.raises(TooFewFeatures) as refused:
+        calibrate_samples(samples, replace(config, self_check_folds=0))
     message = str(refused.value)
-    assert "profiles are no V" in message and "better described by a line" in message
-    assert "a line leaves" in message and "where a line pair leaves" in message
-    assert "The scans show a plane" in message and "No result was written" in message
+    assert "only 0 of 20 recorded profiles show a weld-seam corner" in message
+    assert "x corner: not a V" in message
+    assert "{setting:target}" not in message
 
 
 def test_the_recording_scale_sets_aside_exactly_the_corrupted_profiles() -> None:

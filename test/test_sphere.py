@@ -372,15 +372,3 @@ def test_poses_that_only_turn_about_the_vertical_are_named(method: Method) -> No
     with pytest.raises(DegenerateError, match="cannot be told from a shift of the sphere") as err:
         run_pipeline(data.profiles, data.poses, _config(method))
     assert "rotate the flange" in str(err.value)
-
-
-def test_the_known_point_target_refuses_sphere_scans(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path
-) -> None:
-    """V corners found on a ball's arcs do not meet in one point: refused, nothing written."""
-    out = tmp_path / "result.yaml"
-    assert (
-        main(["calibrate", str(SPHERE_BAG), "--target", "known_point", "--output", str(out)]) == 1
-    )
-    err = capsys.readouterr().err
-    assert not out.exists() and "does not fit" in err and "No result was written" in err

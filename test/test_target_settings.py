@@ -180,7 +180,9 @@ def test_known_point_refuses_views_of_a_moving_point() -> None:
         moved.append(Sample(s.index, s.stamp_ns, T, s.points))
     config = PipelineConfig(target="known_point")
     assert calibrate_samples(samples, config).rms_residual_m < 1e-3
-    with pytest.raises(ModelMismatch, match=r"known point model does not fit .* line target"):
+    with pytest.raises(
+        ModelMismatch, match=r"known point model does not explain .*{setting:target\} line"
+    ):
         calibrate_samples(moved, config)
 
 

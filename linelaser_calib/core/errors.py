@@ -37,3 +37,24 @@ class SolverError(CalibrationError):
 
 class ModelMismatch(CalibrationError):
     """The target's model does not fit the data (another target, units, clocks, motion)."""
+
+
+class TooFewFeatures(DegenerateError):
+    """Too few profiles show the target's feature (an arc, a circle, a V).
+
+    The pipeline then asks whether another target's full model explains the recording
+    (:func:`~linelaser_calib.core.targets.rivals.refuse_without_fit`) before this refusal
+    stands.
+
+    Attributes
+    ----------
+    found : int
+        The profiles that show the feature.
+    """
+
+    def __init__(self, message: str, found: int) -> None:
+        super().__init__(message)
+        self.found = found
+
+    def __reduce__(self) -> tuple[type[TooFewFeatures], tuple[str, int]]:
+        return type(self), (str(self), self.found)

@@ -17,7 +17,10 @@ questions, and knows no target:
    fit's residuals, in scan order), not of its N points: a more flexible rival that only
    follows some of the shape error gains little. A rival whose BIC lies
    :data:`CLEAR_BIC` below the model's fits clearly better (Kass & Raftery's "very strong"
-   evidence).
+   evidence). It names what a profile without the target's feature shows
+   (:func:`rival_rejection`), and where it fits most of a recording's profiles better it
+   puts the target's model in doubt (:func:`shape_doubt`); it never decides the target,
+   which only the whole recording's full models do (:mod:`linelaser_calib.core.targets.rivals`).
 2. **Is the profile an outlier among its recording's profiles?** The residual of the
    target's model on every profile of one recording (one sensor) gives the recording's
    scale: its median and robust spread across the profiles (:class:`RecordingScale`). A
@@ -32,7 +35,7 @@ Shapes fitted here (points (N, 2) in scan order, m): :func:`line_fit` (2 numbers
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -353,18 +356,8 @@ def recording_outliers(values_m: ArrayLike, sigmas: float, model: str) -> list[t
 
 @dataclass(frozen=True)
 class RivalRejection(Rejection):
-    """A profile a rival shape fits clearly better than the target's model.
-
-    Attributes
-    ----------
-    rival : str
-        The rival's name (:attr:`ShapeFit.name`).
-    detail : str
-        The comparison in words (:meth:`Comparison.describe`).
-    """
-
-    rival: str = ""
-    detail: str = ""
+    """A profile a rival shape fits clearly better than the target's model (its reason gives
+    the comparison's numbers)."""
 
 
 def rival_rejection(
@@ -373,38 +366,24 @@ def rival_rejection(
     """The rejection of a profile whose rival fits clearly better: ``not_the_shape`` (what
     the profile is not, e.g. "no circular arc") and the comparison's numbers."""
     assert comparison.rival is not None
-    detail = comparison.describe()
-    return RivalRejection(
-        index, stamp_ns, stage, f"{not_the_shape}: {detail}", comparison.rival.name, detail
-    )
+    return RivalRejection(index, stamp_ns, stage, f"{not_the_shape}: {comparison.describe()}")
 
 
-def rival_verdict(
-    title: str,
-    shape: str,
-    rejections: Sequence[Rejection],
-    n_features: int,
-    rival_targets: Mapping[str, str],
-) -> str | None:
-    """The refusal of a recording in which a rival describes at least as many profiles
-    better (:class:`RivalRejection`) as the target's model fits, naming the rival seen most
-    often and the target it points to (``rival_targets``: rival name -> what the scans
-    show, in words); None otherwise.
+def shape_doubt(comparisons: Sequence[tuple[int, Comparison | None]], shape: str) -> str | None:
+    """Why single profiles put a model in doubt, in words: at least half of a recording's
+    profiles fit a rival shape clearly better than the model's ``shape`` ("circle") one by
+    one; None otherwise.
 
-    ``title`` names the target's model ("sphere"), ``shape`` what one profile of it shows
-    ("circular arc").
+    ``comparisons`` holds each profile's index and its comparison where a rival fits it
+    clearly better (None where not). A doubt never decides the target: it asks for the whole
+    recording's comparison of the full models
+    (:func:`~linelaser_calib.core.targets.rivals.check_model`).
     """
-    rivals = [r for r in rejections if isinstance(r, RivalRejection)]
-    if not rivals or len(rivals) < n_features:
+    shown = [(index, c) for index, c in comparisons if c is not None]
+    if not shown or 2 * len(shown) < len(comparisons):
         return None
-    names = [r.rival for r in rivals]
-    rival = max(sorted(set(names)), key=names.count)
-    example = next(r for r in rivals if r.rival == rival)
-    count = names.count(rival)
+    index, example = shown[0]
     return (
-        f"the {title} model does not fit these data: {len(rivals)} of "
-        f"{len(rivals) + n_features} profiles are no {shape}, and {count} of them "
-        f"{'are' if count > 1 else 'is'} better described by {_a(rival)} (profile "
-        f"{example.index}: {example.detail}). The scans show {rival_targets[rival]}; or the "
-        "profiles are not in metres. No result was written."
+        f"{len(shown)} of {len(comparisons)} profiles fit a rival shape better than "
+        f"{_a(shape)} one by one (profile {index}: {example.describe()})"
     )

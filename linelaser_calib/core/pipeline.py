@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from .errors import CalibrationError, DegenerateError, InputError, PairingError
+from .errors import CalibrationError, DegenerateError, InputError, PairingError, TooFewFeatures
 from .geometry import FloatArray, check_transform
 from .latency import add_clock_diagnosis
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
@@ -51,7 +51,7 @@ from .targets.base import (
     rejection_digest,
     sample_rng,
 )
-from .targets.rivals import check_model
+from .targets.rivals import check_model, refuse_without_fit
 from .thinning import DEFAULT_PER_NEIGHBOURHOOD, thin_samples
 from .types import FlangePose, Profile, Rejection, Sample
 from .verdict import no_self_check_reason
@@ -360,7 +360,11 @@ def calibrate_samples(
         placements=others,
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
-    solution = solve[config.method](features, target_config, context)
+    try:
+        solution = solve[config.method](features, target_config, context)
+    except TooFewFeatures as refusal:
+        refuse_without_fit(target, samples, refusal, context)
+        raise
     check_model(target, target_config, samples, features, solution, context)
     if placements and solution.kinematics is None:
         raise InputError(

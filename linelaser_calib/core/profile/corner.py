@@ -25,10 +25,10 @@ local noise):
   same points, a line (a plane) and an arc (a cylinder or sphere), by the information
   criterion (:mod:`.corner_shape`); a profile a rival fits clearly better is rejected naming
   it;
-- per recording (:func:`check_corner_recording`), a recording most of whose profiles a
-  rival describes better is refused naming the target it points to, and a profile whose
-  lines leave far more than the recording's other profiles is set aside, with the
-  recording's scale.
+- per recording (:func:`check_corner_recording`), a profile whose lines leave far more than
+  the recording's other profiles is set aside, with the recording's scale. No profile
+  decides the target: where too few show a corner, the whole recording's full models do
+  (:mod:`linelaser_calib.core.targets.rivals`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from itertools import combinations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ..errors import InputError, ModelMismatch, ProfileRejected
+from ..errors import InputError, ProfileRejected
 from ..model_check import recording_outliers
 from ..types import BoolArray, FloatArray, Rejection, Sample, SampleFit
 from .cleaning import MAD_TO_SIGMA, CleaningConfig, clean_profile
@@ -49,7 +49,6 @@ from .corner_shape import (
     compare_corner,
     compare_without_corner,
     corner_rival_rejection,
-    corner_rival_verdict,
 )
 
 #: Rounds of "refit, re-assign" after RANSAC.
@@ -584,7 +583,7 @@ def _angle_text(opening_rad: float) -> str:
 
 
 def check_corner_recording(
-    title: str, corners: list[CornerSample], rejections: list[Rejection], sigmas: float
+    corners: list[CornerSample], rejections: list[Rejection], sigmas: float
 ) -> tuple[list[CornerSample], list[Rejection]]:
     """The recording's corners without the outliers among them, and the rejections with
     theirs added (stage ``corner``).
@@ -596,22 +595,11 @@ def check_corner_recording(
 
     Parameters
     ----------
-    title : str
-        The target's model in words ("known point"), for the refusal.
     corners : list of CornerSample
     rejections : list of Rejection
         The profiles' rejections (:func:`extract_corner_sample`).
     sigmas : float
-
-    Raises
-    ------
-    ModelMismatch
-        When a rival shape describes at least as many profiles better as show a corner
-        (:func:`~.corner_shape.corner_rival_verdict`: it names what the scans show).
     """
-    verdict = corner_rival_verdict(title, rejections, len(corners))
-    if verdict is not None:
-        raise ModelMismatch(verdict)
     corners, aside = _consistent_corners(corners, sigmas)
     fitted = [(k, c.rms_m) for k, c in enumerate(corners) if c.rms_m is not None]
     outliers = recording_outliers([rms for _, rms in fitted], sigmas, "line pair")

@@ -18,9 +18,9 @@ profile's effective point count (:func:`compare_corner`):
 A profile in which no corner was found (:func:`compare_without_corner`) meets the same
 rivals with a line pair in the V's place. When the corner fit found it flat (no second line,
 or the two lines nearly parallel) and a line pair fits it no clearly better than one line,
-it is a plane: the simpler model, unless the other is clearly better. A recording of planes
-or arcs is thus refused naming what it shows (:func:`corner_rival_verdict`) rather than for
-want of corners.
+it is a plane: the simpler model, unless the other is clearly better. A profile's rejection
+thus says what it shows; no profile decides the target: where too few profiles show a corner,
+the whole recording's full models do (:mod:`linelaser_calib.core.targets.rivals`).
 """
 
 from __future__ import annotations
@@ -38,9 +38,8 @@ from linelaser_calib.core.model_check import (
     line_fit,
     line_pair_fit,
     rival_rejection,
-    rival_verdict,
 )
-from linelaser_calib.core.types import FloatArray, Rejection
+from linelaser_calib.core.types import FloatArray
 
 #: Largest radius of curvature of a curved target's profile, m: five times the largest
 #: cylinder of the design (100 mm diameter).
@@ -49,13 +48,6 @@ MAX_ARC_RADIUS_M = 0.25
 NOT_A_V = "not a V (two straight flanks meeting at a corner)"
 #: What a profile without a corner that one line fits as well as two is not.
 NOT_TWO_LINES = "not a V: one straight line fits it as well as two (a plane)"
-#: What each rival shape says the scans show instead, with the target to choose.
-RIVAL_TARGETS = {
-    "line": "a plane: no seam or edge in the laser line (aim the line across the seam, both "
-    "flanks in view)",
-    "arc": "the arcs of a curved target: a cylinder ({setting:target} cylinder) or a sphere "
-    "({setting:target} sphere)",
-}
 
 
 def _rivals(points_xz: FloatArray) -> list[ShapeFit]:
@@ -102,16 +94,5 @@ def corner_rival_rejection(
 ) -> RivalRejection:
     """The rejection of a profile that a rival describes better than a V (``not_the_shape``:
     :data:`NOT_A_V` when the rival fits clearly better, :data:`NOT_TWO_LINES` when one line
-    fits as well as the two); its detail says which."""
-    rejection = rival_rejection(index, stamp_ns, "corner", not_the_shape, comparison)
-    if not_the_shape == NOT_A_V:
-        return rejection
-    detail = f"one straight line fits it as well as two: {rejection.detail}"
-    return replace(rejection, detail=detail)
-
-
-def corner_rival_verdict(title: str, rejections: list[Rejection], n_corners: int) -> str | None:
-    """The refusal of a recording most of whose profiles a rival fits better than a V
-    (:func:`~linelaser_calib.core.model_check.rival_verdict`); ``title`` names the target's
-    model ("known point")."""
-    return rival_verdict(title, "V", rejections, n_corners, RIVAL_TARGETS)
+    fits as well as the two)."""
+    return rival_rejection(index, stamp_ns, "corner", not_the_shape, comparison)

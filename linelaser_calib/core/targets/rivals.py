@@ -5,7 +5,8 @@ of µm along the line) lets a 5-number conic beat a 3-number circle on almost an
 profile. The evidence is in the whole recording: a sphere's cuts are circles whose radius
 changes with the plane's distance from one centre, a cylinder's are ellipses about one
 axis, each consistent only through the poses. So a recording is judged here, by the full
-models (:func:`check_model`, called by the pipeline after the solve):
+models (:func:`check_model`, called by the pipeline after the solve; and
+:func:`refuse_without_fit`, where too few profiles show the target's feature for a solve):
 
 1. **Is the target's own model in doubt?** Its fit check (:meth:`Target.check_fit`) failed;
    or its solve needs a robot pose error more than :data:`~.base.ROBOT_PRIOR_EXCESS` times
@@ -24,11 +25,22 @@ models (:func:`check_model`, called by the pipeline after the solve):
 3. **Otherwise** the data are still consistent with the target when a rival was fitted and
    every rival leaves :data:`CLEAR_FACTOR` times more. A fit that needs a robot error
    :data:`MISFIT_ROBOT_EXCESS` times the prior is refused as a misfit unless they are (its
-   warnings say how large the error is); a failed fit check is refused too unless they are
-   or no rival could be fitted at all (it then becomes a warning with the figures), but one
-   that failed on the robot's error is always refused, in the target's own words (e.g. a
-   sphere centre given on the wrong side). A target that names no rival keeps its fit
-   check's refusals.
+   warnings say how large the error is). A failed fit check is refused too, in the target's
+   own words with the figures; only a target whose check a real profiler's shape error
+   alone may fail (its optional ``soft_fit_check``: the sphere's and the cylinder's residual
+   against what each profile's own shape fit leaves) keeps a result whose check failed where
+   every rival is clearly worse or none could be fitted at all (it then becomes a warning
+   with the figures), but never one that failed on the robot's error (e.g. a sphere centre
+   given on the wrong side). A target that names no rival keeps its fit check's refusals.
+
+Where too few profiles show the target's feature to solve at all (a ball's arcs given to the
+line target, a V given to the sphere; :class:`~linelaser_calib.core.errors.TooFewFeatures`),
+the rivals are fitted likewise, in the target's order: the first whose fit passes its own
+checks (fit check, convergence, a robot error within :data:`MISFIT_ROBOT_EXCESS` times the
+prior) and uses :data:`CLEAR_FACTOR` times as many profiles as show the target's feature
+explains the recording clearly better, and the refusal names it with both figures (the
+profiles each explains; the RMS distances of the rivals fitted). Otherwise the target's
+own refusal stands, naming no rival.
 """
 
 from __future__ import annotations
@@ -40,7 +52,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CalibrationError, ModelMismatch
+from ..errors import CalibrationError, ModelMismatch, TooFewFeatures
 from ..types import Sample, SampleFit
 from . import get_target
 from .base import ROBOT_PRIOR_EXCESS, SolveContext, Target, TargetSolution, _no_progress
@@ -203,16 +215,18 @@ def check_model(
             f"{{setting:target}} {best.name}. No result was written."
         )
     compared = (
-        " A rival fitted with the poses does no better: "
+        " On the whole recording, "
         + "; ".join(w.text() for w in judged)
-        + f", {own.text()} ({figures})."
+        + f"; {own.text()} ({figures})."
         if judged
         else ""
     )
     # Every rival fitted leaves CLEAR_FACTOR times more (and one at least was fitted) ...
     consistent = bool(judged) and judged[0].rms_m >= CLEAR_FACTOR * own.rms_m
-    # ... or, for a failed residual check, no rival could be fitted at all.
-    unrivalled = bool(declared) and (consistent or not judged)
+    # ... or, for a failed residual check, no rival could be fitted at all; kept only where
+    # the target's check is a soft one.
+    soft = bool(getattr(target, "soft_fit_check", False))
+    unrivalled = soft and bool(declared) and (consistent or not judged)
     if problem is not None and (robot_misfit or not unrivalled):
         raise ModelMismatch(_inserted(str(problem), compared))
     if robot_misfit and not consistent:
@@ -241,4 +255,61 @@ def check_model(
         + ", ".join(others)
         + (f" ({figures})" if judged else "")
         + f": these data are still best explained by a {own.title}, and the result is kept"
+    )
+
+
+def _explains(rival: Target[Any], solution: TargetSolution) -> bool:
+    """Whether a rival's fit passes its own checks: its fit check (default settings), its
+    refinement converged, and its robot error within :data:`MISFIT_ROBOT_EXCESS` times the
+    prior."""
+    robot = solution.robot_error
+    if not solution.converged or (robot is not None and robot.excess > MISFIT_ROBOT_EXCESS):
+        return False
+    try:
+        rival.check_fit(solution, rival.config_type())
+    except ModelMismatch:
+        return False
+    return True
+
+
+def refuse_without_fit(
+    target: Target[Any], samples: list[Sample], refusal: TooFewFeatures, context: SolveContext
+) -> None:
+    """Where too few profiles show the target's feature (``refusal``), refuse naming a rival
+    target that explains the recording clearly better, with both figures (see the module
+    docstring); return otherwise (the caller's own refusal stands).
+
+    The rivals are fitted in the target's order (its ``rivals``) up to the first that
+    explains the recording.
+
+    Raises
+    ------
+    ModelMismatch
+        Naming the rival, the profiles it explains against those showing the target's
+        feature, and the RMS distances of the rivals fitted.
+    """
+    fitted = []
+    for name in getattr(target, "rivals", ()):
+        found = _rival_solution(name, samples, context)
+        if found is None:
+            continue
+        fitted.append(found)
+        rival, solution = found
+        enough = len(solution.samples_used) >= max(CLEAR_FACTOR * refusal.found, 1.0)
+        if enough and _explains(rival, solution):
+            break
+    else:
+        return
+    fits = {f.index: f for _, s in fitted for f in s.sample_fits}
+    every = [fits[k] for k in sorted(fits)]
+    *tried, best = [_judged(t, s, every) for t, s in fitted]
+    others = "".join(f"; {w.text()}" for w in tried)
+    own = str(refusal).split(". ", 1)[0]
+    raise ModelMismatch(
+        f"the {target.title} model does not explain these data: {own}; but the {best.title} "
+        f"fitted with the poses explains {len(solution.samples_used)} of the "
+        f"{context.n_samples} recorded profiles and leaves {best.rms_m * 1e6:.1f} um RMS (over "
+        f"{best.n_points} points of {best.n_profiles} profiles mapped with the recorded flange "
+        f"poses{others}). The scans show a {best.title}: choose {{setting:target}} "
+        f"{best.name}. No result was written."
     )

@@ -22,7 +22,6 @@ If no candidate gives an ellipse, the rejection of the largest candidate is rais
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -103,10 +102,6 @@ class ArcFit:
     ellipse_config: EllipseConfig
     grazing: BoolArray
     grazing_shift_sigmas: float = math.nan
-
-
-#: The number of straight pieces a profile rejected for showing no arc names (its one group).
-STRAIGHT_PIECES = re.compile(r"beside the (\d+) straight piece")
 
 
 def incidence_cosines(conic: FloatArray, points_xz: FloatArray) -> FloatArray:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import InputError, ModelMismatch, ProfileRejected
+from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...model_check import Comparison
 from ...profile.cleaning import clean_profile
@@ -27,7 +27,6 @@ from .config import CylinderConfig
 from .ellipse import EllipseFit
 from .shape import (
     arc_rival_rejection,
-    arc_rival_verdict,
     compare_ellipse,
     compare_with_line,
     compare_without_arc,
@@ -43,7 +42,8 @@ class FittedSample:
     """A sample with the points of its arc and its fitted ellipse (the cylinder target's
     feature); ``arc`` says how the arc was found, ``trimmed`` how many grazing-angle points
     were trimmed from it, ``rival`` the comparison when a rival shape fits this one profile
-    clearly better than its ellipse (kept unless most profiles are so, :func:`fit_samples`)."""
+    clearly better than its ellipse (kept: where most profiles are so, the whole recording
+    decides, :meth:`~.target.CylinderTarget.model_doubt`)."""
 
     sample: Sample
     points: FloatArray
@@ -140,16 +140,14 @@ def fit_samples(
     """Fit every sample's ellipse (semi-axes bounded by ``config.radius_m`` when given);
     ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`.
 
+    Arcs that a rival shape fits better one by one are used: a real profiler's shape error
+    makes a V or a line beat an ellipse now and then, and the refinement's outlier test sets
+    aside an arc that the one cylinder does not explain.
+
     Raises
     ------
     InputError
         When a configured radius disagrees with the profiles (:func:`settle_radius`).
-    ModelMismatch
-        When a rival shape fits at least as many profiles clearly better as give an
-        ellipse it does not (it names what they show). A minority of arcs that a rival fits
-        better are used: a real profiler's shape error makes a V or a line beat an ellipse
-        now and then, and the refinement's outlier test sets aside an arc that the one
-        cylinder does not explain.
     """
 
     def fit_bounded(
@@ -160,12 +158,6 @@ def fit_samples(
     fitted, rejections = extract_each(
         samples, config, seed, fit_bounded, progress, "ellipse", workers
     )
-    preferring: list[Rejection] = [
-        arc_rival_rejection(f.index, f.stamp_ns, f.rival) for f in fitted if f.rival is not None
-    ]
-    verdict = arc_rival_verdict(rejections + preferring, len(fitted) - len(preferring))
-    if verdict is not None:
-        raise ModelMismatch(verdict)
     if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):
         # Most profiles failed with the given radius: fit freely to tell the user why.
         free = [fit_sample(s, config, sample_rng(seed, s.index)) for s in samples]

@@ -4,8 +4,10 @@ Built on :mod:`linelaser_calib.core.model_check`. Per profile (:func:`compare_el
 fitted ellipse (5 numbers) meets a line (a plane) and a line pair (a V seam, an edge) on the
 same points, by the information criterion over the profile's effective point count; a
 profile whose arc was not found meets them with a general conic in its place
-(:func:`compare_without_arc`), so that a recording of seams or planes is refused naming what
-it shows (:func:`arc_rival_verdict`) rather than for want of arcs.
+(:func:`compare_without_arc`), so that its rejection says what it shows. No profile
+decides the target: a recording most of whose profiles a rival fits better puts the
+cylinder in doubt (:meth:`~.target.CylinderTarget.model_doubt`), and the whole recording's
+full models decide (:mod:`..rivals`).
 
 A cylinder's cut is an ellipse in every view, so a circle is no rival here: a sphere shows as
 circles of varying radius, which no single cylinder explains; the joint fit of all profiles
@@ -23,18 +25,12 @@ from linelaser_calib.core.model_check import (
     line_fit,
     line_pair_fit,
     rival_rejection,
-    rival_verdict,
 )
 from linelaser_calib.core.targets.cylinder.conic import sampson_distance
-from linelaser_calib.core.types import FloatArray, Rejection
+from linelaser_calib.core.types import FloatArray
 
 #: What a profile that a rival fits clearly better is not.
 NOT_AN_ARC = "no elliptical arc"
-#: What each rival shape says the scans show instead, with the target to choose.
-RIVAL_TARGETS = {
-    "line pair": "a seam's V or an edge ({setting:target} known_point or line)",
-    "line": "a plane: no curved target in the line ({setting:target} line for a straight edge)",
-}
 
 
 def compare_ellipse(points_xz: FloatArray, conic: FloatArray) -> Comparison:
@@ -60,9 +56,3 @@ def compare_without_arc(points_xz: FloatArray) -> Comparison:
 def arc_rival_rejection(index: int, stamp_ns: int, comparison: Comparison) -> RivalRejection:
     """The rejection of a profile whose rival fits clearly better than an ellipse."""
     return rival_rejection(index, stamp_ns, "ellipse", NOT_AN_ARC, comparison)
-
-
-def arc_rival_verdict(rejections: list[Rejection], n_features: int) -> str | None:
-    """The refusal of a recording most of whose profiles a rival fits clearly better than an
-    ellipse (:func:`~linelaser_calib.core.model_check.rival_verdict`)."""
-    return rival_verdict("cylinder", "elliptical arc", rejections, n_features, RIVAL_TARGETS)

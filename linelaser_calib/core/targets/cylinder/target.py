@@ -20,15 +20,17 @@ Methods
 Model fit
 ---------
 Each profile's ellipse meets rival shapes (a line, a V) by an information criterion
-(:mod:`.shape`); a recording most of whose profiles a rival fits clearly better is refused,
-naming what it shows. A cylinder's cut is an ellipse whose semi-minor axis is the radius in
-every view, but a short arc leaves that axis uncertain, so the radius is judged by the joint
-fit of all profiles: its point residual stays near what each profile's own free ellipse
-leaves (the recording's scale); scans of a sphere (circles of varying radius) leave many
-times more. Which target the recording shows is decided on the whole recording
-(:mod:`..rivals`): where the fit is in doubt (that residual, a robot error far beyond the
-prior, no convergence) the sphere's full fit with the poses is made, and the recording is
-refused naming it only when it explains the points clearly better.
+(:mod:`.shape`); a recording most of whose profiles a rival fits clearly better puts the
+cylinder in doubt (:meth:`CylinderTarget.model_doubt`), and is never refused for it. A
+cylinder's cut is an ellipse whose semi-minor axis is the radius in every view, but a short
+arc leaves that axis uncertain, so the radius is judged by the joint fit of all profiles:
+its point residual stays near what each profile's own free ellipse leaves (the recording's
+scale); scans of a sphere (circles of varying radius) leave many times more. Which target
+the recording shows is decided on the whole recording (:mod:`..rivals`): where the fit is
+in doubt (that residual, a robot error far beyond the prior, no convergence, the profiles'
+shapes), or too few profiles show an arc, the rival targets' full fits with the poses are
+made (the sphere, the seam targets), and the recording is refused naming one only when it
+explains the recording clearly better.
 """
 
 from __future__ import annotations
@@ -40,8 +42,9 @@ from typing import Any
 
 import numpy as np
 
-from ...errors import CalibrationError, DegenerateError, ModelMismatch
+from ...errors import CalibrationError, DegenerateError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray
+from ...model_check import shape_doubt
 from ...profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
     implausible_scale_held,
@@ -63,7 +66,7 @@ from ..base import (
     rejection_digest,
 )
 from .advice import CylinderPlacementAdviser
-from .arc import STRAIGHT_PIECES, radius_mismatch
+from .arc import radius_mismatch
 from .config import CylinderConfig
 from .features import (
     FittedSample,
@@ -224,7 +227,10 @@ class CylinderTarget:
     #: Whether another placement would determine more of the robot's kinematics.
     placement_adviser = CylinderPlacementAdviser()
     #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
-    rivals = ("sphere",)
+    rivals = ("sphere", "line", "known_point")
+    #: Its residual check (against what each profile's own shape fit leaves) may fail on a
+    #: real profiler's shape error alone: kept with a warning where no rival does better.
+    soft_fit_check = True
 
     def validate(
         self, sample: Sample, config: CylinderConfig, rng: np.random.Generator
@@ -258,32 +264,22 @@ class CylinderTarget:
         """The radius (m), after checking there are enough ellipses."""
         radius = settle_radius(features, config.radius_m) if features else config.radius_m
         if len(features) < config.min_samples:
-            pieces = [STRAIGHT_PIECES.search(r.reason) for r in context.rejections]
-            corners = sum(int(m[1]) >= 2 for m in pieces if m is not None)
-            fitted = sum(r.stage == "ellipse" for r in context.rejections)
-            another_target = not features and corners > fitted / 2
             if features:
                 advice = (
                     "Scan the cylinder from more poses, with the laser line across the cylinder."
-                )
-            elif another_target:
-                advice = (
-                    "The profiles show straight pieces meeting and no arc: a seam's V or an "
-                    "edge. For a weld seam choose {setting:target} known_point (a corner point) "
-                    "or line (a straight seam); for a cylinder, check that the laser line falls "
-                    "across the cylinder within the measuring range."
                 )
             else:
                 advice = (
                     "None of the profiles shows the cylinder's arc: check that the laser line "
                     "falls across the cylinder within the measuring range."
                 )
-            raise DegenerateError(
+            raise TooFewFeatures(
                 f"only {len(features)} of {context.n_samples} recorded profiles gave a usable "
                 "ellipse, "
                 f"and at least {config.min_samples} are needed. "
-                + rejection_digest(context.rejections, advise_motion=not another_target)
-                + advice
+                + rejection_digest(context.rejections)
+                + advice,
+                len(features),
             )
         assert radius is not None  # features is not empty here
         return radius
@@ -587,6 +583,12 @@ class CylinderTarget:
             raise ModelMismatch(
                 mismatch_message("cylinder", solution.rms_residual_m, solution.noise_m, detail)
             )
+
+    def model_doubt(self, features: list[Any], config: CylinderConfig) -> str | None:
+        """Why the profiles' own shapes put the cylinder in doubt: at least half of them fit
+        a rival shape clearly better than an ellipse (:attr:`.features.FittedSample.rival`);
+        None otherwise. The whole recording decides then (:mod:`..rivals`)."""
+        return shape_doubt([(f.index, f.rival) for f in features], "ellipse")
 
     def check_features(self, features: list[Any], config: CylinderConfig) -> None:
         """Nothing beyond extraction: each profile's ellipse meets the rival shapes there, and

@@ -33,16 +33,8 @@ def extract_corners(
     ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`), corners that
     are outliers among the recording's set aside
     (:func:`~...profile.corner.check_corner_recording`).
-
-    Raises
-    ------
-    ModelMismatch
-        When a rival shape (a plane's line, a cylinder's or sphere's arc) fits most profiles
-        clearly better than a V; the message names what the scans show.
     """
     corners, rejections = extract_each(
         samples, config, seed, extract_corner, progress, "corner", workers
     )
-    return check_corner_recording(
-        "known point", corners, rejections, config.corner.profile_outlier_sigmas
-    )
+    return check_corner_recording(corners, rejections, config.corner.profile_outlier_sigmas)

@@ -83,12 +83,13 @@ Model fit
 ---------
 Each profile must be a V rather than a rival shape (a plane's line, a cylinder's or
 sphere's arc), and its lines must not leave far more than the recording's other profiles'
-(:func:`~...profile.corner.check_corner_recording`); a recording most of whose profiles a
-rival describes better is refused naming it. The views' corners, mapped into the base
-frame, must meet in one point up to the robot's pose error and the corner noise (about
-0.05-0.1 mm: 1-2 times the robot's σ_t on the weld presets). A residual over ten times σ_t
-is refused: a moving seam (the line target's S-sweep gives ~100 mm) or corners of shapes
-that are no V.
+(:func:`~...profile.corner.check_corner_recording`); no profile decides the target: where
+too few profiles show a corner, or the fit below fails, the rival targets' full fits with
+the poses (the line, the sphere, the cylinder) decide on the whole recording
+(:mod:`..rivals`). The views' corners, mapped into the base frame, must meet in one point up
+to the robot's pose error and the corner noise (about 0.05-0.1 mm: 1-2 times the robot's
+σ_t on the weld presets). A residual over ten times σ_t is refused: a moving seam (the line
+target's S-sweep gives ~100 mm) or corners of shapes that are no V.
 """
 
 from __future__ import annotations
@@ -101,7 +102,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import chdtri
 
-from ...errors import DegenerateError, InputError, ModelMismatch
+from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample
 from ...seam_grid import paper_correction, weld_points_base
@@ -234,11 +235,12 @@ def _check_count(
     corners: list[CornerSample], n_samples: int, rejections: list[Rejection], min_samples: int
 ) -> None:
     if len(corners) < min_samples:
-        raise DegenerateError(
+        raise TooFewFeatures(
             f"only {len(corners)} of {n_samples} recorded profiles show a weld-seam corner, "
             f"and at least {min_samples} are needed. "
             + rejection_digest(rejections)
-            + "Aim the laser line across the seam through the taught point, both flanks in view."
+            + "Aim the laser line across the seam through the taught point, both flanks in view.",
+            len(corners),
         )
 
 
@@ -515,6 +517,8 @@ class KnownPointTarget:
             why_required="the old hand-eye (a result YAML with its hand_eye section)",
         ),
     }
+    #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
+    rivals = ("line", "sphere", "cylinder")
 
     def validate(
         self, sample: Sample, config: KnownPointConfig, rng: np.random.Generator
@@ -561,7 +565,7 @@ class KnownPointTarget:
         return self._solve("default", features, config, context)
 
     def check_features(self, features: list[Any], config: KnownPointConfig) -> None:
-        """The corner fit already refuses profiles that are not a V; nothing more to check."""
+        """Nothing beyond extraction: each profile's corner meets the rival shapes there."""
 
     def check_fit(self, solution: TargetSolution, config: KnownPointConfig) -> None:
         """Refuse views whose corners do not meet in one point."""

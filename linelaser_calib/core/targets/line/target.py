@@ -17,7 +17,10 @@ Methods
 Each profile is checked against rival shapes and the recording's other profiles
 (:func:`~...profile.corner.check_corner_recording`); the model check
 (:meth:`LineTarget.check_fit`) refuses a result whose corners lie far further from the line
-than the corner and robot noise explain.
+than the corner and robot noise explain, or that one point explains about as well. No
+profile decides the target: where too few profiles show a corner, or the fit check fails,
+the rival targets' full fits with the poses (the known point, the sphere, the cylinder)
+decide on the whole recording (:mod:`..rivals`).
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ from typing import Any
 import numpy as np
 from scipy.special import chdtri
 
-from ...errors import DegenerateError, ModelMismatch
+from ...errors import DegenerateError, ModelMismatch, TooFewFeatures
 from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held, scale_significant
 from ...profile.corner import CornerSample, check_corner_recording
 from ...seam_grid import paper_correction, weld_points_base
@@ -149,12 +152,13 @@ def _one_point(solution: TargetSolution) -> str | None:
 
 def _require(features: list[CornerSample], config: LineConfig, context: SolveContext) -> None:
     if len(features) < config.min_samples:
-        raise DegenerateError(
+        raise TooFewFeatures(
             f"only {len(features)} of {context.n_samples} recorded profiles show a seam corner, "
             "and at "
             f"least {config.min_samples} are needed. "
             + rejection_digest(context.rejections)
-            + "Sweep the laser line across the seam along its length, both flanks in view."
+            + "Sweep the laser line across the seam along its length, both flanks in view.",
+            len(features),
         )
 
 
@@ -187,6 +191,8 @@ class LineTarget:
             why_required="the paper's grid search corrects an existing hand-eye",
         ),
     }
+    #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
+    rivals: tuple[str, ...] = ("known_point", "sphere", "cylinder")
 
     def validate(
         self, sample: Sample, config: LineConfig, rng: np.random.Generator
@@ -204,14 +210,7 @@ class LineTarget:
         workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
         """The seam corner of every sample (:mod:`.features`), corners that are outliers
-        among the recording's set aside (:func:`~...profile.corner.check_corner_recording`).
-
-        Raises
-        ------
-        ModelMismatch
-            When a rival shape (a plane's line, a cylinder's or sphere's arc) fits most
-            profiles clearly better than a V; the message names what the scans show.
-        """
+        among the recording's set aside (:func:`~...profile.corner.check_corner_recording`)."""
         corners, rejections = extract_each(
             samples,
             config,
@@ -222,7 +221,7 @@ class LineTarget:
             workers,
         )
         return check_corner_recording(
-            self.title, corners, rejections, config.features.corner.profile_outlier_sigmas
+            corners, rejections, config.features.corner.profile_outlier_sigmas
         )
 
     def solve_paper(
@@ -385,7 +384,7 @@ class LineTarget:
         )
 
     def check_features(self, features: list[Any], config: LineConfig) -> None:
-        """The corner extraction already refuses profiles that are not a V; nothing more."""
+        """Nothing beyond extraction: each profile's corner meets the rival shapes there."""
 
     def check_fit(self, solution: TargetSolution, config: LineConfig) -> None:
         """Refuse corners that lie around one point (the known-point target's recording) or

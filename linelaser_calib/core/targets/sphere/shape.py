@@ -26,20 +26,13 @@ from linelaser_calib.core.model_check import (
     line_pair_fit,
     recording_outliers,
     rival_rejection,
-    rival_verdict,
 )
 from linelaser_calib.core.targets.sphere.circle import NOT_A_CIRCLE, circle_residuals
-from linelaser_calib.core.types import FloatArray, Rejection
+from linelaser_calib.core.types import FloatArray
 
 #: An ellipse whose axes differ by less than this share is a circle seen through the
 #: profiler's scale error, not a rival.
 MAX_AXIS_DIFFERENCE = 0.02
-#: What each rival shape says the scans show instead, with the target to choose.
-RIVAL_TARGETS = {
-    "line pair": "a seam's V or an edge ({setting:target} known_point or line)",
-    "conic": "a cylinder's elliptical arcs ({setting:target} cylinder)",
-    "line": "a plane: no curved target in the line ({setting:target} line for a straight edge)",
-}
 
 
 def compare_circle(points_xz: FloatArray, centre_xz: FloatArray, radius_m: float) -> Comparison:
@@ -56,12 +49,6 @@ def compare_circle(points_xz: FloatArray, centre_xz: FloatArray, radius_m: float
 def circle_rival_rejection(index: int, stamp_ns: int, comparison: Comparison) -> RivalRejection:
     """The rejection of a profile whose rival fits clearly better than its circle."""
     return rival_rejection(index, stamp_ns, "circle", NOT_A_CIRCLE, comparison)
-
-
-def circle_rival_verdict(rejections: list[Rejection], n_features: int) -> str | None:
-    """The refusal of a recording most of whose profiles a rival fits clearly better than a
-    circle (:func:`~linelaser_calib.core.model_check.rival_verdict`)."""
-    return rival_verdict("sphere", "circular arc", rejections, n_features, RIVAL_TARGETS)
 
 
 def set_aside_outliers(rms_m: FloatArray, sigmas: float) -> list[tuple[int, str]]:

@@ -7,8 +7,9 @@ by one is kept: a real profiler's smooth shape error makes a conic beat a circle
 any single profile. Per recording (:meth:`SphereTarget.extract`): a profile whose circle
 leaves far more than the recording's other profiles is set aside; a recording most of whose
 profiles fit a rival shape better puts the sphere in doubt (:meth:`SphereTarget.model_doubt`),
-and the whole recording decides: a cylinder fitted with the poses must explain it clearly
-better for the recording to be refused (:mod:`..rivals`). The sphere centre lies
+and the whole recording decides: a rival target (the cylinder, the seam targets) fitted with
+the poses must explain it clearly better for the recording to be refused (:mod:`..rivals`);
+so too where too few profiles show a circle. The sphere centre lies
 √(R² − r²) off the plane on one side.
 
 - ``paper``: the fixed-point linear solve of the tools that calibrate profilers on a
@@ -40,9 +41,10 @@ from linelaser_calib.core.errors import (
     DegenerateError,
     ModelMismatch,
     ProfileRejected,
+    TooFewFeatures,
 )
 from linelaser_calib.core.geometry import FloatArray
-from linelaser_calib.core.model_check import Comparison
+from linelaser_calib.core.model_check import Comparison, shape_doubt
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
@@ -88,7 +90,6 @@ from linelaser_calib.core.targets.sphere.refine import (
 from linelaser_calib.core.targets.sphere.section import SphereSection, read_sphere_section
 from linelaser_calib.core.targets.sphere.shape import (
     circle_rival_rejection,
-    circle_rival_verdict,
     compare_circle,
     set_aside_outliers,
 )
@@ -223,7 +224,10 @@ class SphereTarget:
     #: Pose planning (:mod:`linelaser_calib.core.planning`).
     planner = SpherePlanner()
     #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
-    rivals = ("cylinder",)
+    rivals = ("cylinder", "known_point", "line")
+    #: Its residual check (against what each profile's own shape fit leaves) may fail on a
+    #: real profiler's shape error alone: kept with a warning where no rival does better.
+    soft_fit_check = True
 
     def validate(
         self, sample: Sample, config: SphereConfig, rng: np.random.Generator
@@ -241,19 +245,10 @@ class SphereTarget:
         workers: int = 1,
     ) -> tuple[list[Any], list[Rejection]]:
         """The circles of all samples and the rejections; profiles whose circle is an outlier
-        among the recording's are set aside.
-
-        Raises
-        ------
-        ModelMismatch
-            When a rival shape fits most profiles clearly better (it names what they show).
-        """
+        among the recording's are set aside."""
         features, rejections = extract_each(
             samples, config, seed, extract_feature, progress, "circle", workers
         )
-        verdict = circle_rival_verdict(rejections, len(features))
-        if verdict is not None:
-            raise ModelMismatch(verdict)
         aside = set_aside_outliers(
             np.array([f.circle.rms_m for f in features]), config.profile_outlier_sigmas
         )
@@ -267,13 +262,15 @@ class SphereTarget:
     def _require(
         self, features: list[SphereFeature], config: SphereConfig, context: SolveContext
     ) -> None:
-        """Refuse too few circles (a recording of another target is refused by extract)."""
+        """Refuse too few circles (the pipeline first asks whether another target explains
+        the recording, :mod:`..rivals`)."""
         if len(features) >= config.min_samples:
             return
-        raise DegenerateError(
+        raise TooFewFeatures(
             f"only {len(features)} profiles show a usable circle; the sphere target needs "
             f"{config.min_samples}. {rejection_digest(context.rejections)}Scan the ball from "
-            "more poses with the line across it."
+            "more poses with the line across it.",
+            len(features),
         )
 
     def _fixed_point(
@@ -563,14 +560,7 @@ class SphereTarget:
         """Why the profiles' own shapes put the sphere in doubt: at least half of them fit a
         rival shape clearly better than a circle (:attr:`SphereFeature.rival`); None
         otherwise. The whole recording decides then (:mod:`..rivals`)."""
-        shown = [f for f in features if f.rival is not None]
-        if not shown or 2 * len(shown) < len(features):
-            return None
-        example = shown[0]
-        return (
-            f"{len(shown)} of {len(features)} profiles fit a rival shape better than a circle "
-            f"one by one (profile {example.index}: {example.rival.describe()})"
-        )
+        return shape_doubt([(f.index, f.rival) for f in features], "circle")
 
     def check_features(self, features: list[Any], config: SphereConfig) -> None:
         """Nothing beyond extraction: each profile's shape is checked there, against rival
