@@ -12,9 +12,11 @@ import pytest
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.cylinder.section import read_cylinder_section
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
 from linelaser_calib.settings import Front, render
 from linelaser_calib.sim import SimulatedData, scenario_from_preset, simulate
+from linelaser_calib.sim.sensor_models import with_faces
 from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
 from linelaser_calib.summary import truth_error
 
@@ -82,6 +84,35 @@ def test_a_fixed_scale_leaves_the_given_radius_contradicted_and_says_how_to_free
     # smooth shape error).
     error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)
     assert error.translation_m > 7e-5
+
+
+@pytest.mark.slow
+def test_with_the_radius_given_the_depth_scale_is_estimated_too() -> None:
+    """x read 0.6 % long and z 0.2 % short about the sensor origin (the stress matrix's
+    ``scales`` face): with the radius given both scales are estimated, and the hand-eye is
+    as good as without them (0.20 mm off with the z scale held). The result file carries the
+    depth scale and reading it back maps the points with it."""
+    scenario = scenario_from_preset("ur_scancontrol", n_poses=12, resolution=320)
+    sensor = with_faces(scenario.sensor, "scales")
+    data = simulate(replace(scenario, sensor=sensor), 3)
+    result = calibrate(data, CylinderConfig(radius_m=data.truth.cylinder.radius))
+    section = result.target
+    assert isinstance(section, CylinderSection)
+    for scale, sigma, truth in (
+        (section.scale, section.scale_sigma, sensor.x_scale_error),
+        (section.depth_scale, section.depth_scale_sigma, sensor.z_scale_error),
+    ):
+        assert scale is not None and sigma is not None
+        assert abs(scale - truth) < 3.0 * sigma < 0.002
+    assert truth_error(result.T_flange_sensor, data.truth.T_flange_sensor).translation_m < 1e-4
+    assert "depth (z) scale 0.99" in section.describe("base_link")
+    mapping = section.to_mapping("base_link")
+    read = read_cylinder_section(mapping, {})
+    assert read.depth_scale is not None and section.depth_scale is not None
+    assert abs(read.depth_scale - section.depth_scale) < 1e-12
+    assert read.sensor_points(np.array([[0.0, 0.0, 0.1]]))[0, 2] == pytest.approx(
+        0.1 / (1.0 + section.depth_scale), abs=1e-12
+    )
 
 
 def test_the_sphere_estimates_the_scale_when_asked_and_names_it() -> None:

@@ -15,6 +15,7 @@ from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import Surface
 from linelaser_calib.sim.sensor_models import (
     SensorModel,
+    apply_sensor_model,
     circle_rms_m,
     second_difference_noise_m,
     sensor_model_from_mapping,
@@ -83,6 +84,25 @@ def test_quantisation_rounds_x_and_z_to_their_steps() -> None:
     p = measured.points[measured.valid]
     for axis, step in ((0, 1e-5), (2, 4e-6)):
         assert np.allclose(p[:, axis] / step, np.round(p[:, axis] / step), atol=1e-6)
+
+
+def test_the_scales_act_about_the_sensor_origin() -> None:
+    """x and z are each multiplied by (1 + their scale error), whatever the measuring range:
+    a pivot elsewhere would shift the sensor frame, which is part of the hand-eye."""
+    model = SensorModel(x_scale_error=0.006, z_scale_error=-0.002)
+    points = np.array([[[0.012, 0.0, 0.09], [-0.02, 0.0, 0.13]]])
+    measured, weak = apply_sensor_model(
+        np.random.default_rng(0),
+        model,
+        points,
+        points,
+        (0.07, 0.15),
+        np.ones((1, 2)),
+        np.ones((1, 2)),
+    )
+    assert not weak.any()
+    assert np.allclose(measured[..., 0], 1.006 * points[..., 0], rtol=0, atol=1e-15)
+    assert np.allclose(measured[..., 2], 0.998 * points[..., 2], rtol=0, atol=1e-15)
 
 
 def test_linearity_bow_is_bounded_by_the_datasheet_figure() -> None:

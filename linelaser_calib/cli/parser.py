@@ -329,9 +329,10 @@ def build_parser() -> argparse.ArgumentParser:
     cal_p.add_argument(
         "--scale",
         metavar="auto|fixed|free",
-        help="cylinder and sphere targets, default method: the sensor's along-line (x) scale, "
-        "unitless, estimated with the hand-eye (free) or held at 1 (fixed); default auto: for "
-        "the cylinder free where it lies clearly off 1, for the sphere fixed",
+        help="cylinder, sphere and line targets, default method: the profiler's along-line (x) "
+        "scale (the line's and, radius given, the cylinder's depth (z) scale too), unitless, "
+        "estimated with the hand-eye (free) or held at 1 (fixed); default auto: for the "
+        "cylinder and the line free where clearly off 1, for the sphere fixed",
     )
     _add_pose_source_arguments(cal_p)
     cal_p.add_argument(

@@ -194,9 +194,9 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
     ),
     WarningKind(
         "scale-held",
-        r"the along-line scale, estimated by default, read",
+        r"the (along-line|depth) scale, estimated by default, read",
         _CARE,
-        "the along-line scale read implausibly far from 1, so it was held at 1",
+        "a scale of the profiler read implausibly far from 1, so it was held at 1",
         f"give the measured {setting('radius_m')}; the hand-eye's 1 sigma does not cover "
         "whatever stretches the profiles",
     ),

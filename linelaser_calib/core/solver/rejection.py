@@ -80,8 +80,8 @@ def recording_widening(chi2: np.ndarray, dof: int, n_global: int) -> tuple[float
     The a-posteriori variance factor: the samples' chi2 (each with ``dof`` degrees of
     freedom, shape (M,)) summed over the redundancy ``dof`` M − ``n_global``; its root where
     it exceeds 1. A profiler whose x and z scales differ by 0.8 % (the stress matrix's
-    ``scales`` face) gives the line target's corners 1.9-7.5 times their modelled variance
-    (clean twins 0.1-0.3, so no widening there).
+    ``scales`` face) gave the line target's corners 1.9-7.5 times their modelled variance
+    with the scales held (clean twins 0.1-0.3, so no widening there); it now estimates them.
     """
     values = np.asarray(chi2, dtype=np.float64)
     redundancy = dof * len(values) - n_global

@@ -54,6 +54,9 @@ class RefineConfig:
         Estimate the sensor's along-line scale error s (the profiler reports x as (1 + s)
         times the true value; a point (x, z) is taken as (x / (1 + s), z)) as one more global
         parameter. Default False: s = 0.
+    estimate_depth_scale : bool
+        Estimate the sensor's depth scale error s_z about its origin (a point (x, z) is taken
+        as (x, z / (1 + s_z))) as one more global parameter. Default False: s_z = 0.
     max_iterations : int
         Levenberg–Marquardt iterations (linearisations). Default 50.
     tolerance : float
@@ -107,6 +110,7 @@ class RefineConfig:
     max_points_per_profile_correlated: int = 0
     estimate_radius: bool = False
     estimate_scale: bool = False
+    estimate_depth_scale: bool = False
     max_iterations: int = 50
     tolerance: float = 1e-10
     step_tolerance_m: float = 1e-12
@@ -178,9 +182,10 @@ class CylinderConfig:
     radius_m : float or None
         Cylinder radius, m; None estimates it.
     scale : str
-        The sensor's along-line scale in the default method: ``free`` estimates it with the
-        hand-eye, ``fixed`` holds it at 1, ``auto`` (default) estimates it when the radius is
-        given (:func:`.target.estimates_scale`).
+        The sensor's along-line (x) scale, and with the radius given its depth (z) scale, in
+        the default method: ``free`` estimates them with the hand-eye, ``fixed`` holds them at
+        1, ``auto`` (default) estimates them and keeps each only where it lies clearly off 1
+        (the x scale always with the radius given; :func:`.target.estimates_scale`).
     min_samples : int
         Fewest fitted samples accepted.
     cleaning : CleaningConfig

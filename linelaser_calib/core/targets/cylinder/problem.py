@@ -15,12 +15,14 @@ an error stated in the base frame, and it keeps rotation and translation errors 
 (a base-frame rotation would swing the flange about the robot base). A point maps into the
 base frame as
 
-    x_jk = T_j · D(δ_j) · T_flange_sensor · S⁻¹ · p_jk,   S = diag(1 + s, 1, 1),
+    x_jk = T_j · D(δ_j) · T_flange_sensor · S⁻¹ · p_jk,   S = diag(1 + s, 1, 1 + s_z),
 
 where s is the sensor's along-line scale error (dimensionless; 0 unless estimated): a
 profiler that reports x as (1 + s) times the true value (s = 0.005 reads 0.5 % long)
 stretches each arc across the line and shifts its centre by s times its along-line
-position.
+position. s_z is its depth scale error about the sensor origin (0 unless estimated): it
+moves every point by s_z times its depth, about s_z · 0.1 m at a typical range, which the
+robot's motions tell from a shift of the hand-eye by the arcs' spread in depth.
 
 The cylinder has an axis point c, a unit direction d and a radius R. The residuals are
 
@@ -43,9 +45,10 @@ Every iteration linearises around the current estimate in local coordinates:
   along the axis);
 - radius: R = R̂ + r (only when estimated);
 - along-line scale: s = ŝ + σ (only when estimated; ``estimate_scale``);
+- depth scale: s_z = ŝ_z + σ_z (only when estimated; ``estimate_depth_scale``);
 - corrections: ω_j, τ_j additively (exact right Jacobian of Exp).
 
-The Jacobian is analytic and block-sparse: a point depends on the G = 10 to 12 global
+The Jacobian is analytic and block-sparse: a point depends on the G = 10 to 13 global
 numbers and on its sample's 6. The shared block solver
 (:mod:`linelaser_calib.core.solver`: Levenberg–Marquardt with Marquardt scaling, Nielsen's
 damping update and iteratively re-weighted robust weights) solves the normal equations by a
@@ -99,6 +102,8 @@ class CylinderState:
         Pose corrections, rad and m, flange frame.
     scale : float
         The sensor's along-line scale error s (dimensionless).
+    depth_scale : float
+        The sensor's depth scale error s_z about its origin (dimensionless).
     """
 
     R_fs: FloatArray
@@ -109,12 +114,13 @@ class CylinderState:
     omega: FloatArray
     tau: FloatArray
     scale: float = 0.0
+    depth_scale: float = 0.0
 
 
 class _Geometry(NamedTuple):
     """Per-point intermediate quantities at one state."""
 
-    p: FloatArray  # (M, K, 3) sensor point with the along-line scale removed, S⁻¹ p
+    p: FloatArray  # (M, K, 3) sensor point with the scale errors removed, S⁻¹ p
     y: FloatArray  # (M, K, 3) point in the nominal flange frame, R_fs S⁻¹ p + t_fs
     RE: FloatArray  # (M, 3, 3) R_bf·Exp(ω) per sample
     distance: FloatArray  # (M, K) distance to the axis, m
@@ -130,7 +136,8 @@ class CylinderProblem:
     Sample j's points fill ``points[j, :counts[j]]``; the rest repeat its first point and are
     masked out (residual and Jacobian rows zero), so that every per-point operation is a
     batched array operation without gathers. Global step: θ (3), ρ (3), a (2), b (2) and,
-    when estimated, the radius and then the along-line scale (see the module docstring).
+    when estimated, the radius, the along-line scale and the depth scale (see the module
+    docstring).
     With ``centroid`` set, a retraction slides the axis point along the axis to the point
     nearest it (same cylinder).
     """
@@ -144,6 +151,7 @@ class CylinderProblem:
     config: RefineConfig
     centroid: FloatArray | None = None
     estimate_scale: bool = False
+    estimate_depth_scale: bool = False
     whitening: Whitening | None = None  # per-sample W with W C Wᵀ = I, or None
 
     @property
@@ -164,7 +172,8 @@ class CylinderProblem:
 
     @property
     def n_global(self) -> int:
-        return N_HAND_EYE + N_AXIS + int(self.estimate_radius) + int(self.estimate_scale)
+        extra = (self.estimate_radius, self.estimate_scale, self.estimate_depth_scale)
+        return N_HAND_EYE + N_AXIS + sum(extra)
 
     @property
     def radius_index(self) -> int | None:
@@ -174,15 +183,21 @@ class CylinderProblem:
     @property
     def scale_index(self) -> int | None:
         """Position of the along-line scale in the global step, when estimated."""
-        return self.n_global - 1 if self.estimate_scale else None
+        return N_HAND_EYE + N_AXIS + int(self.estimate_radius) if self.estimate_scale else None
+
+    @property
+    def depth_scale_index(self) -> int | None:
+        """Position of the depth scale in the global step, when estimated."""
+        return self.n_global - 1 if self.estimate_depth_scale else None
 
     @property
     def step_scale(self) -> FloatArray:
-        """Rotations and the along-line scale times the lever, lengths as they are."""
+        """Rotations and the scales times the lever, lengths as they are."""
         scale = np.ones(self.n_global)
         scale[:3] = lever_arm_m(self)
-        if self.scale_index is not None:
-            scale[self.scale_index] = lever_arm_m(self)
+        for index in (self.scale_index, self.depth_scale_index):
+            if index is not None:
+                scale[index] = lever_arm_m(self)
         return scale
 
     def with_flange_poses(self, T_base_flange: FloatArray) -> CylinderProblem:
@@ -265,6 +280,10 @@ class CylinderProblem:
         if self.estimate_scale:
             # d (x / (1 + s)) / d s = −x / (1 + s)² = −(x / (1 + s)) / (1 + s)
             columns.append((-n_sensor[..., 0] * geo.p[..., 0] / (1.0 + state.scale))[..., None])
+        if self.estimate_depth_scale:
+            columns.append(
+                (-n_sensor[..., 2] * geo.p[..., 2] / (1.0 + state.depth_scale))[..., None]
+            )
         J_omega = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
         J_global = np.concatenate(columns, axis=2)
         J_local = np.concatenate([J_omega, n_corrected], axis=2)
@@ -291,7 +310,7 @@ class CylinderProblem:
         """Apply increments in the local coordinates of :meth:`linearise`."""
         u, v = orthonormal_basis(state.direction)
         direction = state.direction + step_global[6] * u + step_global[7] * v
-        r, s = self.radius_index, self.scale_index
+        r, s, z = self.radius_index, self.scale_index, self.depth_scale_index
         moved = CylinderState(
             R_fs=state.R_fs @ exp_so3(step_global[None, :3])[0],
             t_fs=state.t_fs + step_global[3:6],
@@ -301,6 +320,7 @@ class CylinderProblem:
             omega=state.omega + step_local[:, :3],
             tau=state.tau + step_local[:, 3:],
             scale=state.scale + (0.0 if s is None else float(step_global[s])),
+            depth_scale=state.depth_scale + (0.0 if z is None else float(step_global[z])),
         )
         return moved if self.centroid is None else recentred(moved, self.centroid)
 
@@ -318,7 +338,7 @@ def _sample_transforms(
 def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
     """Base-frame points and their relation to the axis."""
     RE, offset = _sample_transforms(problem, state)
-    p = measured_to_true(problem.points, state.scale)
+    p = measured_to_true(problem.points, state.scale, state.depth_scale)
     y = p @ state.R_fs.T + state.t_fs
     w = y @ RE.transpose(0, 2, 1) + (offset - state.point)[:, None, :]
     along = w @ state.direction
@@ -339,7 +359,7 @@ def data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray:
     """Mean of the profiles' centroids in the base frame (3,), m."""
     RE, offset = _sample_transforms(problem, state)
     means = np.sum(problem.points * problem.mask[..., None], axis=1) / problem.counts[:, None]
-    y = measured_to_true(means, state.scale) @ state.R_fs.T + state.t_fs
+    y = measured_to_true(means, state.scale, state.depth_scale) @ state.R_fs.T + state.t_fs
     return np.asarray(np.mean(np.einsum("mij,mj->mi", RE, y) + offset, axis=0))
 
 
@@ -369,7 +389,8 @@ def build_problem(
     """Validate the input (InputError/DegenerateError with advice) and stack it.
 
     Parameters are those of :func:`.refine.refine`; ``estimate_radius`` adds the radius to the
-    global parameters, ``config.estimate_scale`` the along-line scale.
+    global parameters, ``config.estimate_scale`` the along-line scale and
+    ``config.estimate_depth_scale`` the depth scale.
     """
     T_all = np.asarray(T_base_flange, dtype=np.float64)
     M = len(samples_points)
@@ -417,6 +438,7 @@ def build_problem(
         estimate_radius=estimate_radius,
         config=config,
         estimate_scale=config.estimate_scale,
+        estimate_depth_scale=config.estimate_depth_scale,
     )
 
 

@@ -193,6 +193,11 @@ class RefineResult:
         says, per axis (observed over expected variance,
         :func:`~linelaser_calib.core.solver.sample_dispersion`); the 1σ above is widened by
         its square root where it exceeds 1. None when not checked (too few profiles).
+    depth_scale : float
+        The sensor's depth scale error s_z about its origin (z reported as (1 + s_z) times
+        the true value); 0 when not estimated.
+    sigma_depth_scale : float or None
+        1σ of ``depth_scale``, when estimated.
     """
 
     T_flange_sensor: FloatArray
@@ -225,6 +230,8 @@ class RefineResult:
     solved: SolvedProblem | None = None
     line_noise: LineNoise | None = None
     sample_dispersion: FloatArray | None = None
+    depth_scale: float = 0.0
+    sigma_depth_scale: float | None = None
 
     @property
     def sample_residuals_m(self) -> dict[int, float]:
@@ -288,6 +295,7 @@ def refine(
     pose_corrections0: FloatArray | None = None,
     scale0: float = 0.0,
     noise: LineNoise | None = None,
+    depth_scale0: float = 0.0,
 ) -> RefineResult:
     """Maximum-likelihood hand-eye, axis and radius from every profile point.
 
@@ -313,6 +321,8 @@ def refine(
         The points' correlated noise along the line: each sample's residuals are whitened
         with it (generalised least squares; normals taken at the start). None weighs the
         points as independent with σ_s.
+    depth_scale0 : float
+        Start of the depth scale error, when estimated.
 
     Returns
     -------
@@ -339,6 +349,8 @@ def refine(
         state = replace(state, omega=start[:, :3].copy(), tau=start[:, 3:].copy())
     if problem.estimate_scale:
         state = replace(state, scale=float(scale0))
+    if problem.estimate_depth_scale:
+        state = replace(state, depth_scale=float(depth_scale0))
     if noise is not None:
         whitening = line_whitening(
             noise,
@@ -478,7 +490,7 @@ def summarise(
     )
     covariance = widen_covariance(covariance, dispersion)
     sigma = np.sqrt(np.diag(covariance))
-    r, s = problem.radius_index, problem.scale_index
+    r, s, z = problem.radius_index, problem.scale_index, problem.depth_scale_index
 
     squares = np.sum((e * cfg.sensor_sigma_m) ** 2, axis=1)
     sample_rms = np.sqrt(squares / problem.counts)
@@ -541,6 +553,8 @@ def summarise(
         scale=state.scale,
         sigma_scale=None if s is None else float(sigma[s]),
         scale_radius_correlation=correlation,
+        depth_scale=state.depth_scale,
+        sigma_depth_scale=None if z is None else float(sigma[z]),
         used=list(range(problem.n_samples)),
         dropped=[],
         sample_rms_m=sample_rms,
@@ -637,7 +651,7 @@ def point_residuals_m(
     out = []
     for p, T, delta in zip(samples_points, T_all, result.pose_corrections, strict=True):
         R = T[:3, :3] @ exp_so3(delta[None, :3])[0]
-        w = (measured_to_true(p, result.scale) @ R_fs.T + t_fs) @ R.T + (
+        w = (measured_to_true(p, result.scale, result.depth_scale) @ R_fs.T + t_fs) @ R.T + (
             T[:3, 3] + T[:3, :3] @ delta[3:] - c
         )
         radial = w - np.outer(w @ d, d)
@@ -762,6 +776,7 @@ def refine_with_outlier_rejection(
                 first.pose_corrections[keep],
                 first.scale,
                 noise,
+                first.depth_scale,
             )
         T_start = T0 if previous is None else previous.T_flange_sensor
         axis = start if previous is None else previous.cylinder

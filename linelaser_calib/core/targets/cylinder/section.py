@@ -1,5 +1,5 @@
 """The cylinder target's part of a result: the fitted cylinder in the base frame, and the
-sensor's along-line scale when it was estimated with it."""
+sensor's along-line and depth scales when they were estimated with it."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...geometry import FloatArray, apply_transform
-from ...profile.along_line import measured_to_true, scale_text
+from ...profile.along_line import measured_to_true, scale_entries, scale_text, scales_from_mapping
 from ...profile.noise import LineNoise
 from ...types import SampleFit
 from ..base import Shape, SurfaceMap, direction_text, mm_text, plain_floats, read_vector
@@ -39,6 +39,10 @@ class CylinderSection:
         1σ of ``scale``.
     scale_radius_correlation : float or None
         Correlation coefficient of the scale and the radius, when both were estimated.
+    depth_scale, depth_scale_sigma : float or None
+        The sensor's depth scale error s_z about its origin estimated with the cylinder (the
+        profiler reports z as (1 + s_z) times the true value), and its 1σ; None when it was
+        not estimated.
     line_noise : LineNoise or None
         The recording's point noise along the line that weighed the points (white σ, smooth
         σ and its correlation length, learned from the residuals; default method), or None
@@ -58,11 +62,14 @@ class CylinderSection:
     scale_sigma: float | None = None
     scale_radius_correlation: float | None = None
     line_noise: LineNoise | None = None
+    depth_scale: float | None = None
+    depth_scale_sigma: float | None = None
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
         """``{frame, point, direction, radius}`` (m), and with an estimated scale
         ``along_line_scale`` (the ratio 1 + s), ``along_line_scale_sigma`` (its 1σ) and, with
-        the radius estimated too, ``along_line_scale_radius_correlation``."""
+        the radius estimated too, ``along_line_scale_radius_correlation``; with an estimated
+        depth scale ``depth_scale`` (1 + s_z) and ``depth_scale_sigma``."""
         c = self.cylinder
         mapping: dict[str, Any] = {
             "frame": base_frame,
@@ -79,6 +86,7 @@ class CylinderSection:
                 mapping["along_line_scale_radius_correlation"] = float(
                     self.scale_radius_correlation
                 )
+        mapping.update(scale_entries("depth_scale", self.depth_scale, self.depth_scale_sigma))
         return mapping
 
     def quality_entries(self) -> dict[str, Any]:
@@ -120,6 +128,11 @@ class CylinderSection:
                 if self.scale is None
                 else f"; {scale_text(self.scale, self.scale_sigma)}"
                 + correlation_text(self.scale_radius_correlation)
+            )
+            + (
+                ""
+                if self.depth_scale is None
+                else f"; {scale_text(self.depth_scale, self.depth_scale_sigma, 'depth (z)')}"
             )
         )
 
@@ -168,8 +181,8 @@ class CylinderSection:
         return {}
 
     def sensor_points(self, points: FloatArray) -> FloatArray:
-        """The points with the estimated along-line scale error removed (x / (1 + s))."""
-        return points if self.scale is None else measured_to_true(points, self.scale)
+        """The points with the estimated scale errors removed (x / (1 + s), z / (1 + s_z))."""
+        return measured_to_true(points, self.scale or 0.0, self.depth_scale or 0.0)
 
 
 def read_cylinder_section(
@@ -202,6 +215,7 @@ def read_cylinder_section(
             f"key along_line_scale_radius_correlation must be within [-1, 1], got {correlation}"
         )
     scaled = ratio is not None
+    depth_scale, depth_sigma = scales_from_mapping(mapping, "depth_scale")
     return CylinderSection(
         Cylinder(point, direction / norm, float(radius)),
         estimated,
@@ -210,6 +224,8 @@ def read_cylinder_section(
         scale_sigma=sigma if scaled else None,
         scale_radius_correlation=correlation if scaled else None,
         line_noise=_line_noise(quality.get("line_noise")),
+        depth_scale=depth_scale,
+        depth_scale_sigma=depth_sigma,
     )
 
 

@@ -8,9 +8,9 @@ Methods
 ``default``
     The paper's solve as a seed, then maximum likelihood on every inlier point with the
     robot's per-sample pose error as nuisance parameters, outlier-sample rejection,
-    covariance and observability diagnostics (:mod:`.refine`). The sensor's along-line scale
-    is estimated with them when the radius is given or when asked (``scale``, ``--scale``;
-    :func:`estimates_scale`). With joint states and a
+    covariance and observability diagnostics (:mod:`.refine`). The sensor's along-line scale,
+    and with the radius given its depth scale, are estimated with them (``scale``,
+    ``--scale``; :func:`estimates_scale`). With joint states and a
     robot model (``SolveContext.kinematics``) it then estimates the identifiable kinematic
     corrections together with the hand-eye and the cylinder
     (:func:`.joint.refine_kinematics`), from the other placements of the cylinder in
@@ -100,24 +100,30 @@ MISFIT_FACTOR = 5.0
 PAPER_MISFIT_FACTOR = 100.0
 
 
-def estimates_scale(config: CylinderConfig) -> bool:
-    """Whether the default method estimates the sensor's along-line scale: as ``config.scale``
-    says, and with ``auto`` (default) yes, :meth:`CylinderTarget.solve_default` holding it
-    at 1 again with the radius free when the estimate is implausible or poorly determined.
+def estimates_scale(config: CylinderConfig) -> tuple[bool, bool]:
+    """Whether the default method's first solve estimates the sensor's along-line (x) and
+    depth (z) scales: with ``free`` and ``auto`` (default) the x scale always and the z scale
+    when the radius is given, ``auto`` then holding each at 1 again when its estimate is
+    implausible, poorly determined or not clearly off 1 (the x scale only with the radius
+    free; :meth:`CylinderTarget.solve_default`); ``fixed`` holds both.
 
-    With the radius given the scale is determined by the arcs' shape alone (within ±0.003 %
+    With the radius given the x scale is determined by the arcs' shape alone (within ±0.003 %
     of 1 on the ``paper`` and ``ur_scancontrol`` presets, 20 seeds) and costs no accuracy
     there, whereas a scale error left fixed makes the stretched profiles contradict the
     radius, and the hand-eye absorbs the misfit: RMS 19.6 mm (2.7-35 mm) over 20 seeds of
     ``cluttered_camera`` (0.5 % scale error) against 1.8 mm (0.08-3.1 mm) with the scale
-    estimated (bench/accuracy.py ``scale``). With the radius estimated the two are ~99 %
-    correlated, yet an x scale 0.8 % off the z scale (the stress matrix's ``scales`` face)
-    moved ``ur_scancontrol``'s hand-eye 0.31 mm with the scale held and 0.04 mm estimated
-    (clean twin 0.024 mm either way).
+    estimated (bench/accuracy.py ``scale``). The z scale (about the sensor origin) is then
+    determined too: on the stress matrix's ``scales`` face (x +0.6 %, z -0.2 %, 12 poses of
+    ``ur_scancontrol``, seeds 3 and 4) it reads -0.19 ± 0.05 % and -0.25 ± 0.04 %, and the
+    hand-eye is 0.026 and 0.065 mm off (0.20 mm with the z scale held); on seed 5 it reads
+    -0.13 ± 0.05 %, under 3σ, so ``auto`` holds it (0.195 mm off; ``free`` 0.067 mm).
+    With the radius estimated the profiles determine only the ratio of the two scales: the
+    x scale alone reads their difference (+0.81 ± 0.03 %), both together drift with the
+    radius (+3.9 ± 0.6 % and +3.1 ± 0.6 %), so the z scale is held and its share, s_z times
+    the depth of the points (0.26 mm there), stays in the hand-eye: give the radius.
     """
-    if config.scale == "auto":
-        return True
-    return config.scale == "free"
+    free = config.scale != "fixed"
+    return free, free and config.radius_m is not None
 
 
 def scale_verdict(refined: RefineResult) -> str:
@@ -378,32 +384,41 @@ class CylinderTarget:
         self, features: list[Any], config: CylinderConfig, context: SolveContext
     ) -> TargetSolution:
         """Maximum likelihood on every inlier point, seeded by the paper's solve (or started
-        at the context's warm start). With ``{setting:scale} auto`` and the radius free the
-        along-line scale is estimated and held at 1 again when the estimate is implausible,
-        poorly determined or not clearly off 1 (:func:`scale_significant`); a warm start keeps
-        its own choice."""
+        at the context's warm start). With ``{setting:scale} auto`` the scales of
+        :func:`estimates_scale` are estimated and each is held at 1 again when its estimate
+        is implausible, poorly determined or not clearly off 1 (:func:`scale_significant`;
+        the x scale only with the radius free); a warm start keeps its own choice."""
         radius = self._checked(features, config, context)
-        free = estimates_scale(config)
         warm = context.warm_start
-        if config.scale != "auto" or config.radius_m is not None:
-            return self._solve_default(features, config, context, radius, free)
+        free, depth = estimates_scale(config)
+        if config.scale != "auto":
+            return self._solve_default(features, config, context, radius, free, depth)
         if warm is not None and isinstance(warm.section, CylinderSection):
-            free = warm.section.scale is not None
-            return self._solve_default(features, config, context, radius, free)
-        solution = self._solve_default(features, config, context, radius, True)
-        assert isinstance(solution.section, CylinderSection)
-        scale, sigma = solution.section.scale, solution.section.scale_sigma
-        if scale is None or sigma is None:
+            free, depth = warm.section.scale is not None, warm.section.depth_scale is not None
+            return self._solve_default(features, config, context, radius, free, depth)
+        solution = self._solve_default(features, config, context, radius, free, depth)
+        section = solution.section
+        assert isinstance(section, CylinderSection)
+        estimates = (
+            (section.scale, section.scale_sigma),
+            (section.depth_scale, section.depth_scale_sigma),
+        )
+        kept = [
+            value is not None
+            and abs(value) <= PLAUSIBLE_SCALE_ERROR
+            and (sigma is None or sigma <= MAX_SCALE_SIGMA)
+            and scale_significant(value, sigma)
+            for value, sigma in estimates
+        ]
+        kept[0] = kept[0] or config.radius_m is not None
+        if kept == [free, depth]:
             return solution
-        if (
-            abs(scale) <= PLAUSIBLE_SCALE_ERROR
-            and sigma <= MAX_SCALE_SIGMA
-            and scale_significant(scale, sigma)
-        ):
-            return solution
-        held = self._solve_default(features, config, context, radius, False)
-        if abs(scale) > PLAUSIBLE_SCALE_ERROR:
-            held.warnings.append(implausible_scale_held(scale))
+        held = self._solve_default(features, config, context, radius, kept[0], kept[1])
+        held.warnings.extend(
+            implausible_scale_held(value, axis)
+            for (value, _), axis in zip(estimates, ("along-line", "depth"), strict=True)
+            if value is not None and abs(value) > PLAUSIBLE_SCALE_ERROR
+        )
         return held
 
     def _solve_default(
@@ -413,12 +428,17 @@ class CylinderTarget:
         context: SolveContext,
         radius: float,
         free: bool,
+        depth: bool,
     ) -> TargetSolution:
-        """:meth:`solve_default` with the along-line scale estimated (``free``) or held."""
+        """:meth:`solve_default` with the along-line scale estimated (``free``) or held, and
+        the depth scale estimated (``depth``) or held."""
         mismatch = radius_mismatch(
             [f.ellipse.semi_axes[1] for f in long_arcs(features)], config.radius_m
         )
-        config = replace(config, refine=replace(config.refine, estimate_scale=free))
+        config = replace(
+            config,
+            refine=replace(config.refine, estimate_scale=free, estimate_depth_scale=depth),
+        )
         subset = _subset_start(features, context)
         seed_history: dict[str, Any] = {}
         screened: list[Rejection] = []
@@ -470,6 +490,8 @@ class CylinderTarget:
                 scale_sigma=refined.sigma_scale,
                 scale_radius_correlation=refined.scale_radius_correlation,
                 line_noise=refined.line_noise,
+                depth_scale=None if refined.sigma_depth_scale is None else refined.depth_scale,
+                depth_scale_sigma=refined.sigma_depth_scale,
             ),
             method="default",
             samples_used=[features[j].index for j in refined.used],

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 from ...errors import InputError
+from ...profile.along_line import SCALE_MODES
 from .features import LineFeatureConfig
 
 
@@ -25,6 +26,11 @@ class LineConfig:
         5 µm.
     initial_sigma_rotation_rad, initial_sigma_translation_m : float
         Loose prior around an initial hand-eye, per axis. Defaults 5 deg and 10 mm.
+    scale : str
+        The profiler's x (along the line) and z (depth) scales in the default method, both
+        about the sensor origin: ``free`` estimates them with the hand-eye, ``fixed`` holds
+        them at 1, ``auto`` (default) estimates them and keeps each one only where it lies
+        clearly off 1 (:meth:`.target.LineTarget.solve_default`).
     min_samples : int
         Fewest views with a corner. Default 20 (the closed form needs 17).
     max_iterations : int
@@ -47,6 +53,7 @@ class LineConfig:
     corner_sigma_floor_m: float = 5e-6
     initial_sigma_rotation_rad: float = math.radians(5.0)
     initial_sigma_translation_m: float = 0.01
+    scale: str = "auto"
     min_samples: int = 20
     max_iterations: int = 50
     tolerance: float = 1e-10
@@ -67,6 +74,10 @@ class LineConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise InputError(f"LineConfig.{name} must be positive and finite, got {value}")
+        if self.scale not in SCALE_MODES:
+            raise InputError(
+                f"the profiler scale must be one of {', '.join(SCALE_MODES)}, got {self.scale!r}"
+            )
         if self.min_samples < 3 or self.max_iterations < 1:
             raise InputError("LineConfig.min_samples must be >= 3 and max_iterations >= 1")
         if not 0.0 < self.outlier_probability < 1.0:

@@ -6,6 +6,14 @@ Unknowns: the hand-eye (θ, ρ; R_X ← R_X Exp(θ), t_X ← t_X + ρ), the line
 measured in the laser plane with the covariance of its fit (floored). An optional loose prior
 ties the hand-eye to an initial one; it decides only what the views cannot.
 
+Optionally the profiler's scales are estimated too: its along-line (x) and depth (z) scale
+errors s = (s_x, s_z), both about the sensor origin, so that a measured corner (x, z) is the
+true one (x / (1 + s_x), z / (1 + s_z)) (:func:`~...profile.along_line.measured_to_true`).
+A corner is where two straight flanks meet, and a scale of either axis maps straight lines
+to straight lines, so the measured corner is the scaled true one exactly. A z scale about
+any other depth would be this one plus a shift of the sensor frame along z, which is part of
+the hand-eye; about the origin the two are told apart by the corners' spread in depth.
+
 The shared block solver (:mod:`linelaser_calib.core.solver`) minimises it, each view's
 correction eliminated (Schur complement). The information of the hand-eye from the views
 alone (prior left out, line and corrections marginalised) feeds the observability diagnosis.
@@ -24,14 +32,17 @@ from ...geometry import (
     rotvec_from_matrix,
     transform_from_rotation_translation,
 )
+from ...profile.along_line import measured_to_true
 from ...solver import Linearisation, SolverConfig, solve
 from ...solver.lm import Residuals
 from ...types import FloatArray
 from .config import LineConfig
 from .model import N_LINE, Line, LineResiduals, line_residuals, retract_line
 
-#: Global parameters: hand-eye (6) and line (4).
+#: Global parameters without the scales: hand-eye (6) and line (4).
 N_GLOBAL = 6 + N_LINE
+#: Profiler axes whose scale may be estimated: along the line (x) and depth (z).
+SCALE_AXES = ("x", "z")
 
 
 class _State(NamedTuple):
@@ -39,6 +50,7 @@ class _State(NamedTuple):
     R_L: FloatArray  # (3, 3)
     offset: FloatArray  # (2,)
     pose: FloatArray  # (M, 6)
+    scales: FloatArray  # (2,) s_x, s_z
 
 
 def whitening_matrices(covariance_xz: FloatArray, floor_m: float) -> FloatArray:
@@ -57,14 +69,16 @@ class _LineProblem:
     prior_centre: FloatArray | None  # (4, 4)
     config: LineConfig
     lever_m: float
+    free_scales: tuple[bool, bool]
 
     @property
     def n_global(self) -> int:
-        return N_GLOBAL
+        return N_GLOBAL + sum(self.free_scales)
 
     @property
     def step_scale(self) -> FloatArray:
-        return np.array([self.lever_m] * 3 + [1.0] * 3 + [self.lever_m] * 2 + [1.0] * 2)
+        lengths = [self.lever_m] * 3 + [1.0] * 3 + [self.lever_m] * 2 + [1.0] * 2
+        return np.array(lengths + [self.lever_m] * sum(self.free_scales))
 
     @property
     def precision(self) -> FloatArray:
@@ -72,22 +86,26 @@ class _LineProblem:
         return np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
 
     def _prior(self, X: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Residuals (R,) and Jacobian (R, N_GLOBAL) of the loose hand-eye prior."""
+        """Residuals (R,) and Jacobian (R, G) of the loose hand-eye prior."""
         X0 = self.prior_centre
         if X0 is None:
-            return np.zeros(0), np.zeros((0, N_GLOBAL))
+            return np.zeros(0), np.zeros((0, self.n_global))
         cfg = self.config
         weights = np.array(
             [1.0 / cfg.initial_sigma_rotation_rad] * 3 + [1.0 / cfg.initial_sigma_translation_m] * 3
         )
         delta = np.concatenate([rotvec_from_matrix(X0[:3, :3].T @ X[:3, :3]), X[:3, 3] - X0[:3, 3]])
-        J = np.zeros((6, N_GLOBAL))
+        J = np.zeros((6, self.n_global))
         J[:, :6] = np.diag(weights)
         return weights * delta, J
 
+    def _corners(self, scales: FloatArray) -> FloatArray:
+        """The corners (M, 2) with the scale errors removed, m."""
+        return measured_to_true(self.corners_xz, float(scales[0]), float(scales[1]))
+
     def _model(self, state: _State) -> LineResiduals:
         return line_residuals(
-            self.corners_xz,
+            self._corners(state.scales),
             self.whitening,
             self.T_base_flange,
             state.X,
@@ -104,9 +122,17 @@ class _LineProblem:
     def linearise(self, state: _State) -> Linearisation:
         model = self._model(state)
         prior, J_prior = self._prior(state.X)
+        # The residual is the whitened in-plane offset of the true corner (x / (1 + s_x),
+        # z / (1 + s_z)), so d residual / d s_a = W[:, :, a] · (−true_a / (1 + s_a)).
+        true = self._corners(state.scales)
+        J_scales = [
+            self.whitening[:, :, [a]] * (-true[:, a] / (1.0 + state.scales[a]))[:, None, None]
+            for a in range(2)
+            if self.free_scales[a]
+        ]
         return Linearisation(
             residuals=Residuals(model.residuals, state.pose * self.precision, prior),
-            J_global=np.concatenate([model.hand_eye, model.line], axis=2),
+            J_global=np.concatenate([model.hand_eye, model.line, *J_scales], axis=2),
             J_local=model.pose,
             pose_prior_sqrt_information=self.precision,
             global_prior_jacobian=J_prior,
@@ -116,8 +142,10 @@ class _LineProblem:
         X = state.X.copy()
         X[:3, :3] = X[:3, :3] @ matrix_from_rotvec(step_global[:3])
         X[:3, 3] += step_global[3:6]
-        R_L, offset = retract_line(state.R_L, state.offset, step_global[6:])
-        return _State(X, R_L, offset, state.pose + step_local)
+        R_L, offset = retract_line(state.R_L, state.offset, step_global[6:N_GLOBAL])
+        scales = state.scales.copy()
+        scales[np.flatnonzero(self.free_scales)] += step_global[N_GLOBAL:]
+        return _State(X, R_L, offset, state.pose + step_local, scales)
 
 
 @dataclass(frozen=True)
@@ -129,14 +157,20 @@ class LineRefinement:
     T_flange_sensor : ndarray, shape (4, 4)
     line : Line
         The seam line in the base frame.
-    covariance : ndarray, shape (10, 10)
-        Of ``[θ (rad, sensor axes), ρ (m, flange), line delta (rad, rad, m, m)]``, pose
-        corrections marginalised, priors included.
+    covariance : ndarray, shape (10 + F, 10 + F)
+        Of ``[θ (rad, sensor axes), ρ (m, flange), line delta (rad, rad, m, m)]`` and the F
+        estimated scale errors (x before z), pose corrections marginalised, priors included.
     information_data : ndarray, shape (6, 6)
-        Hand-eye information from the views alone (prior left out, line marginalised).
+        Hand-eye information from the views alone (prior left out, line and scales
+        marginalised).
+    scales : ndarray, shape (2,)
+        The scale errors (s_x, s_z) of the profiler's x and z axes; 0 where held.
+    scale_sigmas : tuple of (float or None)
+        1σ of each scale error; None where it was held.
     pose_corrections : ndarray, shape (M, 6)
     offsets_xz : ndarray, shape (M, 2)
-        Each corner's in-plane offset from the line's crossing of its laser plane, m.
+        Each corner's in-plane offset (true, scale errors removed) from the line's crossing
+        of its laser plane, m.
     view_chi2 : ndarray, shape (M,)
         Normalised squared residual of each view (corner and pose correction), ≈ χ²(2).
     cost_history : list of float
@@ -148,6 +182,8 @@ class LineRefinement:
     line: Line
     covariance: FloatArray
     information_data: FloatArray
+    scales: FloatArray
+    scale_sigmas: tuple[float | None, float | None]
     pose_corrections: FloatArray
     offsets_xz: FloatArray
     view_chi2: FloatArray
@@ -164,6 +200,7 @@ def refine_line(
     line0: Line,
     T_flange_sensor_prior: FloatArray | None,
     config: LineConfig,
+    free_scales: tuple[bool, bool] = (False, False),
 ) -> LineRefinement:
     """Maximum-likelihood hand-eye and line (see the module docstring).
 
@@ -182,6 +219,8 @@ def refine_line(
     T_flange_sensor_prior : ndarray, shape (4, 4), or None
         Centre of the loose hand-eye prior; None for none.
     config : LineConfig
+    free_scales : (bool, bool)
+        Whether the x and the z scale errors are estimated (held at 0 otherwise).
 
     Raises
     ------
@@ -196,10 +235,15 @@ def refine_line(
         None if T_flange_sensor_prior is None else np.asarray(T_flange_sensor_prior),
         config,
         float(np.median(np.hypot(c[:, 0], c[:, 1]))),
+        free_scales,
     )
     R_L, offset = line0.frame()
     start = _State(
-        np.asarray(T_flange_sensor0, dtype=np.float64), R_L, offset, np.zeros((len(c), 6))
+        np.asarray(T_flange_sensor0, dtype=np.float64),
+        R_L,
+        offset,
+        np.zeros((len(c), 6)),
+        np.zeros(2),
     )
     solution = solve(
         problem,
@@ -215,11 +259,18 @@ def refine_line(
     data_hand_eye = data[:6, :6] - data[:6, 6:] @ np.linalg.pinv(data[6:, 6:]) @ data[6:, :6]
     model = problem._model(state)
     r = solution.residuals
+    covariance = np.asarray(np.linalg.pinv(information))
+    sigmas = iter(np.sqrt(np.diag(covariance)[N_GLOBAL:]))
     return LineRefinement(
         T_flange_sensor=transform_from_rotation_translation(state.X[:3, :3], state.X[:3, 3]),
         line=Line.from_frame(state.R_L, state.offset),
-        covariance=np.asarray(np.linalg.pinv(information)),
+        covariance=covariance,
         information_data=np.asarray(0.5 * (data_hand_eye + data_hand_eye.T)),
+        scales=state.scales.copy(),
+        scale_sigmas=(
+            float(next(sigmas)) if free_scales[0] else None,
+            float(next(sigmas)) if free_scales[1] else None,
+        ),
         pose_corrections=state.pose.copy(),
         offsets_xz=model.offsets_xz,
         view_chi2=np.sum(r.points**2, axis=1) + np.sum(r.pose_prior**2, axis=1),

@@ -1,16 +1,37 @@
-"""The straight-line target's part of a result: the seam line in the base frame."""
+"""The straight-line target's part of a result: the seam line in the base frame, and the
+profiler's x and z scales where they were estimated with it."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
 from ...geometry import FloatArray, apply_transform
+from ...profile.along_line import measured_to_true, scale_entries, scale_text, scales_from_mapping
 from ...types import SampleFit
-from ..base import Shape, direction_text, mm_text, plain_floats
+from ..base import Shape, direction_text, mm_text, plain_floats, read_vector
 from .model import Line
+
+#: Result-file keys of the estimated scales of the x and z axes (each with ``_sigma``).
+SCALE_KEYS = ("along_line_scale", "depth_scale")
+#: The axes in words.
+SCALE_AXES = ("along-line (x)", "depth (z)")
+
+
+def read_line_section(mapping: Mapping[str, Any]) -> LineSection:
+    """The section of a result file's ``line`` mapping (ValueError naming a bad key)."""
+    point, direction = read_vector(mapping, "point"), read_vector(mapping, "direction")
+    if not float(np.linalg.norm(direction)) > 0.0:
+        raise ValueError("key direction must not be zero")
+    read = [scales_from_mapping(mapping, key) for key in SCALE_KEYS]
+    return LineSection(
+        Line.through(point, direction),
+        (read[0][0], read[1][0]),
+        (read[0][1], read[1][1]),
+    )
 
 
 @dataclass(frozen=True)
@@ -21,28 +42,56 @@ class LineSection:
     ----------
     line : Line
         Point nearest the base origin (m) and unit direction.
+    scales : (float or None, float or None)
+        The profiler's x and z scale errors (s_x, s_z; both about the sensor origin) estimated
+        with the line (``--scale``); None where held at 1.
+    scale_sigmas : (float or None, float or None)
+        Their 1σ.
     """
 
     key: ClassVar[str] = "line"
     title: ClassVar[str] = "straight line"
 
     line: Line
+    scales: tuple[float | None, float | None] = (None, None)
+    scale_sigmas: tuple[float | None, float | None] = (None, None)
+
+    @property
+    def free_scales(self) -> tuple[bool, bool]:
+        """Whether the x and the z scale were estimated."""
+        return (self.scales[0] is not None, self.scales[1] is not None)
+
+    def scale_estimates(self) -> list[tuple[float, float | None]]:
+        """(scale error, 1σ) of each estimated scale, x before z."""
+        return [
+            (s, sigma)
+            for s, sigma in zip(self.scales, self.scale_sigmas, strict=True)
+            if s is not None
+        ]
 
     def to_mapping(self, base_frame: str) -> dict[str, Any]:
-        """``{frame, point: [x, y, z] (m), direction: [x, y, z]}``."""
-        return {
+        """``{frame, point: [x, y, z] (m), direction: [x, y, z]}``, and per estimated scale
+        ``along_line_scale`` / ``depth_scale`` (the ratio 1 + s) with its 1σ."""
+        mapping: dict[str, Any] = {
             "frame": base_frame,
             "point": plain_floats(self.line.point),
             "direction": plain_floats(self.line.direction),
         }
+        for key, s, sigma in zip(SCALE_KEYS, self.scales, self.scale_sigmas, strict=True):
+            mapping.update(scale_entries(key, s, sigma))
+        return mapping
 
     def quality_entries(self) -> dict[str, Any]:
         """No further quality entries."""
         return {}
 
+    def sensor_corners(self, corners_xz: FloatArray) -> FloatArray:
+        """Measured corners (M, 2) (x, z) with the estimated scale errors removed, m."""
+        return measured_to_true(corners_xz, self.scales[0] or 0.0, self.scales[1] or 0.0)
+
     def surface_distances(self, fit: SampleFit, T_base_sensor: FloatArray) -> FloatArray:
         """Distance (1,) of the sample's corner, mapped into the base frame, from the line, m."""
-        x, z = fit.feature_xz
+        x, z = self.sensor_corners(np.asarray(fit.feature_xz))
         v = apply_transform(T_base_sensor, np.array([[x, 0.0, z]])) - self.line.point
         d = self.line.direction
         return np.asarray(np.linalg.norm(v - np.outer(v @ d, d), axis=1))
@@ -52,14 +101,19 @@ class LineSection:
         return {}
 
     def sensor_points(self, points: FloatArray) -> FloatArray:
-        """The points unchanged: this target estimates nothing of the sensor itself."""
-        return points
+        """The points with the estimated scale errors removed (x / (1 + s_x), z / (1 + s_z))."""
+        return measured_to_true(points, self.scales[0] or 0.0, self.scales[1] or 0.0)
 
     def describe(self, base_frame: str) -> str:
         """One line, mm."""
+        scales = "".join(
+            f"; {scale_text(s, sigma, axis)}"
+            for s, sigma, axis in zip(self.scales, self.scale_sigmas, SCALE_AXES, strict=True)
+            if s is not None
+        )
         return (
             f"Seam line in {base_frame}: point {mm_text(self.line.point)} (nearest the base "
-            f"origin), direction {direction_text(self.line.direction)}"
+            f"origin), direction {direction_text(self.line.direction)}" + scales
         )
 
     def residual_kind(self, method: str) -> str:

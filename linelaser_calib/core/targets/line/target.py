@@ -31,6 +31,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from ...errors import DegenerateError, ModelMismatch
+from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held, scale_significant
 from ...profile.corner import CornerSample, check_corner_recording
 from ...seam_grid import paper_correction, weld_points_base
 from ...solver import (
@@ -47,15 +48,14 @@ from ..base import (
     TargetSolution,
     extract_each,
     mismatch_message,
-    read_vector,
     rejection_digest,
 )
 from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
-from .refine import N_GLOBAL, LineRefinement, refine_line
-from .section import LineSection
+from .refine import LineRefinement, refine_line
+from .section import LineSection, read_line_section
 
 #: A default-method fit whose RMS residual exceeds this many times the noise the model
 #: expects is refused.
@@ -95,17 +95,19 @@ def _noise_m(config: LineConfig) -> float:
 def _solution(
     features: list[CornerSample],
     T_flange_sensor: FloatArray,
-    line: Line,
+    section: LineSection,
     method: str,
     config: LineConfig,
     **extra: Any,
 ) -> TargetSolution:
-    """The solution record: residuals of the used features, their records."""
+    """The solution record: residuals of the used features (their corners with the
+    section's estimated scale errors removed), their records."""
     c, _, T = _stack(features)
-    distances = line.distances(weld_points_base(c, T, T_flange_sensor))
+    true = section.sensor_corners(c)
+    distances = section.line.distances(weld_points_base(true, T, T_flange_sensor))
     return TargetSolution(
         T_flange_sensor=T_flange_sensor,
-        section=LineSection(line),
+        section=section,
         method=method,
         samples_used=[f.index for f in features],
         rejections=extra.pop("rejections", []),
@@ -126,7 +128,9 @@ def _one_point(solution: TargetSolution) -> str | None:
     """The refusal of corners that one point explains about as well as the line: the whole
     recording's rival, the known point, with the same hand-eye."""
     fits = solution.sample_fits
-    corners = np.array([f.feature_xz for f in fits])
+    section = solution.section
+    assert isinstance(section, LineSection)
+    corners = section.sensor_corners(np.array([f.feature_xz for f in fits]))
     T = np.array([f.T_base_flange for f in fits])
     points = weld_points_base(corners, T, solution.T_flange_sensor)
     point_rms = float(np.sqrt(np.mean(np.sum((points - points.mean(axis=0)) ** 2, axis=1))))
@@ -175,6 +179,7 @@ class LineTarget:
         "sensor_sigma_m": Option("corner_sigma_floor_m", methods=("default",)),
         "robot_sigma_t_m": Option("robot_sigma_t_m", methods=("default",)),
         "robot_sigma_r_rad": Option("robot_sigma_r_rad", methods=("default",)),
+        "scale": Option("scale", methods=("default",)),
         "min_samples": Option("min_samples"),
         "initial": Option(
             "",
@@ -241,7 +246,7 @@ class LineTarget:
         return _solution(
             features,
             X,
-            line_from_points(weld_points_base(c, T, X)),
+            LineSection(line_from_points(weld_points_base(c, T, X))),
             "paper",
             config,
             warnings=warnings,
@@ -251,8 +256,45 @@ class LineTarget:
     def solve_default(
         self, features: list[Any], config: LineConfig, context: SolveContext
     ) -> TargetSolution:
-        """Closed form, maximum likelihood with outlier views dropped, diagnosis."""
+        """Closed form, maximum likelihood with outlier views dropped, diagnosis.
+
+        The profiler's x and z scale errors are estimated as ``{setting:scale}`` says: with
+        ``auto`` (default) both are, and the solve is repeated with each one held at 1 that
+        is not clearly off 1 (:func:`~...profile.along_line.scale_significant`) or is
+        implausibly large (beyond :data:`~...profile.along_line.PLAUSIBLE_SCALE_ERROR`, with
+        a warning); a warm start (the self-check's subsets) keeps its own choice.
+        """
         _require(features, config, context)
+        warm = context.warm_start
+        if warm is not None and isinstance(warm.section, LineSection):
+            return self._solve_default(features, config, context, warm.section.free_scales)
+        if config.scale != "auto":
+            free = config.scale == "free"
+            return self._solve_default(features, config, context, (free, free))
+        solution = self._solve_default(features, config, context, (True, True))
+        assert isinstance(solution.section, LineSection)
+        estimates = solution.section.scale_estimates()
+        kept = tuple(
+            abs(s) <= PLAUSIBLE_SCALE_ERROR and scale_significant(s, sigma)
+            for s, sigma in estimates
+        )
+        if all(kept):
+            return solution
+        held = self._solve_default(features, config, context, (kept[0], kept[1]))
+        held.warnings.extend(
+            implausible_scale_held(s) for s, _ in estimates if abs(s) > PLAUSIBLE_SCALE_ERROR
+        )
+        return held
+
+    def _solve_default(
+        self,
+        features: list[Any],
+        config: LineConfig,
+        context: SolveContext,
+        free_scales: tuple[bool, bool],
+    ) -> TargetSolution:
+        """:meth:`solve_default` with the x and z scale errors estimated where
+        ``free_scales`` says, held at 0 elsewhere."""
         X0 = context.initial_T_flange_sensor
         c, cov, T = _stack(features)
         X_start, line_start = _start(features, X0)
@@ -267,7 +309,7 @@ class LineTarget:
                     previous.line,
                 )
             )
-            return refine_line(c[kept], cov[kept], T[kept], X, line, X0, config)
+            return refine_line(c[kept], cov[kept], T[kept], X, line, X0, config, free_scales)
 
         def flag(outcome: LineRefinement, kept: list[int]) -> list[Flag]:
             scale = recording_chi2_scale(outcome.view_chi2, 2)
@@ -293,9 +335,14 @@ class LineTarget:
         used = [features[i] for i in outcome.kept]
         c_used, _, T_used = _stack(used)
         X = refined.T_flange_sensor
+        scales = [
+            None if sigma is None else float(s)
+            for s, sigma in zip(refined.scales, refined.scale_sigmas, strict=True)
+        ]
+        section = LineSection(refined.line, (scales[0], scales[1]), refined.scale_sigmas)
         observability = analyse_line(
             refined.information_data,
-            c_used,
+            section.sensor_corners(c_used),
             T_used,
             X,
             refined.line,
@@ -304,7 +351,7 @@ class LineTarget:
         )
         if observability.unobservable and X0 is None:
             # A misfit makes the information meaningless: say so rather than blame the poses.
-            self.check_fit(_solution(used, X, refined.line, "default", config), config)
+            self.check_fit(_solution(used, X, section, "default", config), config)
             raise DegenerateError(
                 "the views do not determine the hand-eye against a straight seam. "
                 + observability.statement()
@@ -316,7 +363,7 @@ class LineTarget:
                 f"the refinement stopped after {refined.iterations} iterations without "
                 "converging; the result may be inaccurate"
             )
-        widen, scatter = recording_widening(refined.view_chi2, 2, N_GLOBAL)
+        widen, scatter = recording_widening(refined.view_chi2, 2, len(refined.covariance))
         if scatter is not None:
             warnings.append(scatter)
         sigma = widen * np.sqrt(np.diag(refined.covariance))
@@ -327,7 +374,7 @@ class LineTarget:
         return _solution(
             used,
             X,
-            refined.line,
+            section,
             "default",
             config,
             rejections=rejections,
@@ -367,6 +414,7 @@ class LineTarget:
         """
         _require(features, config, context)
         X0 = context.initial_T_flange_sensor
+        free = config.scale != "fixed"
 
         def cost(T_base_flange: FloatArray) -> float:
             moved = [
@@ -375,7 +423,8 @@ class LineTarget:
             c, cov, T = _stack(moved)
             X_start, line_start = _start(moved, X0)
             try:
-                return refine_line(c, cov, T, X_start, line_start, X0, config).cost_history[-1]
+                refined = refine_line(c, cov, T, X_start, line_start, X0, config, (free, free))
+                return refined.cost_history[-1]
             except np.linalg.LinAlgError:  # views that determine nothing at this offset
                 return math.inf
 
@@ -383,10 +432,7 @@ class LineTarget:
 
     def read_section(self, mapping: Mapping[str, Any], quality: Mapping[str, Any]) -> LineSection:
         """The ``line`` section of a result file (ValueError naming a bad key)."""
-        point, direction = read_vector(mapping, "point"), read_vector(mapping, "direction")
-        if not float(np.linalg.norm(direction)) > 0.0:
-            raise ValueError("key direction must not be zero")
-        return LineSection(Line.through(point, direction))
+        return read_line_section(mapping)
 
 
 TARGET = LineTarget()

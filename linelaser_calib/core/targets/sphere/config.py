@@ -111,9 +111,11 @@ def estimates_scale(config: SphereConfig, warm_estimated: bool | None = None) ->
     shape error. With the radius given it also takes up a ball that is not the given size
     (the 12.7 mm set: 0.958 ± 0.003, scatter 1.10 mm against 0.78 mm held), and on the 40 mm
     set it halved the self-check's held-out 1σ until the authors' published hand-eye lay 6σ
-    away. On the simulator an x scale 0.8 % off the z scale (the stress matrix's ``scales``
-    face) moves the ``sphere`` preset's hand-eye 0.30 mm with the scale held and 0.19 mm
-    estimated; ``{setting:scale} free`` is there for a profiler known to be off.
+    away. On the simulator x and z scales off by +0.6 % and -0.2 % about the sensor origin
+    (the stress matrix's ``scales`` face, seed 3) move the ``sphere`` preset's hand-eye
+    0.20 mm with the scale held (1σ 0.27 mm; clean twin 0.19 mm) and 0.32 mm with it
+    estimated (it reads their difference, +0.83 %); ``{setting:scale} free`` is there for a
+    profiler known to be off.
     """
     if config.scale == "free":
         return True if warm_estimated is None else warm_estimated
