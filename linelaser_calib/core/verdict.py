@@ -201,6 +201,14 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
         "whatever stretches the profiles",
     ),
     WarningKind(
+        "scale-model-spread",
+        r"the along-line scale, held at 1 by default, reads",
+        _CARE,
+        "estimating the sensor's along-line scale moves the hand-eye beyond its 1 sigma",
+        "check the profiler's x scale on a known length; the 1 sigma already counts the move, "
+        f"and {setting('scale')} free estimates the scale if it is known to be off",
+    ),
+    WarningKind(
         "model-misfit-kept",
         r"the .+ model does not fit these data:.*the result is kept",
         _CARE,

@@ -23,7 +23,14 @@ its y axis by up to ``tilt_across_rad`` and turned about the viewing axis by up 
 the seed. The robot runs the rig's continuous motion through the waypoints (a spline, quintic
 ease-in/out); sweeps in which a profile fails to show both flanks with ``min_flank_points``
 returns, or the sensor or flange comes within the rig's ``clearance_m`` of a flank plane, are
-drawn again.
+drawn again; so, with ``determined_sigma_m`` set, are sweeps that leave a hand-eye direction
+poorly determined: the line target's own information of the hand-eye from the true corners,
+each known to :data:`PLANNED_CORNER_SIGMA_M`, with the line and both profiler scales
+marginalised, must give every direction a 1σ (rotations times the corners' lever) within
+``determined_sigma_m``. The phases alone decide much: on ``line_ridge`` the first draws of
+seeds 0-9 give a worst 1σ of 0.69-2.03 mm there, and the seeds beyond 1.2 mm (0, 7, 8)
+were refused as undetermined (the target refuses at 1 mm; its corner fits are about 17 µm,
+so 0.9 mm here is about 0.75 mm there).
 
 Timing: the flange-pose stream runs at the rig's ``robot_rate_hz``, each stamp off by a
 Gaussian ``stamp_jitter_s``; profiles are stamped ``latency_s`` late (the rig's).
@@ -49,7 +56,7 @@ segment); the profiler carries every one of :data:`~linelaser_calib.sim.sensor_m
 (thinning at incidence, gaps, x/z scales 0.8 % apart, 42 µm shape error). 8 waypoints over
 ±40 mm of ridge at 0.05 m/s, profiles at 5 Hz (about 50), the view turned 15 deg towards
 the steep flank, tilts of ±26 deg along and ±8 deg across, turns of ±29 deg; a FANUC-like
-robot error of 0.03 mm and 0.005 deg.
+robot error of 0.03 mm and 0.005 deg; sweeps determined to 0.9 mm (``determined_sigma_m``).
 """
 
 from __future__ import annotations
@@ -62,6 +69,10 @@ import numpy as np
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import invert_transform, matrix_from_rotvec
+from linelaser_calib.core.observability import scaled_eigen
+from linelaser_calib.core.targets.line.config import LineConfig
+from linelaser_calib.core.targets.line.model import Line
+from linelaser_calib.core.targets.line.refine import refine_line
 from linelaser_calib.core.types import BoolArray, FlangePose, FloatArray, Profile
 from linelaser_calib.sim.presets import rig_scene_from_preset
 from linelaser_calib.sim.profiler import Measurement, measure
@@ -84,6 +95,9 @@ Vec3 = tuple[float, float, float]
 
 #: Sweeps drawn (new phases) before giving up.
 MAX_SWEEP_DRAWS = 50
+#: The 1σ of each true corner with which a sweep's determination is judged
+#: (``determined_sigma_m``), m: a little above the ``line_ridge`` corner fits' (about 17 µm).
+PLANNED_CORNER_SIGMA_M = 2e-5
 #: Frequencies (periods over the sweep) of the tilts about x and y and of the turn.
 _TILT_X_CYCLES, _TILT_Y_CYCLES, _YAW_CYCLES = 1.5, 1.0, 0.75
 
@@ -138,6 +152,9 @@ class LineScenario(GrooveScene):
         Publish three feature points per profile instead of the profile.
     min_flank_points : int
         Fewest noise-free returns on each flank of every profile.
+    determined_sigma_m : float
+        Largest 1σ of any hand-eye direction a sweep may leave (corners known to
+        :data:`PLANNED_CORNER_SIGMA_M`; rotations times the lever), m; 0: not checked.
     """
 
     name: str = "custom"
@@ -163,6 +180,7 @@ class LineScenario(GrooveScene):
     stamp_jitter_s: float = 0.0
     feature_points: bool = False
     min_flank_points: int = 15
+    determined_sigma_m: float = 0.0
 
     kind: ClassVar[str] = "line"
     vectors: ClassVar[tuple[str, ...]] = ("seam_point_m", "seam_direction", "groove_bisector")
@@ -184,7 +202,7 @@ class LineScenario(GrooveScene):
             value = getattr(self, name)
             require(0.0 <= value < math.pi / 2, f"{name} must be in [0, pi/2) rad, got {value}")
         require(self.stamp_jitter_s >= 0.0, "stamp_jitter_s must be >= 0")
-        for name in ("second_flank_width_m", "floor_width_m"):
+        for name in ("second_flank_width_m", "floor_width_m", "determined_sigma_m"):
             require(getattr(self, name) >= 0.0, f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("flank_turn_rad", "view_tilt_rad"):
             value = getattr(self, name)
@@ -252,6 +270,36 @@ def _sweep_ok(scenario: LineScenario, groove: Groove, T_base_sensor: FloatArray)
         groove.free_clearance(T_base_flange[:, :3, 3]) >= rig.clearance_m
     )
     return bool(np.all((counts.min(axis=1) >= scenario.min_flank_points) & clear))
+
+
+def worst_direction_sigma_m(
+    scenario: LineScenario, groove: Groove, T_base_sensor: FloatArray
+) -> float:
+    """The largest 1σ of a hand-eye direction (rotations times the corners' median lever),
+    m, that profiles at ``T_base_sensor`` (K, 4, 4) give the line target, each true corner
+    known to :data:`PLANNED_CORNER_SIGMA_M`, the line and both scales marginalised."""
+    X = scenario.rig.T_flange_sensor
+    corners = np.einsum(
+        "kji,kj->ki",
+        T_base_sensor[:, :3, :3],
+        groove.seam_point_in_plane(T_base_sensor) - T_base_sensor[:, :3, 3],
+    )[:, [0, 2]]
+    covariance = np.tile(np.eye(2) * PLANNED_CORNER_SIGMA_M**2, (len(corners), 1, 1))
+    refined = refine_line(
+        corners,
+        covariance,
+        T_base_sensor @ invert_transform(X),
+        X,
+        Line.through(groove.point, groove.seam),
+        None,
+        LineConfig(
+            robot_sigma_t_m=scenario.rig.robot_sigma_translation_m,
+            robot_sigma_r_rad=scenario.rig.robot_sigma_rotation_rad,
+        ),
+        (True, True),
+    )
+    lever = float(np.median(np.hypot(corners[:, 0], corners[:, 1])))
+    return float(np.max(scaled_eigen(refined.information_data, lever)[2]))
 
 
 @dataclass(frozen=True, eq=False)
@@ -359,13 +407,18 @@ def simulate_line(scenario: LineScenario, seed: int) -> LineSimulatedData:
         motion = plan_motion(waypoints, rig)
         acq_ns = np.round(motion.shot_times_s() * 1e9).astype(np.int64)
         T_sensor_shot = motion.T_base_sensor(acq_ns / 1e9)
-        if _sweep_ok(scenario, groove, np.concatenate([waypoints, T_sensor_shot])):
+        if _sweep_ok(scenario, groove, np.concatenate([waypoints, T_sensor_shot])) and (
+            scenario.determined_sigma_m == 0.0
+            or worst_direction_sigma_m(scenario, groove, T_sensor_shot)
+            <= scenario.determined_sigma_m
+        ):
             break
     else:
         raise InputError(
             f"line scenario {scenario.name!r}: none of {MAX_SWEEP_DRAWS} sweeps keeps both "
-            "flanks in view of every profile; reduce the tilts, yaw_rad or weave_fraction, or "
-            "widen the profiler's range or fan"
+            "flanks in view of every profile and determines the hand-eye "
+            "(determined_sigma_m); reduce the tilts, yaw_rad or weave_fraction, or widen the "
+            "profiler's range or fan"
         )
     errors = draw_errors(rng, rig, len(waypoints))
     t_shot = acq_ns / 1e9
@@ -454,6 +507,7 @@ def _ridge() -> LineScenario:
         yaw_rad=math.radians(29.0),
         stamp_jitter_s=2.5e-4,
         min_flank_points=15,
+        determined_sigma_m=9e-4,
     )
 
 

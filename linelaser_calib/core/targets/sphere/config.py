@@ -25,7 +25,9 @@ class SphereConfig:
         The sphere radius, m (``--radius``); None estimates it.
     scale : str
         The sensor's along-line scale in the default method: ``free`` estimates it with the
-        hand-eye; ``fixed`` and ``auto`` (default) hold it at 1 (:func:`estimates_scale`).
+        hand-eye; ``fixed`` and ``auto`` (default) hold it at 1 (:func:`estimates_scale`),
+        ``auto`` widening the 1σ by the hand-eye's move with it estimated where that move
+        exceeds it (:func:`~.target.with_scale_model_spread`).
     centre_side : str or None
         ``+y`` or ``-y``: the side of the laser plane (sensor y) the sphere centre lies on,
         when the user knows it; None resolves it from the data.
@@ -114,8 +116,10 @@ def estimates_scale(config: SphereConfig, warm_estimated: bool | None = None) ->
     away. On the simulator x and z scales off by +0.6 % and -0.2 % about the sensor origin
     (the stress matrix's ``scales`` face, seed 3) move the ``sphere`` preset's hand-eye
     0.20 mm with the scale held (1σ 0.27 mm; clean twin 0.19 mm) and 0.32 mm with it
-    estimated (it reads their difference, +0.83 %); ``{setting:scale} free`` is there for a
-    profiler known to be off.
+    estimated (it reads their difference, +0.83 %); on seed 4 the held hand-eye is 0.59 mm
+    off, 5.0 of its 1σ, so ``auto`` solves with the scale estimated as well and counts the
+    move in the 1σ (:func:`~.target.with_scale_model_spread`); ``{setting:scale} free`` is
+    there for a profiler known to be off.
     """
     if config.scale == "free":
         return True if warm_estimated is None else warm_estimated
