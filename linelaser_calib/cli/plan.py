@@ -30,7 +30,7 @@ from linelaser_calib.core.targets import all_targets, get_target
 from linelaser_calib.core.targets.base import ResultSection, Target, placement_adviser
 from linelaser_calib.core.types import Rejection, Sample
 from linelaser_calib.io.kinematics import load_model, read_kinematics
-from linelaser_calib.io.results import write_plan_yaml
+from linelaser_calib.io.plan_file import write_plan_yaml
 from linelaser_calib.offline import bag_samples
 from linelaser_calib.settings import Front, given_from_arguments, spelling, target_config
 

@@ -59,7 +59,6 @@ from linelaser_calib.core.geometry import (
 )
 from linelaser_calib.core.latency import CLOCK_OFFSET_CODE
 from linelaser_calib.core.pairing import PairingConfig
-from linelaser_calib.core.planning import Plan
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections
 from linelaser_calib.core.selfcheck import sigma_at_point
@@ -144,7 +143,7 @@ def _target_section(section: ResultSection, frame: str) -> dict[str, Any]:
     return {section.key: _plain(section.to_mapping(frame))}
 
 
-def _write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Path:
+def write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Path:
     """Write ``header`` + YAML of ``data`` to ``path`` via a flushed temporary file."""
     try:
         text = header + yaml.safe_dump(
@@ -386,7 +385,7 @@ def write_result_yaml(result: CalibrationResult, path: str | Path) -> Path:
     ResultFileError
         If the file cannot be written (nothing is left at ``path`` then).
     """
-    return _write_yaml_atomically(Path(path), _RESULT_HEADER, result_to_dict(result))
+    return write_yaml_atomically(Path(path), _RESULT_HEADER, result_to_dict(result))
 
 
 def write_truth_yaml(
@@ -429,44 +428,7 @@ def write_truth_yaml(
         **_target_section(target, base_frame),
         **_plain(extra),
     }
-    return _write_yaml_atomically(Path(path), _TRUTH_HEADER, data)
-
-
-_PLAN_HEADER = (
-    "# Planned flange poses (T_base_flange) from linelaser-calib plan, SI units (m);\n"
-    "# predicted_sigma: the hand-eye's predicted 1 sigma once the pose is taken\n"
-    "# (translation_m along the flange axes, rotation_rad about the sensor axes).\n"
-)
-
-
-def plan_to_dict(plan: Plan, base_frame: str = "base_link") -> dict[str, Any]:
-    """The plan file's content: ``{frame, poses: [{translation, rotation_xyzw,
-    predicted_sigma: {translation_m, rotation_rad}}]}`` (m, rad)."""
-    poses = []
-    for pose in plan.poses:
-        translation, q_xyzw = translation_quaternion_from_transform(pose.T_base_flange)
-        poses.append(
-            {
-                "translation": plain_floats(translation),
-                "rotation_xyzw": plain_floats(q_xyzw),
-                "predicted_sigma": {
-                    "translation_m": plain_floats(pose.sigma_translation_m),
-                    "rotation_rad": plain_floats(pose.sigma_rotation_rad),
-                },
-            }
-        )
-    return {"frame": base_frame, "poses": poses}
-
-
-def write_plan_yaml(plan: Plan, path: str | Path, base_frame: str = "base_link") -> Path:
-    """Write the planned poses (:func:`plan_to_dict`) to ``path`` atomically.
-
-    Raises
-    ------
-    ResultFileError
-        If the file cannot be written.
-    """
-    return _write_yaml_atomically(Path(path), _PLAN_HEADER, plan_to_dict(plan, base_frame))
+    return write_yaml_atomically(Path(path), _TRUTH_HEADER, data)
 
 
 class _Fields:
@@ -817,7 +779,7 @@ def write_reference_yaml(
     if "hand_eye" in extra:
         raise InputError("extra must not hold hand_eye, the reference itself")
     data = {"hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame)}
-    return _write_yaml_atomically(Path(path), _REFERENCE_HEADER, {**data, **_plain(extra)})
+    return write_yaml_atomically(Path(path), _REFERENCE_HEADER, {**data, **_plain(extra)})
 
 
 def read_reference_yaml(path: str | Path) -> tuple[FloatArray, dict[str, Any]]:
