@@ -432,11 +432,17 @@ def sample_dispersion(
     M, _, G = lin.J_global.shape
     if M - G < MIN_DISPERSION_REDUNDANCY:
         return None
-    _, w = evaluate_loss(lin.residuals.points, config)
+    e = lin.residuals.points
+    _, w = evaluate_loss(e, config)
     normal = normal_equations(lin, config, w)
-    WJ = lin.J_global * w[..., None]
-    u = np.einsum("mkg,mk->mg", WJ, lin.residuals.points)
-    A = np.einsum("mkg,mkh->mgh", WJ, lin.J_global)
+    u = np.empty((M, G))
+    A = np.empty((M, G, G))
+    step = max(1, CHUNK_POINTS // max(e.shape[1], 1))
+    for start in range(0, M, step):  # each sample's share, a chunk at a time (no whole copy)
+        rows = slice(start, start + step)
+        WJ = lin.J_global[rows] * w[rows, :, None]
+        u[rows] = np.einsum("mkg,mk->mg", WJ, e[rows])
+        A[rows] = WJ.transpose(0, 2, 1) @ lin.J_global[rows]
     BC = normal.B @ np.linalg.inv(normal.C())
     BCB = np.einsum("mgk,mhk->mgh", BC, normal.B)
     S_j = A - BCB
@@ -503,6 +509,7 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
     linearisation: Linearisation | None = None
     while iterations < config.max_iterations:
         if normal is None:
+            linearisation = None  # the last Jacobians go before the next are built
             linearisation = problem.linearise(state)
             normal = normal_equations(linearisation, config)
             iterations += 1
@@ -539,6 +546,7 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
                 converged = True
                 break
     if normal is None or linearisation is None:  # the state moved since the last one
+        linearisation = None
         linearisation = problem.linearise(state)
         normal = normal_equations(linearisation, config)
     return Solution(
