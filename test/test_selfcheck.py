@@ -28,12 +28,11 @@ from linelaser_calib.core.selfcheck import (
     DEFAULT_FOLDS,
     honest_sigma,
     neighbour_correlation,
-    region_jackknife,
     region_limit,
-    region_subsets,
     self_check,
     sigma_at_point,
 )
+from linelaser_calib.core.subsets import region_jackknife, region_subsets
 from linelaser_calib.core.targets.base import RobotError, TargetSolution
 from linelaser_calib.core.targets.cylinder.section import CylinderSection
 from linelaser_calib.core.types import FloatArray, SampleFit
