@@ -55,6 +55,7 @@ G×G system. Cost and time grow linearly with the number of samples.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -65,7 +66,7 @@ from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
 from ...profile.along_line import measured_to_true
 from ...profile.noise import Whitening
-from ...solver import N_HAND_EYE, N_LOCAL, Linearisation, Residuals
+from ...solver import N_HAND_EYE, Linearisation, Residuals
 from .config import RefineConfig
 from .model import Cylinder
 
@@ -228,25 +229,38 @@ class CylinderProblem:
 
         ``J_global`` (M, K, G) has the columns θ (3), ρ (3), a (2), b (2) and, when
         estimated, the radius and the along-line scale; ``J_local`` (M, K, 6) the columns
-        ω (3), τ (3) of the point's own sample; both zero on padding. Built a chunk of
-        samples at a time (:data:`CHUNK_POINTS`), so the per-point intermediates never
-        span the whole recording.
+        ω (3), τ (3) of the point's own sample; both zero on padding. Built from
+        :meth:`linearise_chunks`.
         """
+        chunks = list(self.linearise_chunks(state))
+        return Linearisation(
+            residuals=Residuals(
+                np.concatenate([c.residuals.points for c in chunks]), self._pose_prior(state)
+            ),
+            J_global=np.concatenate([c.J_global for c in chunks]),
+            J_local=np.concatenate([c.J_local for c in chunks]),
+            pose_prior_sqrt_information=self._prior_sqrt_information(),
+        )
+
+    def linearise_chunks(self, state: CylinderState) -> Iterator[Linearisation]:
+        """:meth:`linearise` a chunk of samples (:data:`CHUNK_POINTS` points) at a time, in
+        order: the solver sums its normal equations over them
+        (:class:`~linelaser_calib.core.solver.ChunkedProblem`), so neither the Jacobians
+        nor the per-point intermediates ever span the whole recording."""
         M, K, _ = self.points.shape
-        e = np.empty((M, K))
-        J_global = np.empty((M, K, self.n_global))
-        J_local = np.empty((M, K, N_LOCAL))
         step = max(1, CHUNK_POINTS // K)
+        sqrt_information = self._prior_sqrt_information()
         for start in range(0, M, step):
             rows = np.arange(start, min(start + step, M))
             chunk = replace(state, omega=state.omega[rows], tau=state.tau[rows])
-            e[rows], J_global[rows], J_local[rows] = self.take(rows)._jacobians(chunk)
-        return Linearisation(
-            residuals=Residuals(e, self._pose_prior(state)),
-            J_global=J_global,
-            J_local=J_local,
-            pose_prior_sqrt_information=self._prior_sqrt_information(),
-        )
+            part = self.take(rows)
+            e, J_global, J_local = part._jacobians(chunk)
+            yield Linearisation(
+                residuals=Residuals(e, part._pose_prior(chunk)),
+                J_global=J_global,
+                J_local=J_local,
+                pose_prior_sqrt_information=sqrt_information,
+            )
 
     def _jacobians(self, state: CylinderState) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Point residuals (M, K) and their Jacobians (M, K, G) and (M, K, 6) of all samples
@@ -282,7 +296,8 @@ class CylinderProblem:
     def unwhitened_local_jacobian(self, state: CylinderState) -> FloatArray:
         """d point residual / d (ω, τ) of each point's sample (M, K, 6), m per unit, never
         whitened: the directions a sample's own pose correction fits away."""
-        jacobian = replace(self, whitening=None).linearise(state).J_local
+        plain = replace(self, whitening=None)
+        jacobian = np.concatenate([c.J_local for c in plain.linearise_chunks(state)])
         return np.asarray(jacobian * self.config.sensor_sigma_m)
 
     def retract(
