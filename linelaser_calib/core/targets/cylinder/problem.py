@@ -55,7 +55,7 @@ G×G system. Cost and time grow linearly with the number of samples.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -205,16 +205,45 @@ class CylinderProblem:
     def residuals(self, state: CylinderState) -> Residuals:
         """Normalised point residuals (M, K), zero on padding, whitened when
         :attr:`whitening` is set, and pose priors (M, 6)."""
-        return self._residuals(state, _geometry(self, state))
+        e = self._per_point(state, lambda part, at: part._point_residuals(at, _geometry(part, at)))
+        return Residuals(e, self._pose_prior(state))
 
     def point_residuals(self, state: CylinderState) -> FloatArray:
         """Point-to-surface residuals (M, K) in units of σ_s, zero on padding, never
         whitened."""
-        geo = _geometry(self, state)
-        return np.asarray((geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m))
+        unit = self.config.sensor_sigma_m
+        return self._per_point(
+            state,
+            lambda part, at: (_geometry(part, at).distance - at.radius) * (part.mask / unit),
+        )
 
-    def _residuals(self, state: CylinderState, geo: _Geometry) -> Residuals:
-        return Residuals(self._point_residuals(state, geo), self._pose_prior(state))
+    def _chunks(
+        self, state: CylinderState
+    ) -> Iterator[tuple[slice, CylinderProblem, CylinderState]]:
+        """Consecutive chunks of samples (:data:`CHUNK_POINTS` points): their rows, their
+        problem and the state with their own pose corrections."""
+        M, K = self.mask.shape
+        step = max(1, CHUNK_POINTS // K)
+        for start in range(0, M, step):
+            rows = slice(start, min(start + step, M))
+            index = np.arange(rows.start, rows.stop)
+            yield (
+                rows,
+                self.take(index),
+                replace(state, omega=state.omega[rows], tau=state.tau[rows]),
+            )
+
+    def _per_point(
+        self,
+        state: CylinderState,
+        value: Callable[[CylinderProblem, CylinderState], FloatArray],
+    ) -> FloatArray:
+        """``value(chunk problem, chunk state)`` (m, K) of every chunk, joined (M, K): the
+        per-point intermediates never span the whole recording."""
+        out = np.empty(self.mask.shape)
+        for rows, part, at in self._chunks(state):
+            out[rows] = value(part, at)
+        return out
 
     def _point_residuals(self, state: CylinderState, geo: _Geometry) -> FloatArray:
         e = (geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m)
@@ -247,16 +276,11 @@ class CylinderProblem:
         order: the solver sums its normal equations over them
         (:class:`~linelaser_calib.core.solver.ChunkedProblem`), so neither the Jacobians
         nor the per-point intermediates ever span the whole recording."""
-        M, K, _ = self.points.shape
-        step = max(1, CHUNK_POINTS // K)
         sqrt_information = self._prior_sqrt_information()
-        for start in range(0, M, step):
-            rows = np.arange(start, min(start + step, M))
-            chunk = replace(state, omega=state.omega[rows], tau=state.tau[rows])
-            part = self.take(rows)
-            e, J_global, J_local = part._jacobians(chunk)
+        for _, part, at in self._chunks(state):
+            e, J_global, J_local = part._jacobians(at)
             yield Linearisation(
-                residuals=Residuals(e, part._pose_prior(chunk)),
+                residuals=Residuals(e, part._pose_prior(at)),
                 J_global=J_global,
                 J_local=J_local,
                 pose_prior_sqrt_information=sqrt_information,
@@ -289,9 +313,13 @@ class CylinderProblem:
 
     def depth_cosines(self, state: CylinderState) -> FloatArray:
         """|cosine| (M, K) between each point's surface normal and the sensor's depth axis."""
-        geo = _geometry(self, state)
-        n_sensor = np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ state.R_fs
-        return np.asarray(np.abs(n_sensor[..., 2]))
+
+        def cosines(part: CylinderProblem, at: CylinderState) -> FloatArray:
+            geo = _geometry(part, at)
+            n_sensor = np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ at.R_fs
+            return np.asarray(np.abs(n_sensor[..., 2]))
+
+        return self._per_point(state, cosines)
 
     def unwhitened_local_jacobian(self, state: CylinderState) -> FloatArray:
         """d point residual / d (ω, τ) of each point's sample (M, K, 6), m per unit, never
