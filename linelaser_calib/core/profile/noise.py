@@ -35,7 +35,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 from ..types import FloatArray
@@ -119,21 +119,24 @@ class Whitening:
     white : float
         w, the white σ in the residuals' unit.
     U : ndarray, shape (M, K, R)
-        Orthonormal directions of the smooth part (zero rows on padding).
+        Orthonormal directions of the smooth part (zero rows on padding), float32: a few
+        tens of them per point, the largest array of a long recording's problem, and a
+        weighting that float32's 1e-7 moves by far less than any 1σ.
     shrink : ndarray, shape (M, R)
         g per direction.
     """
 
     white: float
-    U: FloatArray
+    U: NDArray[np.float32]
     shrink: FloatArray
 
     def apply(self, a: FloatArray) -> FloatArray:
         """W a for residuals (M, K) or Jacobians (M, K, P)."""
         vector = a.ndim == 2
         b = a[..., None] if vector else a
-        projected = self.U.transpose(0, 2, 1) @ b  # (M, R, P)
-        out = (b - self.U @ (self.shrink[..., None] * projected)) / self.white
+        U = self.U.astype(np.float64)  # a chunk's: the problem applies it chunk by chunk
+        projected = U.transpose(0, 2, 1) @ b  # (M, R, P)
+        out = (b - U @ (self.shrink[..., None] * projected)) / self.white
         return np.asarray(out[..., 0] if vector else out)
 
     def take(self, rows: ArrayLike) -> Whitening:
@@ -176,7 +179,7 @@ def line_whitening(
     white = noise.white_sigma_m / unit_m
     M, K = x_m.shape
     rank = min(K, n_basis)
-    U, shrink = np.empty((M, K, rank)), np.empty((M, rank))
+    U, shrink = np.empty((M, K, rank), dtype=np.float32), np.empty((M, rank))
     step = max(1, WHITENING_CHUNK_VALUES // max(K * n_basis, 1))
     for start in range(0, M, step):  # a chunk of profiles at a time: (K, J) arrays each
         rows = slice(start, start + step)
