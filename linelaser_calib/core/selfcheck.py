@@ -101,7 +101,7 @@ from .regions import (
     blocked_accuracy,
     choose_model,
     held_out_distances,
-    pose_distances,
+    nearest_poses,
     workspace_regions,
 )
 from .subsets import (
@@ -325,16 +325,13 @@ def tilt(x: FloatArray, d: FloatArray) -> float:
 def neighbour_correlation(residuals: FloatArray, T_base_flange: FloatArray) -> float:
     """Correlation of each held-out sample's residual components (M, C) (mean offset, tilt
     across the profile) with the mean of its :data:`NEIGHBOURS` nearest poses'
-    (:func:`pose_distances`); the largest over the components that vary.
+    (:func:`~.regions.nearest_poses`); the largest over the components that vary.
 
     Independent per-pose errors give residuals uncorrelated between neighbours (≈ 0, spread
     about 1/√M per component); a systematic, pose-dependent error gives neighbours alike
     residuals (→ 1) in the offset, the tilt or both.
     """
-    D = pose_distances(T_base_flange)
-    np.fill_diagonal(D, np.inf)
-    k = min(NEIGHBOURS, len(residuals) - 1)
-    nearest = np.argsort(D, axis=1)[:, :k]
+    nearest = nearest_poses(T_base_flange, min(NEIGHBOURS, len(residuals) - 1))
     centred = residuals - residuals.mean(axis=0)
     a, b = centred, centred[nearest].mean(axis=1)
     denominator = np.sqrt(np.sum(a**2, axis=0) * np.sum(b**2, axis=0))
