@@ -65,14 +65,13 @@ def _solved(
         cost_history=[0.0],
         iterations=1,
         converged=True,
-        linearisation=at_solution,
     )
 
 
 def test_dispersion_is_one_where_the_noise_model_holds() -> None:
     rng = np.random.default_rng(3)
     solution = _solved(rng, 400, 1.0, 1.0)
-    ratio = sample_dispersion(solution, LINEAR, 1.0, 1.0)
+    ratio = sample_dispersion(solution, 1.0, 1.0)
     assert ratio is not None and ratio.shape == (G,)
     assert np.all((ratio > 0.8) & (ratio < 1.25)), ratio
 
@@ -83,32 +82,22 @@ def test_dispersion_takes_the_variance_factors_into_account() -> None:
     # it is not.
     rng = np.random.default_rng(4)
     solution = _solved(rng, 400, 2.0, 0.5)
-    ratio = sample_dispersion(solution, LINEAR, 4.0, 0.25)
+    ratio = sample_dispersion(solution, 4.0, 0.25)
     assert ratio is not None and np.all((ratio > 0.8) & (ratio < 1.25)), ratio
-    unscaled = sample_dispersion(solution, LINEAR, 1.0, 1.0)
+    unscaled = sample_dispersion(solution, 1.0, 1.0)
     assert unscaled is not None and np.all(unscaled > 2.0), unscaled
 
 
 def test_dispersion_sees_an_error_shared_by_a_profiles_points() -> None:
     rng = np.random.default_rng(5)
     solution = _solved(rng, 400, 1.0, 1.0, shared_sigma=0.6)
-    ratio = sample_dispersion(solution, LINEAR, 1.0, 1.0)
+    ratio = sample_dispersion(solution, 1.0, 1.0)
     assert ratio is not None and np.all(ratio > 2.0), ratio
 
 
 def test_dispersion_needs_more_samples_than_globals() -> None:
     rng = np.random.default_rng(6)
-    assert sample_dispersion(_solved(rng, G + 4, 1.0, 1.0), LINEAR, 1.0, 1.0) is None
-    solution = _solved(rng, 50, 1.0, 1.0)
-    bare = Solution(
-        state=None,
-        residuals=solution.residuals,
-        normal=solution.normal,
-        cost_history=[0.0],
-        iterations=1,
-        converged=True,
-    )
-    assert sample_dispersion(bare, LINEAR, 1.0, 1.0) is None
+    assert sample_dispersion(_solved(rng, G + 4, 1.0, 1.0), 1.0, 1.0) is None
 
 
 def test_widen_covariance_scales_each_sigma_and_keeps_correlations() -> None:

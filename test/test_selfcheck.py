@@ -4,6 +4,7 @@ systematic robot error and the 1σ at the measuring centre (simulator truth)."""
 
 from __future__ import annotations
 
+import tracemalloc
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -28,12 +29,11 @@ from linelaser_calib.core.selfcheck import (
     DEFAULT_FOLDS,
     honest_sigma,
     neighbour_correlation,
-    region_jackknife,
     region_limit,
-    region_subsets,
     self_check,
     sigma_at_point,
 )
+from linelaser_calib.core.subsets import region_jackknife, region_subsets, solve_subsets
 from linelaser_calib.core.targets.base import RobotError, TargetSolution
 from linelaser_calib.core.targets.cylinder.section import CylinderSection
 from linelaser_calib.core.types import FloatArray, SampleFit
@@ -151,6 +151,31 @@ def test_grouped_jackknife_matches_monte_carlo_with_shared_pose_error() -> None:
     assert jackknife == pytest.approx(sigma_shared / np.sqrt(M), rel=0.15)
     assert solution.sigma_translation_m is not None
     assert solution.sigma_translation_m[2] < 0.1 * monte_carlo
+
+
+def test_subset_solves_hold_no_copy_of_the_points_however_many_subsets() -> None:
+    """Regression (issue 32): each subset solve's outcome kept its per-sample records (a copy
+    of every used profile's points), so the self-check's memory grew by a recording's
+    points with every subset."""
+    rng = np.random.default_rng(1)
+    features = toy_features(rng, np.zeros(60), spread_positions(rng, 60))
+
+    def recording_solve(subset: list[Any]) -> TargetSolution:
+        # As a real target's: records of every used sample, 48 kB of points each.
+        fits = [replace(f.record(), points=np.zeros((2000, 3))) for f in subset]
+        return replace(toy_solve(subset), sample_fits=fits)
+
+    one_solve = 60 * 2000 * 3 * 8
+    retained = []
+    for folds in (2, 6):
+        tracemalloc.start()
+        outcomes = solve_subsets(features, folds, recording_solve)
+        retained.append(tracemalloc.get_traced_memory()[0])
+        tracemalloc.stop()
+        assert len(outcomes) == folds + 2
+        assert all(not isinstance(o, Exception) and o.sample_fits == [] for o in outcomes)
+    assert max(retained) < one_solve / 10, retained
+    assert retained[1] - retained[0] < one_solve / 20, retained
 
 
 def test_neighbour_correlation_separates_independent_from_systematic_offsets() -> None:

@@ -27,7 +27,7 @@ from linelaser_calib.core.geometry import (
 )
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
-from linelaser_calib.core.selfcheck import hand_eye_difference
+from linelaser_calib.core.subsets import hand_eye_difference
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import configure
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection

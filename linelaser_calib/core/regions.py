@@ -53,6 +53,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial.distance import cdist
 from scipy.special import stdtrit
 
@@ -83,9 +85,28 @@ CLUSTER_ANGLE_RAD = float(np.deg2rad(8.0))
 #: A linked group of poses counts once per neighbourhood of this many times the limits above
 #: that it takes to cover it (a continuous sweep is one linked group).
 CLUSTER_SPAN = 2.0
+#: Poses per block of the pairwise pose comparisons (:func:`pose_clusters`,
+#: :func:`nearest_poses`): a block against every pose stays a few MB however long the
+#: recording (an (M, M) array of 20,000 profiles' poses would be 3.2 GB).
+DISTANCE_BLOCK = 256
 
 #: Most Lloyd iterations of :func:`region_groups`.
 LLOYD_ITERATIONS = 50
+
+
+def _linked(
+    T_a: FloatArray, T_b: FloatArray, radius_m: float, angle_rad: float
+) -> NDArray[np.bool_]:
+    """(A, B) whether poses (A, 4, 4) and (B, 4, 4) lie within ``radius_m`` of each other
+    and their flange z axes within ``angle_rad``."""
+    cosine = np.clip(T_a[:, :3, 2] @ T_b[:, :3, 2].T, -1.0, 1.0)
+    near = cdist(T_a[:, :3, 3], T_b[:, :3, 3]) < radius_m
+    return np.asarray(near & (cosine > np.cos(angle_rad)))
+
+
+def _blocks(M: int) -> list[slice]:
+    """Consecutive blocks of :data:`DISTANCE_BLOCK` poses out of M."""
+    return [slice(start, min(start + DISTANCE_BLOCK, M)) for start in range(0, M, DISTANCE_BLOCK)]
 
 
 def pose_clusters(T_base_flange: FloatArray) -> int:
@@ -95,40 +116,51 @@ def pose_clusters(T_base_flange: FloatArray) -> int:
     (greedily, around the first pose not yet covered).
 
     A tight group counts once however many poses it holds; a continuous sweep, which steps
-    link into one group across the whole workspace, counts by its extent."""
-    t = T_base_flange[:, :3, 3]
-    z = T_base_flange[:, :3, 2]
-    step = cdist(t, t)
-    cosine = np.clip(z @ z.T, -1.0, 1.0)
-    near = (step < CLUSTER_RADIUS_M) & (cosine > np.cos(CLUSTER_ANGLE_RAD))
-    within = (step < CLUSTER_SPAN * CLUSTER_RADIUS_M) & (
-        cosine > np.cos(CLUSTER_SPAN * CLUSTER_ANGLE_RAD)
-    )
-    label = np.arange(len(T_base_flange))
-    changed = True
-    while changed:
-        merged = np.array([label[near[i]].min() for i in range(len(label))])
-        changed = bool(np.any(merged != label))
-        label = merged[merged]
+    link into one group across the whole workspace, counts by its extent. The links are
+    found a block of poses at a time (:data:`DISTANCE_BLOCK`): no (M, M) array."""
+    T = T_base_flange
+    M = len(T)
+    first, second = [], []
+    for rows in _blocks(M):
+        i, j = np.nonzero(_linked(T[rows], T, CLUSTER_RADIUS_M, CLUSTER_ANGLE_RAD))
+        i += rows.start
+        first.append(i[j > i])
+        second.append(j[j > i])
+    i, j = np.concatenate(first), np.concatenate(second)
+    links = coo_matrix((np.ones(len(i), dtype=np.int8), (i, j)), shape=(M, M))
+    _, label = connected_components(links, directed=False)
+    radius, angle = CLUSTER_SPAN * CLUSTER_RADIUS_M, CLUSTER_SPAN * CLUSTER_ANGLE_RAD
     count = 0
     for group in np.unique(label):
-        members = np.flatnonzero(label == group)
-        reach = within[np.ix_(members, members)]
+        members = T[label == group]
         covered = np.zeros(len(members), dtype=bool)
         while not np.all(covered):
-            covered |= reach[int(np.argmin(covered))]
+            centre = members[[int(np.argmin(covered))]]
+            covered |= _linked(centre, members, radius, angle)[0]
             count += 1
     return count
 
 
-def pose_distances(T_base_flange: FloatArray) -> FloatArray:
-    """(M, M) distances between poses (M, 4, 4): position step over :data:`CLUSTER_RADIUS_M`
-    plus the angle between the flange z axes over :data:`CLUSTER_ANGLE_RAD`."""
-    t = T_base_flange[:, :3, 3]
-    z = T_base_flange[:, :3, 2]
-    angle = np.arccos(np.clip(z @ z.T, -1.0, 1.0))
-    step = cdist(t, t)  # (M, M) without the (M, M, 3) differences
+def pose_distances(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
+    """(A, B) distances between poses (A, 4, 4) and (B, 4, 4): position step over
+    :data:`CLUSTER_RADIUS_M` plus the angle between the flange z axes over
+    :data:`CLUSTER_ANGLE_RAD`."""
+    angle = np.arccos(np.clip(T_a[:, :3, 2] @ T_b[:, :3, 2].T, -1.0, 1.0))
+    step = cdist(T_a[:, :3, 3], T_b[:, :3, 3])  # without the (A, B, 3) differences
     return np.asarray(step / CLUSTER_RADIUS_M + angle / CLUSTER_ANGLE_RAD)
+
+
+def nearest_poses(T_base_flange: FloatArray, k: int) -> NDArray[np.intp]:
+    """(M, k) indices of each pose's k nearest other poses (M, 4, 4) by
+    :func:`pose_distances`, nearest first; a block of :data:`DISTANCE_BLOCK` poses at a time
+    (no (M, M) array)."""
+    M = len(T_base_flange)
+    nearest = np.empty((M, k), dtype=np.intp)
+    for rows in _blocks(M):
+        D = pose_distances(T_base_flange[rows], T_base_flange)
+        D[np.arange(rows.stop - rows.start), np.arange(rows.start, rows.stop)] = np.inf
+        nearest[rows] = np.argsort(D, axis=1)[:, :k]
+    return nearest
 
 
 def region_groups(T_base_flange: FloatArray, groups: int) -> NDArray[np.int64]:

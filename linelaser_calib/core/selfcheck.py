@@ -89,8 +89,7 @@ from numpy.typing import NDArray
 from scipy.special import chdtri
 
 from .errors import CalibrationError
-from .forked import map_forked
-from .geometry import FloatArray, rotvec_from_matrix
+from .geometry import FloatArray
 from .regions import (
     CLUSTER_ANGLE_RAD,
     CLUSTER_RADIUS_M,
@@ -102,8 +101,19 @@ from .regions import (
     blocked_accuracy,
     choose_model,
     held_out_distances,
-    pose_distances,
+    nearest_poses,
     workspace_regions,
+)
+from .subsets import (
+    halves_difference,
+    hand_eye_difference,
+    model_sigma,
+    region_jackknife,
+    region_subsets,
+    reported_sigma,
+    reporting,
+    solve_each,
+    solve_subsets,
 )
 from .targets.base import ROBOT_PRIOR_EXCESS, Progress, RobotError, TargetSolution
 from .types import SampleFit
@@ -302,31 +312,6 @@ def _axes(sigma: FloatArray) -> dict[str, list[float]]:
     }
 
 
-def hand_eye_difference(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
-    """(6,) rotation of b relative to a (rad, rotation vector of R_aᵀR_b) and translation
-    b − a (m, flange axes), in the order of the 1σ vectors."""
-    rotation = rotvec_from_matrix(T_a[:3, :3].T @ T_b[:3, :3])
-    return np.concatenate([rotation, T_b[:3, 3] - T_a[:3, 3]])
-
-
-def _reported_sigma(solution: TargetSolution) -> FloatArray | None:
-    """(6,) 1σ [rotation, translation] a solution reports, None if it has none."""
-    if solution.sigma_rotation_rad is None or solution.sigma_translation_m is None:
-        return None
-    return np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
-
-
-def _sigma(solution: TargetSolution) -> FloatArray | None:
-    """(6,) noise-model 1σ [rotation, translation] of a solution (its reported 1σ without
-    the widening for profiles that scatter it more than the model says), None if it has
-    none. The statistics below compare with the model; the widening is a floor of the
-    final 1σ."""
-    sigma = _reported_sigma(solution)
-    if sigma is None or solution.sigma_widening is None:
-        return sigma
-    return np.asarray(sigma / solution.sigma_widening)
-
-
 def tilt(x: FloatArray, d: FloatArray) -> float:
     """Change (m) of the distances ``d`` (N,) across the profile: the slope of a line fitted
     to d against the sensor x (N,) of the points, times their x spread (2σ); 0 for fewer than
@@ -340,16 +325,13 @@ def tilt(x: FloatArray, d: FloatArray) -> float:
 def neighbour_correlation(residuals: FloatArray, T_base_flange: FloatArray) -> float:
     """Correlation of each held-out sample's residual components (M, C) (mean offset, tilt
     across the profile) with the mean of its :data:`NEIGHBOURS` nearest poses'
-    (:func:`pose_distances`); the largest over the components that vary.
+    (:func:`~.regions.nearest_poses`); the largest over the components that vary.
 
     Independent per-pose errors give residuals uncorrelated between neighbours (≈ 0, spread
     about 1/√M per component); a systematic, pose-dependent error gives neighbours alike
     residuals (→ 1) in the offset, the tilt or both.
     """
-    D = pose_distances(T_base_flange)
-    np.fill_diagonal(D, np.inf)
-    k = min(NEIGHBOURS, len(residuals) - 1)
-    nearest = np.argsort(D, axis=1)[:, :k]
+    nearest = nearest_poses(T_base_flange, min(NEIGHBOURS, len(residuals) - 1))
     centred = residuals - residuals.mean(axis=0)
     a, b = centred, centred[nearest].mean(axis=1)
     denominator = np.sqrt(np.sum(a**2, axis=0) * np.sum(b**2, axis=0))
@@ -364,73 +346,6 @@ def neighbour_limit(n: int) -> float:
     :data:`NEIGHBOUR_LIMIT`, or 2.5 standard deviations of the correlation of independent
     residuals (2.5/√n) when that is larger."""
     return max(NEIGHBOUR_LIMIT, 2.5 / float(np.sqrt(max(n, 1))))
-
-
-@dataclass(frozen=True)
-class RegionJackknife:
-    """The jackknife over regions of the workspace (:func:`region_jackknife`).
-
-    Attributes
-    ----------
-    sigma : ndarray, shape (6,)
-        √((G − 1)/G · Σ_g (θ_g − θ)²) per axis, θ_g the solve without region g and θ the full
-        solution (the order of :func:`hand_eye_difference`).
-    expected : ndarray, shape (6,)
-        What the noise model predicts for it: √((G − 1)/G · Σ_g (σ_g² − σ²)), σ_g the 1σ of
-        the solve without region g and σ the full solution's (the variance of θ_g − θ for
-        nested estimates), at least σ. A region whose absence leaves the poses weak (a whole
-        direction of view missing) moves the estimate more, and the model says so.
-    regions : int
-        G, the regions solved without.
-    """
-
-    sigma: FloatArray
-    expected: FloatArray
-    regions: int
-
-    @property
-    def ratio(self) -> float:
-        """√(mean over the axes of (sigma / expected)²), the region dispersion."""
-        return float(np.sqrt(np.mean((self.sigma / self.expected) ** 2)))
-
-
-def region_subsets(kept: list[Any], label: NDArray[np.int64]) -> list[list[Any]]:
-    """The features without each region of the workspace (``label`` (M,) of
-    :func:`~linelaser_calib.core.regions.workspace_regions`), one list per region."""
-    return [
-        [f for f, lab in zip(kept, label, strict=True) if lab != g]
-        for g in range(int(label.max()) + 1)
-    ]
-
-
-def region_jackknife(
-    solves: Sequence[TargetSolution | CalibrationError],
-    solution: TargetSolution,
-    sigma_model: FloatArray,
-) -> RegionJackknife | None:
-    """The jackknife of the hand-eye over the solves of :func:`region_subsets` (each region
-    left out in turn; :class:`RegionJackknife`); None when fewer than 3 regions could be
-    solved without.
-
-    Leaving a whole region out moves the estimate by what that region's shared robot error
-    put into it; interleaved folds keep every region in every fold and cannot show it.
-    """
-    moves, spreads = [], []
-    for fold in solves:
-        if isinstance(fold, CalibrationError):
-            continue
-        moves.append(hand_eye_difference(solution.T_flange_sensor, fold.T_flange_sensor))
-        sigma_fold = _sigma(fold)
-        spreads.append(np.zeros(6) if sigma_fold is None else sigma_fold**2 - sigma_model**2)
-    G = len(moves)
-    if G < 3:
-        return None
-    factor = (G - 1) / G
-    return RegionJackknife(
-        sigma=np.sqrt(factor * np.sum(np.square(moves), axis=0)),
-        expected=np.sqrt(np.maximum(factor * np.sum(spreads, axis=0), sigma_model**2)),
-        regions=G,
-    )
 
 
 def region_limit(dof: int) -> float:
@@ -564,14 +479,14 @@ def self_check(
     SelfCheck or None
         None when there is no 1σ to check or the interleaved folds cannot be solved.
     """
-    sigma_per_pose = _sigma(solution)
+    sigma_per_pose = model_sigma(solution)
     used = set(solution.samples_used)
     kept = [f for f in features if f.index in used]
     if sigma_per_pose is None or len(kept) < 2 * folds:
         return None
     T_kept = np.stack([f.T_base_flange for f in kept])
     label, clusters = workspace_regions(T_kept, folds)
-    solved = solve_subsets(kept, folds, solve, label, workers, _reporting(progress, "self-check"))
+    solved = solve_subsets(kept, folds, solve, label, workers, reporting(progress, "self-check"))
     interleaved, solved = solved[:folds], solved[folds:]
     (even, odd), solved = solved[:2], solved[2:]
     if any(isinstance(fold, CalibrationError) for fold in interleaved):
@@ -621,15 +536,15 @@ def self_check(
             model = choose_model(blocked, None)
         else:
             plain_solution, plain_solve = tried
-            plain_solved = map_forked(
+            plain_solved = solve_each(
                 plain_solve,
                 region_subsets(kept, label),
                 workers,
-                _reporting(progress, "self-check, plain model"),
+                reporting(progress, "self-check, plain model"),
             )
             plain_blocked = blocked_accuracy(plain_solved, held_sets, plain_solution, flange_poses)
             model = choose_model(blocked, plain_blocked)
-            sigma_plain = _sigma(plain_solution)
+            sigma_plain = model_sigma(plain_solution)
             if model.chosen == PLAIN and sigma_plain is not None:
                 chosen, sigma_model, blocked = plain_solution, sigma_plain, plain_blocked
                 region_solved = plain_solved
@@ -651,10 +566,10 @@ def self_check(
         prior = max(prior, robot_prior.translation_m)
     # The chosen solve's own 1σ, widened where its profiles scatter it beyond the noise
     # model, is a floor: the statistics above judge the robot's error against the model.
-    reported = _reported_sigma(chosen)
+    reported = reported_sigma(chosen)
     if reported is not None:
         sigma = np.maximum(sigma, reported)
-    split = _halves(even, odd)
+    split = halves_difference(even, odd)
     halves = None
     if split is not None:
         difference, combined = split
@@ -698,51 +613,6 @@ def self_check(
     )
     check.warnings = _warnings(check)
     return check
-
-
-def _reporting(progress: Progress | None, stage: str) -> Callable[[int, int], None] | None:
-    """``progress`` of ``stage`` as :func:`~.forked.map_forked` reports it."""
-    if progress is None:
-        return None
-    report = progress
-    return lambda done, total: report(stage, done, total)
-
-
-def solve_subsets(
-    kept: list[Any],
-    folds: int,
-    solve: Callable[[list[Any]], TargetSolution],
-    label: NDArray[np.int64] | None = None,
-    workers: int = 1,
-    progress: Callable[[int, int], None] | None = None,
-) -> list[TargetSolution | CalibrationError]:
-    """The solves of the self-check, each a solution or the CalibrationError it raised: every
-    interleaved fold's training features (all but every ``folds``-th from k), the even and
-    the odd features, then the features without each region (``label``, when given).
-    They are independent; with ``workers`` 2 a forked child takes half of them
-    (:func:`~linelaser_calib.core.forked.map_forked`; same outcomes as one process)."""
-    group = np.arange(len(kept)) % folds
-    jobs: list[tuple[Callable[[list[Any]], TargetSolution], list[Any]]] = [
-        (solve, [f for f, g in zip(kept, group, strict=True) if g != k]) for k in range(folds)
-    ]
-    jobs += [(solve, kept[0::2]), (solve, kept[1::2])]
-    if label is not None:
-        jobs += [(solve, subset) for subset in region_subsets(kept, label)]
-    return map_forked(lambda job: job[0](job[1]), jobs, workers, progress)
-
-
-def _halves(
-    a: TargetSolution | CalibrationError, b: TargetSolution | CalibrationError
-) -> tuple[FloatArray, FloatArray] | None:
-    """|θ_even − θ_odd| (6,) and the halves' combined model 1σ √(σ_even² + σ_odd²) (6,) of the
-    even (a) and odd (b) solves, or None when they could not be solved apart."""
-    if isinstance(a, CalibrationError) or isinstance(b, CalibrationError):
-        return None
-    sigma_a, sigma_b = _sigma(a), _sigma(b)
-    if sigma_a is None or sigma_b is None:
-        return None
-    difference = hand_eye_difference(a.T_flange_sensor, b.T_flange_sensor)
-    return np.abs(difference), np.sqrt(sigma_a**2 + sigma_b**2)
 
 
 class Evidence(NamedTuple):

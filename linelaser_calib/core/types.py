@@ -19,7 +19,7 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Profile:
     """One laser profile as received.
 
@@ -39,7 +39,7 @@ class Profile:
     frame_id: str = "laser"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class FlangePose:
     """One flange pose sample from the robot.
 
@@ -57,7 +57,7 @@ class FlangePose:
     frame_id: str = "base_link"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Sample:
     """A profile paired with the flange pose interpolated at its stamp.
 

@@ -35,7 +35,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 from ..types import FloatArray
@@ -101,6 +101,9 @@ SPECTRUM_CUT = 4.5
 #: Margin of the low-rank basis' domain beyond each profile's ends, in correlation lengths
 #: (the Hilbert-space basis bends the covariance near its domain's boundary).
 DOMAIN_MARGIN = 2.0
+#: Values per array of one chunk of :func:`line_whitening` (profiles × points × basis
+#: functions): 8 MB in float64, however long the recording.
+WHITENING_CHUNK_VALUES = 1 << 20
 
 
 @dataclass(frozen=True)
@@ -116,21 +119,24 @@ class Whitening:
     white : float
         w, the white σ in the residuals' unit.
     U : ndarray, shape (M, K, R)
-        Orthonormal directions of the smooth part (zero rows on padding).
+        Orthonormal directions of the smooth part (zero rows on padding), float32: a few
+        tens of them per point, the largest array of a long recording's problem, and a
+        weighting that float32's 1e-7 moves by far less than any 1σ.
     shrink : ndarray, shape (M, R)
         g per direction.
     """
 
     white: float
-    U: FloatArray
+    U: NDArray[np.float32]
     shrink: FloatArray
 
     def apply(self, a: FloatArray) -> FloatArray:
         """W a for residuals (M, K) or Jacobians (M, K, P)."""
         vector = a.ndim == 2
         b = a[..., None] if vector else a
-        projected = self.U.transpose(0, 2, 1) @ b  # (M, R, P)
-        out = (b - self.U @ (self.shrink[..., None] * projected)) / self.white
+        U = self.U.astype(np.float64)  # a chunk's: the problem applies it chunk by chunk
+        projected = U.transpose(0, 2, 1) @ b  # (M, R, P)
+        out = (b - U @ (self.shrink[..., None] * projected)) / self.white
         return np.asarray(out[..., 0] if vector else out)
 
     def take(self, rows: ArrayLike) -> Whitening:
@@ -170,22 +176,31 @@ def line_whitening(
     half = 0.5 * np.maximum(hi - lo, 0.0) + DOMAIN_MARGIN * length  # L per profile
     n_basis = max(1, math.ceil(SPECTRUM_CUT * 2.0 * float(np.max(half)) / (math.pi * length)))
     j = np.arange(1, n_basis + 1)
-    omega = math.pi * j[None, :] / (2.0 * half[:, None])  # (M, J)
-    density = (
-        (noise.smooth_sigma_m / unit_m) ** 2
-        * math.sqrt(2.0 * math.pi)
-        * length
-        * np.exp(-0.5 * (omega * length) ** 2)
-    )
-    centre = 0.5 * (lo + hi)
-    phase = (x_m - centre[:, None] + half[:, None])[..., None] * omega[:, None, :]
-    basis = np.sin(phase) / np.sqrt(half)[:, None, None]  # (M, K, J)
-    B = np.where(m[..., None], cosine[..., None] * basis * np.sqrt(density)[:, None, :], 0.0)
-    Q, R = np.linalg.qr(B)  # batched thin QR: B = Q R
-    lam, V = np.linalg.eigh(R @ R.transpose(0, 2, 1))
     white = noise.white_sigma_m / unit_m
-    shrink = 1.0 - 1.0 / np.sqrt(1.0 + np.maximum(lam, 0.0) / white**2)
-    return Whitening(white, np.asarray(Q @ V), np.asarray(shrink))
+    M, K = x_m.shape
+    rank = min(K, n_basis)
+    U, shrink = np.empty((M, K, rank), dtype=np.float32), np.empty((M, rank))
+    step = max(1, WHITENING_CHUNK_VALUES // max(K * n_basis, 1))
+    for start in range(0, M, step):  # a chunk of profiles at a time: (K, J) arrays each
+        rows = slice(start, start + step)
+        omega = math.pi * j[None, :] / (2.0 * half[rows, None])  # (m, J)
+        density = (
+            (noise.smooth_sigma_m / unit_m) ** 2
+            * math.sqrt(2.0 * math.pi)
+            * length
+            * np.exp(-0.5 * (omega * length) ** 2)
+        )
+        centre = 0.5 * (lo[rows] + hi[rows])
+        phase = (x_m[rows] - centre[:, None] + half[rows, None])[..., None] * omega[:, None, :]
+        basis = np.sin(phase) / np.sqrt(half[rows])[:, None, None]  # (m, K, J)
+        B = np.where(
+            m[rows, :, None], cosine[rows, :, None] * basis * np.sqrt(density)[:, None, :], 0.0
+        )
+        Q, R = np.linalg.qr(B)  # batched thin QR: B = Q R
+        lam, V = np.linalg.eigh(R @ R.transpose(0, 2, 1))
+        U[rows] = Q @ V
+        shrink[rows] = 1.0 - 1.0 / np.sqrt(1.0 + np.maximum(lam, 0.0) / white**2)
+    return Whitening(white, U, shrink)
 
 
 class _Reml:

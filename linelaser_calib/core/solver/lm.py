@@ -42,8 +42,9 @@ prior information are divided by the sensor and robot variance factors first.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
@@ -190,6 +191,16 @@ class BlockProblem(Protocol[State]):
         ...
 
 
+@runtime_checkable
+class ChunkedProblem(Protocol):
+    """A :class:`BlockProblem` that also linearises a chunk of its samples at a time."""
+
+    def linearise_chunks(self, state: Any) -> Iterator[Linearisation]:
+        """Residuals and Jacobians at ``state`` of consecutive chunks of the samples, in
+        order (each chunk's ``pose_prior`` its samples' rows)."""
+        ...
+
+
 def evaluate_loss(e: FloatArray, config: SolverConfig) -> tuple[FloatArray, FloatArray]:
     """Robust cost terms c²·ρ(s) (twice the cost) and IRLS weights ρ'(s), shaped like ``e``."""
     c = config.loss_scale
@@ -231,6 +242,11 @@ class BlockNormal:
     g_global : ndarray, shape (G,)
     g_local : ndarray, shape (M, 6)
         Pose priors included.
+    A_sample : ndarray, shape (M, G, G)
+        Each sample's share of A from its measurements (what :func:`sample_dispersion`
+        needs; A is their sum plus the global priors).
+    g_sample : ndarray, shape (M, G)
+        Each sample's share of g_global from its measurements.
     """
 
     A: FloatArray
@@ -239,6 +255,8 @@ class BlockNormal:
     prior_precision: FloatArray
     g_global: FloatArray
     g_local: FloatArray
+    A_sample: FloatArray
+    g_sample: FloatArray
 
     def C(self, sensor_factor: float = 1.0, robot_factor: float = 1.0) -> FloatArray:
         """Local blocks (M, 6, 6) with the measurement and prior information divided by the
@@ -270,49 +288,94 @@ class BlockNormal:
 
 
 def normal_equations(
-    linearisation: Linearisation, config: SolverConfig, weights: FloatArray | None = None
+    linearisation: Linearisation | Iterable[Linearisation],
+    config: SolverConfig,
+    weights: FloatArray | None = None,
 ) -> BlockNormal:
     """Weighted normal equations; ``weights`` (M, K) None uses the robust IRLS weights.
 
-    Summed over chunks of samples (:data:`CHUNK_POINTS`), so the weighted copies of the
-    Jacobians never span the whole recording.
+    ``linearisation`` is the whole problem's, or its consecutive chunks of samples in order
+    (:meth:`ChunkedProblem.linearise_chunks`: the Jacobians of the whole recording are
+    then never held at once; global priors and the pose prior's information are the first
+    chunk's). Summed over chunks of at most :data:`CHUNK_POINTS` points, so the weighted
+    copies of the Jacobians never span the whole recording either.
     """
-    r = linearisation.residuals
-    J_global, J_local = linearisation.J_global, linearisation.J_local
-    M, K, G = J_global.shape
-    A = np.zeros((G, G))
-    g_global = np.zeros(G)
-    B = np.empty((M, G, N_LOCAL))
-    C_data = np.empty((M, N_LOCAL, N_LOCAL))
-    g_local = np.empty((M, N_LOCAL))
-    step = max(1, CHUNK_POINTS // max(K, 1))
-    for start in range(0, M, step):
-        rows = slice(start, start + step)
-        e = r.points[rows]
-        w = evaluate_loss(e, config)[1] if weights is None else weights[rows]
-        # The global and local columns apart (no stacked copy of the Jacobian): the global
-        # block A is one product over the chunk's points, B and C one small product per
-        # sample.
-        WJ_global = J_global[rows] * w[..., None]
-        WJ_local = J_local[rows] * w[..., None]
-        A += WJ_global.reshape(-1, G).T @ J_global[rows].reshape(-1, G)
-        g_global += WJ_global.reshape(-1, G).T @ e.reshape(-1)
-        B[rows] = WJ_global.transpose(0, 2, 1) @ J_local[rows]
-        C_data[rows] = WJ_local.transpose(0, 2, 1) @ J_local[rows]
-        g_local[rows] = np.einsum("mkl,mk->ml", WJ_local, e)
-    Jp = linearisation.global_prior_jacobian
+    return _accumulated(linearisation, config, weights)[0]
+
+
+def _accumulated(
+    linearisation: Linearisation | Iterable[Linearisation],
+    config: SolverConfig,
+    weights: FloatArray | None = None,
+) -> tuple[BlockNormal, Residuals]:
+    """:func:`normal_equations` and the residuals (the chunks' joined)."""
+    chunks = [linearisation] if isinstance(linearisation, Linearisation) else linearisation
+    parts: list[tuple[FloatArray, ...]] = []
+    first: Linearisation | None = None
+    row = 0
+    for lin in chunks:
+        first = lin if first is None else first
+        M, K = lin.J_global.shape[:2]
+        step = max(1, CHUNK_POINTS // max(K, 1))
+        for start in range(0, M, step):
+            rows = slice(start, start + step)
+            e = lin.residuals.points[rows]
+            w = (
+                evaluate_loss(e, config)[1]
+                if weights is None
+                else weights[row + start : row + start + e.shape[0]]
+            )
+            # Each sample's blocks apart (no stacked copy of the Jacobian): one small
+            # product per sample for its share of A, B and C.
+            J_global, J_local = lin.J_global[rows], lin.J_local[rows]
+            WJ_global = J_global * w[..., None]
+            WJ_local = J_local * w[..., None]
+            parts.append(
+                (
+                    WJ_global.transpose(0, 2, 1) @ J_global,
+                    np.einsum("mkg,mk->mg", WJ_global, e),
+                    WJ_global.transpose(0, 2, 1) @ J_local,
+                    WJ_local.transpose(0, 2, 1) @ J_local,
+                    np.einsum("mkl,mk->ml", WJ_local, e),
+                    e,
+                    lin.residuals.pose_prior[rows],
+                )
+            )
+        row += M
+    if first is None:
+        raise InputError("the normal equations need at least one sample")
+    A_sample, g_sample, B, C_data, g_local, points, pose_prior = (
+        np.concatenate([part[k] for part in parts]) for k in range(7)
+    )
+    A, g_global = A_sample.sum(axis=0), g_sample.sum(axis=0)
+    r = first.residuals
+    Jp = first.global_prior_jacobian
     if Jp is not None and len(Jp):
         A = A + Jp.T @ Jp
         g_global = g_global + Jp.T @ r.global_prior
-    sqrt_info = linearisation.pose_prior_sqrt_information
-    return BlockNormal(
+    sqrt_info = first.pose_prior_sqrt_information
+    normal = BlockNormal(
         A=0.5 * (A + A.T),
         B=B,
         C_data=C_data,
         prior_precision=sqrt_info**2,
         g_global=g_global,
-        g_local=g_local + r.pose_prior * sqrt_info,
+        g_local=g_local + pose_prior * sqrt_info,
+        A_sample=A_sample,
+        g_sample=g_sample,
     )
+    return normal, Residuals(points, pose_prior, r.global_prior)
+
+
+def linearised(
+    problem: BlockProblem[State], state: State, config: SolverConfig
+) -> tuple[BlockNormal, Residuals]:
+    """The normal equations (robust weights) and the residuals of ``problem`` at ``state``: a
+    chunk of samples at a time where the problem linearises by chunks
+    (:class:`ChunkedProblem`), so its whole Jacobians are never held."""
+    if isinstance(problem, ChunkedProblem):
+        return _accumulated(problem.linearise_chunks(state), config)
+    return _accumulated(problem.linearise(state), config)
 
 
 def solve_damped(normal: BlockNormal, damping: float) -> tuple[FloatArray, FloatArray]:
@@ -384,8 +447,6 @@ class Solution(Generic[State]):
     iterations : int
         Linearisations performed during the search.
     converged : bool
-    linearisation : Linearisation or None
-        Residuals and Jacobians at the estimate (what :func:`sample_dispersion` needs).
     """
 
     state: State
@@ -394,7 +455,6 @@ class Solution(Generic[State]):
     cost_history: list[float]
     iterations: int
     converged: bool
-    linearisation: Linearisation | None = None
 
     @property
     def information(self) -> FloatArray:
@@ -403,7 +463,7 @@ class Solution(Generic[State]):
 
 
 def sample_dispersion(
-    solution: Solution[Any], config: SolverConfig, sensor_factor: float, robot_factor: float
+    solution: Solution[Any], sensor_factor: float, robot_factor: float
 ) -> FloatArray | None:
     """How much more the estimate moves from sample to sample than the noise model says.
 
@@ -422,21 +482,14 @@ def sample_dispersion(
     Returns
     -------
     ndarray, shape (G,), or None
-        Observed over expected variance per global parameter; None without the solution's
-        linearisation or with fewer than :data:`MIN_DISPERSION_REDUNDANCY` samples beyond
-        the global parameters.
+        Observed over expected variance per global parameter; None with fewer than
+        :data:`MIN_DISPERSION_REDUNDANCY` samples beyond the global parameters.
     """
-    lin = solution.linearisation
-    if lin is None:
-        return None
-    M, _, G = lin.J_global.shape
+    normal = solution.normal
+    M, G, _ = normal.B.shape
     if M - G < MIN_DISPERSION_REDUNDANCY:
         return None
-    _, w = evaluate_loss(lin.residuals.points, config)
-    normal = normal_equations(lin, config, w)
-    WJ = lin.J_global * w[..., None]
-    u = np.einsum("mkg,mk->mg", WJ, lin.residuals.points)
-    A = np.einsum("mkg,mkh->mgh", WJ, lin.J_global)
+    u, A = normal.g_sample, normal.A_sample
     BC = normal.B @ np.linalg.inv(normal.C())
     BCB = np.einsum("mgk,mhk->mgh", BC, normal.B)
     S_j = A - BCB
@@ -500,11 +553,10 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
     converged = False
     iterations = 0
     normal: BlockNormal | None = None
-    linearisation: Linearisation | None = None
+    residuals: Residuals | None = None
     while iterations < config.max_iterations:
         if normal is None:
-            linearisation = problem.linearise(state)
-            normal = normal_equations(linearisation, config)
+            normal, residuals = linearised(problem, state, config)
             iterations += 1
         step_global, step_local = solve_damped(normal, damping)
         if float(np.max(np.abs(step_global * scale))) < config.step_tolerance_m:
@@ -538,15 +590,13 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
             if damping > MAX_DAMPING:
                 converged = True
                 break
-    if normal is None or linearisation is None:  # the state moved since the last one
-        linearisation = problem.linearise(state)
-        normal = normal_equations(linearisation, config)
+    if normal is None or residuals is None:  # the state moved since the last one
+        normal, residuals = linearised(problem, state, config)
     return Solution(
         state=state,
-        residuals=linearisation.residuals,
+        residuals=residuals,
         normal=normal,
         cost_history=history,
         iterations=iterations,
         converged=converged,
-        linearisation=linearisation,
     )

@@ -174,7 +174,6 @@ def refine_kinematics(
             cost_history=joint.cost_history,
             iterations=joint.iterations,
             converged=joint.converged,
-            linearisation=linearisation,
         )
         results.append(summarise(corrected, inner))
     _check_kinematic_fit(max(r.robot_sigma_scale for r in results), outcome, setup)

@@ -58,6 +58,7 @@ G×G system. Cost and time grow linearly with the number of samples.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -68,7 +69,7 @@ from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
 from ...profile.along_line import measured_to_true
 from ...profile.noise import Whitening
-from ...solver import N_HAND_EYE, N_LOCAL, Linearisation, Residuals
+from ...solver import N_HAND_EYE, Linearisation, Residuals
 from .config import RefineConfig
 from .model import Cylinder
 
@@ -219,16 +220,45 @@ class CylinderProblem:
     def residuals(self, state: CylinderState) -> Residuals:
         """Normalised point residuals (M, K), zero on padding, whitened when
         :attr:`whitening` is set, and pose priors (M, 6)."""
-        return self._residuals(state, _geometry(self, state))
+        e = self._per_point(state, lambda part, at: part._point_residuals(at, _geometry(part, at)))
+        return Residuals(e, self._pose_prior(state))
 
     def point_residuals(self, state: CylinderState) -> FloatArray:
         """Point-to-surface residuals (M, K) in units of σ_s, zero on padding, never
         whitened."""
-        geo = _geometry(self, state)
-        return np.asarray((geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m))
+        unit = self.config.sensor_sigma_m
+        return self._per_point(
+            state,
+            lambda part, at: (_geometry(part, at).distance - at.radius) * (part.mask / unit),
+        )
 
-    def _residuals(self, state: CylinderState, geo: _Geometry) -> Residuals:
-        return Residuals(self._point_residuals(state, geo), self._pose_prior(state))
+    def _chunks(
+        self, state: CylinderState
+    ) -> Iterator[tuple[slice, CylinderProblem, CylinderState]]:
+        """Consecutive chunks of samples (:data:`CHUNK_POINTS` points): their rows, their
+        problem and the state with their own pose corrections."""
+        M, K = self.mask.shape
+        step = max(1, CHUNK_POINTS // K)
+        for start in range(0, M, step):
+            rows = slice(start, min(start + step, M))
+            index = np.arange(rows.start, rows.stop)
+            yield (
+                rows,
+                self.take(index),
+                replace(state, omega=state.omega[rows], tau=state.tau[rows]),
+            )
+
+    def _per_point(
+        self,
+        state: CylinderState,
+        value: Callable[[CylinderProblem, CylinderState], FloatArray],
+    ) -> FloatArray:
+        """``value(chunk problem, chunk state)`` (m, K) of every chunk, joined (M, K): the
+        per-point intermediates never span the whole recording."""
+        out = np.empty(self.mask.shape)
+        for rows, part, at in self._chunks(state):
+            out[rows] = value(part, at)
+        return out
 
     def _point_residuals(self, state: CylinderState, geo: _Geometry) -> FloatArray:
         e = (geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m)
@@ -243,25 +273,33 @@ class CylinderProblem:
 
         ``J_global`` (M, K, G) has the columns θ (3), ρ (3), a (2), b (2) and, when
         estimated, the radius and the along-line scale; ``J_local`` (M, K, 6) the columns
-        ω (3), τ (3) of the point's own sample; both zero on padding. Built a chunk of
-        samples at a time (:data:`CHUNK_POINTS`), so the per-point intermediates never
-        span the whole recording.
+        ω (3), τ (3) of the point's own sample; both zero on padding. Built from
+        :meth:`linearise_chunks`.
         """
-        M, K, _ = self.points.shape
-        e = np.empty((M, K))
-        J_global = np.empty((M, K, self.n_global))
-        J_local = np.empty((M, K, N_LOCAL))
-        step = max(1, CHUNK_POINTS // K)
-        for start in range(0, M, step):
-            rows = np.arange(start, min(start + step, M))
-            chunk = replace(state, omega=state.omega[rows], tau=state.tau[rows])
-            e[rows], J_global[rows], J_local[rows] = self.take(rows)._jacobians(chunk)
+        chunks = list(self.linearise_chunks(state))
         return Linearisation(
-            residuals=Residuals(e, self._pose_prior(state)),
-            J_global=J_global,
-            J_local=J_local,
+            residuals=Residuals(
+                np.concatenate([c.residuals.points for c in chunks]), self._pose_prior(state)
+            ),
+            J_global=np.concatenate([c.J_global for c in chunks]),
+            J_local=np.concatenate([c.J_local for c in chunks]),
             pose_prior_sqrt_information=self._prior_sqrt_information(),
         )
+
+    def linearise_chunks(self, state: CylinderState) -> Iterator[Linearisation]:
+        """:meth:`linearise` a chunk of samples (:data:`CHUNK_POINTS` points) at a time, in
+        order: the solver sums its normal equations over them
+        (:class:`~linelaser_calib.core.solver.ChunkedProblem`), so neither the Jacobians
+        nor the per-point intermediates ever span the whole recording."""
+        sqrt_information = self._prior_sqrt_information()
+        for _, part, at in self._chunks(state):
+            e, J_global, J_local = part._jacobians(at)
+            yield Linearisation(
+                residuals=Residuals(e, part._pose_prior(at)),
+                J_global=J_global,
+                J_local=J_local,
+                pose_prior_sqrt_information=sqrt_information,
+            )
 
     def _jacobians(self, state: CylinderState) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Point residuals (M, K) and their Jacobians (M, K, G) and (M, K, 6) of all samples
@@ -294,14 +332,19 @@ class CylinderProblem:
 
     def depth_cosines(self, state: CylinderState) -> FloatArray:
         """|cosine| (M, K) between each point's surface normal and the sensor's depth axis."""
-        geo = _geometry(self, state)
-        n_sensor = np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ state.R_fs
-        return np.asarray(np.abs(n_sensor[..., 2]))
+
+        def cosines(part: CylinderProblem, at: CylinderState) -> FloatArray:
+            geo = _geometry(part, at)
+            n_sensor = np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ at.R_fs
+            return np.asarray(np.abs(n_sensor[..., 2]))
+
+        return self._per_point(state, cosines)
 
     def unwhitened_local_jacobian(self, state: CylinderState) -> FloatArray:
         """d point residual / d (ω, τ) of each point's sample (M, K, 6), m per unit, never
         whitened: the directions a sample's own pose correction fits away."""
-        jacobian = replace(self, whitening=None).linearise(state).J_local
+        plain = replace(self, whitening=None)
+        jacobian = np.concatenate([c.J_local for c in plain.linearise_chunks(state)])
         return np.asarray(jacobian * self.config.sensor_sigma_m)
 
     def retract(

@@ -360,7 +360,9 @@ def refine(
             cfg.sensor_sigma_m,
         )
         problem = replace(problem, whitening=whitening)
-    geometric = normal_equations(problem.linearise(state), cfg.solver, np.ones_like(problem.mask))
+    geometric = normal_equations(
+        problem.linearise_chunks(state), cfg.solver, np.ones_like(problem.mask)
+    )
     _observability(problem, state, geometric.schur_information()).raise_if_unobservable()
 
     centroid = data_centroid(problem, state)
@@ -488,9 +490,7 @@ def summarise(
     observability = _observability(problem, state, normal.schur_information())
     observability.raise_if_unobservable()
     covariance = np.linalg.inv(normal.schur_information(*factors))
-    dispersion = (
-        sample_dispersion(solution, cfg.solver, *factors) if cfg.widen_by_dispersion else None
-    )
+    dispersion = sample_dispersion(solution, *factors) if cfg.widen_by_dispersion else None
     covariance = widen_covariance(covariance, dispersion)
     sigma = np.sqrt(np.diag(covariance))
     r, s, z = problem.radius_index, problem.scale_index, problem.depth_scale_index

@@ -491,11 +491,7 @@ def refine_sphere(
             problem.n_global,
         )
     information = solution.normal.schur_information(sensor, robot)
-    dispersion = (
-        sample_dispersion(solution, solver_config, sensor, robot)
-        if config.widen_by_dispersion
-        else None
-    )
+    dispersion = sample_dispersion(solution, sensor, robot) if config.widen_by_dispersion else None
     residuals = solution.residuals.points[problem.sample, problem.slot] * config.sensor_sigma_m
     covariance = np.linalg.pinv(information)
     return SphereRefinement(
