@@ -41,7 +41,6 @@ not used (:func:`recording_line_noise`).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -184,7 +183,7 @@ class RefineResult:
     warnings : list of str
     solved : SolvedProblem or None
         The problem as solved (points trimmed and subsampled) and the state at the solution,
-        rows in :attr:`used` order, for :func:`refine_subset`.
+        rows in :attr:`used` order, for :func:`.warm.refine_subset`.
     line_noise : LineNoise or None
         The recording's point noise along the line that weighed the points (generalised
         least squares), when learned; None weighs them as independent.
@@ -242,7 +241,7 @@ class RefineResult:
 @dataclass(frozen=True)
 class SolvedProblem:
     """A refinement's problem (its points trimmed and subsampled) and its state at the
-    solution: where :func:`refine_subset` starts a solve of some of its samples."""
+    solution: where :func:`.warm.refine_subset` starts a solve of some of its samples."""
 
     problem: CylinderProblem
     state: CylinderState
@@ -371,103 +370,6 @@ def refine(
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError("the refinement produced non-finite values: check the initial estimate")
     return summarise(problem, solution, noise)
-
-
-#: Step tolerance of :func:`refine_subset`, m: 10 nm, a thousandth of the smallest 1σ this
-#: tool reports (a few µm); the full solve's 1e-12 m would cost it one or two more
-#: linearisations.
-SUBSET_STEP_TOLERANCE_M = 1e-8
-
-
-#: Cost tolerance of :func:`refine_subset`: it stops when a step lowers the cost by less
-#: than this fraction. With some 10⁴ points that step moved the hand-eye by under 1 % of
-#: its 1σ, and what is left is smaller again. Where the robust loss slows convergence it
-#: saves a few linearisations (cluttered_camera: 9-12 instead of 13-21; the jackknife's
-#: statistics move by 1e-3 of themselves).
-SUBSET_COST_TOLERANCE = 1e-8
-
-
-def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
-    """The refinement of some samples of a solved problem, started at its solution.
-
-    The samples keep their points as solved (trimmed, subsampled) and start at the full
-    solution with their own pose corrections; no seed solve, no point trimming and no
-    outlier rejection run again (the full solve screened these samples). Leaving samples out
-    moves the optimum by about its 1σ, so the solve converges, to
-    :data:`SUBSET_STEP_TOLERANCE_M`, in two or three linearisations on clean data (a few more
-    where the robust loss down-weights many points) instead of a dozen: the self-check's
-    twelve subset solves (leave-some-out, halves, regions) go through here. One Gauss–Newton
-    step is not enough: on cluttered data it moves the jackknife's dispersion by 20 %.
-
-    Parameters
-    ----------
-    solved : SolvedProblem
-        :attr:`RefineResult.solved` of the full solve.
-    rows : sequence of int
-        Positions of the samples in ``solved.problem``.
-
-    Returns
-    -------
-    RefineResult
-        ``used`` indexes ``rows``.
-
-    Raises
-    ------
-    DegenerateError
-        Fewer samples than ``min_samples``, or poses that leave a direction unobservable.
-    SolverError
-        The solve produced non-finite numbers.
-    """
-    full, at = solved.problem, solved.state
-    keep = np.asarray(rows, dtype=np.intp)
-    if len(keep) < full.config.min_samples:
-        raise DegenerateError(
-            f"{len(keep)} samples given, but the refinement needs at least "
-            f"{full.config.min_samples}"
-        )
-    problem = full.take(keep)
-    start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
-    solution = _solve_near(problem, start, "of a subset")
-    return summarise(problem, solution, solved.noise)
-
-
-def _solve_near(
-    problem: CylinderProblem, start: CylinderState, what: str, max_iterations: int | None = None
-) -> Solution[CylinderState]:
-    """The solve of a problem from a state near its optimum, to :data:`SUBSET_STEP_TOLERANCE_M`
-    and :data:`SUBSET_COST_TOLERANCE` or ``max_iterations`` linearisations (None: the
-    problem's solver's), SolverError on non-finite numbers, naming ``what``."""
-    tolerances = replace(
-        problem.config.solver,
-        step_tolerance_m=SUBSET_STEP_TOLERANCE_M,
-        tolerance=SUBSET_COST_TOLERANCE,
-        max_iterations=max_iterations or problem.config.solver.max_iterations,
-    )
-    solution = solve(problem, start, tolerances)
-    if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
-        raise SolverError(f"the refinement {what} produced non-finite values")
-    return solution
-
-
-def refine_at_poses(
-    solved: SolvedProblem, T_base_flange: FloatArray, max_iterations: int | None = None
-) -> tuple[SolvedProblem, float]:
-    """The refinement of a solved problem's samples at other flange poses (M, 4, 4), started
-    at its solution, and its final cost (dimensionless, as :attr:`RefineResult.cost_history`).
-
-    The clock-offset search re-pairs the same points with poses a few ms away, which moves
-    the optimum little: from a nearby solution the solve converges (to the tolerances of
-    :func:`refine_subset`) without a new problem, seed or observability check;
-    ``max_iterations`` bounds its linearisations (None: the solver's bound).
-
-    Raises
-    ------
-    SolverError
-        The solve produced non-finite numbers.
-    """
-    problem = solved.problem.with_flange_poses(np.asarray(T_base_flange, dtype=np.float64))
-    solution = _solve_near(problem, solved.state, "at other flange poses", max_iterations)
-    return replace(solved, problem=problem, state=solution.state), solution.cost_history[-1]
 
 
 def summarise(

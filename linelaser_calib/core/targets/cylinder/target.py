@@ -85,11 +85,10 @@ from .refine import (
     RefineResult,
     SolvedProblem,
     refine,
-    refine_at_poses,
-    refine_subset,
     refine_with_outlier_rejection,
 )
 from .section import CylinderSection, read_cylinder_section
+from .warm import refine_at_poses, refine_subset
 
 #: Points per profile in the refinements of the clock-offset search, and the most
 #: linearisations of each refinement after the first (:meth:`CylinderTarget.offset_cost`).
@@ -604,7 +603,7 @@ class CylinderTarget:
         once; a few dozen points per profile pin the offset as well as all of them. The
         first evaluation refines the seed at the features' own poses (the offset the search
         is centred on); each evaluation then starts at the solution of the lowest cost so
-        far (:func:`.refine.refine_at_poses`: the same points at other poses) and runs at
+        far (:func:`.warm.refine_at_poses`: the same points at other poses) and runs at
         most :data:`OFFSET_SEARCH_ITERATIONS` linearisations. Near the optimum that
         converges; far from it (the search's first grid, 10 ms apart) the cost is an upper
         bound, high above the optimum's, which is all the grid needs to find the optimum's
