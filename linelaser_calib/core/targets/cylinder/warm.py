@@ -77,11 +77,12 @@ def refine_subset(
     problem = full.take(keep)
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
     if prior is not None:
-        robot = {
-            "robot_sigma_t_m": prior.robot_sigma_t_m,
-            "robot_sigma_r_rad": prior.robot_sigma_r_rad,
-        }
-        problem = replace(problem, config=replace(problem.config, **robot))
+        config = replace(
+            problem.config,
+            robot_sigma_t_m=prior.robot_sigma_t_m,
+            robot_sigma_r_rad=prior.robot_sigma_r_rad,
+        )
+        problem = replace(problem, config=config)
         start = replace(start, omega=np.zeros_like(start.omega), tau=np.zeros_like(start.tau))
     solution = _solve_near(problem, start, "of a subset")
     return summarise(problem, solution, solved.noise)
