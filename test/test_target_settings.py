@@ -58,7 +58,7 @@ REFUSED = [
     ("cylinder", "default", ["--point", "0.5,0.1,0"], "--point"),
     ("cylinder", "paper", ["--scale", "free"], "--scale"),
     ("sphere", "paper", ["--scale", "free"], "--scale"),
-    ("line", "default", ["--scale", "fixed"], "--scale"),
+    ("line", "paper", ["--scale", "fixed"], "--scale"),
     ("known_point", "default", ["--scale", "free"], "--scale"),
 ]
 
@@ -79,6 +79,7 @@ ACTING = [
     ("known_point", ["--robot-sigma-r", "1e-5"], "robot_sigma_r_rad", 1e-5),
     ("known_point", ["--min-samples", "9"], "min_samples", 9),
     ("cylinder", ["--min-samples", "12"], "min_samples", 12),
+    ("line", ["--scale", "free"], "scale", "free"),
 ]
 
 
