@@ -65,7 +65,6 @@ from ..base import (
     mismatch_message,
     rejection_digest,
 )
-from ..model_spread import with_model_spread
 from .advice import CylinderPlacementAdviser
 from .arc import radius_mismatch
 from .config import CylinderConfig
@@ -124,42 +123,10 @@ def estimates_scale(config: CylinderConfig) -> tuple[bool, bool]:
     With the radius estimated the profiles determine only the ratio of the two scales: the
     x scale alone reads their difference (+0.81 ± 0.03 %), both together drift with the
     radius (+3.9 ± 0.6 % and +3.1 ± 0.6 %), so the z scale is held and its share, s_z times
-    the depth of the points (0.26 mm there), stays in the hand-eye; the 1σ counts it
-    (:func:`with_depth_reading`). Give the radius."""
+    the depth of the points (0.26 mm there), stays in the hand-eye: give the radius.
+    """
     free = config.scale != "fixed"
     return free, free and config.radius_m is not None
-
-
-def with_depth_reading(kept: TargetSolution, other: TargetSolution) -> TargetSolution:
-    """The solution whose along-line (x) scale was kept with the radius free (``kept``), its
-    1σ widened where reading the same stretch as a depth (z) scale instead, x held at 1
-    (``other``), moves the hand-eye beyond it (:func:`.model_spread.with_model_spread`).
-
-    With the radius free the profiles fix only the ratio of the two scales, not how it
-    splits between them: a z scale about the sensor origin moves every point by s_z times
-    its depth, which the x scale cannot take up. On the stress matrix's ``scales`` face (x
-    +0.6 %, z -0.2 %, 12 poses of ``ur_scancontrol``) the x scale alone reads +0.81 ±
-    0.03 % and the hand-eye is 0.26 mm off against a 1σ of 0.04 mm; the truth lies between
-    the two readings, so their difference belongs in the 1σ.
-    """
-    section, alternative = kept.section, other.section
-    assert isinstance(section, CylinderSection) and isinstance(alternative, CylinderSection)
-    if section.scale is None or alternative.depth_scale is None:
-        return kept
-    return with_model_spread(
-        kept,
-        other,
-        "with the radius estimated the profiles fix only the ratio of the along-line and "
-        f"depth scales: the along-line scale reads {_ratio(section.scale, section.scale_sigma)} "
-        "with the depth scale held at 1; read as a depth scale instead it is "
-        f"{_ratio(alternative.depth_scale, alternative.depth_scale_sigma)}, and that reading",
-        "Give the measured {setting:radius_m}: with it both scales are estimated",
-    )
-
-
-def _ratio(scale: float, sigma: float | None) -> str:
-    spread = "" if sigma is None else f" ± {sigma:.5f}"
-    return f"{1.0 + scale:.5f}{spread} ({100.0 * scale:+.3f} % from nominal)"
 
 
 def scale_verdict(refined: RefineResult) -> str:
@@ -440,20 +407,15 @@ class CylinderTarget:
             for value, sigma in estimates
         ]
         kept[0] = kept[0] or config.radius_m is not None
-        if kept != [free, depth]:
-            solution = self._solve_default(features, config, context, radius, kept[0], kept[1])
-            solution.warnings.extend(
-                implausible_scale_held(value, axis)
-                for (value, _), axis in zip(estimates, ("along-line", "depth"), strict=True)
-                if value is not None and abs(value) > PLAUSIBLE_SCALE_ERROR
-            )
-        if config.radius_m is not None or kept != [True, False]:
+        if kept == [free, depth]:
             return solution
-        try:
-            other = self._solve_default(features, config, context, radius, False, True)
-        except CalibrationError:
-            return solution
-        return with_depth_reading(solution, other)
+        held = self._solve_default(features, config, context, radius, kept[0], kept[1])
+        held.warnings.extend(
+            implausible_scale_held(value, axis)
+            for (value, _), axis in zip(estimates, ("along-line", "depth"), strict=True)
+            if value is not None and abs(value) > PLAUSIBLE_SCALE_ERROR
+        )
+        return held
 
     def _solve_default(
         self,

@@ -44,7 +44,7 @@ from linelaser_calib.core.errors import (
     ProfileRejected,
     TooFewFeatures,
 )
-from linelaser_calib.core.geometry import FloatArray
+from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix
 from linelaser_calib.core.model_check import Comparison, shape_doubt
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.along_line import (
@@ -63,7 +63,6 @@ from linelaser_calib.core.targets.base import (
     mismatch_message,
     rejection_digest,
 )
-from linelaser_calib.core.targets.model_spread import with_model_spread
 from linelaser_calib.core.targets.sphere.circle import (
     CircleFit,
     fit_circle_algebraic,
@@ -201,15 +200,29 @@ def with_scale_model_spread(held: TargetSolution, estimated: TargetSolution) -> 
         return held
     if abs(scale) > PLAUSIBLE_SCALE_ERROR:
         return replace(held, warnings=[*held.warnings, implausible_scale_held(scale)])
+    X_held, X_free = held.T_flange_sensor, estimated.T_flange_sensor
+    move = np.concatenate(
+        [rotvec_from_matrix(X_held[:3, :3].T @ X_free[:3, :3]), X_free[:3, 3] - X_held[:3, 3]]
+    )
+    sigma = np.concatenate([sigma_r, sigma_t])
+    if not np.any(np.abs(move) > sigma):
+        return held
+    widened = np.hypot(sigma, move)
     scale_sigma = getattr(section, "scale_sigma", None)
     spread = "" if scale_sigma is None else f" ± {scale_sigma:.5f}"
-    return with_model_spread(
-        held,
-        estimated,
+    warning = (
         f"the along-line scale, held at 1 by default, reads {1.0 + scale:.5f}{spread} "
-        f"({100.0 * scale:+.3f} % from nominal) when estimated, and estimating it",
-        "A profiler's own shape error can read as a scale; if its x scale is known to be off, "
-        "{setting:scale} free estimates it",
+        f"({100.0 * scale:+.3f} % from nominal) when estimated, and estimating it moves the "
+        f"hand-eye by {float(np.linalg.norm(move[3:])) * 1e3:.3f} mm and "
+        f"{math.degrees(float(np.linalg.norm(move[:3]))):.4f} deg, beyond its 1 sigma: the 1 "
+        "sigma now counts that move (added per axis). A profiler's own shape error can read "
+        "as a scale; if its x scale is known to be off, {setting:scale} free estimates it"
+    )
+    return replace(
+        held,
+        sigma_rotation_rad=widened[:3],
+        sigma_translation_m=widened[3:],
+        warnings=[*held.warnings, warning],
     )
 
 
