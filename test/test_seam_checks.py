@@ -21,7 +21,7 @@ import pytest
 
 from linelaser_calib.core.errors import TooFewFeatures
 from linelaser_calib.core.geometry import transform_error
-from linelaser_calib.core.model_check import RivalRejection
+from linelaser_calib.core.model_check import RivalRejection, ShapeFit, compare_models
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, calibrate_samples
 from linelaser_calib.core.profile.cleaning import CleaningConfig
@@ -29,6 +29,7 @@ from linelaser_calib.core.profile.corner import (
     CornerConfig,
     CornerSample,
     check_corner_recording,
+    corner_doubt,
     extract_corner_sample,
 )
 from linelaser_calib.core.targets import get_target
@@ -173,3 +174,42 @@ def test_the_recording_scale_sets_aside_exactly_the_corrupted_profiles() -> None
     for r in aside:
         assert "the line pair leaves" in r.reason and "robust spreads above the median" in r.reason
         assert "of this recording's 20 profiles" in r.reason and "limit" in r.reason
+
+
+def _judged(index: int, rival_scale_m: float, rng: np.random.Generator) -> CornerSample:
+    """A corner whose V leaves 30 µm (robust scale) over 300 points and whose best rival
+    shape (an arc) leaves ``rival_scale_m``."""
+    own = ShapeFit("line pair", rng.normal(scale=3e-5, size=300), 5)
+    arc = ShapeFit("arc", rng.normal(scale=rival_scale_m, size=300), 5)
+    corner = np.array([0.0, 0.12])
+    return CornerSample(
+        index,
+        index,
+        np.eye(4),
+        corner,
+        np.eye(2) * 1e-10,
+        np.zeros((1, 3)),
+        3e-5,
+        1.5,
+        shape=compare_models(own, [arc]),
+    )
+
+
+def test_a_rival_that_beats_a_v_only_as_much_as_on_the_recordings_other_profiles_is_kept() -> None:
+    """Issue 29: one profile's rival shape never rejects it by itself. A real profiler's
+    shape error lets an arc beat a V by a little on many single profiles; only a margin far
+    above the recording's own sets a profile aside, and where most profiles fit a rival
+    better the whole recording decides (the targets' model doubt)."""
+    rng = np.random.default_rng(29)
+    typical = [_judged(k, 2.6e-5 + 2e-6 * (k % 3), rng) for k in range(9)]
+    assert sum(c.rival is not None for c in typical) >= 5  # the arc beats the V one by one
+    corners = [*typical, _judged(9, 3e-6, rng)]  # an arc through this profile, not a V
+    kept, rejections = check_corner_recording(corners, [], 6.0)
+    assert [c.index for c in kept] == list(range(9))
+    assert [r.index for r in rejections] == [9]
+    reason = rejections[0].reason
+    assert reason.startswith("not a V") and "an arc leaves 3.3 um" in reason
+    assert "robust spreads above the median" in reason and "10 corners" in reason
+    doubt = corner_doubt(kept)
+    assert doubt is not None and "profiles fit a rival shape better than a V" in doubt
+    assert corner_doubt([kept[0], *(replace(c, shape=None) for c in kept[1:])]) is None

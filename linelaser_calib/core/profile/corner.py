@@ -23,12 +23,15 @@ local noise):
 
 - per profile (:func:`extract_corner_sample`), the two lines meet rival shapes fitted to the
   same points, a line (a plane) and an arc (a cylinder or sphere), by the information
-  criterion (:mod:`.corner_shape`); a profile a rival fits clearly better is rejected naming
-  it;
+  criterion (:mod:`.corner_shape`); a profile without a corner that a rival fits clearly
+  better is rejected naming it, and one with a corner keeps the comparison;
 - per recording (:func:`check_corner_recording`), a profile whose lines leave far more than
-  the recording's other profiles is set aside, with the recording's scale. No profile
-  decides the target: where too few show a corner, the whole recording's full models do
-  (:mod:`linelaser_calib.core.targets.rivals`).
+  the recording's other profiles is set aside, with the recording's scale; so is a profile
+  that a rival fits clearly better by a margin far above the recording's other profiles'
+  (a real profiler's shape error lets an arc beat a V on many a single profile, so the
+  margin is judged against the recording's own). No profile decides the target: where
+  most profiles fit a rival better (the targets' ``model_doubt``) or too few show a corner,
+  the whole recording's full models do (:mod:`linelaser_calib.core.targets.rivals`).
 """
 
 from __future__ import annotations
@@ -41,7 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ..errors import InputError, ProfileRejected
-from ..model_check import recording_outliers
+from ..model_check import Comparison, recording_outliers, recording_scale, shape_doubt
 from ..types import BoolArray, FloatArray, Rejection, Sample, SampleFit
 from .cleaning import MAD_TO_SIGMA, CleaningConfig, clean_profile
 from .corner_shape import (
@@ -464,6 +467,9 @@ class CornerSample:
     alternatives : tuple of CornerSample
         The profile's other usable corners (:attr:`CornerFit.alternatives`); the recording
         chooses among them (:func:`check_corner_recording`).
+    shape : Comparison or None
+        The corner's two lines against the rival shapes on this profile
+        (:func:`~.corner_shape.compare_corner`); None for feature points.
     """
 
     index: int
@@ -475,6 +481,12 @@ class CornerSample:
     rms_m: float | None = None
     opening_rad: float = math.nan
     alternatives: tuple[CornerSample, ...] = ()
+    shape: Comparison | None = None
+
+    @property
+    def rival(self) -> Comparison | None:
+        """The comparison when a rival shape fits this one profile clearly better, else None."""
+        return self.shape if self.shape is not None and self.shape.rival_wins else None
 
     def record(self) -> SampleFit:
         """The plain record kept in the result (the V corner as the feature point)."""
@@ -486,8 +498,10 @@ def extract_corner_sample(
 ) -> CornerSample | Rejection:
     """Clean one sample's profile, fit its V corner and weigh it against the rival shapes;
     a rejection says why it failed (a
-    :class:`~linelaser_calib.core.model_check.RivalRejection` when a rival fits clearly
-    better, also when no corner was found).
+    :class:`~linelaser_calib.core.model_check.RivalRejection` when no corner was found and
+    a rival fits clearly better). A corner keeps its comparison (:attr:`CornerSample.shape`),
+    also where a rival fits this one profile better: the recording judges it
+    (:func:`check_corner_recording`).
 
     Shared by the targets that see a V (the known point, the straight seam).
 
@@ -519,8 +533,6 @@ def extract_corner_sample(
             return corner_rival_rejection(sample.index, sample.stamp_ns, *rival)
         return Rejection(sample.index, sample.stamp_ns, "corner", str(exc))
     comparison = compare_corner(xz[fit.inliers.any(axis=0)], fit.residuals_m(xz))
-    if comparison.rival_wins:
-        return corner_rival_rejection(sample.index, sample.stamp_ns, NOT_A_V, comparison)
 
     def sample_of(corner_fit: CornerFit) -> CornerSample:
         residuals = corner_fit.residuals_m(xz)
@@ -533,6 +545,7 @@ def extract_corner_sample(
             cleaned.points[corner_fit.inliers.any(axis=0)],
             float(np.sqrt(np.mean(residuals**2))),
             corner_fit.opening_rad,
+            shape=comparison,
         )
 
     return replace(
@@ -576,6 +589,48 @@ def _consistent_corners(
     return chosen, aside
 
 
+def corner_doubt(corners: list[CornerSample]) -> str | None:
+    """Why the profiles' own shapes put a V target in doubt: at least half of its corners'
+    profiles fit a rival shape clearly better than a V (:attr:`CornerSample.rival`); None
+    otherwise. The whole recording decides then (:mod:`~linelaser_calib.core.targets.rivals`)."""
+    return shape_doubt([(c.index, c.rival) for c in corners], "V")
+
+
+def corners_shown(corners: list[CornerSample]) -> tuple[int, str]:
+    """How many corners no rival shape fits better one by one (what a refusal for too few
+    corners counts as showing the V, :class:`~linelaser_calib.core.errors.TooFewFeatures`),
+    and the words to put after "show a seam corner" saying so ("" when none is doubted)."""
+    doubted = [c for c in corners if c.rival is not None]
+    if not doubted:
+        return len(corners), ""
+    example = doubted[0]
+    assert example.rival is not None
+    return len(corners) - len(doubted), (
+        f" that no rival shape fits better ({len(doubted)} more show a corner that a rival "
+        f"fits better one by one; profile {example.index}: {example.rival.describe()})"
+    )
+
+
+def _rival_outliers(corners: list[CornerSample], sigmas: float) -> dict[int, str]:
+    """The positions of the corners that a rival shape fits clearly better by a margin (BIC
+    per effective point) more than ``sigmas`` robust spreads above the median of the
+    recording's corners, with the reason (none for fewer than 3 compared corners)."""
+    compared = [(k, c.shape) for k, c in enumerate(corners) if c.shape is not None]
+    if len(compared) < 3:
+        return {}
+    margins = [shape.delta_bic / max(shape.n_effective, 1.0) for _, shape in compared]
+    scale = recording_scale(margins)
+    limit = scale.limit_m(sigmas)
+    return {
+        k: f"{NOT_A_V}: {shape.describe()}; that margin, {margin:.2f} per effective point, "
+        f"lies {scale.sigmas_above(margin):.0f} robust spreads above the median "
+        f"{scale.median_m:.2f} of this recording's {len(compared)} corners (spread "
+        f"{scale.spread_m:.2f}; limit {limit:.2f} at {sigmas:g} spreads)"
+        for (k, shape), margin in zip(compared, margins, strict=True)
+        if shape.rival_wins and margin > limit
+    }
+
+
 def _angle_text(opening_rad: float) -> str:
     """An opening in words: degrees and ridge or groove."""
     kind = "a ridge" if opening_rad >= 0.0 else "a groove"
@@ -591,7 +646,8 @@ def check_corner_recording(
     A corner whose lines leave an RMS residual ``sigmas`` robust spreads above the median of
     the recording's profiles is set aside
     (:func:`~linelaser_calib.core.model_check.recording_outliers`; corners given as feature
-    points are not judged).
+    points are not judged); so is one that a rival shape fits clearly better by a margin
+    ``sigmas`` robust spreads above the recording's median (:func:`_rival_outliers`).
 
     Parameters
     ----------
@@ -601,6 +657,7 @@ def check_corner_recording(
     sigmas : float
     """
     corners, aside = _consistent_corners(corners, sigmas)
+    aside.update({k: why for k, why in _rival_outliers(corners, sigmas).items() if k not in aside})
     fitted = [(k, c.rms_m) for k, c in enumerate(corners) if c.rms_m is not None]
     outliers = recording_outliers([rms for _, rms in fitted], sigmas, "line pair")
     aside.update({fitted[j][0]: reason for j, reason in outliers if fitted[j][0] not in aside})

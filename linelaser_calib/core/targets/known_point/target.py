@@ -104,7 +104,7 @@ from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
-from ...profile.corner import CornerSample
+from ...profile.corner import CornerSample, corner_doubt, corners_shown
 from ...seam_grid import paper_correction, weld_points_base
 from ...solver import (
     N_HAND_EYE,
@@ -235,12 +235,13 @@ def _check_count(
     corners: list[CornerSample], n_samples: int, rejections: list[Rejection], min_samples: int
 ) -> None:
     if len(corners) < min_samples:
+        found, doubted = corners_shown(corners)
         raise TooFewFeatures(
-            f"only {len(corners)} of {n_samples} recorded profiles show a weld-seam corner, "
+            f"only {found} of {n_samples} recorded profiles show a weld-seam corner{doubted}, "
             f"and at least {min_samples} are needed. "
             + rejection_digest(rejections)
             + "Aim the laser line across the seam through the taught point, both flanks in view.",
-            len(corners),
+            found,
         )
 
 
@@ -566,6 +567,11 @@ class KnownPointTarget:
 
     def check_features(self, features: list[Any], config: KnownPointConfig) -> None:
         """Nothing beyond extraction: each profile's corner meets the rival shapes there."""
+
+    def model_doubt(self, features: list[Any], config: KnownPointConfig) -> str | None:
+        """Why the profiles' own shapes put the known point in doubt
+        (:func:`~...profile.corner.corner_doubt`); the whole recording decides then."""
+        return corner_doubt(features)
 
     def check_fit(self, solution: TargetSolution, config: KnownPointConfig) -> None:
         """Refuse views whose corners do not meet in one point."""

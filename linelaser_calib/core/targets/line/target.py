@@ -36,7 +36,12 @@ from scipy.special import chdtri
 from ...errors import DegenerateError, ModelMismatch, TooFewFeatures
 from ...geometry import rotvec_from_matrix
 from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held, scale_significant
-from ...profile.corner import CornerSample, check_corner_recording
+from ...profile.corner import (
+    CornerSample,
+    check_corner_recording,
+    corner_doubt,
+    corners_shown,
+)
 from ...seam_grid import paper_correction, weld_points_base
 from ...solver import (
     Flag,
@@ -177,13 +182,13 @@ def _held_scale_counted(held: TargetSolution, free: TargetSolution) -> TargetSol
 
 def _require(features: list[CornerSample], config: LineConfig, context: SolveContext) -> None:
     if len(features) < config.min_samples:
+        found, doubted = corners_shown(features)
         raise TooFewFeatures(
-            f"only {len(features)} of {context.n_samples} recorded profiles show a seam corner, "
-            "and at "
-            f"least {config.min_samples} are needed. "
+            f"only {found} of {context.n_samples} recorded profiles show a seam corner"
+            f"{doubted}, and at least {config.min_samples} are needed. "
             + rejection_digest(context.rejections)
             + "Sweep the laser line across the seam along its length, both flanks in view.",
-            len(features),
+            found,
         )
 
 
@@ -412,6 +417,11 @@ class LineTarget:
 
     def check_features(self, features: list[Any], config: LineConfig) -> None:
         """Nothing beyond extraction: each profile's corner meets the rival shapes there."""
+
+    def model_doubt(self, features: list[Any], config: LineConfig) -> str | None:
+        """Why the profiles' own shapes put the straight line in doubt
+        (:func:`~...profile.corner.corner_doubt`); the whole recording decides then."""
+        return corner_doubt(features)
 
     def check_fit(self, solution: TargetSolution, config: LineConfig) -> None:
         """Refuse corners that lie around one point (the known-point target's recording) or
