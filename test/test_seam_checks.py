@@ -176,9 +176,11 @@ def test_the_recording_scale_sets_aside_exactly_the_corrupted_profiles() -> None
         assert "of this recording's 20 profiles" in r.reason and "limit" in r.reason
 
 
-def _judged(index: int, rival_scale_m: float, rng: np.random.Generator) -> CornerSample:
+def _judged(
+    index: int, rival_scale_m: float, rng: np.random.Generator, opening_rad: float = 1.5
+) -> CornerSample:
     """A corner whose V leaves 30 µm (robust scale) over 300 points and whose best rival
-    shape (an arc) leaves ``rival_scale_m``."""
+    shape (an arc) leaves ``rival_scale_m``; its flanks open by ``opening_rad``."""
     own = ShapeFit("line pair", rng.normal(scale=3e-5, size=300), 5)
     arc = ShapeFit("arc", rng.normal(scale=rival_scale_m, size=300), 5)
     corner = np.array([0.0, 0.12])
@@ -190,7 +192,7 @@ def _judged(index: int, rival_scale_m: float, rng: np.random.Generator) -> Corne
         np.eye(2) * 1e-10,
         np.zeros((1, 3)),
         3e-5,
-        1.5,
+        opening_rad,
         shape=compare_models(own, [arc]),
     )
 
@@ -213,3 +215,20 @@ def test_a_rival_that_beats_a_v_only_as_much_as_on_the_recordings_other_profiles
     doubt = corner_doubt(kept)
     assert doubt is not None and "profiles fit a rival shape better than a V" in doubt
     assert corner_doubt([kept[0], *(replace(c, shape=None) for c in kept[1:])]) is None
+
+
+def test_a_profile_a_rival_beats_does_not_set_the_recordings_typical_opening() -> None:
+    """The real 12.7 mm ball (RobCalibrator) given to the line target: five profiles look
+    like ridges of 130-156 deg, four like grooves, and one groove an arc fits better. Judged
+    with that one, the openings' median fell between ridge and groove and no corner was set
+    aside (the sphere then went unnamed); the recording's typical corner is taken over the
+    profiles no rival beats."""
+    rng = np.random.default_rng(30)
+    ridges = [math.radians(a) for a in (131.8, 148.0, 138.6, 151.9, 155.7)]
+    grooves = [math.radians(a) for a in (-156.5, -153.0, -141.2, -129.1)]
+    corners = [_judged(k, 4e-5, rng, a) for k, a in enumerate(ridges + grooves)]
+    corners.append(_judged(9, 1e-5, rng, math.radians(-151.2)))
+    assert [c.rival is not None for c in corners] == [False] * 9 + [True]
+    kept, rejections = check_corner_recording(corners, [], 6.0)
+    assert [c.index for c in kept] == [0, 1, 2, 3, 4]
+    assert sorted(r.index for r in rejections) == [5, 6, 7, 8, 9]

@@ -558,16 +558,24 @@ def _consistent_corners(
 ) -> tuple[list[CornerSample], dict[int, str]]:
     """Each corner with alternatives replaced by the one whose opening (flank angle and
     ridge or groove) is nearest the recording's median, taken over the profiles with one
-    usable corner (over every profile's first when fewer than three have one); and the
-    positions of the corners whose opening still lies more than ``sigmas`` robust spreads
-    (at least :data:`MIN_OPENING_SPREAD_RAD`) from it, with the reason (another corner of
-    the part, e.g. where a flank meets the floor)."""
-    single = [c.opening_rad for c in corners if not c.alternatives]
-    openings = np.array(single if len(single) >= 3 else [c.opening_rad for c in corners])
-    openings = openings[np.isfinite(openings)]
-    if len(openings) < 3:
+    usable corner (over every profile's first when fewer than three have one), of those that
+    no rival shape fits better (of all when fewer than three are such); and the positions of
+    the corners whose opening still lies more than ``sigmas`` robust spreads of those same
+    profiles' (at least
+    :data:`MIN_OPENING_SPREAD_RAD`) from it, with the reason (another corner of the part,
+    e.g. where a flank meets the floor)."""
+    finite = np.array([math.isfinite(c.opening_rad) for c in corners], dtype=np.bool_)
+    undoubted = finite & np.array([c.rival is None for c in corners], dtype=np.bool_)
+    if undoubted.sum() >= 3:
+        finite = undoubted
+    reference = finite & np.array([not c.alternatives for c in corners], dtype=np.bool_)
+    if reference.sum() < 3:
+        reference = finite
+    if reference.sum() < 3:
         return corners, {}
-    typical = float(np.median(openings))
+    typical = float(
+        np.median([c.opening_rad for c, r in zip(corners, reference, strict=True) if r])
+    )
     chosen = [
         min(
             (replace(c, alternatives=()), *c.alternatives),
@@ -576,7 +584,7 @@ def _consistent_corners(
         for c in corners
     ]
     off = np.array([abs(c.opening_rad - typical) for c in chosen])
-    spread = MAD_TO_SIGMA * float(np.nanmedian(off))
+    spread = MAD_TO_SIGMA * float(np.median(off[reference]))
     limit = max(sigmas * spread, MIN_OPENING_SPREAD_RAD)
     aside = {
         k: f"its flanks meet at {_angle_text(c.opening_rad)} where the recording's corners "
