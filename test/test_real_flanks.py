@@ -34,7 +34,12 @@ from linelaser_calib.core.targets.line.config import LineConfig
 from linelaser_calib.core.targets.line.section import LineSection
 from linelaser_calib.core.types import Sample
 from linelaser_calib.sim import line as line_sim
-from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
+from linelaser_calib.sim.line import (
+    LineScenario,
+    LineSimulatedData,
+    line_scenario_from_preset,
+    simulate_line,
+)
 from linelaser_calib.sim.robot import draw_errors
 from linelaser_calib.sim.sensor_models import SensorModel, shape_error
 
@@ -116,18 +121,23 @@ def test_the_recording_chooses_the_ridge_beside_a_floor_and_sets_aside_a_lone_fl
     assert "(a ridge)" in rejections[0].reason
 
 
-def test_the_ridge_preset_uses_every_profile_and_finds_the_hand_eye() -> None:
-    """``line_ridge``: before issue 29, 6 of its 51 profiles gave a corner (refused); seed 0
-    was refused as undetermined (rotation about sensor x) before the preset checked its
-    sweep."""
-    scenario = line_scenario_from_preset("line_ridge")
+def _ridge_samples(scenario: LineScenario) -> tuple[LineSimulatedData, list[Sample]]:
+    """Seed 0 of a ridge scenario and its samples, paired as a continuous sweep is (the
+    latency known)."""
     data = simulate_line(scenario, 0)
     pairing = PairingConfig(
         max_linear_speed_m_s=0.0,
         max_angular_speed_rad_s=0.0,
         clock_offset_s=-scenario.rig.latency_s,
     )
-    samples = pair_profiles(data.profiles, data.poses, pairing).samples
+    return data, pair_profiles(data.profiles, data.poses, pairing).samples
+
+
+def test_the_ridge_preset_uses_every_profile_and_finds_the_hand_eye() -> None:
+    """``line_ridge``: before issue 29, 6 of its 51 profiles gave a corner (refused); seed 0
+    was refused as undetermined (rotation about sensor x) before the preset checked its
+    sweep."""
+    data, samples = _ridge_samples(line_scenario_from_preset("line_ridge"))
     target, config = get_target("line"), LineConfig()
     features, rejections = target.extract(samples, config, 0, lambda *_: None)
     assert len(features) >= 0.98 * len(samples), [r.reason for r in rejections]
@@ -162,16 +172,9 @@ def test_a_held_depth_scale_is_counted_in_the_ridge_1_sigma(
     comes out about 0.2 mm off along flange z. Before the held scale was counted that was
     1.8-2.0 of its 1σ on every seed."""
     monkeypatch.setattr(line_sim, "draw_errors", lambda rng, rig, n: 0.0 * draw_errors(rng, rig, n))
-    scenario = line_scenario_from_preset(
-        "line_ridge", sensor={"shape_sigma_m": 0.0, "linearity_m": 0.0}
+    data, samples = _ridge_samples(
+        line_scenario_from_preset("line_ridge", sensor={"shape_sigma_m": 0.0, "linearity_m": 0.0})
     )
-    data = simulate_line(scenario, 0)
-    pairing = PairingConfig(
-        max_linear_speed_m_s=0.0,
-        max_angular_speed_rad_s=0.0,
-        clock_offset_s=-scenario.rig.latency_s,
-    )
-    samples = pair_profiles(data.profiles, data.poses, pairing).samples
     target, config = get_target("line"), LineConfig()
     features, _ = target.extract(samples, config, 0, lambda *_: None)
     solution = target.solve_default(features, config, SolveContext(n_samples=len(samples)))
