@@ -363,6 +363,16 @@ def self_check_rows(result: CalibrationResult, front: Front = Front.CLI) -> Rows
                 f"x{'/'.join(f'{v:.2f}' for v in widening[3:])})",
             )
         )
+    spread = check.sigma_model_spread
+    if spread is not None:
+        rows.append(
+            (
+                "1 sigma model spread",
+                f"{mm_text(spread[3:])}, {deg_text(spread[:3])} (another reading of the "
+                "profiler's scales that the profiles cannot tell apart moves the hand-eye this "
+                "far; added per axis to the statistical 1 sigma, which the checks above use)",
+            )
+        )
     if check.systematic:
         arm_setting = spelling("arm_accuracy_m", front)
         rows.append(

@@ -11,8 +11,11 @@ import pytest
 
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets.base import TargetSolution
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
+from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.cylinder.section import read_cylinder_section
+from linelaser_calib.core.targets.cylinder.target import with_depth_reading
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
 from linelaser_calib.core.verdict import warning_kind
 from linelaser_calib.settings import Front, render
@@ -186,3 +189,33 @@ def test_the_sphere_holding_its_scale_counts_what_estimating_it_would_move() -> 
         else:
             assert not spread
             assert auto.uncertainty_translation_m == pytest.approx(fixed.uncertainty_translation_m)
+
+
+def test_the_cylinder_counts_the_x_z_split_only_where_both_readings_are_one_stretch() -> None:
+    """With the radius free the profiles fix only the ratio of the x and z scales: a kept x
+    reading and a z reading (x held) of the same ratio leave the split unknown, and the
+    move between their hand-eyes counts in the 1σ (the stress matrix's ``scales`` face: x
+    +0.81 ± 0.03 %, z -0.79 ± 0.03 %, a 1 mm move); a z reading of another ratio is told
+    apart by the profiles and adds nothing (as on ``cylinder_scancontrol``, x +0.100 ±
+    0.029 % against z +0.179 ± 0.027 %, 7σ from one ratio)."""
+    cylinder = Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02)
+    sigma = np.full(3, 2e-5)
+
+    def solution(section: CylinderSection, z: float) -> TargetSolution:
+        T = np.eye(4)
+        T[2, 3] = z
+        return TargetSolution(
+            T, section, "default", [], [], 0.0, {}, sigma, sigma, [], {}, [], 1e-5
+        )
+
+    kept = solution(CylinderSection(cylinder, True, scale=0.0081, scale_sigma=0.0003), 0.0)
+    for z, counted in ((-0.0079, True), (0.0179, False)):
+        other = CylinderSection(cylinder, True, depth_scale=z, depth_scale_sigma=0.0003)
+        read = with_depth_reading(kept, solution(other, 0.001))
+        assert (read.sigma_model_spread is not None) is counted
+        if counted:
+            assert read.sigma_translation_m is not None
+            assert read.sigma_translation_m[2] == pytest.approx(np.hypot(2e-5, 1e-3))
+            assert warning_kind(read.warnings[0]).id == "scale-model-spread"
+        else:
+            assert read is kept

@@ -14,6 +14,7 @@ import pytest
 import yaml
 
 from linelaser_calib.cli import main
+from linelaser_calib.core.model_spread import with_model_spread
 from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
 from linelaser_calib.core.regions import (
     PER_POSE,
@@ -248,16 +249,22 @@ def test_region_dispersion_rarely_exceeds_its_limit_under_independent_error() ->
     assert float(np.mean(np.array(ratios) > limit)) <= 0.02
 
 
-def test_error_shared_within_regions_is_seen_by_regions_not_by_interleaved_folds() -> None:
-    """Each region of the workspace off by its own 0.1 mm-scale offset: interleaved folds all
-    hold every region and barely move, leaving a region out moves the estimate; warned, and
-    the widened 1σ covers the shift."""
+def regional_features() -> list[ToyFeature]:
+    """Five regions of the workspace, ten samples each, each region off by its own
+    0.1 mm-scale offset (plus 10 µm independent noise)."""
     rng = np.random.default_rng(23)
     centres = rng.uniform(-0.3, 0.3, (5, 2))
     region = np.arange(50) // 10
     positions = centres[region] + rng.uniform(-0.02, 0.02, (50, 2))
     shared = np.array([1.5e-4, -0.5e-4, 1.0e-4, 2.0e-4, 0.5e-4])[region]
-    features = toy_features(rng, shared + rng.normal(0.0, 1e-5, 50), positions)
+    return toy_features(rng, shared + rng.normal(0.0, 1e-5, 50), positions)
+
+
+def test_error_shared_within_regions_is_seen_by_regions_not_by_interleaved_folds() -> None:
+    """Each region of the workspace off by its own 0.1 mm-scale offset: interleaved folds all
+    hold every region and barely move, leaving a region out moves the estimate; warned, and
+    the widened 1σ covers the shift."""
+    features = regional_features()
     solution = toy_solve(features)
     check = self_check(features, solution, toy_solve)
     assert check is not None and check.sigma_region is not None and check.systematic
@@ -267,6 +274,34 @@ def test_error_shared_within_regions_is_seen_by_regions_not_by_interleaved_folds
     shift = abs(solution.T_flange_sensor[2, 3] + 0.3)
     assert shift > 3.0 * check.sigma_jackknife[5]
     assert shift < 3.0 * check.sigma_honest[5]
+
+
+def test_a_model_spread_stays_out_of_the_yardstick_and_in_the_reported_sigma() -> None:
+    """Regression: a target's model spread (the move to another model of the sensor that its
+    profiles cannot tell apart) was part of the 1σ the self-check judges the data against,
+    so the widened 1σ hid a region-dependent robot error. The recording of the test above,
+    with a spread of 30 times its statistical 1σ and without: the same statistics, the
+    error still systematic, and the reported 1σ the same with the spread added per axis."""
+    features = regional_features()
+    solution = toy_solve(features)
+    assert solution.sigma_translation_m is not None
+    other = replace(solution, T_flange_sensor=solution.T_flange_sensor.copy())
+    other.T_flange_sensor[2, 3] += 0.5 * solution.sigma_translation_m[2]
+    assert with_model_spread(solution, other, "a reading", "advice") is solution
+    other.T_flange_sensor[2, 3] += 29.5 * solution.sigma_translation_m[2]
+    spread = with_model_spread(solution, other, "a reading", "advice")
+    assert spread.sigma_model_spread is not None
+    (warning,) = spread.warnings
+    assert warning.startswith("a reading moves the hand-eye by") and warning.endswith("advice")
+    plain, widened = (self_check(features, s, toy_solve) for s in (solution, spread))
+    assert plain is not None and widened is not None and plain.systematic and widened.systematic
+    assert widened.region_ratio == pytest.approx(plain.region_ratio, rel=1e-9)
+    np.testing.assert_allclose(widened.sigma_model, plain.sigma_model, rtol=1e-9)
+    np.testing.assert_allclose(
+        widened.sigma_honest, np.hypot(plain.sigma_honest, spread.sigma_model_spread), rtol=1e-9
+    )
+    entry = widened.quality_entries()["self_check"]["model_spread_sigma"]
+    assert entry["translation_m"][2] == pytest.approx(30.0 * solution.sigma_translation_m[2])
 
 
 def test_halves_that_disagree_warn_and_agree_within_the_widened_sigma() -> None:

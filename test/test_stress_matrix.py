@@ -44,15 +44,6 @@ TARGETS = ("cylinder", "sphere", "line", "known_point")
 FACES = (*REAL_FACES, "floor")
 #: Width of the plate beside the seam targets' flank (the ``floor`` face), m.
 FLOOR_WIDTH_M = 0.01
-SCALE = (
-    "with its radius estimated a cylinder's profiles fix only the ratio of the profiler's x "
-    "and z scales, not their common part (both estimated, they drift with the radius: +3.9 +- "
-    "0.6 % and +3.1 +- 0.6 % for +0.6 % and -0.2 %), and a z scale about the sensor origin "
-    "moves every point by s_z times its depth (0.1 m): the x scale alone reads the ratio "
-    "(+0.81 +- 0.03 %) and the hand-eye is 0.26 mm off (clean twin 0.024 mm, 1 sigma 0.04 mm). "
-    "With the radius given both scales are estimated and the hand-eye is 0.026 mm off"
-)
-XFAIL: dict[tuple[str, str], str] = {("cylinder", "scales"): SCALE}
 
 
 @cache
@@ -125,8 +116,6 @@ def _sigma(result: CalibrationResult) -> tuple[float, float]:
 def test_each_target_calibrates_on_each_face_as_well_as_its_clean_twin(
     target: str, face: str
 ) -> None:
-    if (target, face) in XFAIL:
-        pytest.xfail(XFAIL[(target, face)])
     if face == "floor" and target in ("cylinder", "sphere"):
         pytest.skip("the cylinder's and the sphere's scenes show a table beside the target")
     clean = _clean(target)

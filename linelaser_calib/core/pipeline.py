@@ -54,7 +54,7 @@ from .targets.base import (
 from .targets.rivals import check_model, refuse_without_fit
 from .thinning import DEFAULT_PER_NEIGHBOURHOOD, thin_samples
 from .types import FlangePose, Profile, Rejection, Sample
-from .verdict import no_self_check_reason
+from .verdict import no_self_check_reason, warning_kind
 
 #: Offsets of the clock-offset search's first grid (:func:`search_clock_offset`).
 GRID_POINTS = 11
@@ -397,7 +397,11 @@ def calibrate_samples(
             progress,
         )
     sigma_t, sigma_r = solution.sigma_translation_m, solution.sigma_rotation_rad
+    carried: list[str] = []
     if check is not None:
+        if check.solution is not solution:
+            # The plain model chosen: its 1σ keeps the default solve's model spread; say so.
+            carried = [w for w in solution.warnings if warning_kind(w).id == "scale-model-spread"]
         solution = check.solution
         sigma_r, sigma_t = check.sigma_honest[:3], check.sigma_honest[3:]
     return CalibrationResult(
@@ -411,6 +415,7 @@ def calibrate_samples(
         uncertainty_translation_m=sigma_t,
         uncertainty_rotation_rad=sigma_r,
         warnings=list(solution.warnings)
+        + carried
         + joint_notes
         + placement_notes
         + ([] if check is None else check.warnings),

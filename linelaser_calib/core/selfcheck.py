@@ -71,6 +71,12 @@ When the error is systematic the hand-eye's 1σ has two parts, added in quadratu
 Halves that still disagree beyond :data:`HALVES_LIMIT_SIGMAS` of that 1σ widen it by their
 excess. Recordings not marked keep the model's 1σ.
 
+Every statistic is judged against the solve's statistical 1σ. A target that also solved a
+model of the sensor its profiles cannot tell apart (the x/z scale split) reports the move
+to it as a model spread (:attr:`~.targets.base.TargetSolution.sigma_model_spread`); that is
+added to the final 1σ in quadrature, never to the yardstick of the tests, where it would
+hide a systematic robot error.
+
 The 1σ is also given where the user's points are: at the measuring centre, the point
 (0, 0, z_c) of the sensor frame at the mean depth z_c of the used profile points
 (:func:`sigma_at_point`): a rotation 1σ of 0.1° moves a point 1 m away by 1.7 mm.
@@ -110,10 +116,10 @@ from .subsets import (
     model_sigma,
     region_jackknife,
     region_subsets,
-    reported_sigma,
     reporting,
     solve_each,
     solve_subsets,
+    statistical_sigma,
 )
 from .targets.base import ROBOT_PRIOR_EXCESS, Progress, RobotError, TargetSolution
 from .types import SampleFit
@@ -194,11 +200,15 @@ class SelfCheck:
         The robot's per-pose error over its prior, from the pose corrections (None where the
         solve estimates none).
     sigma_honest : ndarray, shape (6,)
-        The 1σ to report (the model's, or widened).
+        The 1σ to report (the model's, or widened, with the model spread).
     sigma_widening : ndarray, shape (6,), or None
         Factors (>= 1) by which the chosen solve widened its own 1σ because its profiles
         scatter the hand-eye more than its noise model predicts
         (:attr:`TargetSolution.sigma_widening`); a floor of ``sigma_honest``.
+    sigma_model_spread : ndarray, shape (6,), or None
+        The part of ``sigma_honest`` (added in quadrature) for a model of the sensor the
+        profiles cannot tell apart (:attr:`TargetSolution.sigma_model_spread` of the default
+        solve of all features); None where there is none.
     solution : TargetSolution
         The chosen model's solve of all features (the result to report).
     region_indices : list of list of int
@@ -235,6 +245,7 @@ class SelfCheck:
     sigma_honest: FloatArray
     solution: TargetSolution = field(repr=False)
     sigma_widening: FloatArray | None = None
+    sigma_model_spread: FloatArray | None = None
     region_indices: list[list[int]] = field(default_factory=list)
     region_solutions: list[TargetSolution | None] = field(default_factory=list, repr=False)
     warnings: list[str] = field(default_factory=list)
@@ -300,6 +311,9 @@ class SelfCheck:
                 "sigma_widening": None
                 if self.sigma_widening is None
                 else _axes(self.sigma_widening),
+                "model_spread_sigma": None
+                if self.sigma_model_spread is None
+                else _axes(self.sigma_model_spread),
             },
         }
 
@@ -564,9 +578,9 @@ def self_check(
     )
     if robot_prior is not None:
         prior = max(prior, robot_prior.translation_m)
-    # The chosen solve's own 1σ, widened where its profiles scatter it beyond the noise
-    # model, is a floor: the statistics above judge the robot's error against the model.
-    reported = reported_sigma(chosen)
+    # The chosen solve's own statistical 1σ, widened where its profiles scatter it beyond the
+    # noise model, is a floor: the statistics above judge the robot's error against the model.
+    reported = statistical_sigma(chosen)
     if reported is not None:
         sigma = np.maximum(sigma, reported)
     split = halves_difference(even, odd)
@@ -580,6 +594,9 @@ def self_check(
         systematic = systematic or excess > 1.0
         if excess > 1.0:
             sigma = sigma * excess
+    spread = solution.sigma_model_spread
+    if spread is not None:
+        sigma = np.hypot(sigma, spread)
     check = SelfCheck(
         folds=folds,
         accuracy_in_use_m=None if blocked is None else blocked.rms_m,
@@ -608,6 +625,7 @@ def self_check(
         sigma_honest=sigma,
         solution=chosen,
         sigma_widening=chosen.sigma_widening,
+        sigma_model_spread=spread,
         region_indices=[[f.index for f in held] for held in held_sets],
         region_solutions=[None if isinstance(r, CalibrationError) else r for r in region_solved],
     )

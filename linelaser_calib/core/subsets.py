@@ -41,12 +41,24 @@ def reported_sigma(solution: TargetSolution) -> FloatArray | None:
     return np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
 
 
+def statistical_sigma(solution: TargetSolution) -> FloatArray | None:
+    """(6,) 1σ [rotation, translation] a solution reports without its model spread (the
+    move to a model of the sensor its profiles cannot tell apart,
+    :attr:`~.targets.base.TargetSolution.sigma_model_spread`, taken out in quadrature),
+    None if it has none."""
+    sigma = reported_sigma(solution)
+    spread = solution.sigma_model_spread
+    if sigma is None or spread is None:
+        return sigma
+    return np.asarray(np.sqrt(np.maximum(sigma**2 - spread**2, 0.0)))
+
+
 def model_sigma(solution: TargetSolution) -> FloatArray | None:
-    """(6,) noise-model 1σ [rotation, translation] of a solution (its reported 1σ without
+    """(6,) noise-model 1σ [rotation, translation] of a solution (its statistical 1σ without
     the widening for profiles that scatter it more than the model says), None if it has
     none. The statistics below compare with the model; the widening is a floor of the
-    final 1σ."""
-    sigma = reported_sigma(solution)
+    final 1σ, to which the model spread is added."""
+    sigma = statistical_sigma(solution)
     if sigma is None or solution.sigma_widening is None:
         return sigma
     return np.asarray(sigma / solution.sigma_widening)

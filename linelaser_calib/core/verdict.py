@@ -202,10 +202,12 @@ WARNING_KINDS: tuple[WarningKind, ...] = (
     ),
     WarningKind(
         "scale-model-spread",
-        r"the along-line scale, held at 1 by default, reads",
+        r"the along-line scale, held at 1 by default, reads|with the radius estimated the profiles "
+        r"fix only the ratio of the along-line and depth scales",
         _CARE,
-        "estimating the sensor's along-line scale moves the hand-eye beyond its 1 sigma",
-        "check the profiler's x scale on a known length; the 1 sigma already counts the move, "
+        "another reading of the sensor's scales moves the hand-eye beyond its 1 sigma",
+        "check the profiler's x scale on a known length (a cylinder: give its measured "
+        f"{setting('radius_m')}); the 1 sigma already counts the move, "
         f"and {setting('scale')} free estimates the scale if it is known to be off",
     ),
     WarningKind(

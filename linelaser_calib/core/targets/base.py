@@ -297,6 +297,12 @@ class TargetSolution:
         profiles scatter the hand-eye more than the noise model predicts
         (:func:`~linelaser_calib.core.solver.sample_dispersion`); None where not checked.
         The 1σ divided by them is the noise model's.
+    sigma_model_spread : ndarray, shape (6,), or None
+        The part of the 1σ above ([rotation, translation], added per axis in quadrature) that
+        counts another model of the sensor the profiles cannot tell from the one solved: the
+        hand-eye's move to that model's solve (:mod:`~linelaser_calib.core.model_spread`);
+        None where there is none. Without it the 1σ is the statistical one, against which the
+        self-check judges the data.
     converged : bool
         Whether the solve converged (False: it stopped at its iteration limit).
     """
@@ -321,6 +327,7 @@ class TargetSolution:
     robot_error: RobotError | None = None
     converged: bool = True
     sigma_widening: FloatArray | None = None
+    sigma_model_spread: FloatArray | None = None
 
 
 @dataclass(frozen=True)

@@ -45,8 +45,10 @@ import numpy as np
 from ...errors import CalibrationError, DegenerateError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray
 from ...model_check import shape_doubt
+from ...model_spread import with_model_spread
 from ...profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
+    SIGNIFICANT_SCALE_SIGMAS,
     implausible_scale_held,
     scale_significant,
     scale_text,
@@ -123,10 +125,57 @@ def estimates_scale(config: CylinderConfig) -> tuple[bool, bool]:
     With the radius estimated the profiles determine only the ratio of the two scales: the
     x scale alone reads their difference (+0.81 ± 0.03 %), both together drift with the
     radius (+3.9 ± 0.6 % and +3.1 ± 0.6 %), so the z scale is held and its share, s_z times
-    the depth of the points (0.26 mm there), stays in the hand-eye: give the radius.
+    the depth of the points (0.26 mm there), stays in the hand-eye; the 1σ counts it where
+    the profiles show it (:func:`with_depth_reading`). Give the radius.
     """
     free = config.scale != "fixed"
     return free, free and config.radius_m is not None
+
+
+def with_depth_reading(kept: TargetSolution, other: TargetSolution) -> TargetSolution:
+    """The solution whose along-line (x) scale was kept with the radius free (``kept``),
+    with the move to ``other``, the same stretch read as a depth (z) scale (x held at 1), as
+    its model spread (:func:`~linelaser_calib.core.model_spread.with_model_spread`) where
+    the two read one stretch and the move exceeds the 1σ.
+
+    With the radius free the profiles fix the ratio of the two scales, not how it splits
+    between them: a z scale about the sensor origin moves every point by s_z times its
+    depth, which the x scale cannot take up, and the common part of the two scales moves
+    the radius and, through the depth, the hand-eye. Both estimated, they drift together
+    (+3.9 ± 0.6 % and +3.1 ± 0.6 % on the stress matrix's ``scales`` face, x +0.6 % and z
+    -0.2 %; +12.5 % each on ``cylinder_scancontrol``), so no split is estimated. On that
+    face the x scale alone reads +0.81 ± 0.03 % and the hand-eye is 0.26 mm off against a
+    1σ of 0.02 mm; read as a z scale the stretch is -0.79 ± 0.03 %, the same ratio, and the
+    hand-eye moves 1.0 mm: the truth lies between the readings, and their difference counts
+    in the 1σ. Where the z reading is no reading of the same ratio (beyond
+    :data:`SIGNIFICANT_SCALE_SIGMAS` of their combined 1σ), the profiles tell the two
+    models apart and the kept one stands alone: ``cylinder_scancontrol`` (x 0.1 % short,
+    z true) reads x +0.100 ± 0.029 % but z +0.179 ± 0.027 %, 7σ from one ratio.
+    """
+    section, alternative = kept.section, other.section
+    assert isinstance(section, CylinderSection) and isinstance(alternative, CylinderSection)
+    x, sigma_x = section.scale, section.scale_sigma
+    z, sigma_z = alternative.depth_scale, alternative.depth_scale_sigma
+    if x is None or sigma_x is None or z is None or sigma_z is None:
+        return kept
+    # The ratio (1 + s_x) / (1 + s_z) each reading gives, compared on a log scale.
+    gap = math.log1p(x) + math.log1p(z)
+    if abs(gap) > SIGNIFICANT_SCALE_SIGMAS * math.hypot(sigma_x / (1 + x), sigma_z / (1 + z)):
+        return kept
+    return with_model_spread(
+        kept,
+        other,
+        "with the radius estimated the profiles fix only the ratio of the along-line and "
+        f"depth scales: the along-line scale reads {_reading(x, sigma_x)} with the depth "
+        f"scale held at 1; read as a depth scale the same stretch is {_reading(z, sigma_z)}, "
+        "and that reading",
+        "Give the measured {setting:radius_m}: with it both scales are estimated",
+    )
+
+
+def _reading(scale: float, sigma: float) -> str:
+    """A scale and its 1σ, in words."""
+    return f"{1.0 + scale:.5f} ± {sigma:.5f} ({100.0 * scale:+.3f} % from nominal)"
 
 
 def scale_verdict(refined: RefineResult) -> str:
@@ -383,7 +432,10 @@ class CylinderTarget:
         at the context's warm start). With ``{setting:scale} auto`` the scales of
         :func:`estimates_scale` are estimated and each is held at 1 again when its estimate
         is implausible, poorly determined or not clearly off 1 (:func:`scale_significant`;
-        the x scale only with the radius free); a warm start keeps its own choice."""
+        the x scale only with the radius free); a warm start keeps its own choice. An x
+        scale kept with the radius free is read as a depth scale too, and where that is the
+        same stretch and moves the hand-eye beyond its 1σ, the move counts in the 1σ
+        (:func:`with_depth_reading`)."""
         radius = self._checked(features, config, context)
         warm = context.warm_start
         free, depth = estimates_scale(config)
@@ -407,15 +459,20 @@ class CylinderTarget:
             for value, sigma in estimates
         ]
         kept[0] = kept[0] or config.radius_m is not None
-        if kept == [free, depth]:
+        if kept != [free, depth]:
+            solution = self._solve_default(features, config, context, radius, *kept)
+            solution.warnings.extend(
+                implausible_scale_held(value, axis)
+                for (value, _), axis in zip(estimates, ("along-line", "depth"), strict=True)
+                if value is not None and abs(value) > PLAUSIBLE_SCALE_ERROR
+            )
+        if config.radius_m is not None or kept != [True, False]:
             return solution
-        held = self._solve_default(features, config, context, radius, kept[0], kept[1])
-        held.warnings.extend(
-            implausible_scale_held(value, axis)
-            for (value, _), axis in zip(estimates, ("along-line", "depth"), strict=True)
-            if value is not None and abs(value) > PLAUSIBLE_SCALE_ERROR
-        )
-        return held
+        try:
+            other = self._solve_default(features, config, context, radius, False, True)
+        except CalibrationError:
+            return solution
+        return with_depth_reading(solution, other)
 
     def _solve_default(
         self,

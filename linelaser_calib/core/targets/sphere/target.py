@@ -44,8 +44,9 @@ from linelaser_calib.core.errors import (
     ProfileRejected,
     TooFewFeatures,
 )
-from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix
+from linelaser_calib.core.geometry import FloatArray
 from linelaser_calib.core.model_check import Comparison, shape_doubt
+from linelaser_calib.core.model_spread import with_model_spread
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
@@ -189,40 +190,27 @@ def with_scale_model_spread(held: TargetSolution, estimated: TargetSolution) -> 
     face (x and z scales 0.8 % apart) the held scale leaves the hand-eye up to 5.4 of its 1σ
     off, the estimated one within 1.8. So the held solution is kept and, where the two
     hand-eyes differ by more than the held one's 1σ on some axis, the difference is added to
-    every axis's 1σ in quadrature, with a warning naming the scale and the move. An
-    estimated scale beyond :data:`PLAUSIBLE_SCALE_ERROR` is no model of the profiles (the
-    12.7 mm ball set, radius given: 0.958): the held solution is kept with a warning.
+    every axis's 1σ in quadrature as the solution's model spread, which the self-check keeps
+    out of its yardstick (:func:`~linelaser_calib.core.model_spread.with_model_spread`),
+    with a warning naming the scale and the move. An estimated scale beyond
+    :data:`PLAUSIBLE_SCALE_ERROR` is no model of the profiles (the 12.7 mm ball set, radius
+    given: 0.958): the held solution is kept with a warning.
     """
     section = estimated.section
     scale = getattr(section, "scale", None)
-    sigma_r, sigma_t = held.sigma_rotation_rad, held.sigma_translation_m
-    if scale is None or sigma_r is None or sigma_t is None:
+    if scale is None:
         return held
     if abs(scale) > PLAUSIBLE_SCALE_ERROR:
         return replace(held, warnings=[*held.warnings, implausible_scale_held(scale)])
-    X_held, X_free = held.T_flange_sensor, estimated.T_flange_sensor
-    move = np.concatenate(
-        [rotvec_from_matrix(X_held[:3, :3].T @ X_free[:3, :3]), X_free[:3, 3] - X_held[:3, 3]]
-    )
-    sigma = np.concatenate([sigma_r, sigma_t])
-    if not np.any(np.abs(move) > sigma):
-        return held
-    widened = np.hypot(sigma, move)
     scale_sigma = getattr(section, "scale_sigma", None)
     spread = "" if scale_sigma is None else f" ± {scale_sigma:.5f}"
-    warning = (
-        f"the along-line scale, held at 1 by default, reads {1.0 + scale:.5f}{spread} "
-        f"({100.0 * scale:+.3f} % from nominal) when estimated, and estimating it moves the "
-        f"hand-eye by {float(np.linalg.norm(move[3:])) * 1e3:.3f} mm and "
-        f"{math.degrees(float(np.linalg.norm(move[:3]))):.4f} deg, beyond its 1 sigma: the 1 "
-        "sigma now counts that move (added per axis). A profiler's own shape error can read "
-        "as a scale; if its x scale is known to be off, {setting:scale} free estimates it"
-    )
-    return replace(
+    return with_model_spread(
         held,
-        sigma_rotation_rad=widened[:3],
-        sigma_translation_m=widened[3:],
-        warnings=[*held.warnings, warning],
+        estimated,
+        f"the along-line scale, held at 1 by default, reads {1.0 + scale:.5f}{spread} "
+        f"({100.0 * scale:+.3f} % from nominal) when estimated, and estimating it",
+        "A profiler's own shape error can read as a scale; if its x scale is known to be off, "
+        "{setting:scale} free estimates it",
     )
 
 
