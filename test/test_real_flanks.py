@@ -183,4 +183,5 @@ def test_a_held_depth_scale_is_counted_in_the_ridge_1_sigma(
     error = solution.T_flange_sensor[:3, 3] - data.truth.T_flange_sensor[:3, 3]
     assert error[2] > 1e-4  # the held scale's shift, not noise
     assert solution.sigma_translation_m is not None
+    assert solution.sigma_model_spread is not None  # a separate term the self-check leaves out
     assert np.all(np.abs(error) < 1.5 * solution.sigma_translation_m)

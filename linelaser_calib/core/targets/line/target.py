@@ -34,7 +34,7 @@ import numpy as np
 from scipy.special import chdtri
 
 from ...errors import DegenerateError, ModelMismatch, TooFewFeatures
-from ...geometry import rotvec_from_matrix
+from ...model_spread import with_model_spread
 from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held, scale_significant
 from ...profile.corner import (
     CornerSample,
@@ -156,9 +156,12 @@ def _one_point(solution: TargetSolution) -> str | None:
     )
 
 
-def _held_scale_counted(held: TargetSolution, free: TargetSolution) -> TargetSolution:
-    """The solve with a scale held at 1 (``held``), its 1σ widened per axis by how far the
-    hand-eye moves when the scale is estimated instead (``free``), added in quadrature.
+def _held_scales_counted(
+    held: TargetSolution, free: TargetSolution, readings: list[tuple[str, float, float | None]]
+) -> TargetSolution:
+    """The solve with the scales not clearly off 1 held at 1 (``held``), with the move to
+    the solve that estimates them (``free``) as its model spread where it exceeds the 1σ
+    (:func:`~linelaser_calib.core.model_spread.with_model_spread`).
 
     A scale the recording cannot tell from 1 is held because estimating it adds a parameter
     and no information; but it is still whatever it is, and where the corners' depths span
@@ -168,15 +171,18 @@ def _held_scale_counted(held: TargetSolution, free: TargetSolution) -> TargetSol
     +0.18 to +0.23 mm off along flange z, 1.8-2.0 of its 1σ, with the robot's error and the
     profiler's shape error turned off.
     """
-    if held.sigma_rotation_rad is None or held.sigma_translation_m is None:
-        return held
-    moved = free.T_flange_sensor
-    rotation = rotvec_from_matrix(held.T_flange_sensor[:3, :3].T @ moved[:3, :3])
-    translation = moved[:3, 3] - held.T_flange_sensor[:3, 3]
-    return replace(
+    read = " and ".join(
+        f"the {axis} scale reads {1.0 + s:.5f}"
+        + ("" if sigma is None else f" ± {sigma:.5f}")
+        + f" ({100.0 * s:+.3f} % from nominal)"
+        for axis, s, sigma in readings
+    )
+    return with_model_spread(
         held,
-        sigma_rotation_rad=np.hypot(held.sigma_rotation_rad, rotation),
-        sigma_translation_m=np.hypot(held.sigma_translation_m, translation),
+        free,
+        f"held at 1 as not clearly off it, {read} when estimated, and estimating it",
+        "Where the corners span little depth a small scale is nearly a shift; "
+        "{setting:scale} free estimates both",
     )
 
 
@@ -315,7 +321,12 @@ class LineTarget:
         )
         if any(abs(s) > PLAUSIBLE_SCALE_ERROR for s, _ in estimates):
             return held
-        return _held_scale_counted(held, solution)
+        held_readings = [
+            (axis, s, sigma)
+            for axis, (s, sigma), keep in zip(("along-line", "depth"), estimates, kept, strict=True)
+            if not keep
+        ]
+        return _held_scales_counted(held, solution, held_readings)
 
     def _solve_default(
         self,
