@@ -259,7 +259,7 @@ def refine_line(
     data_hand_eye = data[:6, :6] - data[:6, 6:] @ np.linalg.pinv(data[6:, 6:]) @ data[6:, :6]
     model = problem._model(state)
     r = solution.residuals
-    covariance = np.asarray(np.linalg.pinv(information))
+    covariance = np.asarray(np.linalg.pinv(information, hermitian=True))
     sigmas = iter(np.sqrt(np.diag(covariance)[N_GLOBAL:]))
     return LineRefinement(
         T_flange_sensor=transform_from_rotation_translation(state.X[:3, :3], state.X[:3, 3]),
