@@ -45,6 +45,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError, ProfileRejected
+from ..model_check import median
 from ..types import BoolArray, FloatArray
 
 IntArray = NDArray[np.intp]
@@ -366,7 +367,7 @@ def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
     threshold = math.nan
     if config.spike_half_window > 0 and len(idx):
         residual, spacing = spike_residuals(p[idx][:, [0, 2]], labels, config.spike_half_window)
-        sigma = MAD_TO_SIGMA * float(np.median(residual))
+        sigma = MAD_TO_SIGMA * median(residual)
         threshold = max(config.spike_factor * sigma, config.spike_floor_m)
         smooth = residual <= np.maximum(threshold, config.spike_spacing_factor * spacing)
         counts["spike"] = int(len(idx) - smooth.sum())

@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
+from ..model_check import median
 from ..types import FloatArray
 from .cleaning import MAD_TO_SIGMA, scan_order
 
@@ -232,7 +233,7 @@ def estimate_noise(points_xz: ArrayLike) -> NoiseEstimate:
     distance = np.abs(cross[ok]) / length[ok]
     if not len(distance):
         return NoiseEstimate(floor, quantum)
-    sigma = MAD_TO_SIGMA * float(np.median(distance)) / CHORD_SPREAD
+    sigma = MAD_TO_SIGMA * median(distance) / CHORD_SPREAD
     return NoiseEstimate(max(sigma, floor), quantum)
 
 
@@ -241,7 +242,7 @@ def gap_pieces(points_xz: FloatArray, config: SegmentationConfig) -> list[IntArr
     if len(points_xz) < 2:
         return [np.arange(len(points_xz), dtype=np.intp)]
     step = np.hypot(*np.diff(points_xz, axis=0).T)
-    limit = max(config.min_gap_m, config.gap_spacings * float(np.median(step)))
+    limit = max(config.min_gap_m, config.gap_spacings * median(step))
     cuts = np.flatnonzero(step > limit) + 1
     return [np.asarray(piece, dtype=np.intp) for piece in np.split(np.arange(len(points_xz)), cuts)]
 

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...errors import InputError, ProfileRejected
-from ...model_check import effective_count, robust_scale_m
+from ...model_check import effective_count, median, robust_scale_m
 from ...profile.cleaning import MAD_TO_SIGMA
 from ...types import BoolArray, FloatArray
 from .conic import (
@@ -713,7 +713,7 @@ def _fit(
         distance = np.abs(sampson_distance(conic_u, u))
         settled = True
         if config.noise_threshold_sigmas > 0.0:
-            sigma_m = MAD_TO_SIGMA * float(np.median(distance[inliers])) * norm.scale
+            sigma_m = MAD_TO_SIGMA * median(distance[inliers]) * norm.scale
             target_u = max(config.noise_threshold_sigmas * sigma_m, MIN_NOISE_THRESHOLD_M)
             target_u /= norm.scale
             # Halve at most per round, so that a start bent by outliers can straighten.
