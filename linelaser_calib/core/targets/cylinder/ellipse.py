@@ -50,12 +50,12 @@ from .conic import (
     arc_coverage,
     conic_from_matrix,
     conic_matrix,
-    design_rows,
     ellipse_geometry,
     normalise_conic,
     refine_geometric,
     sampson_distance,
     sampson_jacobian,
+    sampson_rows,
     turning_angle,
     value_and_gradient_sq,
 )
@@ -462,7 +462,7 @@ def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[f
     semi-minor axes several mm apart.
     """
     conic = conic_u / np.linalg.norm(conic_u)
-    residual, jacobian = sampson_jacobian(conic, u, design_rows(u))
+    residual, jacobian = sampson_jacobian(conic, sampson_rows(u))
     scale_sq = robust_scale_m(residual) ** 2 * len(u) / effective_count(residual)
     covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
     steps = AXIS_GRADIENT_STEP * np.eye(6)
