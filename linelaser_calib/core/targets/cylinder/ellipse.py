@@ -463,7 +463,8 @@ def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[f
     """
     conic = conic_u / np.linalg.norm(conic_u)
     residual, jacobian = sampson_jacobian(conic, sampson_rows(u))
-    scale_sq = robust_scale_m(residual) ** 2 * len(u) / effective_count(residual)
+    scale = robust_scale_m(residual)
+    scale_sq = scale**2 * len(u) / effective_count(residual, scale)
     covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
     steps = AXIS_GRADIENT_STEP * np.eye(6)
     axes = ellipse_geometry(np.concatenate([conic + steps, conic - steps])).semi_axes
