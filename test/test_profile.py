@@ -6,9 +6,16 @@ import math
 
 import numpy as np
 import pytest
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from linelaser_calib.core.errors import InputError, ProfileRejected
-from linelaser_calib.core.profile.cleaning import CleaningConfig, clean_profile
+from linelaser_calib.core.profile.cleaning import (
+    MAX_BRIDGED_POINTS,
+    CleaningConfig,
+    clean_profile,
+    segment_labels,
+)
 from linelaser_calib.core.targets.cylinder.ellipse import EllipseConfig, fit_ellipse_ransac
 
 RADIUS = 0.02  # m
@@ -178,3 +185,24 @@ def test_bad_input_and_config() -> None:
         CleaningConfig(min_depth_m=0.5, max_depth_m=0.1)
     with pytest.raises(ValueError, match="min_segment_points"):
         CleaningConfig(spike_half_window=5, min_segment_points=5)
+
+
+def test_scan_line_pieces_are_the_connected_components_of_the_links() -> None:
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        n = int(rng.integers(1, 200))
+        xz = np.cumsum(rng.normal(scale=rng.uniform(0.1, 3.0), size=(n, 2)), axis=0)
+        stray = rng.random(n) < rng.uniform(0.0, 0.5)
+        xz[stray] += rng.normal(scale=10.0, size=(int(stray.sum()), 2))
+        near = [
+            (i, i + k)
+            for k in range(1, MAX_BRIDGED_POINTS + 2)
+            for i in np.flatnonzero(np.linalg.norm(xz[k:] - xz[:-k], axis=1) <= 2.0)
+        ]
+        rows, cols = np.array(near, dtype=np.intp).reshape(-1, 2).T
+        graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
+        _, components = connected_components(graph, directed=False)
+        first, expected = np.unique(components, return_index=True, return_inverse=True)[1:]
+        np.testing.assert_array_equal(
+            segment_labels(xz, 2.0), np.argsort(np.argsort(first))[expected]
+        )

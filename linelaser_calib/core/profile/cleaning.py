@@ -41,10 +41,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError, ProfileRejected
+from ..model_check import median
 from ..types import BoolArray, FloatArray
 
 IntArray = NDArray[np.intp]
@@ -206,18 +205,36 @@ def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
     """
     p = np.asarray(xz, dtype=np.float64)
     n = len(p)
-    rows, cols = [], []
-    for k in range(1, MAX_BRIDGED_POINTS + 2):
-        near = np.flatnonzero(np.linalg.norm(p[k:] - p[:-k], axis=1) <= max_gap_m)
-        rows.append(near)
-        cols.append(near + k)
-    row, col = np.concatenate(rows), np.concatenate(cols)
-    graph = coo_matrix((np.ones(len(row)), (row, col)), shape=(n, n))
-    _, labels = connected_components(graph, directed=False)
-    _, first, component = np.unique(labels, return_index=True, return_inverse=True)
-    rank = np.empty(len(first), dtype=np.intp)
-    rank[np.argsort(first)] = np.arange(len(first))
-    return np.asarray(rank[component], dtype=np.intp)
+    if n == 0:
+        return np.zeros(0, dtype=np.intp)
+    linked = [
+        np.linalg.norm(p[k:] - p[:-k], axis=1) <= max_gap_m
+        for k in range(1, MAX_BRIDGED_POINTS + 2)
+    ]
+    # Runs of consecutive linked points are connected; the longer links join runs (a spike
+    # is a run of its own, bridged over). Joining the few runs is a tiny union-find.
+    run = np.concatenate([[0], np.cumsum(~linked[0])])
+    parent = list(range(int(run[-1]) + 1))
+
+    def root(r: int) -> int:
+        while parent[r] != r:
+            parent[r] = parent[parent[r]]
+            r = parent[r]
+        return r
+
+    for k, near in enumerate(linked[1:], start=2):
+        i = np.flatnonzero(near)
+        a, b = run[i], run[i + k]
+        across = a != b
+        for x, y in zip(a[across].tolist(), b[across].tolist(), strict=True):
+            rx, ry = root(x), root(y)
+            if rx != ry:
+                parent[max(rx, ry)] = min(rx, ry)
+    # A component's first run holds its root (roots are the smallest run): number the
+    # components in order of first appearance.
+    number: dict[int, int] = {}
+    piece = [number.setdefault(root(r), len(number)) for r in range(len(parent))]
+    return np.asarray(np.array(piece)[run], dtype=np.intp)
 
 
 def _runs(labels: IntArray) -> IntArray:
@@ -260,27 +277,44 @@ def spike_residuals(
     starts = np.searchsorted(seg, seg, side="left")
     ends = np.searchsorted(seg, seg, side="right") - 1
     low = np.clip(index - w, starts, ends - 2 * w)
-    window = low[:, None] + np.arange(2 * w + 1)
     x, z = p[:, 0], p[:, 1]
-    spacing = np.min(np.hypot(np.diff(x[window], axis=1), np.diff(z[window], axis=1)), axis=1)
-
-    neighbours = window[window != index[:, None]].reshape(n, 2 * w)
+    step = np.hypot(np.diff(x), np.diff(z))
+    spacing = np.min(step[low[:, None] + np.arange(2 * w)], axis=1)
+    residual = np.empty(n)
+    # A point with w neighbours on each side (most of them) uses the w * w pairs that
+    # straddle it; the others (near a segment's ends) are treated in general.
+    centred = low == index - w
+    rows = np.flatnonzero(centred)
+    before, after = rows[:, None] + np.arange(-w, 0), rows[:, None] + np.arange(1, w + 1)
+    a, b = np.repeat(before, w, axis=1), np.tile(after, (1, w))
+    residual[rows] = _nanmedian_rows(_pair_distances(x, z, rows, a, b))
+    rows = np.flatnonzero(~centred)
+    window = low[rows, None] + np.arange(2 * w + 1)
+    neighbours = window[window != rows[:, None]].reshape(len(rows), 2 * w)
     first, second = np.triu_indices(2 * w, k=1)
-    a, b = neighbours[:, first], neighbours[:, second]
+    distance = _pair_distances(x, z, rows, neighbours[:, first], neighbours[:, second])
+    later = neighbours > rows[:, None]
+    straddles = later[:, first] != later[:, second]
+    # A segment's end point has neighbours on one side only: it uses the pairs among its
+    # w + 1 nearest, whose extrapolated curvature term stays close to that of the others.
+    near = np.abs(neighbours - rows[:, None]) <= w + 1
+    end = ((rows == starts[rows]) | (rows == ends[rows]))[:, None]
+    at_end = end & near[:, first] & near[:, second]
+    residual[rows] = _nanmedian_rows(np.where(straddles | at_end, distance, np.nan))
+    return residual, np.asarray(spacing, dtype=np.float64)
+
+
+def _pair_distances(
+    x: FloatArray, z: FloatArray, rows: IntArray, a: IntArray, b: IntArray
+) -> FloatArray:
+    """Distance of each point ``rows`` (R,) from the lines through its pairs of points
+    ``a``, ``b`` (R, K) (the distance to ``a`` where the pair coincides), shape (R, K)."""
     dx, dz = x[b] - x[a], z[b] - z[a]  # direction of the line through the pair
-    ox, oz = x[:, None] - x[a], z[:, None] - z[a]  # the point relative to its first point
+    ox, oz = x[rows, None] - x[a], z[rows, None] - z[a]  # the point relative to its first point
     length = np.hypot(dx, dz)
     cross = np.abs(dx * oz - dz * ox)
     with np.errstate(divide="ignore", invalid="ignore"):
-        distance = np.where(length > 0.0, cross / length, np.hypot(ox, oz))
-    after = neighbours > index[:, None]
-    straddles = after[:, first] != after[:, second]
-    # A segment's end point has neighbours on one side only: it uses the pairs among its
-    # w + 1 nearest, whose extrapolated curvature term stays close to that of the others.
-    near = np.abs(neighbours - index[:, None]) <= w + 1
-    at_end = ((index == starts) | (index == ends))[:, None] & near[:, first] & near[:, second]
-    distance = np.where(straddles | at_end, distance, np.nan)
-    return _nanmedian_rows(distance), np.asarray(spacing, dtype=np.float64)
+        return np.asarray(np.where(length > 0.0, cross / length, np.hypot(ox, oz)))
 
 
 def _nanmedian_rows(values: FloatArray) -> FloatArray:
@@ -366,7 +400,7 @@ def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
     threshold = math.nan
     if config.spike_half_window > 0 and len(idx):
         residual, spacing = spike_residuals(p[idx][:, [0, 2]], labels, config.spike_half_window)
-        sigma = MAD_TO_SIGMA * float(np.median(residual))
+        sigma = MAD_TO_SIGMA * median(residual)
         threshold = max(config.spike_factor * sigma, config.spike_floor_m)
         smooth = residual <= np.maximum(threshold, config.spike_spacing_factor * spacing)
         counts["spike"] = int(len(idx) - smooth.sum())

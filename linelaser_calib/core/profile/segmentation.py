@@ -50,6 +50,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
+from ..model_check import median
 from ..types import FloatArray
 from .cleaning import MAD_TO_SIGMA, scan_order
 
@@ -232,7 +233,7 @@ def estimate_noise(points_xz: ArrayLike) -> NoiseEstimate:
     distance = np.abs(cross[ok]) / length[ok]
     if not len(distance):
         return NoiseEstimate(floor, quantum)
-    sigma = MAD_TO_SIGMA * float(np.median(distance)) / CHORD_SPREAD
+    sigma = MAD_TO_SIGMA * median(distance) / CHORD_SPREAD
     return NoiseEstimate(max(sigma, floor), quantum)
 
 
@@ -241,29 +242,23 @@ def gap_pieces(points_xz: FloatArray, config: SegmentationConfig) -> list[IntArr
     if len(points_xz) < 2:
         return [np.arange(len(points_xz), dtype=np.intp)]
     step = np.hypot(*np.diff(points_xz, axis=0).T)
-    limit = max(config.min_gap_m, config.gap_spacings * float(np.median(step)))
+    limit = max(config.min_gap_m, config.gap_spacings * median(step))
     cuts = np.flatnonzero(step > limit) + 1
     return [np.asarray(piece, dtype=np.intp) for piece in np.split(np.arange(len(points_xz)), cuts)]
 
 
 def _longest_runs(mask: NDArray[np.bool_]) -> tuple[IntArray, IntArray]:
-    """Start and end (exclusive) of the longest run of True in each row of (H, M)."""
+    """Start and end (exclusive) of the longest run of True in each row of (H, M), the
+    first where runs tie (0, 0 for a row without True)."""
     h, m = mask.shape
-    padded = np.zeros((h, m + 2), dtype=np.int8)
-    padded[:, 1:-1] = mask
-    change = np.diff(padded, axis=1)
-    rows_s, starts = np.nonzero(change == 1)
-    _, ends = np.nonzero(change == -1)
-    start = np.zeros(h, dtype=np.intp)
-    end = np.zeros(h, dtype=np.intp)
-    if len(starts):
-        length = ends - starts
-        order = np.lexsort((-length, rows_s))
-        first = np.unique(rows_s[order], return_index=True)[1]
-        pick = order[first]
-        start[rows_s[pick]] = starts[pick]
-        end[rows_s[pick]] = ends[pick]
-    return start, end
+    position = np.arange(1, m + 1)
+    # The length of the run of True ending at each entry: its position less the last False's.
+    last_false = np.maximum.accumulate(np.where(mask, 0, position), axis=1)
+    length = position - last_false
+    end = np.argmax(length, axis=1)
+    longest = length[np.arange(h), end]
+    end = np.where(longest > 0, end + 1, 0)
+    return np.asarray(end - longest, dtype=np.intp), np.asarray(end, dtype=np.intp)
 
 
 def _bridge(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
@@ -278,6 +273,16 @@ def _line_fit(p: FloatArray) -> tuple[FloatArray, FloatArray]:
     centre = p.mean(axis=0)
     _, _, vt = np.linalg.svd(p - centre, full_matrices=False)
     return centre, vt[0]
+
+
+def _line_axis(p: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:func:`_line_fit`'s line up to its direction's sign (the principal axis of the 2 x 2
+    scatter in closed form, a tenth of an SVD's cost): for distances from it."""
+    centre = p.mean(axis=0)
+    q = p - centre
+    sxx, sxz, szz = float(q[:, 0] @ q[:, 0]), float(q[:, 0] @ q[:, 1]), float(q[:, 1] @ q[:, 1])
+    angle = 0.5 * math.atan2(2.0 * sxz, sxx - szz)
+    return centre, np.array([math.cos(angle), math.sin(angle)])
 
 
 def _line_distance(p: FloatArray, centre: FloatArray, direction: FloatArray) -> FloatArray:
@@ -303,15 +308,15 @@ def _find_line(
     a, direction = a[keep], direction[keep] / length[keep, None]
     if not len(a):
         return None
-    d = p[None, :, :] - a[:, None, :]
-    distance = np.abs(d[..., 0] * direction[:, None, 1] - d[..., 1] * direction[:, None, 0])
+    normal = np.column_stack([direction[:, 1], -direction[:, 0]])
+    distance = np.abs(normal @ p.T - np.sum(normal * a, axis=1)[:, None])
     start, end = _longest_runs(_bridge(distance <= band_m))
     best = int(np.argmax(end - start))
     lo, hi = int(start[best]), int(end[best])
     if hi - lo < config.min_line_points:
         return None
     for _ in range(3):  # refit on the run, grow or shrink the run around its middle
-        centre, unit = _line_fit(p[lo:hi])
+        centre, unit = _line_axis(p[lo:hi])
         inside = _bridge(_line_distance(p, centre, unit) <= band_m)
         middle = (lo + hi) // 2
         if not inside[middle]:

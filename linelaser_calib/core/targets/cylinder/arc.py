@@ -29,6 +29,7 @@ from numpy.typing import ArrayLike
 from scipy.optimize import least_squares
 
 from ...errors import ProfileRejected
+from ...model_check import median
 from ...profile.cleaning import MAD_TO_SIGMA
 from ...profile.segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
 from ...types import BoolArray, FloatArray
@@ -145,7 +146,7 @@ def _grazing_shift(
     except ProfileRejected:
         return grazing, math.nan
     ends = float(np.mean(outward_distance(front, points_xz[grazing])))
-    others = float(np.median(outward_distance(front, points_xz[rest])))
+    others = median(outward_distance(front, points_xz[rest]))
     return grazing, (ends - others) / sigma_m
 
 

@@ -42,7 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ...errors import InputError, ProfileRejected
-from ...model_check import effective_count, robust_scale_m
+from ...model_check import effective_count, median, robust_scale_m
 from ...profile.cleaning import MAD_TO_SIGMA
 from ...types import BoolArray, FloatArray
 from .conic import (
@@ -50,12 +50,12 @@ from .conic import (
     arc_coverage,
     conic_from_matrix,
     conic_matrix,
-    design_rows,
     ellipse_geometry,
     normalise_conic,
     refine_geometric,
     sampson_distance,
     sampson_jacobian,
+    sampson_rows,
     turning_angle,
     value_and_gradient_sq,
 )
@@ -462,8 +462,9 @@ def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[f
     semi-minor axes several mm apart.
     """
     conic = conic_u / np.linalg.norm(conic_u)
-    residual, jacobian = sampson_jacobian(conic, u, design_rows(u))
-    scale_sq = robust_scale_m(residual) ** 2 * len(u) / effective_count(residual)
+    residual, jacobian = sampson_jacobian(conic, sampson_rows(u))
+    scale = robust_scale_m(residual)
+    scale_sq = scale**2 * len(u) / effective_count(residual, scale)
     covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
     steps = AXIS_GRADIENT_STEP * np.eye(6)
     axes = ellipse_geometry(np.concatenate([conic + steps, conic - steps])).semi_axes
@@ -713,7 +714,7 @@ def _fit(
         distance = np.abs(sampson_distance(conic_u, u))
         settled = True
         if config.noise_threshold_sigmas > 0.0:
-            sigma_m = MAD_TO_SIGMA * float(np.median(distance[inliers])) * norm.scale
+            sigma_m = MAD_TO_SIGMA * median(distance[inliers]) * norm.scale
             target_u = max(config.noise_threshold_sigmas * sigma_m, MIN_NOISE_THRESHOLD_M)
             target_u /= norm.scale
             # Halve at most per round, so that a start bent by outliers can straighten.
