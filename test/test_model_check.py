@@ -24,7 +24,6 @@ from linelaser_calib.core.model_check import (
     conic_fit,
     effective_count,
     line_pair_fit,
-    median,
     recording_scale,
 )
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
@@ -92,16 +91,6 @@ def test_the_effective_count_follows_the_residuals_correlation() -> None:
     assert effective_count(white) > 0.8 * len(white)
     smooth = 25e-6 * np.sin(np.linspace(0.0, 3.0 * math.pi, 2000)) + white
     assert effective_count(smooth) < 0.05 * len(smooth)
-
-
-def test_the_median_is_numpys() -> None:
-    rng = np.random.default_rng(2)
-    for n in [*range(1, 12), 240, 241]:
-        values = rng.normal(scale=1e-5, size=n)
-        assert median(values) == float(np.median(values))
-        values[n // 3] = np.nan
-        assert math.isnan(median(values))
-    assert math.isnan(median(np.zeros(0)))
 
 
 def test_an_ellipse_is_refused_as_a_cylinders_section() -> None:

@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.cluster.hierarchy import DisjointSet
 
 from ..errors import InputError, ProfileRejected
 from ..model_check import median
@@ -212,28 +213,20 @@ def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
         for k in range(1, MAX_BRIDGED_POINTS + 2)
     ]
     # Runs of consecutive linked points are connected; the longer links join runs (a spike
-    # is a run of its own, bridged over). Joining the few runs is a tiny union-find.
+    # is a run of its own, bridged over). A profile has few runs, so they are joined in
+    # scipy's disjoint set rather than a sparse graph, whose set-up costs more than the
+    # whole of the rest on a profile of a few hundred points.
     run = np.concatenate([[0], np.cumsum(~linked[0])])
-    parent = list(range(int(run[-1]) + 1))
-
-    def root(r: int) -> int:
-        while parent[r] != r:
-            parent[r] = parent[parent[r]]
-            r = parent[r]
-        return r
-
+    runs = DisjointSet(range(int(run[-1]) + 1))
     for k, near in enumerate(linked[1:], start=2):
         i = np.flatnonzero(near)
         a, b = run[i], run[i + k]
         across = a != b
         for x, y in zip(a[across].tolist(), b[across].tolist(), strict=True):
-            rx, ry = root(x), root(y)
-            if rx != ry:
-                parent[max(rx, ry)] = min(rx, ry)
-    # A component's first run holds its root (roots are the smallest run): number the
-    # components in order of first appearance.
+            runs.merge(x, y)
+    # Components numbered in order of their first run's appearance.
     number: dict[int, int] = {}
-    piece = [number.setdefault(root(r), len(number)) for r in range(len(parent))]
+    piece = [number.setdefault(runs[r], len(number)) for r in range(int(run[-1]) + 1)]
     return np.asarray(np.array(piece)[run], dtype=np.intp)
 
 
