@@ -23,10 +23,13 @@ All times in s, lengths in m.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy.stats import norm
 
 from .pairing import NS_PER_S, ClockOffsetDiagnosis, PairingConfig, PoseBuffer
+from .pose_track import PoseTrack
 from .result import CalibrationResult
 from .types import FlangePose
 
@@ -55,7 +58,7 @@ def clock_offset_warning(diagnosis: ClockOffsetDiagnosis) -> str:
 
 def diagnose_clock_offset(
     result: CalibrationResult,
-    poses: list[FlangePose],
+    poses: PoseTrack | Sequence[FlangePose],
     pairing: PairingConfig,
     step_s: float = STEP_S,
 ) -> ClockOffsetDiagnosis | None:
@@ -65,7 +68,7 @@ def diagnose_clock_offset(
     ----------
     result : CalibrationResult
         A calibration with its ``sample_fits``.
-    poses : list of FlangePose
+    poses : PoseTrack or sequence of FlangePose
         The flange pose stream the profiles were paired with.
     pairing : PairingConfig
         The pairing the calibration used (its clock offset and sync tolerance).
@@ -124,7 +127,7 @@ def diagnose_clock_offset(
 
 
 def add_clock_diagnosis(
-    result: CalibrationResult, poses: list[FlangePose], pairing: PairingConfig
+    result: CalibrationResult, poses: PoseTrack | Sequence[FlangePose], pairing: PairingConfig
 ) -> None:
     """Run :func:`diagnose_clock_offset` on a result paired with ``pairing`` and keep it as
     ``result.clock_diagnosis``; a significant offset puts its warning first, before any
