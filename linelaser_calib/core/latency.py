@@ -89,23 +89,25 @@ def diagnose_clock_offset(
     shift_ns = round(pairing.clock_offset_s * NS_PER_S)
     T_fs = result.T_flange_sensor
     scores, curvatures, profiles = [], [], []
-    moving = 0
-    for fit in result.sample_fits:
-        t = fit.stamp_ns + shift_ns
-        found = [buffer.pose_at(t + k * step_ns, tolerance_ns) for k in (-1, 0, 1)]
-        if any(isinstance(T, str) for T in found):
-            continue
-        before, at, after = (np.asarray(T) @ T_fs for T in found)
+    t = np.array([fit.stamp_ns for fit in result.sample_fits], dtype=np.int64) + shift_ns
+    looked_up = [buffer.track.at(t + k * step_ns, tolerance_ns) for k in (-1, 0, 1)]
+    everywhere = np.logical_and.reduce([found for _, found in looked_up])
+    linear, angular, known = buffer.speeds_at(t, window_ns)
+    moving = int(
+        np.count_nonzero(
+            everywhere
+            & known
+            & ((linear > gate.max_linear_speed_m_s) | (angular > gate.max_angular_speed_rad_s))
+        )
+    )
+    for j in np.flatnonzero(everywhere).tolist():
+        fit = result.sample_fits[j]
+        before, at, after = (T[j] @ T_fs for T, _ in looked_up)
         d = result.target.surface_distances(fit, at)
         g = (
             result.target.surface_distances(fit, after)
             - result.target.surface_distances(fit, before)
         ) / (2.0 * step_s)
-        speed = buffer.speed_at(t, window_ns)
-        if speed is not None and (
-            speed[0] > gate.max_linear_speed_m_s or speed[1] > gate.max_angular_speed_rad_s
-        ):
-            moving += 1
         profiles.append((d, g))
         scores.append(float(g @ d))
         curvatures.append(float(g @ g))

@@ -21,10 +21,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
 from .geometry import FloatArray, rotation_angle
 from .pose_track import PoseTrack
-from .types import FlangePose, Profile, Rejection, Sample
+from .types import BoolArray, FlangePose, Profile, Rejection, Sample
 
 NS_PER_S = 1_000_000_000
 
@@ -243,45 +244,63 @@ class PoseBuffer:
         Measured between the poses interpolated at ``stamp_ns -+ window_ns``; None when
         the buffer does not cover that window.
         """
+        linear, angular, known = self.speeds_at(np.array([stamp_ns]), window_ns)
+        return (float(linear[0]), float(angular[0])) if known[0] else None
+
+    def speeds_at(
+        self, stamps_ns: NDArray[np.int64], window_ns: int
+    ) -> tuple[FloatArray, FloatArray, BoolArray]:
+        """:meth:`speed_at` at every stamp (K,): linear (m/s) and angular (rad/s) speeds, and
+        where the buffer covers the window (elsewhere the speeds are 0)."""
         stamps = self.track.stamps_ns
+        linear, angular = np.zeros(len(stamps_ns)), np.zeros(len(stamps_ns))
         if window_ns <= 0 or not len(stamps):
-            return None
-        lo, hi = stamp_ns - window_ns, stamp_ns + window_ns
-        if lo < stamps[0] or hi > stamps[-1]:
-            return None
-        (A, B), found = self.track.at([lo, hi], 10 * window_ns)
-        if not found.all():
-            return None
-        dt = (hi - lo) / NS_PER_S
-        linear = float(np.linalg.norm(B[:3, 3] - A[:3, 3])) / dt
-        return linear, rotation_angle(A[:3, :3].T @ B[:3, :3]) / dt
+            return linear, angular, np.zeros(len(stamps_ns), dtype=bool)
+        lo, hi = stamps_ns - window_ns, stamps_ns + window_ns
+        A, found_a = self.track.at(lo, 10 * window_ns)
+        B, found_b = self.track.at(hi, 10 * window_ns)
+        known = (lo >= stamps[0]) & (hi <= stamps[-1]) & found_a & found_b
+        dt = 2 * window_ns / NS_PER_S
+        linear[known] = np.linalg.norm(B[known, :3, 3] - A[known, :3, 3], axis=1) / dt
+        angular[known] = [
+            rotation_angle(a[:3, :3].T @ b[:3, :3]) / dt
+            for a, b in zip(A[known], B[known], strict=True)
+        ]
+        return linear, angular, known
 
     def pair(self, profile: Profile, index: int, config: PairingConfig) -> Sample | Rejection:
         """Pair one profile, or say why it cannot be paired."""
-        t = profile.stamp_ns + round(config.clock_offset_s * NS_PER_S)
-        pose = self.pose_at(t, round(config.sync_tolerance_s * NS_PER_S))
-        if isinstance(pose, str):
-            return Rejection(index, profile.stamp_ns, "pairing", pose)
-        speed = self.speed_at(t, round(config.speed_window_s * NS_PER_S))
-        if speed is not None:
-            linear, angular = speed
-            if config.max_linear_speed_m_s > 0.0 and linear > config.max_linear_speed_m_s:
-                return Rejection(
-                    index,
-                    profile.stamp_ns,
-                    "pairing",
-                    f"robot moving at {linear * 1e3:.1f} mm/s during the profile "
-                    f"(limit {config.max_linear_speed_m_s * 1e3:.1f} mm/s)",
+        return self.pair_many([profile], [index], config)[0]
+
+    def pair_many(
+        self, profiles: Sequence[Profile], indices: Sequence[int], config: PairingConfig
+    ) -> list[Sample | Rejection]:
+        """Pair each profile (its index in the input stream given), or say why it cannot be
+        paired: the poses and speeds of all of them are looked up at once."""
+        shift = round(config.clock_offset_s * NS_PER_S)
+        t = np.array([p.stamp_ns for p in profiles], dtype=np.int64) + shift
+        T, found = self.track.at(t, round(config.sync_tolerance_s * NS_PER_S))
+        linear, angular, known = self.speeds_at(t, round(config.speed_window_s * NS_PER_S))
+        out: list[Sample | Rejection] = []
+        for k, (profile, index) in enumerate(zip(profiles, indices, strict=True)):
+            reason = None
+            if not found[k]:
+                reason = self.pose_at(int(t[k]), round(config.sync_tolerance_s * NS_PER_S))
+            elif known[k] and 0.0 < config.max_linear_speed_m_s < linear[k]:
+                reason = (
+                    f"robot moving at {linear[k] * 1e3:.1f} mm/s during the profile "
+                    f"(limit {config.max_linear_speed_m_s * 1e3:.1f} mm/s)"
                 )
-            if config.max_angular_speed_rad_s > 0.0 and angular > config.max_angular_speed_rad_s:
-                return Rejection(
-                    index,
-                    profile.stamp_ns,
-                    "pairing",
-                    f"robot rotating at {np.degrees(angular):.2f} deg/s during the profile "
-                    f"(limit {np.degrees(config.max_angular_speed_rad_s):.2f} deg/s)",
+            elif known[k] and 0.0 < config.max_angular_speed_rad_s < angular[k]:
+                reason = (
+                    f"robot rotating at {np.degrees(angular[k]):.2f} deg/s during the profile "
+                    f"(limit {np.degrees(config.max_angular_speed_rad_s):.2f} deg/s)"
                 )
-        return Sample(index, profile.stamp_ns, np.asarray(pose, dtype=np.float64), profile.points)
+            if isinstance(reason, str):
+                out.append(Rejection(index, profile.stamp_ns, "pairing", reason))
+            else:
+                out.append(Sample(index, profile.stamp_ns, T[k], profile.points))
+        return out
 
 
 def pair_profiles(
@@ -315,6 +334,7 @@ def pair_profiles(
     offsets: list[int] = []
     seen: set[int] = set()
     order = sorted(range(len(profiles)), key=lambda k: profiles[k].stamp_ns)
+    first: list[int] = []
     for k in order:
         profile = profiles[k]
         if profile.stamp_ns in seen:
@@ -326,7 +346,8 @@ def pair_profiles(
         offset = buffer.nearest_offset_ns(profile.stamp_ns)
         if offset is not None:
             offsets.append(offset)
-        outcome = buffer.pair(profile, k, config)
+        first.append(k)
+    for outcome in buffer.pair_many([profiles[k] for k in first], first, config):
         if isinstance(outcome, Sample):
             samples.append(outcome)
         else:
