@@ -128,3 +128,43 @@ def test_live_buffer_ready_and_bounded() -> None:
             ready_at = pose.stamp_ns
     assert ready_at is not None and ready_at >= target + 0.02 * NS_PER_S
     assert len(buffer) <= 0.5 * 125 + 2
+
+
+def test_pose_track_queries_equal_the_pose_by_pose_interpolation() -> None:
+    """PoseTrack.at (all stamps at once, Slerp) against interpolate_transform of the two
+    bracketing poses, the nearest pose, or none, at random stamps of an unevenly sampled
+    stream with gaps."""
+    from linelaser_calib.core.geometry import interpolate_transform
+    from linelaser_calib.core.pose_track import PoseTrack
+
+    rng = np.random.default_rng(3)
+    stamps = np.cumsum(rng.choice([2, 3, 40], size=300) * 1_000_000) + T0_NS
+    poses = [
+        FlangePose(
+            int(t), transform_from_rotvec_translation(rng.normal(size=3), rng.normal(size=3))
+        )
+        for t in stamps
+    ]
+    track, dropped = PoseTrack.from_poses(poses[::-1] + poses[:5]).sorted()
+    assert dropped == 5 and track.stamps_ns.tolist() == stamps.tolist()
+    tolerance = 20_000_000
+    queries = np.concatenate(
+        [stamps[:50], rng.integers(stamps[0] - 10**8, stamps[-1] + 10**8, 400)]
+    )
+    T, found = track.at(queries, tolerance)
+    for t, got, ok in zip(queries.tolist(), T, found, strict=True):
+        i = int(np.searchsorted(stamps, t))
+        before = i > 0 and t - stamps[i - 1] <= tolerance
+        after = i < len(stamps) and stamps[i] - t <= tolerance
+        if i < len(stamps) and stamps[i] == t:
+            expected = poses[i].T_base_flange
+        elif before and after:
+            s = (t - stamps[i - 1]) / (stamps[i] - stamps[i - 1])
+            expected = interpolate_transform(poses[i - 1].T_base_flange, poses[i].T_base_flange, s)
+        elif before or after:
+            expected = poses[i - 1 if before else i].T_base_flange
+        else:
+            assert not ok
+            continue
+        assert ok
+        np.testing.assert_allclose(got, expected, atol=1e-12)

@@ -23,10 +23,13 @@ All times in s, lengths in m.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from scipy.stats import norm
 
 from .pairing import NS_PER_S, ClockOffsetDiagnosis, PairingConfig, PoseBuffer
+from .pose_track import PoseTrack
 from .result import CalibrationResult
 from .types import FlangePose
 
@@ -55,7 +58,7 @@ def clock_offset_warning(diagnosis: ClockOffsetDiagnosis) -> str:
 
 def diagnose_clock_offset(
     result: CalibrationResult,
-    poses: list[FlangePose],
+    poses: PoseTrack | Sequence[FlangePose],
     pairing: PairingConfig,
     step_s: float = STEP_S,
 ) -> ClockOffsetDiagnosis | None:
@@ -65,7 +68,7 @@ def diagnose_clock_offset(
     ----------
     result : CalibrationResult
         A calibration with its ``sample_fits``.
-    poses : list of FlangePose
+    poses : PoseTrack or sequence of FlangePose
         The flange pose stream the profiles were paired with.
     pairing : PairingConfig
         The pairing the calibration used (its clock offset and sync tolerance).
@@ -86,23 +89,25 @@ def diagnose_clock_offset(
     shift_ns = round(pairing.clock_offset_s * NS_PER_S)
     T_fs = result.T_flange_sensor
     scores, curvatures, profiles = [], [], []
-    moving = 0
-    for fit in result.sample_fits:
-        t = fit.stamp_ns + shift_ns
-        found = [buffer.pose_at(t + k * step_ns, tolerance_ns) for k in (-1, 0, 1)]
-        if any(isinstance(T, str) for T in found):
-            continue
-        before, at, after = (np.asarray(T) @ T_fs for T in found)
+    t = np.array([fit.stamp_ns for fit in result.sample_fits], dtype=np.int64) + shift_ns
+    looked_up = [buffer.track.at(t + k * step_ns, tolerance_ns) for k in (-1, 0, 1)]
+    everywhere = np.logical_and.reduce([found for _, found in looked_up])
+    linear, angular, known = buffer.speeds_at(t, window_ns)
+    moving = int(
+        np.count_nonzero(
+            everywhere
+            & known
+            & ((linear > gate.max_linear_speed_m_s) | (angular > gate.max_angular_speed_rad_s))
+        )
+    )
+    for j in np.flatnonzero(everywhere).tolist():
+        fit = result.sample_fits[j]
+        before, at, after = (T[j] @ T_fs for T, _ in looked_up)
         d = result.target.surface_distances(fit, at)
         g = (
             result.target.surface_distances(fit, after)
             - result.target.surface_distances(fit, before)
         ) / (2.0 * step_s)
-        speed = buffer.speed_at(t, window_ns)
-        if speed is not None and (
-            speed[0] > gate.max_linear_speed_m_s or speed[1] > gate.max_angular_speed_rad_s
-        ):
-            moving += 1
         profiles.append((d, g))
         scores.append(float(g @ d))
         curvatures.append(float(g @ g))
@@ -124,7 +129,7 @@ def diagnose_clock_offset(
 
 
 def add_clock_diagnosis(
-    result: CalibrationResult, poses: list[FlangePose], pairing: PairingConfig
+    result: CalibrationResult, poses: PoseTrack | Sequence[FlangePose], pairing: PairingConfig
 ) -> None:
     """Run :func:`diagnose_clock_offset` on a result paired with ``pairing`` and keep it as
     ``result.clock_diagnosis``; a significant offset puts its warning first, before any

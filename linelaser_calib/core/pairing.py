@@ -17,13 +17,15 @@ is rejected (the pose is then unreliable by latency times speed).
 
 from __future__ import annotations
 
-from bisect import bisect_left
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import NDArray
 
-from .geometry import FloatArray, interpolate_transform, rotation_angle
-from .types import FlangePose, Profile, Rejection, Sample
+from .geometry import FloatArray, rotation_angle
+from .pose_track import PoseTrack
+from .types import BoolArray, FlangePose, Profile, Rejection, Sample
 
 NS_PER_S = 1_000_000_000
 
@@ -140,61 +142,63 @@ class PairingResult:
 class PoseBuffer:
     """Flange poses sorted by stamp, queried at profile stamps.
 
-    Poses may arrive unsorted or duplicated; the buffer keeps them sorted and keeps the first
-    of any duplicate stamp. ``max_age_s`` bounds the buffer for live use.
+    Poses may arrive unsorted or duplicated; the buffer keeps them sorted (a
+    :class:`~.pose_track.PoseTrack`) and keeps the first of any duplicate stamp.
+    ``max_age_s`` bounds the buffer for live use.
     """
 
     def __init__(self, max_age_s: float | None = None) -> None:
-        self._stamps: list[int] = []
-        self._transforms: list[FloatArray] = []
+        self.track = PoseTrack.empty()
         self._max_age_ns = None if max_age_s is None else int(max_age_s * NS_PER_S)
         self.duplicates = 0
         self.out_of_order = 0
 
     def __len__(self) -> int:
-        return len(self._stamps)
+        return len(self.track)
 
     @property
     def latest_stamp_ns(self) -> int | None:
         """Stamp of the newest pose, or None when empty."""
-        return self._stamps[-1] if self._stamps else None
+        return int(self.track.stamps_ns[-1]) if len(self.track) else None
 
     @property
     def stamps_ns(self) -> list[int]:
         """Stamps of the poses held, ns, sorted (a copy)."""
-        return list(self._stamps)
+        return [int(s) for s in self.track.stamps_ns]
 
     def add(self, pose: FlangePose) -> None:
         """Insert one pose in stamp order (duplicates of an existing stamp are ignored)."""
-        stamps = self._stamps
-        i = bisect_left(stamps, pose.stamp_ns)
+        stamps = self.track.stamps_ns
+        i = int(np.searchsorted(stamps, pose.stamp_ns))
         if i < len(stamps) and stamps[i] == pose.stamp_ns:
             self.duplicates += 1
             return
         if i < len(stamps):
             self.out_of_order += 1
-        stamps.insert(i, pose.stamp_ns)
-        self._transforms.insert(i, pose.T_base_flange)
+        one = PoseTrack.from_transforms([pose.stamp_ns], pose.T_base_flange, pose.frame_id)
+        track = self.track
+        self.track = PoseTrack(
+            np.insert(stamps, i, one.stamps_ns),
+            np.insert(track.translation, i, one.translation, axis=0),
+            np.insert(track.rotation_xyzw, i, one.rotation_xyzw, axis=0),
+            track.frame_id if len(track) else pose.frame_id,
+        )
         if self._max_age_ns is not None:
-            cut = bisect_left(stamps, stamps[-1] - self._max_age_ns)
+            stamps = self.track.stamps_ns
+            cut = int(np.searchsorted(stamps, stamps[-1] - self._max_age_ns))
             if cut > 0:
-                del stamps[:cut]
-                del self._transforms[:cut]
+                self.track = self.track.take(slice(cut, None))
 
-    def extend(self, poses: list[FlangePose]) -> None:
+    def extend(self, poses: PoseTrack | Sequence[FlangePose]) -> None:
         """Insert many poses (sorted once, much faster than repeated :meth:`add`)."""
-        if not poses:
+        new = PoseTrack.of(poses)
+        if not len(new):
             return
-        stamps = np.array([p.stamp_ns for p in poses] + self._stamps, dtype=np.int64)
-        transforms = [p.T_base_flange for p in poses] + self._transforms
-        self.out_of_order += int(np.count_nonzero(np.diff(stamps[: len(poses)]) < 0))
-        order = np.argsort(stamps, kind="stable")
-        stamps = stamps[order]
-        keep = np.ones(len(stamps), dtype=bool)
-        keep[1:] = np.diff(stamps) != 0
-        self.duplicates += int(np.count_nonzero(~keep))
-        self._stamps = [int(s) for s in stamps[keep]]
-        self._transforms = [transforms[int(i)] for i in order[keep]]
+        held = self.track
+        frame = held.frame_id if len(held) else new.frame_id
+        self.out_of_order += int(np.count_nonzero(np.diff(new.stamps_ns) < 0))
+        self.track, duplicates = PoseTrack.concatenate([new, held], frame).sorted()
+        self.duplicates += duplicates
 
     def ready_for(self, stamp_ns: int, config: PairingConfig) -> bool:
         """True when no later pose can still change the pairing of ``stamp_ns``."""
@@ -205,10 +209,11 @@ class PoseBuffer:
 
     def nearest_offset_ns(self, stamp_ns: int) -> int | None:
         """Signed offset from ``stamp_ns`` to the nearest pose stamp, ns."""
-        if not self._stamps:
+        stamps = self.track.stamps_ns
+        if not len(stamps):
             return None
-        i = bisect_left(self._stamps, stamp_ns)
-        candidates = [self._stamps[j] - stamp_ns for j in (i - 1, i) if 0 <= j < len(self)]
+        i = int(np.searchsorted(stamps, stamp_ns))
+        candidates = [int(stamps[j]) - stamp_ns for j in (i - 1, i) if 0 <= j < len(stamps)]
         return min(candidates, key=abs)
 
     def pose_at(self, stamp_ns: int, tolerance_ns: int) -> FloatArray | str:
@@ -218,23 +223,14 @@ class PoseBuffer:
         -------
         T_base_flange : ndarray, shape (4, 4), or str
             Interpolated when two poses within the tolerance bracket the stamp, the nearest
-            pose when only one is within it, else a reason.
+            pose when only one is within it, else a reason (:meth:`PoseTrack.at`).
         """
-        stamps = self._stamps
-        if not stamps:
+        if not len(self.track):
             return "no flange pose received"
-        i = bisect_left(stamps, stamp_ns)
-        if i < len(stamps) and stamps[i] == stamp_ns:
-            return self._transforms[i]
-        before = i - 1 if i > 0 and stamp_ns - stamps[i - 1] <= tolerance_ns else None
-        after = i if i < len(stamps) and stamps[i] - stamp_ns <= tolerance_ns else None
-        if before is not None and after is not None:
-            s = (stamp_ns - stamps[before]) / (stamps[after] - stamps[before])
-            return interpolate_transform(self._transforms[before], self._transforms[after], s)
-        if before is not None:
-            return self._transforms[before]
-        if after is not None:
-            return self._transforms[after]
+        T, found = self.track.at([stamp_ns], tolerance_ns)
+        if found[0]:
+            pose: FloatArray = T[0]
+            return pose
         offset = self.nearest_offset_ns(stamp_ns)
         assert offset is not None
         return (
@@ -248,49 +244,67 @@ class PoseBuffer:
         Measured between the poses interpolated at ``stamp_ns -+ window_ns``; None when
         the buffer does not cover that window.
         """
-        if window_ns <= 0 or not self._stamps:
-            return None
-        lo, hi = stamp_ns - window_ns, stamp_ns + window_ns
-        if lo < self._stamps[0] or hi > self._stamps[-1]:
-            return None
-        far = 10 * window_ns
-        A, B = self.pose_at(lo, far), self.pose_at(hi, far)
-        if isinstance(A, str) or isinstance(B, str):
-            return None
-        dt = (hi - lo) / NS_PER_S
-        linear = float(np.linalg.norm(B[:3, 3] - A[:3, 3])) / dt
-        return linear, rotation_angle(A[:3, :3].T @ B[:3, :3]) / dt
+        linear, angular, known = self.speeds_at(np.array([stamp_ns]), window_ns)
+        return (float(linear[0]), float(angular[0])) if known[0] else None
+
+    def speeds_at(
+        self, stamps_ns: NDArray[np.int64], window_ns: int
+    ) -> tuple[FloatArray, FloatArray, BoolArray]:
+        """:meth:`speed_at` at every stamp (K,): linear (m/s) and angular (rad/s) speeds, and
+        where the buffer covers the window (elsewhere the speeds are 0)."""
+        stamps = self.track.stamps_ns
+        linear, angular = np.zeros(len(stamps_ns)), np.zeros(len(stamps_ns))
+        if window_ns <= 0 or not len(stamps):
+            return linear, angular, np.zeros(len(stamps_ns), dtype=bool)
+        lo, hi = stamps_ns - window_ns, stamps_ns + window_ns
+        A, found_a = self.track.at(lo, 10 * window_ns)
+        B, found_b = self.track.at(hi, 10 * window_ns)
+        known = (lo >= stamps[0]) & (hi <= stamps[-1]) & found_a & found_b
+        dt = 2 * window_ns / NS_PER_S
+        linear[known] = np.linalg.norm(B[known, :3, 3] - A[known, :3, 3], axis=1) / dt
+        angular[known] = [
+            rotation_angle(a[:3, :3].T @ b[:3, :3]) / dt
+            for a, b in zip(A[known], B[known], strict=True)
+        ]
+        return linear, angular, known
 
     def pair(self, profile: Profile, index: int, config: PairingConfig) -> Sample | Rejection:
         """Pair one profile, or say why it cannot be paired."""
-        t = profile.stamp_ns + round(config.clock_offset_s * NS_PER_S)
-        pose = self.pose_at(t, round(config.sync_tolerance_s * NS_PER_S))
-        if isinstance(pose, str):
-            return Rejection(index, profile.stamp_ns, "pairing", pose)
-        speed = self.speed_at(t, round(config.speed_window_s * NS_PER_S))
-        if speed is not None:
-            linear, angular = speed
-            if config.max_linear_speed_m_s > 0.0 and linear > config.max_linear_speed_m_s:
-                return Rejection(
-                    index,
-                    profile.stamp_ns,
-                    "pairing",
-                    f"robot moving at {linear * 1e3:.1f} mm/s during the profile "
-                    f"(limit {config.max_linear_speed_m_s * 1e3:.1f} mm/s)",
+        return self.pair_many([profile], [index], config)[0]
+
+    def pair_many(
+        self, profiles: Sequence[Profile], indices: Sequence[int], config: PairingConfig
+    ) -> list[Sample | Rejection]:
+        """Pair each profile (its index in the input stream given), or say why it cannot be
+        paired: the poses and speeds of all of them are looked up at once."""
+        shift = round(config.clock_offset_s * NS_PER_S)
+        t = np.array([p.stamp_ns for p in profiles], dtype=np.int64) + shift
+        T, found = self.track.at(t, round(config.sync_tolerance_s * NS_PER_S))
+        linear, angular, known = self.speeds_at(t, round(config.speed_window_s * NS_PER_S))
+        out: list[Sample | Rejection] = []
+        for k, (profile, index) in enumerate(zip(profiles, indices, strict=True)):
+            reason = None
+            if not found[k]:
+                reason = self.pose_at(int(t[k]), round(config.sync_tolerance_s * NS_PER_S))
+            elif known[k] and 0.0 < config.max_linear_speed_m_s < linear[k]:
+                reason = (
+                    f"robot moving at {linear[k] * 1e3:.1f} mm/s during the profile "
+                    f"(limit {config.max_linear_speed_m_s * 1e3:.1f} mm/s)"
                 )
-            if config.max_angular_speed_rad_s > 0.0 and angular > config.max_angular_speed_rad_s:
-                return Rejection(
-                    index,
-                    profile.stamp_ns,
-                    "pairing",
-                    f"robot rotating at {np.degrees(angular):.2f} deg/s during the profile "
-                    f"(limit {np.degrees(config.max_angular_speed_rad_s):.2f} deg/s)",
+            elif known[k] and 0.0 < config.max_angular_speed_rad_s < angular[k]:
+                reason = (
+                    f"robot rotating at {np.degrees(angular[k]):.2f} deg/s during the profile "
+                    f"(limit {np.degrees(config.max_angular_speed_rad_s):.2f} deg/s)"
                 )
-        return Sample(index, profile.stamp_ns, np.asarray(pose, dtype=np.float64), profile.points)
+            if isinstance(reason, str):
+                out.append(Rejection(index, profile.stamp_ns, "pairing", reason))
+            else:
+                out.append(Sample(index, profile.stamp_ns, T[k], profile.points))
+        return out
 
 
 def pair_profiles(
-    profiles: list[Profile], poses: list[FlangePose], config: PairingConfig
+    profiles: list[Profile], poses: PoseTrack | Sequence[FlangePose], config: PairingConfig
 ) -> PairingResult:
     """Pair every profile with the flange pose at its stamp.
 
@@ -298,7 +312,7 @@ def pair_profiles(
     ----------
     profiles : list of Profile
         In any order; a profile whose stamp repeats an earlier one is rejected.
-    poses : list of FlangePose
+    poses : PoseTrack or sequence of FlangePose
         The flange pose stream, in any order; duplicate stamps keep the first pose.
     config : PairingConfig
 
@@ -320,6 +334,7 @@ def pair_profiles(
     offsets: list[int] = []
     seen: set[int] = set()
     order = sorted(range(len(profiles)), key=lambda k: profiles[k].stamp_ns)
+    first: list[int] = []
     for k in order:
         profile = profiles[k]
         if profile.stamp_ns in seen:
@@ -331,17 +346,19 @@ def pair_profiles(
         offset = buffer.nearest_offset_ns(profile.stamp_ns)
         if offset is not None:
             offsets.append(offset)
-        outcome = buffer.pair(profile, k, config)
+        first.append(k)
+    for outcome in buffer.pair_many([profiles[k] for k in first], first, config):
         if isinstance(outcome, Sample):
             samples.append(outcome)
         else:
             rejected.append(outcome)
     median = float(np.median(offsets)) / NS_PER_S if offsets else None
     span = None
-    if profiles and poses:
-        pose_stamps = [p.stamp_ns for p in poses]
+    pose_stamps = buffer.track.stamps_ns
+    if profiles and len(pose_stamps):
         profile_stamps = [p.stamp_ns for p in profiles]
         span = (
-            (min(pose_stamps) + max(pose_stamps)) - (min(profile_stamps) + max(profile_stamps))
+            (int(pose_stamps[0]) + int(pose_stamps[-1]))
+            - (min(profile_stamps) + max(profile_stamps))
         ) / (2 * NS_PER_S)
     return PairingResult(samples, rejected, notes, median, span)

@@ -34,6 +34,7 @@ from .errors import CalibrationError, DegenerateError, InputError, PairingError,
 from .geometry import FloatArray, check_transform
 from .latency import add_clock_diagnosis
 from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
+from .pose_track import PoseTrack
 from .regions import PLAIN_PRIOR_SCALE
 from .result import CalibrationResult
 from .robot.joint_calibration import KinematicSetup
@@ -498,7 +499,7 @@ def _corrected_poses(
 
 def calibrate_paired(
     samples: list[Sample],
-    poses: list[FlangePose] | None,
+    poses: PoseTrack | Sequence[FlangePose] | None,
     config: PipelineConfig,
     rejected: list[Rejection] | None = None,
     notes: Sequence[str] = (),
@@ -528,7 +529,7 @@ def calibrate_paired(
 
 def run_pipeline(
     profiles: list[Profile],
-    poses: list[FlangePose],
+    poses: PoseTrack | Sequence[FlangePose],
     config: PipelineConfig,
     progress: Progress = _no_progress,
     placements: Sequence[tuple[list[Sample], KinematicSetup]] = (),
@@ -548,7 +549,7 @@ def run_pipeline(
     """
     if not profiles:
         raise InputError("there are no profiles to calibrate from")
-    if not poses:
+    if not len(poses):
         raise InputError("there are no flange poses to pair the profiles with")
     paired = pair_profiles(profiles, poses, config.pairing)
     progress("pairing", len(profiles), len(profiles))
@@ -574,7 +575,7 @@ OFFSET_TRIALS, OFFSET_COSTS = "clock_offset_trial_s", "clock_offset_cost"
 
 def search_clock_offset(
     profiles: list[Profile],
-    poses: list[FlangePose],
+    poses: PoseTrack | Sequence[FlangePose],
     config: PipelineConfig,
     half_range_s: float = 0.05,
     tolerance_s: float = 1e-4,
@@ -623,6 +624,7 @@ def search_clock_offset(
         )
     buffer = PoseBuffer()
     buffer.extend(poses)
+    stamps_ns = np.array([f.stamp_ns for f in features], dtype=np.int64)
     tolerance_ns = round(config.pairing.sync_tolerance_s * NS_PER_S)
     step = 2.0 * half_range_s / (GRID_POINTS - 1)
     evaluations = GRID_POINTS + REFINING_EVALUATIONS
@@ -632,12 +634,8 @@ def search_clock_offset(
         evaluated[0] += 1
         progress("clock offset", min(evaluated[0], evaluations - 1), evaluations)
         shift = round(offset_s * NS_PER_S)
-        found = [buffer.pose_at(f.stamp_ns + shift, tolerance_ns) for f in features]
-        value = (
-            float("inf")
-            if any(isinstance(T, str) for T in found)
-            else float(cost_of_poses(np.stack(found)))
-        )
+        T, found = buffer.track.at(stamps_ns + shift, tolerance_ns)
+        value = float(cost_of_poses(T)) if found.all() else float("inf")
         if trace is not None:
             trace.append((offset_s, value))
         return value

@@ -21,6 +21,7 @@ import numpy as np
 from .errors import InputError
 from .geometry import FloatArray, invert_transform
 from .pairing import NS_PER_S, PoseBuffer
+from .pose_track import PoseTrack
 from .types import FlangePose
 
 #: Frame that UR's ROS 2 driver uses for its tcp_pose_broadcaster: base_link turned 180 deg
@@ -268,9 +269,7 @@ class TransformTree:
                 problems.append(f"{edge.parent} -> {edge.child}: {reason}")
         return "; ".join(problems) or None
 
-    def flange_poses(
-        self, base_frame: str, flange_frame: str, tolerance_s: float
-    ) -> list[FlangePose]:
+    def flange_poses(self, base_frame: str, flange_frame: str, tolerance_s: float) -> PoseTrack:
         """The flange-pose stream: ``T_base_flange`` at every stamp of a dynamic chain edge.
 
         Parameters
@@ -282,7 +281,7 @@ class TransformTree:
 
         Returns
         -------
-        list of FlangePose
+        PoseTrack
             Sorted by stamp, in frame ``base_frame``; one pose (at stamp 0) when the whole
             chain is static.
 
@@ -296,12 +295,13 @@ class TransformTree:
         stamps = sorted({s for e in dynamic for s in self._dynamic[e.child][1].stamps_ns})
         if not dynamic:
             stamps = [0]
-        poses = []
-        for stamp in stamps:
-            T = self.lookup(base_frame, flange_frame, stamp, tolerance_s)
-            if not isinstance(T, str):
-                poses.append(FlangePose(stamp, T, base_frame))
-        return poses
+        found = [(s, self.lookup(base_frame, flange_frame, s, tolerance_s)) for s in stamps]
+        poses = [(s, T) for s, T in found if not isinstance(T, str)]
+        if not poses:
+            return PoseTrack.empty(base_frame)
+        return PoseTrack.from_transforms(
+            [s for s, _ in poses], np.stack([T for _, T in poses]), base_frame
+        )
 
 
 def live_flange_poses(

@@ -22,13 +22,13 @@ from typing import Any
 
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.pose_source import PoseSource
+from linelaser_calib.core.pose_track import PoseTrack
 from linelaser_calib.core.robot.kinematics import (
     JointStates,
     KinematicModel,
     flange_poses_from_joint_states,
 )
 from linelaser_calib.core.tf import StampedTransform, TransformTree, base_frame_warning
-from linelaser_calib.core.types import FlangePose
 from linelaser_calib.io.bags import (
     TF_STATIC_TOPIC,
     TF_TOPIC,
@@ -75,8 +75,8 @@ class FlangePoses:
 
     Attributes
     ----------
-    poses : list of FlangePose
-        ``T_base_flange`` (4, 4) in m, sorted by stamp.
+    poses : PoseTrack
+        ``T_base_flange`` in m, sorted by stamp.
     base_frame : str
         Frame of the poses (the result's base frame).
     description : str
@@ -87,7 +87,7 @@ class FlangePoses:
         ``joint_states``: the stream the poses were computed from.
     """
 
-    poses: list[FlangePose]
+    poses: PoseTrack
     base_frame: str
     description: str
     warnings: list[str] = field(default_factory=list)

@@ -39,7 +39,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
 from ..geometry import rotvec_from_matrix
-from ..types import FlangePose, FloatArray
+from ..pose_track import PoseTrack
+from ..types import FloatArray
 
 _UNIT = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
 
@@ -156,7 +157,7 @@ class JointStates:
 
 def flange_poses_from_joint_states(
     model: KinematicModel, states: JointStates, *, frame_id: str | None = None
-) -> list[FlangePose]:
+) -> PoseTrack:
     """Flange poses ``T_base_flange`` by forward kinematics of every joint state.
 
     The states' joints are matched to the model's by name, in any order; joints the model
@@ -178,7 +179,7 @@ def flange_poses_from_joint_states(
     columns = [states.names.index(name) for name in model.joint_names]
     T = forward_kinematics(model, states.positions[:, columns])
     frame = model.base_frame if frame_id is None else frame_id
-    return [FlangePose(int(s), pose, frame) for s, pose in zip(states.stamps_ns, T, strict=True)]
+    return PoseTrack.from_transforms(states.stamps_ns, T, frame)
 
 
 def check_joint_positions(model: KinematicModel, q: ArrayLike) -> FloatArray:

@@ -112,7 +112,8 @@ def _rival_solution(
     name: str, samples: list[Sample], context: SolveContext
 ) -> tuple[Target[Any], TargetSolution] | None:
     """The rival target's default fit of the samples with its default settings; None when
-    it cannot calibrate them."""
+    it cannot calibrate them (a refusal, or a singular system in its solve: the rival's
+    model leaves a direction undetermined on these samples)."""
     rival = get_target(name)
     config = rival.config_type()
     try:
@@ -124,7 +125,7 @@ def _rival_solution(
             progress=_no_progress,
         )
         return rival, rival.solve_default(features, config, quiet)
-    except CalibrationError:
+    except (CalibrationError, np.linalg.LinAlgError):
         return None
 
 

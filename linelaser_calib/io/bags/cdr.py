@@ -12,8 +12,8 @@ from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE, matrices_from_quaternions_xyzw
-from linelaser_calib.core.types import FlangePose
+from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
+from linelaser_calib.core.pose_track import PoseTrack
 from linelaser_calib.io.bags.records import POSE_TYPE, SessionConnection, SkippedMessage
 from msg_adapters import MessageError, flange_pose_from_pose_stamped, stamp_ns_from_msg
 from msg_adapters.message_types import NS_PER_S
@@ -126,7 +126,7 @@ def _parse_pose_stamped(raws: Sequence[bytes]) -> _PoseRecords:
 
 def flange_poses(
     topic: str, raws: Sequence[bytes], log_ns: Sequence[int]
-) -> list[FlangePose | SkippedMessage]:
+) -> tuple[PoseTrack, list[SkippedMessage]]:
     """Flange poses of serialised PoseStamped messages, parsed and converted in one batch.
 
     A bag holds thousands of poses (125-500 Hz): the batch costs ~2 µs per pose instead of
@@ -138,8 +138,10 @@ def flange_poses(
 
     Returns
     -------
-    list of FlangePose or SkippedMessage
-        One per message, in order.
+    poses : PoseTrack
+        The usable poses, in message order, in the frame of the first (quaternions
+        normalised).
+    skipped : list of SkippedMessage
     """
     records = _parse_pose_stamped(raws)
     position, q_xyzw = records.values[:, :3], records.values[:, 3:]
@@ -147,22 +149,28 @@ def flange_poses(
     with np.errstate(invalid="ignore"):
         good = records.parsed & np.all(np.isfinite(records.values), axis=1) & (norm >= 1e-12)
         good &= np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE
-    T = np.zeros((len(raws), 4, 4))
-    T[:, 3, 3] = 1.0
-    if good.any():
-        T[good, :3, :3] = matrices_from_quaternions_xyzw(q_xyzw[good])
-    T[:, :3, 3] = position
-    out: list[FlangePose | SkippedMessage] = []
-    for k in range(len(raws)):
-        if good[k]:
-            out.append(FlangePose(int(records.stamps_ns[k]), T[k], records.frame_ids[k]))
-            continue
+    skipped: list[SkippedMessage] = []
+    frames = [records.frame_ids[k] if good[k] else "" for k in range(len(raws))]
+    for k in np.flatnonzero(~good).tolist():
         msg = decode_message(jazzy_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
         if isinstance(msg, SkippedMessage):
-            out.append(msg)
+            skipped.append(msg)
             continue
         try:
-            out.append(flange_pose_from_pose_stamped(msg))
+            pose = flange_pose_from_pose_stamped(msg)
         except MessageError as err:
-            out.append(SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err)))
-    return out
+            skipped.append(SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err)))
+            continue
+        one = PoseTrack.from_transforms([pose.stamp_ns], pose.T_base_flange)
+        records.stamps_ns[k] = pose.stamp_ns
+        position[k], q_xyzw[k], norm[k] = one.translation[0], one.rotation_xyzw[0], 1.0
+        frames[k], good[k] = pose.frame_id, True
+    usable = np.flatnonzero(good)
+    frame = frames[usable[0]] if len(usable) else ""
+    track = PoseTrack(
+        records.stamps_ns[usable],
+        position[usable],
+        q_xyzw[usable] / norm[usable, None],
+        frame,
+    )
+    return track, skipped

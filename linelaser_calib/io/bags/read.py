@@ -17,8 +17,9 @@ import yaml
 from numpy.typing import NDArray
 from rosbags.rosbag2 import Reader
 
+from linelaser_calib.core.pose_track import PoseTrack
 from linelaser_calib.core.robot.kinematics import JointStates
-from linelaser_calib.core.types import FlangePose, Profile
+from linelaser_calib.core.types import Profile
 from linelaser_calib.io.bags.cdr import decode_message, flange_poses, reading_store
 from linelaser_calib.io.bags.records import (
     JOINT_STATE_TOPIC,
@@ -289,25 +290,18 @@ def read_bag(
     total = sum(t.msgcount for t in summary.topics if (t.topic, t.msgtype) in wanted)
 
     profiles: list[Profile] = []
-    poses: list[FlangePose] = []
+    tracks: list[PoseTrack] = []
     skipped: list[SkippedMessage] = []
     pose_raws: list[bytes] = []
     pose_log_ns: list[int] = []
-
-    def keep(entry: Profile | FlangePose | SkippedMessage) -> None:
-        if isinstance(entry, Profile):
-            profiles.append(entry)
-        elif isinstance(entry, FlangePose):
-            poses.append(entry)
-        else:
-            skipped.append(entry)
 
     def convert_poses() -> None:
         # A batch at a time: the serialised poses of a long recording are never held at once.
         if not pose_raws:
             return
-        for entry in flange_poses(chosen_pose, pose_raws, pose_log_ns):
-            keep(entry)
+        track, lost = flange_poses(chosen_pose, pose_raws, pose_log_ns)
+        tracks.append(track)
+        skipped.extend(lost)
         pose_raws.clear()
         pose_log_ns.clear()
 
@@ -319,11 +313,15 @@ def read_bag(
             for conn, log_ns, raw in raw_messages(reader, connections, bag, part):
                 if conn.msgtype == PROFILE_TYPE:
                     msg = decode_message(store, conn.topic, conn.msgtype, log_ns, raw)
-                    keep(
+                    entry = (
                         msg
                         if isinstance(msg, SkippedMessage)
                         else _profile(conn.topic, msg, invalid_values_m)
                     )
+                    if isinstance(entry, Profile):
+                        profiles.append(entry)
+                    else:
+                        skipped.append(entry)
                 else:
                     pose_raws.append(bytes(raw))
                     pose_log_ns.append(log_ns)
@@ -333,6 +331,9 @@ def read_bag(
                 if progress is not None:
                     progress(done, total)
     convert_poses()
+    frame = next((t.frame_id for t in tracks if len(t)), "")
+    poses = PoseTrack.concatenate(tracks, frame)
+    poses = poses.take(np.argsort(poses.stamps_ns, kind="stable"))
 
     for items, topic, what in ((profiles, chosen_profile, "profile"), (poses, chosen_pose, "pose")):
         if not items and topic:
@@ -342,7 +343,6 @@ def read_bag(
                 f"({sum(s.topic == topic for s in skipped)} skipped; first reason: {first})"
             )
     profiles.sort(key=lambda p: p.stamp_ns)
-    poses.sort(key=lambda p: p.stamp_ns)
     return BagContents(
         path=bag,
         profiles=profiles,
@@ -350,7 +350,7 @@ def read_bag(
         profile_topic=chosen_profile,
         pose_topic=chosen_pose,
         sensor_frame=profiles[0].frame_id,
-        base_frame=poses[0].frame_id if poses else "",
+        base_frame=poses.frame_id,
         topics=summary.topics,
         start_ns=summary.start_ns,
         end_ns=summary.end_ns,

@@ -7,7 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
 
-from linelaser_calib.core.types import FlangePose, Profile
+from linelaser_calib.core.pose_track import PoseTrack
+from linelaser_calib.core.types import Profile
 
 PROFILE_TYPE = "sensor_msgs/msg/PointCloud2"
 
@@ -61,7 +62,8 @@ class BagContents:
         The bag (or session) directory or MCAP file read.
     profiles : list of Profile
         Points (N, 3) in m with invalid (NaN/Inf) points dropped.
-    poses : list of FlangePose
+    poses : PoseTrack
+        The flange poses, sorted by stamp (repeated stamps kept).
     profile_topic, pose_topic : str
         Topics the profiles and poses came from.
     sensor_frame, base_frame : str
@@ -76,7 +78,7 @@ class BagContents:
 
     path: Path
     profiles: list[Profile]
-    poses: list[FlangePose]
+    poses: PoseTrack
     profile_topic: str
     pose_topic: str
     sensor_frame: str
