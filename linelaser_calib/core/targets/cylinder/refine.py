@@ -41,6 +41,7 @@ not used (:func:`recording_line_noise`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -706,13 +707,7 @@ def refine_with_outlier_rejection(
         )
 
     def with_rejection() -> RejectionOutcome[RefineResult]:
-        return solve_with_rejection(
-            len(points),
-            solve_subset,
-            lambda result, _keep: _outlier_samples(result, cfg),
-            cfg.max_outlier_fraction,
-            cfg.min_samples,
-        )
+        return outlier_rounds(len(points), solve_subset, cfg)
 
     try:
         outcome = with_rejection()
@@ -731,11 +726,33 @@ def refine_with_outlier_rejection(
             noise = None
             outcome = with_rejection()
     assert outcome is not None
+    return screened(outcome, cfg)
+
+
+def outlier_rounds(
+    n_samples: int,
+    solve_subset: Callable[[list[int], RefineResult | None], RefineResult],
+    config: RefineConfig,
+) -> RejectionOutcome[RefineResult]:
+    """:func:`~linelaser_calib.core.solver.solve_with_rejection` of ``n_samples`` samples
+    with ``solve_subset`` and the outlier test of :func:`refine_with_outlier_rejection`."""
+    return solve_with_rejection(
+        n_samples,
+        solve_subset,
+        lambda result, _keep: _outlier_samples(result, config),
+        config.max_outlier_fraction,
+        config.min_samples,
+    )
+
+
+def screened(outcome: RejectionOutcome[RefineResult], config: RefineConfig) -> RefineResult:
+    """The last solve of :func:`outlier_rounds` with its ``used`` and ``dropped`` samples
+    (indices into the samples screened) and a warning for outliers the cap left in."""
     result = outcome.outcome
     if outcome.left_flagged:
         result.warnings.append(
             f"{len(outcome.left_flagged)} more sample(s) look like outliers but "
-            f"max_outlier_fraction {cfg.max_outlier_fraction:.2f} allows no more drops: "
+            f"max_outlier_fraction {config.max_outlier_fraction:.2f} allows no more drops: "
             + "; ".join(f"sample {i}: {reason}" for i, reason in outcome.left_flagged)
         )
     result.used = outcome.kept

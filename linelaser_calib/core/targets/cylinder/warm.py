@@ -12,8 +12,9 @@ import numpy as np
 from ...errors import DegenerateError, SolverError
 from ...geometry import FloatArray
 from ...solver import Solution, solve
+from .config import RefineConfig
 from .problem import CylinderProblem, CylinderState
-from .refine import RefineResult, SolvedProblem, summarise
+from .refine import RefineResult, SolvedProblem, outlier_rounds, screened, summarise
 
 #: Step tolerance of :func:`refine_subset`, m: 10 nm, a thousandth of the smallest 1σ this
 #: tool reports (a few µm); the full solve's 1e-12 m would cost it one or two more
@@ -29,7 +30,9 @@ SUBSET_STEP_TOLERANCE_M = 1e-8
 SUBSET_COST_TOLERANCE = 1e-8
 
 
-def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
+def refine_subset(
+    solved: SolvedProblem, rows: Sequence[int], prior: RefineConfig | None = None
+) -> RefineResult:
     """The refinement of some samples of a solved problem, started at its solution.
 
     The samples keep their points as solved (trimmed, subsampled) and start at the full
@@ -47,6 +50,10 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
         :attr:`RefineResult.solved` of the full solve.
     rows : sequence of int
         Positions of the samples in ``solved.problem``.
+    prior : RefineConfig, optional
+        Whose per-pose robot-error prior (``robot_sigma_t_m``, ``robot_sigma_r_rad``) the
+        solve takes instead of the solved problem's (the self-check's plain model); its pose
+        corrections then start at zero. None keeps the problem's prior and corrections.
 
     Returns
     -------
@@ -69,8 +76,44 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
         )
     problem = full.take(keep)
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
+    if prior is not None:
+        config = replace(
+            problem.config,
+            robot_sigma_t_m=prior.robot_sigma_t_m,
+            robot_sigma_r_rad=prior.robot_sigma_r_rad,
+        )
+        problem = replace(problem, config=config)
+        start = replace(start, omega=np.zeros_like(start.omega), tau=np.zeros_like(start.tau))
     solution = _solve_near(problem, start, "of a subset")
     return summarise(problem, solution, solved.noise)
+
+
+def refine_screened(
+    solved: SolvedProblem, rows: Sequence[int], prior: RefineConfig
+) -> RefineResult:
+    """The refinement of some samples of a solved problem under another robot-error
+    ``prior`` (:func:`refine_subset`), with the outlier rounds of
+    :func:`.refine.refine_with_outlier_rejection` run again: a tighter prior (the
+    self-check's plain model) can make samples outliers that the solved problem's kept. Each
+    round starts at the last one's solution. ``used`` and ``dropped`` index ``rows``.
+
+    Raises
+    ------
+    DegenerateError, SolverError
+        As :func:`refine_subset`.
+    """
+    last: list[int] = []  # the rows of the last round's solve, in its problem's order
+
+    def solve_rows(keep: list[int], previous: RefineResult | None) -> RefineResult:
+        if previous is None or previous.solved is None:
+            result = refine_subset(solved, [rows[i] for i in keep], prior)
+        else:
+            at = {i: k for k, i in enumerate(last)}
+            result = refine_subset(previous.solved, [at[i] for i in keep])
+        last[:] = keep
+        return result
+
+    return screened(outlier_rounds(len(rows), solve_rows, prior), prior)
 
 
 def _solve_near(
