@@ -241,12 +241,15 @@ class RefineResult:
 
 @dataclass(frozen=True)
 class SolvedProblem:
-    """A refinement's problem (its points trimmed and subsampled) and its state at the
-    solution: where :func:`.warm.refine_subset` starts a solve of some of its samples."""
+    """A refinement's problem (its points trimmed and subsampled), its state at the
+    solution, the line noise it was weighed by and the sensor and robot variance factors it
+    estimated there: where :func:`.warm.refine_subset` starts a solve of some of its
+    samples."""
 
     problem: CylinderProblem
     state: CylinderState
     noise: LineNoise | None = None
+    variance_factors: tuple[float, float] = (1.0, 1.0)
 
 
 def _marginal_hand_eye(information: FloatArray) -> FloatArray:
@@ -485,7 +488,7 @@ def summarise(
         n_points=n_points,
         observability=observability,
         warnings=warnings,
-        solved=SolvedProblem(problem, state, noise),
+        solved=SolvedProblem(problem, state, noise, factors),
         line_noise=noise,
         sample_dispersion=None if dispersion is None else dispersion[:N_HAND_EYE],
     )
