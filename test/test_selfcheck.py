@@ -157,14 +157,17 @@ def test_grouped_jackknife_matches_monte_carlo_with_shared_pose_error() -> None:
 def test_subset_solves_hold_no_copy_of_the_points_however_many_subsets() -> None:
     """Regression (issue 32): each subset solve's outcome kept its per-sample records (a copy
     of every used profile's points), so the self-check's memory grew by a recording's
-    points with every subset."""
+    points with every subset. Its subset start (the cylinder's solved problem: the points
+    again) is not kept either."""
     rng = np.random.default_rng(1)
     features = toy_features(rng, np.zeros(60), spread_positions(rng, 60))
 
     def recording_solve(subset: list[Any]) -> TargetSolution:
-        # As a real target's: records of every used sample, 48 kB of points each.
+        # As a real target's: records of every used sample, 48 kB of points each, and a
+        # start for solves of subsets of it holding them all.
         fits = [replace(f.record(), points=np.zeros((2000, 3))) for f in subset]
-        return replace(toy_solve(subset), sample_fits=fits)
+        start = np.zeros((len(subset), 2000, 3))
+        return replace(toy_solve(subset), sample_fits=fits, subset_start=start)
 
     one_solve = 60 * 2000 * 3 * 8
     retained = []
@@ -174,7 +177,10 @@ def test_subset_solves_hold_no_copy_of_the_points_however_many_subsets() -> None
         retained.append(tracemalloc.get_traced_memory()[0])
         tracemalloc.stop()
         assert len(outcomes) == folds + 2
-        assert all(not isinstance(o, Exception) and o.sample_fits == [] for o in outcomes)
+        assert all(
+            not isinstance(o, Exception) and o.sample_fits == [] and o.subset_start is None
+            for o in outcomes
+        )
     assert max(retained) < one_solve / 10, retained
     assert retained[1] - retained[0] < one_solve / 20, retained
 

@@ -462,9 +462,11 @@ def _plain(
     context: SolveContext,
 ) -> tuple[TargetSolution, Callable[[list[Any]], TargetSolution]] | None:
     """The plain model (:mod:`.regions`): its solve of all features, started at the default
-    ``solution`` (not at its subset start: the prior differs), and its solve of a subset,
-    started at its own. No model-fit check: the default solve passed it on the same data, and
-    the plain model's residual holds the robot's error by design. None when the target's
+    ``solution`` (a target with a subset start re-solves that solved problem under the
+    tighter prior: no seed solve, point trimming or line-noise learning again, only the
+    outlier rounds), and its solve of a subset, started at its own. No model-fit check: the
+    default solve passed it on the same data, and the plain model's residual holds the
+    robot's error by design. None when the target's
     default method takes no robot prior or the plain solve of all features fails."""
     plain_config = _plain_config(target, target_config)
     if plain_config is None:
@@ -477,7 +479,7 @@ def _plain(
         return solve
 
     try:
-        full = solve_from(replace(solution, subset_start=None))(features)
+        full = solve_from(solution)(features)
     except CalibrationError:
         return None
     return full, solve_from(full)

@@ -28,7 +28,10 @@ Levenberg–Marquardt with Marquardt scaling (damping times the diagonal) and Ni
 update from the gain ratio (actual over predicted decrease). It stops when an accepted step
 lowers the cost by less than ``tolerance`` of it, when no global parameter moves by more than
 ``step_tolerance_m`` (a step times the problem's ``step_scale``: the lever for rotations, 1
-for lengths), or when no damping lowers the cost any more (a minimum to machine precision).
+for lengths), when the steps tell that the optimum is within ``step_sigmas`` of each
+global parameter's 1σ (warm re-solves, whose figures need to be right to a small fraction
+of their 1σ only; off by default), or when no damping lowers the cost any more (a minimum to
+machine precision).
 
 Information and covariance
 --------------------------
@@ -103,6 +106,17 @@ class SolverConfig:
         Stop when an accepted step lowers the cost by less than this fraction.
     step_tolerance_m : float
         Stop when no global parameter moves by more than this, m (after ``step_scale``).
+    step_sigmas : float
+        Stop when the optimum is within this fraction of each global parameter's 1σ (the
+        inverse of the Schur information at the current linearisation, :meth:`BlockNormal.
+        schur_information` with ``variance_factors``), as the steps tell: the first step of
+        each linearisation, largest in units of that 1σ, shrinks by a ratio r where the
+        robust loss makes the solve converge linearly, so the optimum is the step over
+        (1 − r) away. The state is then that linearisation's, so no further linearisation
+        is needed. 0 (default): not used.
+    variance_factors : tuple of float
+        Sensor and robot variance factors of that 1σ (:func:`variance_factors`; those of an
+        earlier solve of the problem).
     """
 
     loss: str = "linear"
@@ -110,6 +124,8 @@ class SolverConfig:
     max_iterations: int = 50
     tolerance: float = 1e-10
     step_tolerance_m: float = 1e-12
+    step_sigmas: float = 0.0
+    variance_factors: tuple[float, float] = (1.0, 1.0)
 
     def __post_init__(self) -> None:
         if self.loss not in LOSSES:
@@ -120,6 +136,10 @@ class SolverConfig:
                 raise InputError(f"SolverConfig.{name} must be positive and finite, got {value}")
         if self.max_iterations < 1:
             raise InputError(f"max_iterations must be >= 1, got {self.max_iterations}")
+        if not (np.isfinite(self.step_sigmas) and self.step_sigmas >= 0.0):
+            raise InputError(f"step_sigmas must be >= 0 and finite, got {self.step_sigmas}")
+        if not all(np.isfinite(f) and f > 0.0 for f in self.variance_factors):
+            raise InputError(f"variance_factors must be positive, got {self.variance_factors}")
 
 
 @dataclass(frozen=True)
@@ -544,6 +564,23 @@ def widen_covariance(covariance: FloatArray, ratio: FloatArray | None) -> FloatA
     return np.asarray(covariance * np.outer(scale, scale))
 
 
+def _sigma(normal: BlockNormal, config: SolverConfig) -> FloatArray | None:
+    """1σ (G,) of the global parameters at a linearisation (``config.variance_factors``);
+    None where the information is singular."""
+    try:
+        covariance = np.linalg.inv(normal.schur_information(*config.variance_factors))
+    except np.linalg.LinAlgError:
+        return None
+    return np.asarray(np.sqrt(np.maximum(np.diag(covariance), 0.0)))
+
+
+def _left(size: float, last_size: float) -> float:
+    """How far the optimum still is, in the units of the step sizes, when a linearly
+    converging solve's step shrank from ``last_size`` to ``size`` (< ``last_size``): the
+    rest of the geometric series, size / (1 − size / last_size)."""
+    return size / (1.0 - size / last_size)
+
+
 def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> Solution[State]:
     """Minimise the problem's cost from ``state`` (see the module docstring)."""
     cost_now = cost(problem.residuals(state), config)
@@ -554,14 +591,23 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
     iterations = 0
     normal: BlockNormal | None = None
     residuals: Residuals | None = None
+    last_size = math.inf  # the first step of the last linearisation, in 1σ (step_sigmas)
     while iterations < config.max_iterations:
+        sigma = None
         if normal is None:
             normal, residuals = linearised(problem, state, config)
             iterations += 1
+            sigma = _sigma(normal, config) if config.step_sigmas > 0.0 else None
         step_global, step_local = solve_damped(normal, damping)
         if float(np.max(np.abs(step_global * scale))) < config.step_tolerance_m:
             converged = True
             break
+        if sigma is not None:
+            size = float(np.max(np.abs(step_global) / sigma))
+            if size < last_size and _left(size, last_size) < config.step_sigmas:
+                converged = True
+                break
+            last_size = size
         candidate = problem.retract(state, step_global, step_local)
         new_cost = cost(problem.residuals(candidate), config)
         diag_step = np.concatenate(

@@ -41,6 +41,7 @@ not used (:func:`recording_line_noise`).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -240,12 +241,15 @@ class RefineResult:
 
 @dataclass(frozen=True)
 class SolvedProblem:
-    """A refinement's problem (its points trimmed and subsampled) and its state at the
-    solution: where :func:`.warm.refine_subset` starts a solve of some of its samples."""
+    """A refinement's problem (its points trimmed and subsampled), its state at the
+    solution, the line noise it was weighed by and the sensor and robot variance factors it
+    estimated there: where :func:`.warm.refine_subset` starts a solve of some of its
+    samples."""
 
     problem: CylinderProblem
     state: CylinderState
     noise: LineNoise | None = None
+    variance_factors: tuple[float, float] = (1.0, 1.0)
 
 
 def _marginal_hand_eye(information: FloatArray) -> FloatArray:
@@ -484,7 +488,7 @@ def summarise(
         n_points=n_points,
         observability=observability,
         warnings=warnings,
-        solved=SolvedProblem(problem, state, noise),
+        solved=SolvedProblem(problem, state, noise, factors),
         line_noise=noise,
         sample_dispersion=None if dispersion is None else dispersion[:N_HAND_EYE],
     )
@@ -706,13 +710,7 @@ def refine_with_outlier_rejection(
         )
 
     def with_rejection() -> RejectionOutcome[RefineResult]:
-        return solve_with_rejection(
-            len(points),
-            solve_subset,
-            lambda result, _keep: _outlier_samples(result, cfg),
-            cfg.max_outlier_fraction,
-            cfg.min_samples,
-        )
+        return outlier_rounds(len(points), solve_subset, cfg)
 
     try:
         outcome = with_rejection()
@@ -731,11 +729,33 @@ def refine_with_outlier_rejection(
             noise = None
             outcome = with_rejection()
     assert outcome is not None
+    return screened(outcome, cfg)
+
+
+def outlier_rounds(
+    n_samples: int,
+    solve_subset: Callable[[list[int], RefineResult | None], RefineResult],
+    config: RefineConfig,
+) -> RejectionOutcome[RefineResult]:
+    """:func:`~linelaser_calib.core.solver.solve_with_rejection` of ``n_samples`` samples
+    with ``solve_subset`` and the outlier test of :func:`refine_with_outlier_rejection`."""
+    return solve_with_rejection(
+        n_samples,
+        solve_subset,
+        lambda result, _keep: _outlier_samples(result, config),
+        config.max_outlier_fraction,
+        config.min_samples,
+    )
+
+
+def screened(outcome: RejectionOutcome[RefineResult], config: RefineConfig) -> RefineResult:
+    """The last solve of :func:`outlier_rounds` with its ``used`` and ``dropped`` samples
+    (indices into the samples screened) and a warning for outliers the cap left in."""
     result = outcome.outcome
     if outcome.left_flagged:
         result.warnings.append(
             f"{len(outcome.left_flagged)} more sample(s) look like outliers but "
-            f"max_outlier_fraction {cfg.max_outlier_fraction:.2f} allows no more drops: "
+            f"max_outlier_fraction {config.max_outlier_fraction:.2f} allows no more drops: "
             + "; ".join(f"sample {i}: {reason}" for i, reason in outcome.left_flagged)
         )
     result.used = outcome.kept

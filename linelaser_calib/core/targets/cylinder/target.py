@@ -90,7 +90,7 @@ from .refine import (
     refine_with_outlier_rejection,
 )
 from .section import CylinderSection, read_cylinder_section
-from .warm import refine_at_poses, refine_subset
+from .warm import refine_at_poses, refine_screened, refine_subset
 
 #: Points per profile in the refinements of the clock-offset search, and the most
 #: linearisations of each refinement after the first (:meth:`CylinderTarget.offset_cost`).
@@ -498,7 +498,17 @@ class CylinderTarget:
         if subset is not None:
             start, features, screened = subset
             context.progress("refine", 0, 1)
-            refined = refine_subset(start.solved, [start.rows[f.index] for f in features])
+            solved_prior = start.solved.problem.config
+            same_prior = (solved_prior.robot_sigma_t_m, solved_prior.robot_sigma_r_rad) == (
+                config.refine.robot_sigma_t_m,
+                config.refine.robot_sigma_r_rad,
+            )
+            rows = [start.rows[f.index] for f in features]
+            refined = (
+                refine_subset(start.solved, rows)
+                if same_prior
+                else refine_screened(start.solved, rows, config.refine)
+            )
         else:
             T_init, cylinder0, seed_history = self._start(features, config, context)
             context.progress("refine", 0, 1)
@@ -573,7 +583,7 @@ class CylinderTarget:
             else None,
             subset_start=(
                 None
-                if subset is not None or outcome is not None or refined.solved is None
+                if outcome is not None or refined.solved is None
                 else _SubsetStart(
                     refined.solved, {features[j].index: k for k, j in enumerate(refined.used)}
                 )

@@ -11,9 +11,10 @@ import numpy as np
 
 from ...errors import DegenerateError, SolverError
 from ...geometry import FloatArray
-from ...solver import Solution, solve
+from ...solver import Solution, SolverConfig, solve
+from .config import RefineConfig
 from .problem import CylinderProblem, CylinderState
-from .refine import RefineResult, SolvedProblem, summarise
+from .refine import RefineResult, SolvedProblem, outlier_rounds, screened, summarise
 
 #: Step tolerance of :func:`refine_subset`, m: 10 nm, a thousandth of the smallest 1σ this
 #: tool reports (a few µm); the full solve's 1e-12 m would cost it one or two more
@@ -28,15 +29,28 @@ SUBSET_STEP_TOLERANCE_M = 1e-8
 #: statistics move by 1e-3 of themselves).
 SUBSET_COST_TOLERANCE = 1e-8
 
+#: Stopping rule of :func:`refine_subset`, before the two above: the step of the current
+#: linearisation moves no global parameter (hand-eye, axis, radius, scales) by more than
+#: this fraction of its 1σ (with the noise levels the solved problem learned). The
+#: self-check reads a subset's hand-eye and axis against moves of about their 1σ, so what
+#: is left is far below anything it can tell; and the solve ends at that linearisation,
+#: where a stop on the cost's decrease takes the step and linearises once more. A
+#: re-solve under a tighter robot prior (the plain model) converges only linearly where
+#: the robust loss down-weights many points: this stop saves it two or three
+#: linearisations of seven, the default model's subsets one of three.
+SUBSET_STEP_SIGMAS = 0.01
 
-def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
+
+def refine_subset(
+    solved: SolvedProblem, rows: Sequence[int], prior: RefineConfig | None = None
+) -> RefineResult:
     """The refinement of some samples of a solved problem, started at its solution.
 
     The samples keep their points as solved (trimmed, subsampled) and start at the full
     solution with their own pose corrections; no seed solve, no point trimming and no
     outlier rejection run again (the full solve screened these samples). Leaving samples out
     moves the optimum by about its 1σ, so the solve converges, to
-    :data:`SUBSET_STEP_TOLERANCE_M`, in two or three linearisations on clean data (a few more
+    :data:`SUBSET_STEP_SIGMAS` of the 1σ, in two linearisations on clean data (a few more
     where the robust loss down-weights many points) instead of a dozen: the self-check's
     twelve subset solves (leave-some-out, halves, regions) go through here. One Gauss–Newton
     step is not enough: on cluttered data it moves the jackknife's dispersion by 20 %.
@@ -47,6 +61,10 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
         :attr:`RefineResult.solved` of the full solve.
     rows : sequence of int
         Positions of the samples in ``solved.problem``.
+    prior : RefineConfig, optional
+        Whose per-pose robot-error prior (``robot_sigma_t_m``, ``robot_sigma_r_rad``) the
+        solve takes instead of the solved problem's (the self-check's plain model); its pose
+        corrections then start at zero. None keeps the problem's prior and corrections.
 
     Returns
     -------
@@ -69,22 +87,66 @@ def refine_subset(solved: SolvedProblem, rows: Sequence[int]) -> RefineResult:
         )
     problem = full.take(keep)
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
-    solution = _solve_near(problem, start, "of a subset")
+    if prior is not None:
+        config = replace(
+            problem.config,
+            robot_sigma_t_m=prior.robot_sigma_t_m,
+            robot_sigma_r_rad=prior.robot_sigma_r_rad,
+        )
+        problem = replace(problem, config=config)
+        start = replace(start, omega=np.zeros_like(start.omega), tau=np.zeros_like(start.tau))
+    tolerances = replace(
+        _near(problem), step_sigmas=SUBSET_STEP_SIGMAS, variance_factors=solved.variance_factors
+    )
+    solution = _solve_near(problem, start, "of a subset", tolerances)
     return summarise(problem, solution, solved.noise)
 
 
-def _solve_near(
-    problem: CylinderProblem, start: CylinderState, what: str, max_iterations: int | None = None
-) -> Solution[CylinderState]:
-    """The solve of a problem from a state near its optimum, to :data:`SUBSET_STEP_TOLERANCE_M`
-    and :data:`SUBSET_COST_TOLERANCE` or ``max_iterations`` linearisations (None: the
-    problem's solver's), SolverError on non-finite numbers, naming ``what``."""
-    tolerances = replace(
+def refine_screened(
+    solved: SolvedProblem, rows: Sequence[int], prior: RefineConfig
+) -> RefineResult:
+    """The refinement of some samples of a solved problem under another robot-error
+    ``prior`` (:func:`refine_subset`), with the outlier rounds of
+    :func:`.refine.refine_with_outlier_rejection` run again: a tighter prior (the
+    self-check's plain model) can make samples outliers that the solved problem's kept. Each
+    round starts at the last one's solution. ``used`` and ``dropped`` index ``rows``.
+
+    Raises
+    ------
+    DegenerateError, SolverError
+        As :func:`refine_subset`.
+    """
+    last: list[int] = []  # the rows of the last round's solve, in its problem's order
+
+    def solve_rows(keep: list[int], previous: RefineResult | None) -> RefineResult:
+        if previous is None or previous.solved is None:
+            result = refine_subset(solved, [rows[i] for i in keep], prior)
+        else:
+            at = {i: k for k, i in enumerate(last)}
+            result = refine_subset(previous.solved, [at[i] for i in keep])
+        last[:] = keep
+        return result
+
+    return screened(outlier_rounds(len(rows), solve_rows, prior), prior)
+
+
+def _near(problem: CylinderProblem, max_iterations: int | None = None) -> SolverConfig:
+    """The problem's solver settings with the tolerances of a solve from near its optimum,
+    :data:`SUBSET_STEP_TOLERANCE_M` and :data:`SUBSET_COST_TOLERANCE`, and at most
+    ``max_iterations`` linearisations (None: the problem's solver's)."""
+    return replace(
         problem.config.solver,
         step_tolerance_m=SUBSET_STEP_TOLERANCE_M,
         tolerance=SUBSET_COST_TOLERANCE,
         max_iterations=max_iterations or problem.config.solver.max_iterations,
     )
+
+
+def _solve_near(
+    problem: CylinderProblem, start: CylinderState, what: str, tolerances: SolverConfig
+) -> Solution[CylinderState]:
+    """The solve of a problem from a state near its optimum with ``tolerances``
+    (:func:`_near`), SolverError on non-finite numbers, naming ``what``."""
     solution = solve(problem, start, tolerances)
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError(f"the refinement {what} produced non-finite values")
@@ -98,8 +160,9 @@ def refine_at_poses(
     at its solution, and its final cost (dimensionless, as :attr:`RefineResult.cost_history`).
 
     The clock-offset search re-pairs the same points with poses a few ms away, which moves
-    the optimum little: from a nearby solution the solve converges (to the tolerances of
-    :func:`refine_subset`) without a new problem, seed or observability check;
+    the optimum little: from a nearby solution the solve converges (to
+    :data:`SUBSET_STEP_TOLERANCE_M` and :data:`SUBSET_COST_TOLERANCE`: the search compares
+    costs) without a new problem, seed or observability check;
     ``max_iterations`` bounds its linearisations (None: the solver's bound).
 
     Raises
@@ -108,5 +171,7 @@ def refine_at_poses(
         The solve produced non-finite numbers.
     """
     problem = solved.problem.with_flange_poses(np.asarray(T_base_flange, dtype=np.float64))
-    solution = _solve_near(problem, solved.state, "at other flange poses", max_iterations)
+    solution = _solve_near(
+        problem, solved.state, "at other flange poses", _near(problem, max_iterations)
+    )
     return replace(solved, problem=problem, state=solution.state), solution.cost_history[-1]
