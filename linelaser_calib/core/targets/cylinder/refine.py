@@ -154,7 +154,10 @@ class RefineResult:
     sample_rms_m : ndarray, shape (M,)
         RMS point-to-surface residual of each sample, m.
     sample_rms_zscore : ndarray, shape (M,)
-        Robust z-score of ``sample_rms_m`` ((value − median) / (1.4826 · MAD)).
+        Robust z-score ((value − median) / (1.4826 · MAD)) of each sample's RMS residual as
+        the noise model weighs it: ``sample_rms_m`` over σ_s, or with a learned line noise
+        the whitened residual's RMS, so that a profile whose smooth shape error happens to
+        be large (a draw of the recording's own noise) is no outlier.
     sample_prior_chi2 : ndarray, shape (M,)
         ``|ω/σ_r|² + |τ/σ_t|²`` of each pose correction (≈ χ² with ≤ 6 dof if plausible).
     sample_downweighted : ndarray, shape (M,)
@@ -386,6 +389,7 @@ def summarise(
     e, prior = solution.residuals.points, solution.residuals.pose_prior
     rho, _ = evaluate_loss(e, cfg.solver)
     point_cost, prior_cost = float(np.sum(rho)), float(np.sum(prior**2))
+    weighed_rms = np.sqrt(np.sum(e**2, axis=1) / problem.counts)
     if problem.whitening is not None:
         e = problem.point_residuals(state)  # per-point statistics on the plain residuals
     n_points = int(problem.counts.sum())
@@ -467,7 +471,7 @@ def summarise(
         used=list(range(problem.n_samples)),
         dropped=[],
         sample_rms_m=sample_rms,
-        sample_rms_zscore=_robust_zscore(sample_rms),
+        sample_rms_zscore=_robust_zscore(weighed_rms),
         sample_prior_chi2=np.sum(prior**2, axis=1),
         sample_downweighted=beyond / problem.counts,
         pose_corrections=np.hstack([state.omega, state.tau]),
@@ -515,7 +519,9 @@ def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[Flag]:
         ):
             reasons.append(
                 f"its points lie {rms[j] * 1e6:.1f} um RMS off the cylinder (median sample "
-                f"{median_rms * 1e6:.1f} um, robust z {z_rms[j]:.0f})"
+                f"{median_rms * 1e6:.1f} um, robust z {z_rms[j]:.0f}"
+                + ("" if result.line_noise is None else " weighed by the learned line noise")
+                + ")"
             )
         if prior_chi2[j] > chi2_limit and z_prior[j] > config.outlier_zscore:
             omega, tau = result.pose_corrections[j, :3], result.pose_corrections[j, 3:]
