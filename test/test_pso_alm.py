@@ -182,3 +182,55 @@ def test_accept_early_seed_stops_at_the_first_accepted_polish() -> None:
     assert rotation_error < 1e-7 and translation_error < 1e-7 * MM
     with pytest.raises(InputError):
         HybridConfig(accept_early=True, faithful=True)
+
+
+@dataclass(frozen=True)
+class _Ellipse:
+    semi_axes: tuple[float, float]
+    short: bool = False
+
+
+@dataclass(frozen=True)
+class _Centre:
+    """A fitted profile as the seed solve reads it: its ellipse, centre and flange pose."""
+
+    ellipse: _Ellipse
+    centre: np.ndarray
+    T_base_flange: np.ndarray
+
+    def centre_xz(self, radius_m: float) -> np.ndarray:
+        return self.centre
+
+
+def test_default_seed_of_a_long_recording_uses_a_bounded_spread_of_centres(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Regression (issue 32, continuous 4,000 poses): the seed's PSO + GALM ran over every
+    centre of a long recording. It now takes at most SEED_MOST_CENTRES, spread over the
+    whole recording, and still lands next to the truth."""
+    from linelaser_calib.core.targets.base import SolveContext
+    from linelaser_calib.core.targets.cylinder import target as cylinder_target
+
+    T, cyl = paper_setup()
+    n = 3 * cylinder_target.SEED_MOST_CENTRES
+    data = synthetic_centres(
+        T, cyl, n, np.random.default_rng(5), robot_sigma_m=0.1 * MM, sensor_sigma_m=0.05 * MM
+    )
+    features = [
+        _Centre(_Ellipse((0.04, 0.02)), c, Tb)
+        for c, Tb in zip(data.centres_xz, data.T_base_flange, strict=True)
+    ]
+    seen: list[np.ndarray] = []
+
+    def spy(centres: np.ndarray, *args: object) -> object:
+        seen.append(np.asarray(centres))
+        return solve_pso_galm(centres, *args)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(cylinder_target, "solve_pso_galm", spy)
+    config = cylinder_target.CylinderConfig(radius_m=0.02)
+    seed = cylinder_target.TARGET._seed(features, config, SolveContext(), paper=False)  # type: ignore[arg-type]
+    (centres,) = seen
+    assert len(centres) == cylinder_target.SEED_MOST_CENTRES
+    assert_floats_close(centres[[0, -1]], data.centres_xz[[0, -1]], atol=0.0)
+    rotation_error, translation_error = transform_error(seed.T_flange_sensor, T)
+    assert rotation_error < np.radians(0.1) and translation_error < 0.5 * MM
