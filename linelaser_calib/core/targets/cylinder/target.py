@@ -155,9 +155,13 @@ def with_depth_reading(kept: TargetSolution, other: TargetSolution) -> TargetSol
     1σ of 0.02 mm; read as a z scale the stretch is -0.79 ± 0.03 %, the same ratio, and the
     hand-eye moves 1.0 mm: the truth lies between the readings, and their difference counts
     in the 1σ. Where the z reading is no reading of the same ratio (beyond
-    :data:`SIGNIFICANT_SCALE_SIGMAS` of their combined 1σ), the profiles tell the two
-    models apart and the kept one stands alone: ``cylinder_scancontrol`` (x 0.1 % short,
-    z true) reads x +0.100 ± 0.029 % but z +0.179 ± 0.027 %, 7σ from one ratio.
+    :data:`SIGNIFICANT_SCALE_SIGMAS` of their combined 1σ), the two are not one stretch and
+    the kept one stands alone: ``cylinder_scancontrol`` (x 0.1 % short, z true) reads
+    x +0.100 ± 0.029 % but z +0.179 ± 0.027 %, 7σ from one ratio. That gap is not
+    necessarily information: a profiler's smooth shape error (5 mm correlated) biases the
+    z reading by about +0.25 % on its own (``cylinder_gocator`` with its z scale true:
+    +0.20 to +0.30 %, 5-8σ; +0.02 ± 0.01 % with the shape error off), so counting the
+    z reading wherever the x scale is held would widen clean recordings' 1σ several times.
     """
     section, alternative = kept.section, other.section
     assert isinstance(section, CylinderSection) and isinstance(alternative, CylinderSection)
