@@ -166,23 +166,6 @@ def ellipse_geometry(conic: ArrayLike) -> EllipseGeometry:
     )
 
 
-def is_ellipse(conic: FloatArray) -> bool:
-    """``ellipse_geometry(conic).valid`` of one conic (6,), in scalar arithmetic (a tenth of
-    the batched function's cost, for the checks of single fits)."""
-    a, b, c, d, e, f = (float(v) for v in conic)
-    det = 4 * a * c - b * b
-    if not det > 0:
-        return False
-    centre_x, centre_z = (b * e - 2 * c * d) / det, (b * d - 2 * a * e) / det
-    q_centre = f + 0.5 * (d * centre_x + e * centre_z)
-    half_trace = 0.5 * (a + c)
-    if not q_centre * half_trace < 0:
-        return False
-    lam_small = half_trace - math.copysign(float(np.hypot(0.5 * (a - c), 0.5 * b)), half_trace)
-    ratio = -q_centre / lam_small if lam_small != 0.0 else math.inf
-    return 0.0 <= ratio < math.inf
-
-
 def value_and_gradient_sq(
     conic: FloatArray, points_xz: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -334,7 +317,7 @@ def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
             damping *= 10
             if damping > 1e8:
                 break
-    return conic if is_ellipse(conic) else conic_u
+    return conic if bool(ellipse_geometry(conic).valid) else conic_u
 
 
 def arc_coverage(geometry: EllipseGeometry, points_xz: FloatArray) -> float:
