@@ -21,6 +21,7 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial.transform import Rotation, Slerp
 
 FloatArray = NDArray[np.float64]
 
@@ -308,9 +309,8 @@ def interpolate_transform(T0: ArrayLike, T1: ArrayLike, s: float) -> FloatArray:
     """
     A = np.asarray(T0, dtype=np.float64)
     B = np.asarray(T1, dtype=np.float64)
-    delta = rotvec_from_matrix(A[:3, :3].T @ B[:3, :3])
-    R = A[:3, :3] @ matrix_from_rotvec(s * delta)
-    return transform_from_rotation_translation(R, (1.0 - s) * A[:3, 3] + s * B[:3, 3])
+    R = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([A[:3, :3], B[:3, :3]])))(s)
+    return transform_from_rotation_translation(R.as_matrix(), (1.0 - s) * A[:3, 3] + s * B[:3, 3])
 
 
 def skew(v: ArrayLike) -> FloatArray:
