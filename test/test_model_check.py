@@ -120,15 +120,23 @@ def test_a_v_is_a_line_pair_not_a_circle() -> None:
     assert not compare_models(pair, [conic_fit(v)]).rival_wins
 
 
-def test_v_seam_scans_given_to_the_sphere_are_refused_naming_the_seam(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path
+@pytest.mark.parametrize(
+    ("options", "own"),
+    [
+        (["--target", "sphere"], "only 0 profiles show a usable circle"),
+        # The clock-offset search meets the same refusal first, and names the rival too.
+        (["--target", "cylinder", "--clock-offset", "auto"], "only 0 of 20 recorded profiles"),
+    ],
+)
+def test_v_seam_scans_given_to_a_curved_target_are_refused_naming_the_seam(
+    capsys: pytest.CaptureFixture[str], tmp_path: Path, options: list[str], own: str
 ) -> None:
     out = tmp_path / "result.yaml"
-    argv = ["calibrate", str(BAGS / "weld_seam"), "--target", "sphere", "--output", str(out)]
+    argv = ["calibrate", str(BAGS / "weld_seam"), *options, "--output", str(out)]
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert not out.exists() and "No result was written" in err
-    assert "only 0 profiles show a usable circle" in err and "--target known_point" in err
+    assert own in err and "--target known_point" in err
     assert "the known point fitted with the poses explains 20 of the 20 recorded" in err
 
 

@@ -618,7 +618,11 @@ def search_clock_offset(
     )
     context = SolveContext(seed=config.seed, rejections=rejections, n_samples=len(paired.samples))
     extracted = Extracted(tuple(s.index for s in samples), features, rejections)
-    cost_of_poses = target.offset_cost(features, target_config, context)
+    try:
+        cost_of_poses = target.offset_cost(features, target_config, context)
+    except TooFewFeatures as refusal:
+        refuse_without_fit(target, samples, refusal, context)
+        raise
     if cost_of_poses is None:
         raise InputError(
             f"the clock offset cannot be estimated from {target.title} scans; give it with "

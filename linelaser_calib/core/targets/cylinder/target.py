@@ -692,13 +692,7 @@ class CylinderTarget:
         neighbours. Where the refinement at the features' poses fails (too few samples,
         an unobservable motion), every offset costs infinity.
         """
-        if len(features) < config.min_samples:
-            raise DegenerateError(
-                f"only {len(features)} profiles gave a usable ellipse; at least "
-                f"{config.min_samples} are needed to estimate the clock offset. "
-                + rejection_digest(context.rejections)
-            )
-        radius = settle_radius(features, config.radius_m)
+        radius = self._checked(features, config, context)
         seed = self._seed(features, config, context, paper=False)
         cylinder0 = replace(seed.cylinder, radius=radius)
         points = [f.inlier_points for f in features]
