@@ -1,8 +1,9 @@
 """The stress matrix of issue 29: every target on each face of a real profiler.
 
 A real profiler's profiles thin out on steep surfaces, have gaps, show a floor or a wall
-beside the target, have x and z scales a little off, and carry a smooth shape error with
-which a conic beats a circle on a single profile (:data:`~linelaser_calib.sim.
+beside the target, have x and z scales a little off, and carry a shape error (a fixed x/z
+distortion and a smooth part, as the real ball sets show) with which a conic beats a circle
+on a single profile (:data:`~linelaser_calib.sim.
 sensor_models.REAL_FACES`). Each target calibrates a recording with one such face as well as
 its clean twin (the same scene and seed without it): nothing refused, no profile set aside
 that the clean twin uses, and an error against the truth within 1.5 times the clean twin's
