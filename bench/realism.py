@@ -9,6 +9,19 @@ and each target on each face.
     longer than 2 pitches) per profile and their mean length, and the share of the columns
     that return in each band of surface slope (against the ray fan's own count for a circle
     of the profile's radius: 100 % means no thinning beyond the geometry's).
+``conic``
+    Why a conic beats a circle on a single profile of a ball, on the real sets and on the
+    simulator's ``sphere`` scene with each face (the stress matrix's: 14 views, pooled over
+    seeds) and on ``sphere_sszn``: per set, the profiles whose conic's BIC lies
+    :data:`~linelaser_calib.core.model_check.CLEAR_BIC` below the circle's (the sphere
+    target's circle and a free conic, effective points as the target counts them), the
+    median robust scale of each, the median BIC margin per point; the one fixed linear
+    distortion of the sensor's plane that best makes every profile of the set a circle
+    (x' = (1 + a) x + b z, z' = z + b x: its axes' difference, %, and the short axis's angle
+    from x, deg) and the profiles a conic still wins after it is undone; the local noise
+    (RMS of second differences / √6) and the smooth part of the corrected circle residual
+    (a Gaussian fitted to its autocovariance from the second lag on: 1σ and correlation
+    length).
 ``presets``
     Each realistic preset (a real profiler's datasheet geometry and shape errors:
     ``cylinder_keyence``, ``cylinder_scancontrol``, ``cylinder_gocator``, ``sphere_sszn``,
@@ -26,7 +39,7 @@ error against truth (RMS over seeds, deg and mm), the 1σ as reported (RMS over 
 length of the rotation and translation 1σ, self-check widening included), and the largest
 per-axis |error| / 1σ. The goals: ≥ 98 % of profiles used, no refusal, |error|/σ ≤ 3.
 
-Run: ``.venv/bin/python bench/realism.py [--seeds N] [--only real|presets|faces]
+Run: ``.venv/bin/python bench/realism.py [--seeds N] [--only real|conic|presets|faces]
 [--presets A,B] [--targets A,B]`` (default 3 seeds; a calibration takes 5-40 s).
 """
 
@@ -42,11 +55,15 @@ from typing import Any
 import numpy as np
 from realistic_sensors import Tally
 from scipy.ndimage import gaussian_filter1d
+from scipy.optimize import curve_fit, least_squares
 
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix
+from linelaser_calib.core.model_check import CLEAR_BIC, ShapeFit, compare_models, conic_fit
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, calibrate_samples
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.sphere import SphereConfig
 from linelaser_calib.core.targets.sphere.circle import (
     circle_residuals,
     fit_circle_algebraic,
@@ -56,7 +73,11 @@ from linelaser_calib.io.robcalibrator import read_robcalibrator
 from linelaser_calib.settings import Front, pipeline_config, render
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.presets import scenario_from_preset
-from linelaser_calib.sim.sensor_models import REAL_FACES, second_difference_noise_m, with_faces
+from linelaser_calib.sim.sensor_models import (
+    REAL_FACES,
+    second_difference_noise_m,
+    with_faces,
+)
 from linelaser_calib.sim.simulate import simulate
 from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
 from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
@@ -141,6 +162,115 @@ def real_table() -> None:
         "medians over the ball's profiles; the 12.7 mm set's 3 profiles with other "
         "surfaces beside the ball skipped"
     )
+
+
+def _arcs(profiles: Any, poses: Any, radius_m: float) -> list[FloatArray]:
+    """Each profile's circle inliers (N, 2), x and z in the sensor, m, in scan order."""
+    samples = pair_profiles(profiles, poses, PairingConfig()).samples
+    features, _ = get_target("sphere").extract(
+        samples, SphereConfig(radius_m=radius_m), 0, lambda *_: None
+    )
+    return [f.points[:, [0, 2]] for f in features]
+
+
+def _circle_residuals(xz: FloatArray) -> FloatArray:
+    centre, radius = fit_circle_geometric(xz, *fit_circle_algebraic(xz))
+    return circle_residuals(xz, centre, radius)
+
+
+def _undistorted(xz: FloatArray, a: float, b: float) -> FloatArray:
+    return np.column_stack([(1.0 + a) * xz[:, 0] + b * xz[:, 1], xz[:, 1] + b * xz[:, 0]])
+
+
+def _common_distortion(arcs: list[FloatArray]) -> tuple[float, float]:
+    """The (a, b) of :func:`_undistorted` that makes every arc closest to a circle."""
+
+    def residuals(p: FloatArray) -> FloatArray:
+        return np.concatenate(
+            [_circle_residuals(_undistorted(xz, p[0], p[1])) / math.sqrt(len(xz)) for xz in arcs]
+        )
+
+    a, b = least_squares(residuals, [0.0, 0.0], x_scale=1e-3, diff_step=1e-4).x
+    return float(a), float(b)
+
+
+def _smooth_part(arcs: list[FloatArray], pitch_m: float) -> tuple[float, float]:
+    """1σ (m) and correlation length (m) of a Gaussian fitted to the arcs' mean residual
+    autocovariance from the second lag on (the first holds the neighbour-correlated noise)."""
+    lags = min(200, min(len(xz) for xz in arcs) // 2)
+    covariance = np.zeros(lags)
+    for xz in arcs:
+        r = _circle_residuals(xz)
+        r = r - r.mean()
+        covariance += [float(np.mean(r[: len(r) - k] * r[k:])) for k in range(lags)]
+    covariance /= len(arcs)
+    d = np.arange(lags) * pitch_m
+
+    def gaussian(d: FloatArray, variance: float, length: float) -> FloatArray:
+        return np.asarray(variance * np.exp(-(d**2) / (2.0 * length**2)))
+
+    (variance, length), _ = curve_fit(gaussian, d[2:], covariance[2:], p0=[covariance[2], 1e-3])
+    return math.sqrt(max(variance, 0.0)), abs(length)
+
+
+def conic_row(label: str, arcs: list[FloatArray]) -> None:
+    """One row of the ``conic`` table (see the module docstring)."""
+    margins = []
+    for xz in arcs:
+        comparison = compare_models(ShapeFit("circle", _circle_residuals(xz), 3), [conic_fit(xz)])
+        assert comparison.rival is not None
+        margins.append(
+            (comparison.delta_bic, comparison.model.scale_m, comparison.rival.scale_m, len(xz))
+        )
+    m = np.array(margins)
+    a, b = _common_distortion(arcs)
+    undone = [_undistorted(xz, a, b) for xz in arcs]
+    after = sum(
+        compare_models(ShapeFit("circle", _circle_residuals(xz), 3), [conic_fit(xz)]).delta_bic
+        > CLEAR_BIC
+        for xz in undone
+    )
+    pitch = float(np.median([np.median(np.abs(np.diff(xz[:, 0]))) for xz in arcs]))
+    sigma, length = _smooth_part(undone, pitch)
+    local = np.median([second_difference_noise_m(np.insert(xz, 1, 0.0, axis=1)) for xz in arcs])
+    wins = f"{int(np.sum(m[:, 0] > CLEAR_BIC))}/{len(arcs)}"
+    print(
+        f"{label:<26}{wins:>7}{np.median(m[:, 1]) * 1e6:>8.1f}{np.median(m[:, 2]) * 1e6:>9.1f}"
+        f"{np.median(m[:, 0] / m[:, 3]):>8.3f}{100.0 * math.hypot(a, 2.0 * b):>8.2f}"
+        f"{math.degrees(0.5 * math.atan2(2.0 * b, a)):>7.0f}{f'{after}/{len(arcs)}':>7}"
+        f"{local * 1e6:>9.1f}{sigma * 1e6:>8.1f}"
+        f"{f'{length * 1e3:.2f}' if sigma > 5e-7 else '-':>7}",
+        flush=True,
+    )
+
+
+def conic_table(seeds: int) -> None:
+    """Why a conic beats a circle on single profiles, real and simulated (module docstring)."""
+    print(
+        f"{'set':<26}{'conic':>7}{'circ um':>8}{'conic um':>9}{'BIC/pt':>8}{'aniso %':>8}"
+        f"{'deg':>7}{'undone':>7}{'local um':>9}{'smooth':>8}{'L mm':>7}"
+    )
+    if EXTERNAL.is_dir():
+        for name, folder in (("real 40 mm", EXTERNAL), ("real 12.7 mm", EXTERNAL / "ball")):
+            scans = read_robcalibrator(folder)
+            conic_row(name, _arcs(scans.profiles, scans.poses, scans.sphere_radius_m))
+    scene = sphere_scenario_from_preset("sphere", n_poses=14)
+    for face in ("", "shape before", *REAL_FACES):
+        if face == "shape before":  # the face before issue 29's measurement: 42 um over 4 mm
+            sensor = replace(scene.rig.sensor, shape_sigma_m=4.2e-5, shape_length_m=0.004)
+        else:
+            sensor = with_faces(scene.rig.sensor, *((face,) if face else ()))
+        arcs = []
+        for seed in range(seeds):
+            data = simulate_sphere(replace(scene, rig=replace(scene.rig, sensor=sensor)), seed)
+            arcs += _arcs(data.profiles, data.poses, scene.radius_m)
+        conic_row(f"sphere, {face or 'clean'}", arcs)
+    sszn = sphere_scenario_from_preset("sphere_sszn")
+    arcs = []
+    for seed in range(seeds):
+        data = simulate_sphere(sszn, seed)
+        arcs += _arcs(data.profiles, data.poses, sszn.radius_m)
+    conic_row("sphere_sszn", arcs)
 
 
 def cells(tally: Tally) -> str:
@@ -264,13 +394,16 @@ def faces_table(targets: list[str], seeds: int) -> list[str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--only", choices=("real", "presets", "faces"))
+    parser.add_argument("--only", choices=("real", "conic", "presets", "faces"))
     parser.add_argument("--presets", default=",".join(PRESETS))
     parser.add_argument("--targets", default=",".join(TARGETS))
     args = parser.parse_args()
     notes: list[str] = []
     if args.only in (None, "real"):
         real_table()
+        print()
+    if args.only in (None, "conic"):
+        conic_table(args.seeds)
         print()
     if args.only in (None, "presets"):
         notes += presets_table(args.presets.split(","), args.seeds)

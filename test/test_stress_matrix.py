@@ -1,8 +1,9 @@
 """The stress matrix of issue 29: every target on each face of a real profiler.
 
 A real profiler's profiles thin out on steep surfaces, have gaps, show a floor or a wall
-beside the target, have x and z scales a little off, and carry a smooth shape error with
-which a conic beats a circle on a single profile (:data:`~linelaser_calib.sim.
+beside the target, have x and z scales a little off, and carry a shape error (a fixed x/z
+distortion and a smooth part, as the real ball sets show) with which a conic beats a circle
+on a single profile (:data:`~linelaser_calib.sim.
 sensor_models.REAL_FACES`). Each target calibrates a recording with one such face as well as
 its clean twin (the same scene and seed without it): nothing refused, no profile set aside
 that the clean twin uses, and an error against the truth within 1.5 times the clean twin's
@@ -20,22 +21,28 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 from functools import cache
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from linelaser_calib.core.errors import DegenerateError, ModelMismatch
+from linelaser_calib.core.errors import DegenerateError, InputError, ModelMismatch
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.model_check import CLEAR_BIC, ShapeFit, compare_models, conic_fit
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, calibrate_samples
 from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.sphere import SphereConfig
+from linelaser_calib.core.targets.sphere.circle import circle_residuals
+from linelaser_calib.io.robcalibrator import read_robcalibrator
 from linelaser_calib.settings import Front, pipeline_config
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.presets import scenario_from_preset
 from linelaser_calib.sim.sensor_models import REAL_FACES, SensorModel, with_faces
 from linelaser_calib.sim.simulate import simulate
-from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
+from linelaser_calib.sim.sphere import SPHERE_PRESETS, simulate_sphere, sphere_scenario_from_preset
 from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
 
 pytestmark = pytest.mark.slow
@@ -44,6 +51,8 @@ TARGETS = ("cylinder", "sphere", "line", "known_point")
 FACES = (*REAL_FACES, "floor")
 #: Width of the plate beside the seam targets' flank (the ``floor`` face), m.
 FLOOR_WIDTH_M = 0.01
+#: The same lab's 12.7 mm ball set, kept out of the repository (../shared/external/README).
+BALL = Path(__file__).resolve().parents[2] / "shared" / "external" / "robcalibrator" / "ball"
 
 
 @cache
@@ -152,3 +161,41 @@ def test_the_faces_are_what_the_field_showed() -> None:
         assert with_faces(model, face).active
     scales = with_faces(model, "scales")
     assert 0.003 <= abs(scales.x_scale_error - scales.z_scale_error) <= 0.01
+    with pytest.raises(InputError, match="x_scale_error"):
+        with_faces(model, "scales", "shape")
+
+
+def _conic_margins(samples: list[Any], radius_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per profile, the circle's BIC minus a free conic's (the sphere target's circle and
+    inliers; positive: the conic fits better), and the same over the profile's points."""
+    features, _ = get_target("sphere").extract(
+        samples, SphereConfig(radius_m=radius_m), 0, lambda *_: None
+    )
+    margins = []
+    for f in features:
+        xz = f.points[:, [0, 2]]
+        circle = ShapeFit("circle", circle_residuals(xz, f.circle.centre_xz, f.circle.radius_m), 3)
+        margins.append((compare_models(circle, [conic_fit(xz)]).delta_bic, len(xz)))
+    m = np.array(margins)
+    return m[:, 0], m[:, 0] / m[:, 1]
+
+
+def test_the_shape_face_makes_a_conic_beat_a_circle_as_on_the_real_ball_set() -> None:
+    """Issue 29: on the real 12.7 mm ball set a conic fits all 10 profiles clearly better
+    than a circle, by a median 0.41 of BIC per point (``bench/realism.py --only conic``);
+    the ``shape`` face does so on the stress matrix's sphere scene, its clean twin not."""
+    radius = SPHERE_PRESETS["sphere"].radius_m
+    sets = {
+        "shape": _conic_margins(_recording("sphere", "shape")[0], radius),
+        "clean": _conic_margins(_recording("sphere", "")[0], radius),
+    }
+    if BALL.is_dir():
+        scans = read_robcalibrator(BALL)
+        paired = pair_profiles(scans.profiles, scans.poses, PairingConfig())
+        sets["real"] = _conic_margins(list(paired.samples), scans.sphere_radius_m)
+    for name, (margin, per_point) in sets.items():
+        wins, typical = float(np.mean(margin > CLEAR_BIC)), float(np.median(per_point))
+        if name == "clean":
+            assert wins < 0.5 and typical < 0.05, (name, margin)
+        else:
+            assert wins >= 0.8 and 0.2 <= typical <= 0.8, (name, margin, per_point)

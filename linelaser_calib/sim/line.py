@@ -52,8 +52,9 @@ profiler showed it (issue 29): each profile an inverted V (``ridge``) with a lon
 flank (60 mm at 15 deg, 600-1000 points at the 0.05 mm pitch of ``sszn_fanuc``) and a steep
 one (20 mm at 80 deg, ``flank_turn_rad``) that the laser meets at grazing incidence, so that
 it holds 30-250 points (median about 100), with a 10 mm floor beside it (a third straight
-segment); the profiler carries every one of :data:`~linelaser_calib.sim.sensor_models.REAL_FACES`
-(thinning at incidence, gaps, x/z scales 0.8 % apart, 42 µm shape error). 8 waypoints over
+segment); the profiler carries the ``grazing``, ``gaps`` and ``scales`` faces of
+:data:`~linelaser_calib.sim.sensor_models.REAL_FACES` (thinning at incidence, gaps, x/z scales
+0.8 % apart) and ``sszn_fanuc``'s own 42 µm shape error over 4 mm. 8 waypoints over
 ±40 mm of ridge at 0.05 m/s, profiles at 5 Hz (about 50), the view turned 15 deg towards
 the steep flank, tilts of ±26 deg along and ±8 deg across, turns of ±29 deg; a FANUC-like
 robot error of 0.03 mm and 0.005 deg; sweeps determined to 0.9 mm (``determined_sigma_m``).
@@ -79,7 +80,7 @@ from linelaser_calib.sim.profiler import Measurement, measure
 from linelaser_calib.sim.robot import draw_errors, plan_motion, reported_flange
 from linelaser_calib.sim.scenario import Scenario
 from linelaser_calib.sim.scene import Int8Array, Int64Array
-from linelaser_calib.sim.sensor_models import PROFILERS, REAL_FACES, profiler_fields, with_faces
+from linelaser_calib.sim.sensor_models import PROFILERS, profiler_fields, with_faces
 from linelaser_calib.sim.simulate import published_profiles, recorded_pose_stream
 from linelaser_calib.sim.weld import (
     WELD_PRESETS,
@@ -470,13 +471,18 @@ def _line_rig() -> Scenario:
     )
 
 
+#: The faces the ridge's profiler carries beside its own shape error (the ``shape`` face's x
+#: scale would replace the ``scales`` face's).
+RIDGE_FACES = ("grazing", "gaps", "scales")
+
+
 def _ridge() -> LineScenario:
     """A ridge on a block seen by an SSZN-class profiler with every face of reality."""
     spec = PROFILERS["sszn_fanuc"]
     rig = replace(
         _line_rig(),
         name="line_ridge",
-        **profiler_fields(replace(spec, model=with_faces(spec.model, *REAL_FACES))),
+        **profiler_fields(replace(spec, model=with_faces(spec.model, *RIDGE_FACES))),
         n_poses=8,
         max_incidence_rad=math.radians(88.0),
         camera_baseline_m=0.0,
