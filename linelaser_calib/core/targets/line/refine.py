@@ -38,6 +38,7 @@ from ...solver.lm import Residuals
 from ...types import FloatArray
 from .config import LineConfig
 from .model import N_LINE, Line, LineResiduals, line_residuals, retract_line
+from .shared_pose import SharedPoseError, shared_pose_error
 
 #: Global parameters without the scales: hand-eye (6) and line (4).
 N_GLOBAL = 6 + N_LINE
@@ -192,6 +193,26 @@ class LineRefinement:
     converged: bool
 
 
+def _problem(
+    corners_xz: FloatArray,
+    covariances_xz: FloatArray,
+    T_base_flange: FloatArray,
+    T_flange_sensor_prior: FloatArray | None,
+    config: LineConfig,
+    free_scales: tuple[bool, bool],
+) -> _LineProblem:
+    c = np.asarray(corners_xz, dtype=np.float64)
+    return _LineProblem(
+        c,
+        whitening_matrices(covariances_xz, config.corner_sigma_floor_m),
+        np.asarray(T_base_flange, dtype=np.float64),
+        None if T_flange_sensor_prior is None else np.asarray(T_flange_sensor_prior),
+        config,
+        float(np.median(np.hypot(c[:, 0], c[:, 1]))),
+        free_scales,
+    )
+
+
 def refine_line(
     corners_xz: FloatArray,
     covariances_xz: FloatArray,
@@ -228,15 +249,7 @@ def refine_line(
         Non-finite values.
     """
     c = np.asarray(corners_xz, dtype=np.float64)
-    problem = _LineProblem(
-        c,
-        whitening_matrices(covariances_xz, config.corner_sigma_floor_m),
-        np.asarray(T_base_flange, dtype=np.float64),
-        None if T_flange_sensor_prior is None else np.asarray(T_flange_sensor_prior),
-        config,
-        float(np.median(np.hypot(c[:, 0], c[:, 1]))),
-        free_scales,
-    )
+    problem = _problem(c, covariances_xz, T_base_flange, T_flange_sensor_prior, config, free_scales)
     R_L, offset = line0.frame()
     start = _State(
         np.asarray(T_flange_sensor0, dtype=np.float64),
@@ -277,4 +290,39 @@ def refine_line(
         cost_history=solution.cost_history,
         iterations=solution.iterations,
         converged=solution.converged,
+    )
+
+
+def shared_error(
+    refined: LineRefinement,
+    corners_xz: FloatArray,
+    covariances_xz: FloatArray,
+    T_base_flange: FloatArray,
+    T_flange_sensor_prior: FloatArray | None,
+    config: LineConfig,
+    free_scales: tuple[bool, bool],
+    learned: SharedPoseError | None = None,
+) -> SharedPoseError | None:
+    """How the robot's pose error of the views ``refined`` solved (the same arguments as
+    :func:`refine_line`) is shared between neighbours, and the 1σ of its estimate under that
+    (:func:`~.shared_pose.shared_pose_error`, ``learned`` the sharing learned on a superset
+    of the views; its covariance in the order of :attr:`LineRefinement.covariance`)."""
+    problem = _problem(
+        corners_xz, covariances_xz, T_base_flange, T_flange_sensor_prior, config, free_scales
+    )
+    R_L, offset = refined.line.frame()
+    state = _State(
+        refined.T_flange_sensor, R_L, offset, np.zeros((len(corners_xz), 6)), refined.scales
+    )
+    lin = problem.linearise(state)
+    J_prior = lin.global_prior_jacobian
+    assert J_prior is not None
+    return shared_pose_error(
+        lin.residuals.points,
+        lin.J_global,
+        lin.J_local / problem.precision,
+        lin.residuals.global_prior,
+        J_prior,
+        problem.T_base_flange,
+        learned,
     )

@@ -63,8 +63,9 @@ from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
-from .refine import LineRefinement, refine_line
+from .refine import LineRefinement, refine_line, shared_error
 from .section import LineSection, read_line_section
+from .shared_pose import SharedPoseError
 
 #: A default-method fit whose RMS residual exceeds this many times the noise the model
 #: expects is refused.
@@ -126,6 +127,8 @@ def _solution(
         sigma_rotation_rad=extra.pop("sigma_rotation_rad", None),
         warnings=extra.pop("warnings", []),
         history=extra.pop("history", {}),
+        sigma_widening=extra.pop("sigma_widening", None),
+        subset_start=extra.pop("subset_start", None),
         sample_fits=[
             SampleFit(f.index, f.stamp_ns, f.T_base_flange, f.points, f.corner_xz) for f in features
         ],
@@ -302,7 +305,14 @@ class LineTarget:
         _require(features, config, context)
         warm = context.warm_start
         if warm is not None and isinstance(warm.section, LineSection):
-            return self._solve_default(features, config, context, warm.section.free_scales)
+            learned = warm.subset_start
+            return self._solve_default(
+                features,
+                config,
+                context,
+                warm.section.free_scales,
+                learned if isinstance(learned, SharedPoseError) else None,
+            )
         if config.scale != "auto":
             free = config.scale == "free"
             return self._solve_default(features, config, context, (free, free))
@@ -315,7 +325,14 @@ class LineTarget:
         )
         if all(kept):
             return solution
-        held = self._solve_default(features, config, context, (kept[0], kept[1]))
+        learned = solution.subset_start
+        held = self._solve_default(
+            features,
+            config,
+            context,
+            (kept[0], kept[1]),
+            learned if isinstance(learned, SharedPoseError) else None,
+        )
         held.warnings.extend(
             implausible_scale_held(s) for s, _ in estimates if abs(s) > PLAUSIBLE_SCALE_ERROR
         )
@@ -334,9 +351,12 @@ class LineTarget:
         config: LineConfig,
         context: SolveContext,
         free_scales: tuple[bool, bool],
+        learned: SharedPoseError | None = None,
     ) -> TargetSolution:
         """:meth:`solve_default` with the x and z scale errors estimated where
-        ``free_scales`` says, held at 0 elsewhere."""
+        ``free_scales`` says, held at 0 elsewhere; the 1σ counts the robot's error shared
+        by neighbouring views (:mod:`.shared_pose`: as ``learned`` on a superset of the
+        features, else learned here), kept as the solution's ``subset_start``."""
         X0 = context.initial_T_flange_sensor
         c, cov, T = _stack(features)
         X_start, line_start = _start(features, X0)
@@ -375,7 +395,7 @@ class LineTarget:
         context.progress("refine", 1, 1)
         refined = outcome.outcome
         used = [features[i] for i in outcome.kept]
-        c_used, _, T_used = _stack(used)
+        c_used, cov_used, T_used = _stack(used)
         X = refined.T_flange_sensor
         scales = [
             None if sigma is None else float(s)
@@ -409,6 +429,21 @@ class LineTarget:
         if scatter is not None:
             warnings.append(scatter)
         sigma = widen * np.sqrt(np.diag(refined.covariance))
+        # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
+        # of the same estimate under it, where wider.
+        shared = shared_error(refined, c_used, cov_used, T_used, X0, config, free_scales, learned)
+        history: dict[str, list[float]] = {"refine_cost": list(refined.cost_history)}
+        shared_widening = None
+        if shared is not None:
+            per_view = sigma
+            sigma = np.maximum(per_view, np.sqrt(np.diag(shared.covariance)))
+            shared_widening = sigma[:6] / per_view[:6]
+            history["shared_pose_error"] = [
+                shared.noise_factor,
+                shared.shared_fraction,
+                shared.length,
+                shared.likelihood_gain,
+            ]
         rejections = [
             Rejection(features[i].index, features[i].stamp_ns, "outlier", reason)
             for i, reason in outcome.dropped
@@ -423,7 +458,9 @@ class LineTarget:
             sigma_translation_m=sigma[3:6],
             sigma_rotation_rad=sigma[:3],
             warnings=warnings,
-            history={"refine_cost": list(refined.cost_history)},
+            history=history,
+            sigma_widening=shared_widening,
+            subset_start=shared,
         )
 
     def check_features(self, features: list[Any], config: LineConfig) -> None:
