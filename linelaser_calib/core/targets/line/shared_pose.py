@@ -2,7 +2,7 @@
 
 A real arm errs by region: poses near each other share most of their error. The refinement
 (:mod:`.refine`) gives each view its own pose correction with an independent prior, which is
-the right estimator when the shares are unknown but the wrong yardstick: where neighbouring
+a fair estimator when the sharing is unknown but the wrong yardstick: where neighbouring
 views err alike, their corners do not average the robot's error away, and the hand-eye
 scatters more than the per-view covariance says.
 
@@ -11,34 +11,33 @@ The model
 Linearised at the solution with every pose correction at zero, the whitened corners are
 y = X·Δx + Σ_j A_j e_j + n: X (2M, G) the Jacobian of the global parameters (hand-eye first),
 A_j (2, 6) view j's pose Jacobian times the robot's prior 1σ (σ_r, σ_t per axis), e_j its pose
-error in units of that prior, n the corner noise (whitened: unit covariance as fitted). The
-pose errors are Gaussian with
+error in units of that prior, n the corner noise (whitened: unit covariance as fitted, times
+a variance factor s). The pose errors are Gaussian with
 
-    Cov(e_i, e_j) = ((1 − f)·[i = j] + f·exp(−d_ij / ℓ)) · I₆,
+    Cov(e_i, e_j) = exp(−d_ij / ℓ) · I₆,
 
 d_ij the separation of the two flange poses (:func:`pose_separations`: position over 5 cm
-plus the turn over 8 deg), f the share of each view's error
-that its neighbours share and ℓ the distance over which they share it; the corner noise has
-the variance factor s. The stated prior fixes each view's own error; the recording decides
-how it is shared. f = 0 is the refinement's own model. An error shared by every view (ℓ
-beyond the recording's extent) is a hand-eye error the data cannot see, so ℓ is bounded by
-the poses' largest distance, and the stated prior bounds what it adds.
+plus the turn over 8 deg) and ℓ the separation over which they share their error. The
+stated prior fixes each view's own error (d_ii = 0); the recording decides how far it is
+shared. ℓ far below the poses' spacing is the refinement's own model (each view alone). An
+error shared by every view is a hand-eye error the data cannot see, so ℓ stops at the poses'
+largest separation, and the stated prior bounds what it adds.
 
-(s, f, ℓ) are the restricted maximum-likelihood estimates (REML: the likelihood of the
-residuals with the global parameters integrated out, a loose hand-eye prior included as
-pseudo-observations), found by bounded quasi-Newton search from several lengths between the
-poses' median nearest-neighbour distance and their largest distance. The covariance of the
-refinement's per-view estimate under that model is the sandwich
+(s, ℓ) are the restricted maximum-likelihood estimates (REML: the likelihood of the residuals
+with the global parameters integrated out, a loose hand-eye prior included as
+pseudo-observations): ℓ the best of :data:`LENGTHS` log-spaced lengths, s found at each; on
+at most :data:`MAX_FIT_VIEWS` views spread through the recording. The covariance
+of the refinement's per-view estimate under that model is the sandwich
 
     H⁻¹ · (Xᵀ V₀⁻¹ V V₀⁻¹ X + prior) · H⁻¹,    H = Xᵀ V₀⁻¹ X + prior,
 
-V₀ the per-view model the refinement solved (s = 1, f = 0) and V the learned one. The
-estimate itself is left alone: its 1σ is what was wrong.
+V₀ the per-view model the refinement solved (s = 1, each view alone) and V the learned one,
+over all views. The estimate itself is left alone: its 1σ is what was wrong.
 
 On ``line_ridge`` (the simulated arm's error drawn at 8 points of the sweep and blended, so
-about six neighbouring views share it) the per-view 1σ left the hand-eye off by up to 3.8 of
-it over seeds 0-9; with the robot's error made independent per view, or with its true
-sharing in the sandwich, the worst was about 2.4.
+that about six neighbouring views share it) the per-view 1σ left the hand-eye off by up to
+3.79 of it over seeds 0-9 (3.29 and 3.79 on seeds 3 and 6, both mostly the robot's error);
+the same sandwich with the simulator's own sharing gives 1.89 and 2.40 there.
 """
 
 from __future__ import annotations
@@ -48,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
-from scipy.optimize import minimize
+from scipy.optimize import minimize_scalar
 from scipy.spatial.distance import cdist
 
 from ...geometry import FloatArray
@@ -56,16 +55,17 @@ from ...regions import CLUSTER_ANGLE_RAD, CLUSTER_RADIUS_M, DISTANCE_BLOCK
 
 #: Most views whose residuals the likelihood search uses (evenly spaced through the
 #: recording); the sandwich uses all. Each evaluation factors a (2N, 2N) matrix.
-MAX_FIT_VIEWS = 240
+MAX_FIT_VIEWS = 100
 #: Fewest views for the search: fewer cannot tell a shared error from the corner noise.
 MIN_FIT_VIEWS = 12
-#: Starting lengths of the search, log-spaced between the shortest and the longest allowed.
-STARTS = 3
-#: Relative change of the likelihood at which the search stops (hundredths of a unit of
-#: log-likelihood on a few hundred residuals).
-FTOL = 1e-5
-#: Most quasi-Newton iterations of each search.
-MAX_ITERATIONS = 40
+#: The shortest ℓ searched, as a fraction of the poses' median nearest-neighbour separation:
+#: neighbours then share e⁻¹⁰ of their error, each view alone.
+SHORTEST = 0.1
+#: Lengths ℓ tried, log-spaced from the shortest to the longest (neighbouring ones about a
+#: factor 2 apart on a sweep).
+LENGTHS = 8
+#: How closely log s is found at each length.
+NOISE_TOLERANCE = 0.02
 #: Bounds of the corner-noise variance factor s.
 NOISE_FACTOR_BOUNDS = (1e-3, 1e4)
 
@@ -78,20 +78,17 @@ class SharedPoseError:
     ----------
     noise_factor : float
         s, the corners' variance over their fitted covariance.
-    shared_fraction : float
-        f, the share of each view's pose error that its neighbours share.
     length : float
         ℓ, the separation over which they share it, in the units of :func:`pose_separations`
         (1 is 5 cm of flange travel or 8 deg of flange turn).
     likelihood_gain : float
-        Restricted log-likelihood of the learned model over the per-view one (f = 0, s
-        learned alike).
+        Restricted log-likelihood of the learned model over the per-view one (s learned
+        alike).
     covariance : ndarray, shape (G, G)
         Of the refinement's estimate of the global parameters under the learned model.
     """
 
     noise_factor: float
-    shared_fraction: float
     length: float
     likelihood_gain: float
     covariance: FloatArray
@@ -110,7 +107,8 @@ def pose_separations(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
 
 
 class _Likelihood:
-    """The negative restricted log-likelihood of (log s, f, log ℓ) on some views."""
+    """The negative restricted log-likelihood of (log s, log ℓ) on some views; ℓ None: each
+    view's pose error alone."""
 
     def __init__(
         self,
@@ -125,18 +123,16 @@ class _Likelihood:
         flat = A.reshape(M * rows, 6)
         self.y, self.X = y.ravel(), X.reshape(-1, X.shape[2])
         self.pose = flat @ flat.T  # (MK, MK): A_i A_jᵀ
-        self.expand = np.repeat(np.arange(M), rows)  # view of each row
-        self.D = D[np.ix_(self.expand, self.expand)]
-        self.same = self.expand[:, None] == self.expand[None]
+        expand = np.repeat(np.arange(M), rows)  # the view of each row
+        self.D = D[np.ix_(expand, expand)]
         self.prior_information = J_prior.T @ J_prior
         self.prior_gradient = J_prior.T @ prior
         self.prior_square = float(prior @ prior)
 
-    def __call__(self, p: FloatArray) -> float:
-        log_s, f, log_length = p
-        # V = s·I + ((1 − f)·[same view] + f·exp(−d / ℓ)) ∘ A Aᵀ
-        mix = f * np.exp(-self.D / math.exp(log_length)) + (1.0 - f) * self.same
-        V = mix * self.pose
+    def __call__(self, log_s: float, log_length: float | None) -> float:
+        # V = s·I + exp(−d / ℓ) ∘ A Aᵀ
+        K = (self.D == 0.0) if log_length is None else np.exp(-self.D / math.exp(log_length))
+        V = K * self.pose
         V[np.diag_indices_from(V)] += math.exp(log_s)
         try:
             factor = cho_factor(V)
@@ -153,27 +149,25 @@ class _Likelihood:
         return 0.5 * (log_det_V + float(log_det_H) + quadratic)
 
 
-def _fit(likelihood: _Likelihood, shortest: float, longest: float) -> tuple[FloatArray, float]:
-    """The REML estimate of (log s, f, log ℓ) and its gain over the per-view model."""
-    s_bounds = (math.log(NOISE_FACTOR_BOUNDS[0]), math.log(NOISE_FACTOR_BOUNDS[1]))
-    length_bounds = (math.log(shortest), math.log(longest))
-    per_view = minimize(
-        likelihood,
-        [0.0, 0.0, length_bounds[0]],
-        bounds=[s_bounds, (0.0, 0.0), length_bounds],
-        options={"ftol": FTOL, "maxiter": MAX_ITERATIONS},
+def _best_noise(likelihood: _Likelihood, log_length: float | None) -> tuple[float, float]:
+    """The REML log s at a given ℓ (None: each view alone) and its negative likelihood."""
+    found = minimize_scalar(
+        lambda log_s: likelihood(log_s, log_length),
+        bounds=(math.log(NOISE_FACTOR_BOUNDS[0]), math.log(NOISE_FACTOR_BOUNDS[1])),
+        method="bounded",
+        options={"xatol": NOISE_TOLERANCE},
     )
-    best = per_view
-    for start in np.linspace(*length_bounds, STARTS):
-        found = minimize(
-            likelihood,
-            [0.0, 0.5, start],
-            bounds=[s_bounds, (0.0, 1.0), length_bounds],
-            options={"ftol": FTOL, "maxiter": MAX_ITERATIONS},
-        )
-        if found.fun < best.fun:
-            best = found
-    return np.asarray(best.x), float(per_view.fun - best.fun)
+    return float(found.x), float(found.fun)
+
+
+def _fit(likelihood: _Likelihood, shortest: float, longest: float) -> tuple[float, float, float]:
+    """The REML estimate (s, ℓ), ℓ on a grid of :data:`LENGTHS` log-spaced from ``shortest``
+    to ``longest``, and its log-likelihood gain over the per-view model."""
+    per_view = _best_noise(likelihood, None)[1]
+    grid = np.linspace(math.log(shortest), math.log(longest), LENGTHS)
+    fits = [(*_best_noise(likelihood, float(log_length)), float(log_length)) for log_length in grid]
+    log_s, value, log_length = min(fits, key=lambda fit: fit[1])
+    return math.exp(log_s), math.exp(log_length), per_view - value
 
 
 def _learn(
@@ -183,9 +177,9 @@ def _learn(
     prior: FloatArray,
     J_prior: FloatArray,
     T_base_flange: FloatArray,
-) -> tuple[FloatArray, float] | None:
-    """:func:`_fit` on at most :data:`MAX_FIT_VIEWS` views; None where too few views or
-    poses that do not differ leave nothing to learn."""
+) -> tuple[float, float, float] | None:
+    """:func:`_fit` on at most :data:`MAX_FIT_VIEWS` views spread through the recording;
+    None where too few views or poses that do not differ leave nothing to learn."""
     M = len(residuals)
     if M < MIN_FIT_VIEWS:
         return None
@@ -198,22 +192,19 @@ def _learn(
     if not positive.size or longest <= float(np.median(positive)):
         return None
     likelihood = _Likelihood(residuals[pick], J_global[pick], J_pose[pick], D, prior, J_prior)
-    return _fit(likelihood, float(np.median(positive)), longest)
+    return _fit(likelihood, SHORTEST * float(np.median(positive)), longest)
 
 
-def _meat(
-    Z: FloatArray, A: FloatArray, T: FloatArray, s: float, f: float, length: float
-) -> FloatArray:
+def _meat(Z: FloatArray, A: FloatArray, T: FloatArray, s: float, length: float) -> FloatArray:
     """Xᵀ V₀⁻¹ V V₀⁻¹ X (G, G) from Z = V₀⁻¹ X per view (M, K, G): the views' pairs a block
     of rows at a time (no (M, M) array)."""
     Q = np.einsum("mkg,mkl->mgl", Z, A)  # (M, G, 6): Z_jᵀ A_j
-    meat = s * np.einsum("mkg,mkh->gh", Z, Z) + (1.0 - f) * np.einsum("mgl,mhl->gh", Q, Q)
-    if f > 0.0:
-        M = len(T)
-        for start in range(0, M, DISTANCE_BLOCK):
-            rows = slice(start, min(start + DISTANCE_BLOCK, M))
-            KQ = np.exp(-pose_separations(T[rows], T) / length) @ Q.reshape(M, -1)
-            meat += f * np.einsum("igl,ihl->gh", Q[rows], KQ.reshape(Q[rows].shape))
+    meat = s * np.einsum("mkg,mkh->gh", Z, Z)
+    M = len(T)
+    for start in range(0, M, DISTANCE_BLOCK):
+        rows = slice(start, min(start + DISTANCE_BLOCK, M))
+        KQ = np.exp(-pose_separations(T[rows], T) / length) @ Q.reshape(M, -1)
+        meat += np.einsum("igl,ihl->gh", Q[rows], KQ.reshape(Q[rows].shape))
     return np.asarray(meat)
 
 
@@ -247,25 +238,23 @@ def shared_pose_error(
         recording): taken as it is, without a search.
     """
     if learned is not None:
-        log_s, f = math.log(learned.noise_factor), learned.shared_fraction
-        log_length, gain = math.log(learned.length), learned.likelihood_gain
+        noise, length, gain = learned.noise_factor, learned.length, learned.likelihood_gain
     else:
         fitted = _learn(residuals, J_global, J_pose, prior, J_prior, T_base_flange)
         if fitted is None:
             return None
-        (log_s, f, log_length), gain = fitted
+        noise, length, gain = fitted
     # The refinement's model V₀ = I + diag_j(A_j A_jᵀ): Z_j = V₀_j⁻¹ X_j.
     V0 = np.eye(residuals.shape[1]) + J_pose @ J_pose.transpose(0, 2, 1)
     Z = np.linalg.solve(V0, J_global)
     information = J_prior.T @ J_prior
     H = np.einsum("mkg,mkh->gh", J_global, Z) + information
-    meat = _meat(Z, J_pose, T_base_flange, math.exp(log_s), f, math.exp(log_length))
+    meat = _meat(Z, J_pose, T_base_flange, noise, length)
     H_inv = np.linalg.inv(H)
     covariance = H_inv @ (meat + information) @ H_inv
     return SharedPoseError(
-        noise_factor=math.exp(log_s),
-        shared_fraction=float(f),
-        length=math.exp(log_length),
+        noise_factor=noise,
+        length=length,
         likelihood_gain=gain,
         covariance=np.asarray(0.5 * (covariance + covariance.T)),
     )

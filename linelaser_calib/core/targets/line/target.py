@@ -127,7 +127,6 @@ def _solution(
         sigma_rotation_rad=extra.pop("sigma_rotation_rad", None),
         warnings=extra.pop("warnings", []),
         history=extra.pop("history", {}),
-        sigma_widening=extra.pop("sigma_widening", None),
         subset_start=extra.pop("subset_start", None),
         sample_fits=[
             SampleFit(f.index, f.stamp_ns, f.T_base_flange, f.points, f.corner_xz) for f in features
@@ -432,18 +431,8 @@ class LineTarget:
         # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
         # of the same estimate under it, where wider.
         shared = shared_error(refined, c_used, cov_used, T_used, X0, config, free_scales, learned)
-        history: dict[str, list[float]] = {"refine_cost": list(refined.cost_history)}
-        shared_widening = None
         if shared is not None:
-            per_view = sigma
-            sigma = np.maximum(per_view, np.sqrt(np.diag(shared.covariance)))
-            shared_widening = sigma[:6] / per_view[:6]
-            history["shared_pose_error"] = [
-                shared.noise_factor,
-                shared.shared_fraction,
-                shared.length,
-                shared.likelihood_gain,
-            ]
+            sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
         rejections = [
             Rejection(features[i].index, features[i].stamp_ns, "outlier", reason)
             for i, reason in outcome.dropped
@@ -458,8 +447,7 @@ class LineTarget:
             sigma_translation_m=sigma[3:6],
             sigma_rotation_rad=sigma[:3],
             warnings=warnings,
-            history=history,
-            sigma_widening=shared_widening,
+            history={"refine_cost": list(refined.cost_history)},
             subset_start=shared,
         )
 
