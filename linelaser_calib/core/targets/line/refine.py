@@ -17,6 +17,8 @@ the hand-eye; about the origin the two are told apart by the corners' spread in 
 The shared block solver (:mod:`linelaser_calib.core.solver`) minimises it, each view's
 correction eliminated (Schur complement). The information of the hand-eye from the views
 alone (prior left out, line and corrections marginalised) feeds the observability diagnosis.
+Its covariance is the per-view model's; :func:`shared_error` gives the estimate's covariance
+where neighbouring views share their pose error (:mod:`.shared_pose`).
 """
 
 from __future__ import annotations
