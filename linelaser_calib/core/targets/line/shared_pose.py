@@ -83,16 +83,12 @@ class SharedPoseError:
     length : float
         ℓ, the separation over which they share it, in the units of :func:`pose_separations`
         (1 is 5 cm of flange travel or 8 deg of flange turn).
-    likelihood_gain : float
-        Restricted log-likelihood of the learned model over the per-view one (s learned
-        alike).
     covariance : ndarray, shape (G, G)
         Of the refinement's estimate of the global parameters under the learned model.
     """
 
     noise_factor: float
     length: float
-    likelihood_gain: float
     covariance: FloatArray
 
 
@@ -109,8 +105,7 @@ def pose_separations(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
 
 
 class _Likelihood:
-    """The negative restricted log-likelihood of (log s, log ℓ) on some views; ℓ None: each
-    view's pose error alone."""
+    """The negative restricted log-likelihood of (log s, log ℓ) on some views."""
 
     def __init__(
         self,
@@ -131,10 +126,9 @@ class _Likelihood:
         self.prior_gradient = J_prior.T @ prior
         self.prior_square = float(prior @ prior)
 
-    def __call__(self, log_s: float, log_length: float | None) -> float:
+    def __call__(self, log_s: float, log_length: float) -> float:
         # V = s·I + exp(−d / ℓ) ∘ A Aᵀ
-        K = (self.D == 0.0) if log_length is None else np.exp(-self.D / math.exp(log_length))
-        V = K * self.pose
+        V = np.exp(-self.D / math.exp(log_length)) * self.pose
         V[np.diag_indices_from(V)] += math.exp(log_s)
         try:
             factor = cho_factor(V)
@@ -151,8 +145,8 @@ class _Likelihood:
         return 0.5 * (log_det_V + float(log_det_H) + quadratic)
 
 
-def _best_noise(likelihood: _Likelihood, log_length: float | None) -> tuple[float, float]:
-    """The REML log s at a given ℓ (None: each view alone) and its negative likelihood."""
+def _best_noise(likelihood: _Likelihood, log_length: float) -> tuple[float, float]:
+    """The REML log s at a given ℓ and its negative likelihood."""
     found = minimize_scalar(
         lambda log_s: likelihood(log_s, log_length),
         bounds=(math.log(NOISE_FACTOR_BOUNDS[0]), math.log(NOISE_FACTOR_BOUNDS[1])),
@@ -162,14 +156,13 @@ def _best_noise(likelihood: _Likelihood, log_length: float | None) -> tuple[floa
     return float(found.x), float(found.fun)
 
 
-def _fit(likelihood: _Likelihood, shortest: float, longest: float) -> tuple[float, float, float]:
+def _fit(likelihood: _Likelihood, shortest: float, longest: float) -> tuple[float, float]:
     """The REML estimate (s, ℓ), ℓ on a grid of :data:`LENGTHS` log-spaced from ``shortest``
-    to ``longest``, and its log-likelihood gain over the per-view model."""
-    per_view = _best_noise(likelihood, None)[1]
+    to ``longest``."""
     grid = np.linspace(math.log(shortest), math.log(longest), LENGTHS)
     fits = [(*_best_noise(likelihood, float(log_length)), float(log_length)) for log_length in grid]
-    log_s, value, log_length = min(fits, key=lambda fit: fit[1])
-    return math.exp(log_s), math.exp(log_length), per_view - value
+    log_s, _, log_length = min(fits, key=lambda fit: fit[1])
+    return math.exp(log_s), math.exp(log_length)
 
 
 def _learn(
@@ -179,7 +172,7 @@ def _learn(
     prior: FloatArray,
     J_prior: FloatArray,
     T_base_flange: FloatArray,
-) -> tuple[float, float, float] | None:
+) -> tuple[float, float] | None:
     """:func:`_fit` on at most :data:`MAX_FIT_VIEWS` views spread through the recording;
     None where too few views or poses that do not differ leave nothing to learn."""
     M = len(residuals)
@@ -240,12 +233,12 @@ def shared_pose_error(
         recording): taken as it is, without a search.
     """
     if learned is not None:
-        noise, length, gain = learned.noise_factor, learned.length, learned.likelihood_gain
+        noise, length = learned.noise_factor, learned.length
     else:
         fitted = _learn(residuals, J_global, J_pose, prior, J_prior, T_base_flange)
         if fitted is None:
             return None
-        noise, length, gain = fitted
+        noise, length = fitted
     # The refinement's model V₀ = I + diag_j(A_j A_jᵀ): Z_j = V₀_j⁻¹ X_j.
     V0 = np.eye(residuals.shape[1]) + J_pose @ J_pose.transpose(0, 2, 1)
     Z = np.linalg.solve(V0, J_global)
@@ -257,6 +250,5 @@ def shared_pose_error(
     return SharedPoseError(
         noise_factor=noise,
         length=length,
-        likelihood_gain=gain,
         covariance=np.asarray(0.5 * (covariance + covariance.T)),
     )
