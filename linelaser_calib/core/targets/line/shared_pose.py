@@ -104,6 +104,11 @@ def pose_separations(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
     return np.asarray(step + chord / (math.sqrt(2.0) * CLUSTER_ANGLE_RAD))
 
 
+def correlation(separation: FloatArray, length: float) -> FloatArray:
+    """The correlation exp(−d / ℓ) of two views' pose errors ``separation`` apart."""
+    return np.asarray(np.exp(-separation / length))
+
+
 class _Likelihood:
     """The negative restricted log-likelihood of (log s, log ℓ) on some views."""
 
@@ -128,7 +133,7 @@ class _Likelihood:
 
     def __call__(self, log_s: float, log_length: float) -> float:
         # V = s·I + exp(−d / ℓ) ∘ A Aᵀ
-        V = np.exp(-self.D / math.exp(log_length)) * self.pose
+        V = correlation(self.D, math.exp(log_length)) * self.pose
         V[np.diag_indices_from(V)] += math.exp(log_s)
         try:
             factor = cho_factor(V)
@@ -198,7 +203,7 @@ def _meat(Z: FloatArray, A: FloatArray, T: FloatArray, s: float, length: float) 
     M = len(T)
     for start in range(0, M, DISTANCE_BLOCK):
         rows = slice(start, min(start + DISTANCE_BLOCK, M))
-        KQ = np.exp(-pose_separations(T[rows], T) / length) @ Q.reshape(M, -1)
+        KQ = correlation(pose_separations(T[rows], T), length) @ Q.reshape(M, -1)
         meat += np.einsum("igl,ihl->gh", Q[rows], KQ.reshape(Q[rows].shape))
     return np.asarray(meat)
 
