@@ -10,7 +10,11 @@ from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SolveContext
 from linelaser_calib.core.targets.line.config import LineConfig
-from linelaser_calib.core.targets.line.shared_pose import pose_separations, shared_pose_error
+from linelaser_calib.core.targets.line.shared_pose import (
+    ViewsLinearised,
+    pose_separations,
+    shared_pose_error,
+)
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 
 #: Views of the synthetic sweep, their step (m) and the global parameters.
@@ -35,6 +39,10 @@ def _draw(rng: np.random.Generator, A: np.ndarray, K: np.ndarray) -> np.ndarray:
     return np.einsum("mkl,ml->mk", A, e) + rng.normal(size=(len(K), 2))
 
 
+def _views(y: np.ndarray, X: np.ndarray, A: np.ndarray, T: np.ndarray) -> ViewsLinearised:
+    return ViewsLinearised(y, X, A, np.zeros(0), np.zeros((0, GLOBALS)), T)
+
+
 def _per_view(X: np.ndarray, A: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The per-view estimate (each view's pose error alone, as the refinement solves it) and
     the covariance that model states."""
@@ -57,10 +65,7 @@ def test_a_shared_pose_error_is_learned_and_counted_in_the_1_sigma() -> None:
     spread = np.std(estimates, axis=0)
     assert stated is not None
     assert np.all(spread > 1.5 * np.sqrt(np.diag(stated)))  # the per-view 1σ is too small
-    learned = [
-        shared_pose_error(_draw(rng, A, K), X, A, np.zeros(0), np.zeros((0, GLOBALS)), T)
-        for _ in range(4)
-    ]
+    learned = [shared_pose_error(_views(_draw(rng, A, K), X, A, T)) for _ in range(4)]
     sigma = np.mean([np.sqrt(np.diag(s.covariance)) for s in learned if s is not None], axis=0)
     assert np.all(np.abs(sigma / spread - 1.0) < 0.3), sigma / spread
 
@@ -69,7 +74,7 @@ def test_independent_pose_errors_keep_the_per_view_1_sigma() -> None:
     rng = np.random.default_rng(2)
     T, X, A = _sweep(rng)
     y = _draw(rng, A, np.eye(VIEWS))
-    learned = shared_pose_error(y, X, A, np.zeros(0), np.zeros((0, GLOBALS)), T)
+    learned = shared_pose_error(_views(y, X, A, T))
     assert learned is not None
     ratio = np.sqrt(np.diag(learned.covariance) / np.diag(_per_view(X, A, y)[1]))
     assert np.all(np.abs(ratio - 1.0) < 0.25), ratio

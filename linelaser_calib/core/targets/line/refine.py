@@ -40,7 +40,7 @@ from ...solver.lm import Residuals
 from ...types import FloatArray
 from .config import LineConfig
 from .model import N_LINE, Line, LineResiduals, line_residuals, retract_line
-from .shared_pose import SharedPoseError, shared_pose_error
+from .shared_pose import SharedPoseError, ViewsLinearised, shared_pose_error
 
 #: Global parameters without the scales: hand-eye (6) and line (4).
 N_GLOBAL = 6 + N_LINE
@@ -179,6 +179,8 @@ class LineRefinement:
     cost_history : list of float
     iterations : int
     converged : bool
+    problem : _LineProblem
+        The problem solved (for :func:`shared_error`).
     """
 
     T_flange_sensor: FloatArray
@@ -193,26 +195,7 @@ class LineRefinement:
     cost_history: list[float]
     iterations: int
     converged: bool
-
-
-def _problem(
-    corners_xz: FloatArray,
-    covariances_xz: FloatArray,
-    T_base_flange: FloatArray,
-    T_flange_sensor_prior: FloatArray | None,
-    config: LineConfig,
-    free_scales: tuple[bool, bool],
-) -> _LineProblem:
-    c = np.asarray(corners_xz, dtype=np.float64)
-    return _LineProblem(
-        c,
-        whitening_matrices(covariances_xz, config.corner_sigma_floor_m),
-        np.asarray(T_base_flange, dtype=np.float64),
-        None if T_flange_sensor_prior is None else np.asarray(T_flange_sensor_prior),
-        config,
-        float(np.median(np.hypot(c[:, 0], c[:, 1]))),
-        free_scales,
-    )
+    problem: _LineProblem
 
 
 def refine_line(
@@ -251,7 +234,15 @@ def refine_line(
         Non-finite values.
     """
     c = np.asarray(corners_xz, dtype=np.float64)
-    problem = _problem(c, covariances_xz, T_base_flange, T_flange_sensor_prior, config, free_scales)
+    problem = _LineProblem(
+        c,
+        whitening_matrices(covariances_xz, config.corner_sigma_floor_m),
+        np.asarray(T_base_flange, dtype=np.float64),
+        None if T_flange_sensor_prior is None else np.asarray(T_flange_sensor_prior),
+        config,
+        float(np.median(np.hypot(c[:, 0], c[:, 1]))),
+        free_scales,
+    )
     R_L, offset = line0.frame()
     start = _State(
         np.asarray(T_flange_sensor0, dtype=np.float64),
@@ -292,39 +283,31 @@ def refine_line(
         cost_history=solution.cost_history,
         iterations=solution.iterations,
         converged=solution.converged,
+        problem=problem,
     )
 
 
 def shared_error(
-    refined: LineRefinement,
-    corners_xz: FloatArray,
-    covariances_xz: FloatArray,
-    T_base_flange: FloatArray,
-    T_flange_sensor_prior: FloatArray | None,
-    config: LineConfig,
-    free_scales: tuple[bool, bool],
-    learned: SharedPoseError | None = None,
+    refined: LineRefinement, learned: SharedPoseError | None = None
 ) -> SharedPoseError | None:
-    """How the robot's pose error of the views ``refined`` solved (the same arguments as
-    :func:`refine_line`) is shared between neighbours, and the 1σ of its estimate under that
-    (:func:`~.shared_pose.shared_pose_error`, ``learned`` the sharing learned on a superset
-    of the views; its covariance in the order of :attr:`LineRefinement.covariance`)."""
-    problem = _problem(
-        corners_xz, covariances_xz, T_base_flange, T_flange_sensor_prior, config, free_scales
-    )
+    """How the robot's pose error of the views ``refined`` solved is shared between
+    neighbours, and the 1σ of its estimate under that (:func:`~.shared_pose.
+    shared_pose_error`, ``learned`` the sharing learned on a superset of the views; its
+    covariance in the order of :attr:`LineRefinement.covariance`)."""
+    problem = refined.problem
     R_L, offset = refined.line.frame()
-    state = _State(
-        refined.T_flange_sensor, R_L, offset, np.zeros((len(corners_xz), 6)), refined.scales
-    )
-    lin = problem.linearise(state)
+    pose = np.zeros((len(problem.corners_xz), 6))
+    lin = problem.linearise(_State(refined.T_flange_sensor, R_L, offset, pose, refined.scales))
     J_prior = lin.global_prior_jacobian
     assert J_prior is not None
     return shared_pose_error(
-        lin.residuals.points,
-        lin.J_global,
-        lin.J_local / problem.precision,
-        lin.residuals.global_prior,
-        J_prior,
-        problem.T_base_flange,
+        ViewsLinearised(
+            lin.residuals.points,
+            lin.J_global,
+            lin.J_local / problem.precision,
+            lin.residuals.global_prior,
+            J_prior,
+            problem.T_base_flange,
+        ),
         learned,
     )

@@ -46,6 +46,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve
@@ -70,6 +71,31 @@ LENGTHS = 8
 NOISE_TOLERANCE = 0.02
 #: Bounds of the corner-noise variance factor s.
 NOISE_FACTOR_BOUNDS = (1e-3, 1e4)
+
+
+class ViewsLinearised(NamedTuple):
+    """The views' residuals and Jacobians at the solution, every pose correction at zero.
+
+    Attributes
+    ----------
+    residuals : ndarray, shape (M, K)
+        Whitened residuals of each view.
+    J_global : ndarray, shape (M, K, G)
+        Their Jacobian of the global parameters.
+    J_pose : ndarray, shape (M, K, 6)
+        Their Jacobian of the view's pose correction [ω, τ], times the robot's prior 1σ.
+    prior, J_prior : ndarray, shapes (R,) and (R, G)
+        Whitened residuals and Jacobian of the global parameters' prior (R may be 0).
+    T_base_flange : ndarray, shape (M, 4, 4)
+        The views' flange poses.
+    """
+
+    residuals: FloatArray
+    J_global: FloatArray
+    J_pose: FloatArray
+    prior: FloatArray
+    J_prior: FloatArray
+    T_base_flange: FloatArray
 
 
 @dataclass(frozen=True)
@@ -170,28 +196,28 @@ def _fit(likelihood: _Likelihood, shortest: float, longest: float) -> tuple[floa
     return math.exp(log_s), math.exp(log_length)
 
 
-def _learn(
-    residuals: FloatArray,
-    J_global: FloatArray,
-    J_pose: FloatArray,
-    prior: FloatArray,
-    J_prior: FloatArray,
-    T_base_flange: FloatArray,
-) -> tuple[float, float] | None:
+def _learn(views: ViewsLinearised) -> tuple[float, float] | None:
     """:func:`_fit` on at most :data:`MAX_FIT_VIEWS` views spread through the recording;
     None where too few views or poses that do not differ leave nothing to learn."""
-    M = len(residuals)
+    M = len(views.residuals)
     if M < MIN_FIT_VIEWS:
         return None
     pick = np.unique(np.linspace(0, M - 1, min(M, MAX_FIT_VIEWS)).round().astype(int))
-    T = T_base_flange[pick]
+    T = views.T_base_flange[pick]
     D = pose_separations(T, T)
     nearest = np.sort(D, axis=1)[:, 1]
     positive = nearest[nearest > 0.0]
     longest = float(D.max())
     if not positive.size or longest <= float(np.median(positive)):
         return None
-    likelihood = _Likelihood(residuals[pick], J_global[pick], J_pose[pick], D, prior, J_prior)
+    likelihood = _Likelihood(
+        views.residuals[pick],
+        views.J_global[pick],
+        views.J_pose[pick],
+        D,
+        views.prior,
+        views.J_prior,
+    )
     return _fit(likelihood, SHORTEST * float(np.median(positive)), longest)
 
 
@@ -209,47 +235,26 @@ def _meat(Z: FloatArray, A: FloatArray, T: FloatArray, s: float, length: float) 
 
 
 def shared_pose_error(
-    residuals: FloatArray,
-    J_global: FloatArray,
-    J_pose: FloatArray,
-    prior: FloatArray,
-    J_prior: FloatArray,
-    T_base_flange: FloatArray,
-    learned: SharedPoseError | None = None,
+    views: ViewsLinearised, learned: SharedPoseError | None = None
 ) -> SharedPoseError | None:
     """The robot's error shared by neighbouring views and the 1σ of the per-view estimate
     under it (see the module docstring); None with fewer than :data:`MIN_FIT_VIEWS` views
-    or poses that do not differ.
-
-    Parameters
-    ----------
-    residuals : ndarray, shape (M, K)
-        Whitened residuals of each view with its pose correction at zero.
-    J_global : ndarray, shape (M, K, G)
-        Their Jacobian of the global parameters.
-    J_pose : ndarray, shape (M, K, 6)
-        Their Jacobian of the view's pose correction [ω, τ], times the robot's prior 1σ.
-    prior, J_prior : ndarray, shapes (R,) and (R, G)
-        Whitened residuals and Jacobian of the global parameters' prior (R may be 0).
-    T_base_flange : ndarray, shape (M, 4, 4)
-        The views' flange poses.
-    learned : SharedPoseError, optional
-        The sharing learned on a superset of the views (the self-check's subsets of a
-        recording): taken as it is, without a search.
+    or poses that do not differ. ``learned``: the sharing learned on a superset of the views
+    (the self-check's subsets of a recording), taken as it is, without a search.
     """
     if learned is not None:
         noise, length = learned.noise_factor, learned.length
     else:
-        fitted = _learn(residuals, J_global, J_pose, prior, J_prior, T_base_flange)
+        fitted = _learn(views)
         if fitted is None:
             return None
         noise, length = fitted
     # The refinement's model V₀ = I + diag_j(A_j A_jᵀ): Z_j = V₀_j⁻¹ X_j.
-    V0 = np.eye(residuals.shape[1]) + J_pose @ J_pose.transpose(0, 2, 1)
-    Z = np.linalg.solve(V0, J_global)
-    information = J_prior.T @ J_prior
-    H = np.einsum("mkg,mkh->gh", J_global, Z) + information
-    meat = _meat(Z, J_pose, T_base_flange, noise, length)
+    A = views.J_pose
+    Z = np.linalg.solve(np.eye(A.shape[1]) + A @ A.transpose(0, 2, 1), views.J_global)
+    information = views.J_prior.T @ views.J_prior
+    H = np.einsum("mkg,mkh->gh", views.J_global, Z) + information
+    meat = _meat(Z, A, views.T_base_flange, noise, length)
     H_inv = np.linalg.inv(H)
     covariance = H_inv @ (meat + information) @ H_inv
     return SharedPoseError(

@@ -394,7 +394,7 @@ class LineTarget:
         context.progress("refine", 1, 1)
         refined = outcome.outcome
         used = [features[i] for i in outcome.kept]
-        c_used, cov_used, T_used = _stack(used)
+        c_used, _, T_used = _stack(used)
         X = refined.T_flange_sensor
         scales = [
             None if sigma is None else float(s)
@@ -430,7 +430,7 @@ class LineTarget:
         sigma = widen * np.sqrt(np.diag(refined.covariance))
         # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
         # of the same estimate under it, where wider.
-        shared = shared_error(refined, c_used, cov_used, T_used, X0, config, free_scales, learned)
+        shared = shared_error(refined, learned)
         if shared is not None:
             sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
         rejections = [
