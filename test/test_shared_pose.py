@@ -40,7 +40,7 @@ def _draw(rng: np.random.Generator, A: np.ndarray, K: np.ndarray) -> np.ndarray:
 
 
 def _views(y: np.ndarray, X: np.ndarray, A: np.ndarray, T: np.ndarray) -> ViewsLinearised:
-    return ViewsLinearised(y, X, A, np.zeros(0), np.zeros((0, GLOBALS)), T)
+    return ViewsLinearised(y, X, A, np.ones(6), np.zeros(0), np.zeros((0, GLOBALS)), T)
 
 
 def _per_view(X: np.ndarray, A: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -305,6 +305,7 @@ def shared_error(
             lin.residuals.points,
             lin.J_global,
             lin.J_local / problem.precision,
+            1.0 / problem.precision,
             lin.residuals.global_prior,
             J_prior,
             problem.T_base_flange,

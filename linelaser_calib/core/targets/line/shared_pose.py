@@ -84,6 +84,8 @@ class ViewsLinearised(NamedTuple):
         Their Jacobian of the global parameters.
     J_pose : ndarray, shape (M, K, 6)
         Their Jacobian of the view's pose correction [ω, τ], times the robot's prior 1σ.
+    robot_sigma : ndarray, shape (6,)
+        That prior 1σ ([σ_r] * 3 + [σ_t] * 3; rad, m).
     prior, J_prior : ndarray, shapes (R,) and (R, G)
         Whitened residuals and Jacobian of the global parameters' prior (R may be 0).
     T_base_flange : ndarray, shape (M, 4, 4)
@@ -93,6 +95,7 @@ class ViewsLinearised(NamedTuple):
     residuals: FloatArray
     J_global: FloatArray
     J_pose: FloatArray
+    robot_sigma: FloatArray
     prior: FloatArray
     J_prior: FloatArray
     T_base_flange: FloatArray
@@ -111,11 +114,15 @@ class SharedPoseError:
         (1 is 5 cm of flange travel or 8 deg of flange turn).
     covariance : ndarray, shape (G, G)
         Of the refinement's estimate of the global parameters under the learned model.
+    robot_sigma : ndarray, shape (6,)
+        The robot's prior 1σ ([σ_r] * 3 + [σ_t] * 3; rad, m) the sharing was learned with:
+        a solve with another prior (the self-check's plain model) learns its own.
     """
 
     noise_factor: float
     length: float
     covariance: FloatArray
+    robot_sigma: FloatArray
 
 
 def pose_separations(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
@@ -240,9 +247,10 @@ def shared_pose_error(
     """The robot's error shared by neighbouring views and the 1σ of the per-view estimate
     under it (see the module docstring); None with fewer than :data:`MIN_FIT_VIEWS` views
     or poses that do not differ. ``learned``: the sharing learned on a superset of the views
-    (the self-check's subsets of a recording), taken as it is, without a search.
+    (the self-check's subsets of a recording), taken as it is, without a search, where it was
+    learned with the same robot prior.
     """
-    if learned is not None:
+    if learned is not None and np.array_equal(learned.robot_sigma, views.robot_sigma):
         noise, length = learned.noise_factor, learned.length
     else:
         fitted = _learn(views)
@@ -261,4 +269,5 @@ def shared_pose_error(
         noise_factor=noise,
         length=length,
         covariance=np.asarray(0.5 * (covariance + covariance.T)),
+        robot_sigma=np.asarray(views.robot_sigma, dtype=np.float64),
     )
