@@ -17,6 +17,8 @@ the hand-eye; about the origin the two are told apart by the corners' spread in 
 The shared block solver (:mod:`linelaser_calib.core.solver`) minimises it, each view's
 correction eliminated (Schur complement). The information of the hand-eye from the views
 alone (prior left out, line and corrections marginalised) feeds the observability diagnosis.
+Its covariance is the per-view model's; :func:`shared_error` gives the estimate's covariance
+where neighbouring views share their pose error (:mod:`.shared_pose`).
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from ...solver.lm import Residuals
 from ...types import FloatArray
 from .config import LineConfig
 from .model import N_LINE, Line, LineResiduals, line_residuals, retract_line
+from .shared_pose import SharedPoseError, ViewsLinearised, shared_pose_error
 
 #: Global parameters without the scales: hand-eye (6) and line (4).
 N_GLOBAL = 6 + N_LINE
@@ -176,6 +179,8 @@ class LineRefinement:
     cost_history : list of float
     iterations : int
     converged : bool
+    problem : _LineProblem
+        The problem solved (for :func:`shared_error`).
     """
 
     T_flange_sensor: FloatArray
@@ -190,6 +195,7 @@ class LineRefinement:
     cost_history: list[float]
     iterations: int
     converged: bool
+    problem: _LineProblem
 
 
 def refine_line(
@@ -277,4 +283,32 @@ def refine_line(
         cost_history=solution.cost_history,
         iterations=solution.iterations,
         converged=solution.converged,
+        problem=problem,
+    )
+
+
+def shared_error(
+    refined: LineRefinement, learned: SharedPoseError | None = None
+) -> SharedPoseError | None:
+    """How the robot's pose error of the views ``refined`` solved is shared between
+    neighbours, and the 1σ of its estimate under that (:func:`~.shared_pose.
+    shared_pose_error`, ``learned`` the sharing learned on a superset of the views; its
+    covariance in the order of :attr:`LineRefinement.covariance`)."""
+    problem = refined.problem
+    R_L, offset = refined.line.frame()
+    pose = np.zeros((len(problem.corners_xz), 6))
+    lin = problem.linearise(_State(refined.T_flange_sensor, R_L, offset, pose, refined.scales))
+    J_prior = lin.global_prior_jacobian
+    assert J_prior is not None
+    return shared_pose_error(
+        ViewsLinearised(
+            lin.residuals.points,
+            lin.J_global,
+            lin.J_local / problem.precision,
+            1.0 / problem.precision,
+            lin.residuals.global_prior,
+            J_prior,
+            problem.T_base_flange,
+        ),
+        learned,
     )

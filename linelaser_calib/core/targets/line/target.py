@@ -63,8 +63,9 @@ from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
-from .refine import LineRefinement, refine_line
+from .refine import LineRefinement, refine_line, shared_error
 from .section import LineSection, read_line_section
+from .shared_pose import SharedPoseError
 
 #: A default-method fit whose RMS residual exceeds this many times the noise the model
 #: expects is refused.
@@ -126,6 +127,7 @@ def _solution(
         sigma_rotation_rad=extra.pop("sigma_rotation_rad", None),
         warnings=extra.pop("warnings", []),
         history=extra.pop("history", {}),
+        subset_start=extra.pop("subset_start", None),
         sample_fits=[
             SampleFit(f.index, f.stamp_ns, f.T_base_flange, f.points, f.corner_xz) for f in features
         ],
@@ -302,7 +304,14 @@ class LineTarget:
         _require(features, config, context)
         warm = context.warm_start
         if warm is not None and isinstance(warm.section, LineSection):
-            return self._solve_default(features, config, context, warm.section.free_scales)
+            learned = warm.subset_start
+            return self._solve_default(
+                features,
+                config,
+                context,
+                warm.section.free_scales,
+                learned if isinstance(learned, SharedPoseError) else None,
+            )
         if config.scale != "auto":
             free = config.scale == "free"
             return self._solve_default(features, config, context, (free, free))
@@ -315,7 +324,14 @@ class LineTarget:
         )
         if all(kept):
             return solution
-        held = self._solve_default(features, config, context, (kept[0], kept[1]))
+        learned = solution.subset_start
+        held = self._solve_default(
+            features,
+            config,
+            context,
+            (kept[0], kept[1]),
+            learned if isinstance(learned, SharedPoseError) else None,
+        )
         held.warnings.extend(
             implausible_scale_held(s) for s, _ in estimates if abs(s) > PLAUSIBLE_SCALE_ERROR
         )
@@ -334,9 +350,12 @@ class LineTarget:
         config: LineConfig,
         context: SolveContext,
         free_scales: tuple[bool, bool],
+        learned: SharedPoseError | None = None,
     ) -> TargetSolution:
         """:meth:`solve_default` with the x and z scale errors estimated where
-        ``free_scales`` says, held at 0 elsewhere."""
+        ``free_scales`` says, held at 0 elsewhere; the 1σ counts the robot's error shared
+        by neighbouring views (:mod:`.shared_pose`: as ``learned`` on a superset of the
+        features, else learned here), kept as the solution's ``subset_start``."""
         X0 = context.initial_T_flange_sensor
         c, cov, T = _stack(features)
         X_start, line_start = _start(features, X0)
@@ -409,6 +428,11 @@ class LineTarget:
         if scatter is not None:
             warnings.append(scatter)
         sigma = widen * np.sqrt(np.diag(refined.covariance))
+        # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
+        # of the same estimate under it, where wider.
+        shared = shared_error(refined, learned)
+        if shared is not None:
+            sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
         rejections = [
             Rejection(features[i].index, features[i].stamp_ns, "outlier", reason)
             for i, reason in outcome.dropped
@@ -424,6 +448,7 @@ class LineTarget:
             sigma_rotation_rad=sigma[:3],
             warnings=warnings,
             history={"refine_cost": list(refined.cost_history)},
+            subset_start=shared,
         )
 
     def check_features(self, features: list[Any], config: LineConfig) -> None:

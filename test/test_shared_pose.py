@@ -1,0 +1,107 @@
+"""The robot's pose error shared by neighbouring views (:mod:`~linelaser_calib.core.targets.
+line.shared_pose`): learned from the residuals, counted in the line target's 1σ."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from linelaser_calib.core.geometry import rotvec_from_matrix
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.base import SolveContext
+from linelaser_calib.core.targets.line.config import LineConfig
+from linelaser_calib.core.targets.line.shared_pose import (
+    ViewsLinearised,
+    pose_separations,
+    shared_pose_error,
+)
+from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
+
+#: Views of the synthetic sweep, their step (m) and the global parameters.
+VIEWS, STEP_M, GLOBALS = 60, 0.005, 6
+
+
+def _sweep(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Flange poses 5 mm apart along x, and each view's Jacobians: of its two residuals on the
+    globals (M, 2, G), and on its pose error in units of the prior (M, 2, 6), both changing
+    slowly along the sweep as a line's views do."""
+    T = np.tile(np.eye(4), (VIEWS, 1, 1))
+    T[:, 0, 3] = STEP_M * np.arange(VIEWS)
+    phase = np.linspace(0.0, 3.0, VIEWS)[:, None, None]
+    X = np.sin(phase * rng.uniform(0.5, 2.0, (1, 2, GLOBALS)) + rng.uniform(0, 6, (1, 2, GLOBALS)))
+    A = 3.0 * np.cos(phase * rng.uniform(0.5, 2.0, (1, 2, 6)) + rng.uniform(0, 6, (1, 2, 6)))
+    return T, X, A
+
+
+def _draw(rng: np.random.Generator, A: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Residuals (M, 2): unit corner noise plus the pose errors with correlation K (M, M)."""
+    e = np.linalg.cholesky(K + 1e-9 * np.eye(len(K))) @ rng.normal(size=(len(K), 6))
+    return np.einsum("mkl,ml->mk", A, e) + rng.normal(size=(len(K), 2))
+
+
+def _views(y: np.ndarray, X: np.ndarray, A: np.ndarray, T: np.ndarray) -> ViewsLinearised:
+    return ViewsLinearised(y, X, A, np.ones(6), np.zeros(0), np.zeros((0, GLOBALS)), T)
+
+
+def _per_view(X: np.ndarray, A: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The per-view estimate (each view's pose error alone, as the refinement solves it) and
+    the covariance that model states."""
+    V0 = np.eye(2) + A @ A.transpose(0, 2, 1)
+    Z = np.linalg.solve(V0, X)
+    H = np.einsum("mkg,mkh->gh", X, Z)
+    return np.linalg.solve(H, np.einsum("mkg,mk->g", Z, y)), np.linalg.inv(H)
+
+
+def test_a_shared_pose_error_is_learned_and_counted_in_the_1_sigma() -> None:
+    """Pose errors shared over about 8 neighbouring views scatter the per-view estimate more
+    than its own covariance says; the learned sharing's covariance matches the scatter."""
+    rng = np.random.default_rng(1)
+    T, X, A = _sweep(rng)
+    K = np.exp(-pose_separations(T, T) / 0.8)  # e⁻¹ at 8 views
+    estimates, stated = [], None
+    for _ in range(400):
+        x, stated = _per_view(X, A, _draw(rng, A, K))
+        estimates.append(x)
+    spread = np.std(estimates, axis=0)
+    assert stated is not None
+    assert np.all(spread > 1.5 * np.sqrt(np.diag(stated)))  # the per-view 1σ is too small
+    learned = [shared_pose_error(_views(_draw(rng, A, K), X, A, T)) for _ in range(4)]
+    sigma = np.mean([np.sqrt(np.diag(s.covariance)) for s in learned if s is not None], axis=0)
+    assert np.all(np.abs(sigma / spread - 1.0) < 0.3), sigma / spread
+
+
+def test_independent_pose_errors_keep_the_per_view_1_sigma() -> None:
+    rng = np.random.default_rng(2)
+    T, X, A = _sweep(rng)
+    y = _draw(rng, A, np.eye(VIEWS))
+    learned = shared_pose_error(_views(y, X, A, T))
+    assert learned is not None
+    ratio = np.sqrt(np.diag(learned.covariance) / np.diag(_per_view(X, A, y)[1]))
+    assert np.all(np.abs(ratio - 1.0) < 0.25), ratio
+
+
+def test_line_ridge_seed_6_is_within_3_sigma() -> None:
+    """Regression: the simulated arm's error on ``line_ridge`` is drawn at 8 points of the
+    sweep and blended, so about six neighbouring views share it; with each view's error
+    taken as independent, seed 6 came out 3.79 of its 1σ off (rotation about sensor z)."""
+    scenario = line_scenario_from_preset("line_ridge")
+    data = simulate_line(scenario, 6)
+    pairing = PairingConfig(
+        max_linear_speed_m_s=0.0,
+        max_angular_speed_rad_s=0.0,
+        clock_offset_s=-scenario.rig.latency_s,
+    )
+    samples = pair_profiles(data.profiles, data.poses, pairing).samples
+    target, config = get_target("line"), LineConfig()
+    features, _ = target.extract(samples, config, 0, lambda *_: None)
+    solution = target.solve_default(features, config, SolveContext(n_samples=len(samples)))
+    truth = data.truth.T_flange_sensor
+    error = np.concatenate(
+        [
+            rotvec_from_matrix(truth[:3, :3].T @ solution.T_flange_sensor[:3, :3]),
+            solution.T_flange_sensor[:3, 3] - truth[:3, 3],
+        ]
+    )
+    assert solution.sigma_rotation_rad is not None and solution.sigma_translation_m is not None
+    sigma = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
+    assert np.all(np.abs(error) <= 3.0 * sigma), error / sigma
