@@ -76,6 +76,7 @@ def refine_subset(
         of the gradient, which the subsets' stop leaves too large (``ur_scancontrol``, the x
         scale held: the hand-eye's z seemed to scatter 3.2 times the noise model's, 1.0
         converged), and the subsets' cost tolerance moves the 1σ by 0.1 %.
+
     Returns
     -------
     RefineResult
