@@ -123,6 +123,35 @@ def test_spikes_are_outliers_and_do_not_move_the_centre() -> None:
     assert math.sqrt(np.mean(np.square(errors))) < NOISY_BOUNDS_M[120.0]
 
 
+def test_an_arc_explained_within_its_noise_needs_no_ransac_and_clutter_still_gets_it() -> None:
+    """With the profile's noise given, a clean arc's ellipse is found without drawing a
+    hypothesis (the generator is left untouched) and equals RANSAC's; spikes or a table in
+    the points make RANSAC search, with the fit it gives without the noise."""
+    rng = np.random.default_rng(13)
+    centre = np.array([0.0, 0.25])
+    arc = ellipse_points(np.linspace(math.radians(190.0), math.radians(350.0), 400), centre, 0.0)
+    x_table = np.arange(arc[-1, 0] + 50e-6, 0.07, 50e-6)
+    table = np.column_stack([x_table, np.full(len(x_table), arc[-1, 1])])
+    spiked, _, _ = random_arc(rng, 120.0, sigma=SIGMA)
+    spiked[::20, 1] += 2e-3
+    cases = {"spikes": spiked, "table": np.vstack([arc, table])}
+    for k in range(8):
+        cases[f"clean {k}"] = random_arc(rng, rng.uniform(90.0, 180.0), sigma=SIGMA)[0]
+    drawn = {}
+    for name, points in cases.items():
+        points = points + (SIGMA * rng.standard_normal(points.shape) if name == "table" else 0.0)
+        searched = fit_ellipse_ransac(points, EllipseConfig(), np.random.default_rng(0))
+        generator = np.random.default_rng(0)
+        before = generator.bit_generator.state
+        fit = fit_ellipse_ransac(points, EllipseConfig(), generator, noise_sigma_m=SIGMA)
+        drawn[name] = generator.bit_generator.state != before
+        assert np.linalg.norm(fit.centre_xz - searched.centre_xz) < 1e-9, name
+        np.testing.assert_allclose(fit.semi_axes, searched.semi_axes, rtol=1e-9, atol=0.0)
+        assert np.array_equal(fit.inliers, searched.inliers), name
+    assert drawn["spikes"] and drawn["table"]
+    assert sum(not drawn[f"clean {k}"] for k in range(8)) >= 6
+
+
 def test_arc_between_table_segments_is_found() -> None:
     """A cylinder standing on a table: the arc is found, the table line is all outliers."""
     rng = np.random.default_rng(4)

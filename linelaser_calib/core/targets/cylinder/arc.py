@@ -165,6 +165,7 @@ def without_grazing_ends(arc: ArcFit, radius_m: float | None) -> EllipseFit | No
             arc.ellipse_config,
             np.random.default_rng(len(arc.points_xz)),
             radius_m,
+            arc.segmented.noise.sigma_m,
         )
     except ProfileRejected:
         return None
@@ -223,7 +224,7 @@ def fit_arc_in_scene(
         if best is not None and len(segment.indices) <= best[0].inliers.sum():
             break  # no smaller candidate can hold more inliers
         try:
-            fit = fit_ellipse_ransac(p[segment.indices], scaled, rng, radius_m)
+            fit = fit_ellipse_ransac(p[segment.indices], scaled, rng, radius_m, sigma)
         except ProfileRejected as exc:
             first_error = first_error or exc
             continue

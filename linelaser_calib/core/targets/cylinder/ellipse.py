@@ -18,7 +18,9 @@ Steps of :func:`fit_ellipse_ransac`:
    background fills most of the profile. Hypotheses that are not real ellipses, or whose
    size and shape are implausible for a cylinder cut, are dropped before scoring. Each new
    best is locally optimised by a direct fit on its inliers, and the number of hypotheses
-   adapts to the share of all-inlier samples.
+   adapts to the share of all-inlier samples. An arc whose direct fit on all its points
+   explains each within the profile's measured noise, as most clean arcs' does, needs no
+   search: that fit is the start RANSAC would give it (:func:`_whole_arc`).
 3. The distance of a point to a conic is the Sampson distance |Q| / |grad Q|, the
    first-order geometric distance, in metres.
 4. The best hypothesis is refitted on its inliers: direct least squares
@@ -39,7 +41,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
 from ...errors import InputError, ProfileRejected
 from ...model_check import effective_count, median, robust_scale_m
@@ -57,7 +59,14 @@ from .conic import (
     sampson_jacobian,
     sampson_rows,
     turning_angle,
-    value_and_gradient_sq,
+)
+from .hypotheses import (
+    SAMPLE_SIZE,
+    IntArray,
+    minimal_conics,
+    msac_costs,
+    required_iterations,
+    window_samples,
 )
 
 
@@ -94,10 +103,6 @@ class EllipseFit:
     short: bool = False
 
 
-#: Points in a minimal sample: five points fix a conic.
-SAMPLE_SIZE = 5
-
-
 #: Rounds of "refit on the inliers, recompute the inliers" after RANSAC.
 MAX_REFIT_ROUNDS = 10
 
@@ -113,14 +118,6 @@ AXIS_SLACK_SIGMAS, AXIS_GRADIENT_STEP = 3.0, 1e-7
 
 #: Semi-axis bounds of a short arc's ellipse (:func:`fit_ellipse_ransac`), m: any ellipse.
 ANY_SEMI_AXIS_M = (1e-6, 1e3)
-
-
-#: Smallest window of the scan line that a RANSAC sample is spread over, as a fraction of
-#: the points.
-MIN_WINDOW_FRACTION = 0.05
-
-
-IntArray = NDArray[np.intp]
 
 
 @dataclass(frozen=True)
@@ -402,27 +399,6 @@ def refine_conic(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
 # --------------------------------------------------------------------------------- RANSAC
 
 
-def _minimal_conics(u: FloatArray, samples: IntArray) -> FloatArray:
-    """Conics through 5 points each: null vectors of the (K, 5, 6) design matrices (the last
-    column of the complete QR factor of each transposed design, a third of the time of an
-    SVD).
-
-    Parameters
-    ----------
-    u : ndarray, shape (N, 2)
-        Normalised points.
-    samples : ndarray of int, shape (K, 5)
-
-    Returns
-    -------
-    conics : ndarray, shape (K, 6), unit norm, in normalised coordinates.
-    """
-    x, z = u[samples, 0], u[samples, 1]
-    design = np.stack([x * x, x * z, z * z, x, z, np.ones_like(x)], axis=-1)
-    q, _ = np.linalg.qr(np.swapaxes(design, 1, 2), mode="complete")
-    return np.asarray(q[:, :, -1], dtype=np.float64)
-
-
 def _plausible(
     geometry: EllipseGeometry,
     scale_m: float,
@@ -476,47 +452,6 @@ def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[f
     return float(major), float(minor)
 
 
-def _required_iterations(p_good: float, confidence: float) -> float:
-    """Hypotheses needed to draw one all-inlier sample with the given confidence.
-
-    ``p_good`` is the probability that one sample is all inliers.
-    """
-    if p_good >= 1.0:
-        return 1.0
-    if p_good <= 0.0:
-        return math.inf
-    return math.log(1.0 - confidence) / math.log(1.0 - p_good)
-
-
-def _window_samples(order: IntArray, count: int, rng: np.random.Generator) -> IntArray:
-    """5-point samples spread evenly over random windows of the profile.
-
-    The points are taken in ``order`` (along the scan line). A window covers a random
-    fraction of them, log-uniform from :data:`MIN_WINDOW_FRACTION` to all; each of its five
-    equal sub-windows gives one point. The cylinder's arc is one contiguous run of the scan
-    line, so a window inside it gives an all-inlier, well-spread sample far more often than
-    uniform sampling does when table or background points surround the arc.
-
-    Returns
-    -------
-    samples : ndarray of int, shape (count, 5)
-        Indices into the points.
-    """
-    n = len(order)
-    lengths = np.exp(rng.uniform(math.log(MIN_WINDOW_FRACTION), 0.0, count)) * n
-    starts = rng.uniform(0.0, 1.0, count) * (n - lengths)
-    fractions = (np.arange(SAMPLE_SIZE) + rng.uniform(0.0, 1.0, (count, SAMPLE_SIZE))) / SAMPLE_SIZE
-    positions = np.floor(starts[:, None] + fractions * lengths[:, None]).astype(np.intp)
-    return np.asarray(order[np.minimum(positions, n - 1)], dtype=np.intp)
-
-
-def _msac_costs(conics: FloatArray, u: FloatArray, threshold_sq: float) -> FloatArray:
-    """Truncated squared Sampson distances min(d^2, t^2), shape (K, N)."""
-    q, gradient_sq = value_and_gradient_sq(conics, u)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.asarray(np.fmin(q * q / gradient_sq, threshold_sq), dtype=np.float64)
-
-
 def _ransac(
     u: FloatArray,
     norm: _Normalisation,
@@ -545,23 +480,23 @@ def _ransac(
     drawn = 0
     needed = float(config.max_iterations)
     while drawn < min(needed, config.max_iterations):
-        samples = _window_samples(order, config.batch_size, rng)
+        samples = window_samples(order, config.batch_size, rng)
         drawn += config.batch_size
         distinct = np.all(np.diff(np.sort(samples, axis=1), axis=1) > 0, axis=1)
-        conics = _minimal_conics(u, samples[distinct])
+        conics = minimal_conics(u, samples[distinct])
         plausible = _plausible(ellipse_geometry(conics), norm.scale, config, radius_m)
         conics = conics[plausible]
         useful.append(samples[distinct][plausible])
         if len(conics) == 0:
             continue
-        d2 = _msac_costs(conics, u, threshold_sq)
+        d2 = msac_costs(conics, u, threshold_sq)
         top = np.argsort(d2.sum(axis=1))[: config.local_optimisations]
         conics, d2 = conics[top], d2[top]
         inlier_masks = d2 < threshold_sq
         refits, ok = _direct_fits_normalised(u, inlier_masks.astype(np.float64))
         ok &= inlier_masks.sum(axis=1) > SAMPLE_SIZE
         ok &= _plausible(ellipse_geometry(refits), norm.scale, config, radius_m)
-        refit_d2 = _msac_costs(refits, u, threshold_sq)
+        refit_d2 = msac_costs(refits, u, threshold_sq)
         better = ok & (refit_d2.sum(axis=1) < d2.sum(axis=1))
         conics[better], d2[better] = refits[better], refit_d2[better]
         costs = d2.sum(axis=1)
@@ -571,7 +506,7 @@ def _ransac(
         best_cost, best, best_d2 = float(costs[i]), conics[i], d2[i]
         inliers = best_d2 < threshold_sq
         all_inlier = sum(int(np.all(inliers[s], axis=1).sum()) for s in useful)
-        needed = _required_iterations(all_inlier / drawn, config.confidence)
+        needed = required_iterations(all_inlier / drawn, config.confidence)
     return best
 
 
@@ -580,6 +515,7 @@ def fit_ellipse_ransac(
     config: EllipseConfig,
     rng: np.random.Generator,
     radius_m: float | None = None,
+    noise_sigma_m: float | None = None,
 ) -> EllipseFit:
     """Robust ellipse fit of one profile (paper eq. 4) and its centre (eq. 5).
 
@@ -600,6 +536,12 @@ def fit_ellipse_ransac(
         ``config.radius_tolerance`` of it (when none has, the search runs again without),
         and the result's semi-minor axis must lie within that tolerance plus its
         uncertainty of it.
+    noise_sigma_m : float or None
+        The profile's point noise, 1σ, m, when measured
+        (:func:`~linelaser_calib.core.profile.segmentation.estimate_noise`): an arc whose
+        direct fit explains every point within ``config.noise_threshold_sigmas`` of it starts
+        the refits without RANSAC (the start RANSAC gives such an arc, found without its
+        hypotheses; :func:`_whole_arc`). None: RANSAC always searches.
 
     Returns
     -------
@@ -630,12 +572,12 @@ def fit_ellipse_ransac(
     if not norm.scale > 0.0:
         raise ProfileRejected(f"all {len(p)} points coincide: no ellipse can be fitted")
     try:
-        fit = _fit(p, norm, config, rng, radius_m)
+        fit = _fit(p, norm, config, rng, radius_m, noise_sigma_m)
     except _NoPlausibleArc as exc:
         if config.min_short_arc_turn_rad <= 0.0:
             raise
         try:
-            fit = _fit(p, norm, _any_ellipse(config), rng, None)
+            fit = _fit(p, norm, _any_ellipse(config), rng, None, noise_sigma_m)
         except ProfileRejected:
             raise exc from None
         turn = turning_angle(fit.conic, p[fit.inliers])
@@ -685,6 +627,7 @@ def _fit(
     config: EllipseConfig,
     rng: np.random.Generator,
     radius_m: float | None,
+    noise_sigma_m: float | None,
 ) -> EllipseFit:
     """:func:`fit_ellipse_ransac` without the short arcs: :class:`_NoPlausibleArc` when no
     plausible ellipse or too short an arc is found; ``short`` marks a fit whose semi-minor
@@ -692,23 +635,11 @@ def _fit(
     standard errors)."""
     u = norm.apply(p)
     threshold_u = config.inlier_threshold_m / norm.scale
-    radius_text = "" if radius_m is None else f" with semi-minor axis near {radius_m * 1e3:.2f} mm"
-
-    conic_u = _ransac(u, norm, config, rng, radius_m)
-    if conic_u is None and radius_m is not None:
-        # No hypothesis from five points has a semi-minor axis near the radius: on a short
-        # arc they scatter widely; the refitted ellipse is judged with its axes' uncertainty.
-        conic_u = _ransac(u, norm, config, rng, None)
-    if conic_u is None:
-        raise _NoPlausibleArc(
-            f"no plausible ellipse{radius_text} among {config.max_iterations} RANSAC "
-            f"hypotheses on {len(p)} points (semi-axes {config.min_semi_axis_m * 1e3:.1f}-"
-            f"{config.max_semi_axis_m * 1e3:.0f} mm, axis ratio <= {config.max_axis_ratio:.1f}"
-            "); the profile may not show the cylinder, or the radius is wrong"
-        )
-    inliers = np.abs(sampson_distance(conic_u, u)) < threshold_u
-    direct = _direct_fit_normalised(u[inliers]) if inliers.sum() > SAMPLE_SIZE else None
-    conic_u = conic_u if direct is None else direct
+    start = _whole_arc(u, norm, config, radius_m, noise_sigma_m)
+    if start is not None:
+        conic_u, inliers = start, np.ones(len(u), dtype=np.bool_)
+    else:
+        conic_u, inliers = _ransac_start(u, norm, config, rng, radius_m)
     for _ in range(MAX_REFIT_ROUNDS):
         conic_u = refine_geometric(conic_u, u[inliers])
         distance = np.abs(sampson_distance(conic_u, u))
@@ -742,7 +673,7 @@ def _fit(
         raise _NoPlausibleArc(
             f"the refitted ellipse (semi-axes {major:.2f} ± {sigma_major:.2f} mm and "
             f"{minor:.2f} ± {sigma_minor:.2f} mm, 1 sigma) is not a plausible cylinder "
-            f"cut{radius_text}"
+            f"cut{_near_radius(radius_m)}"
         )
     geometry = EllipseGeometry(
         valid=geometry_u.valid,
@@ -768,3 +699,66 @@ def _fit(
         rms_m=rms,
         short=bool(uncertain),
     )
+
+
+def _near_radius(radius_m: float | None) -> str:
+    """ " with semi-minor axis near R mm" for a given radius, for the rejections' messages."""
+    return "" if radius_m is None else f" with semi-minor axis near {radius_m * 1e3:.2f} mm"
+
+
+def _whole_arc(
+    u: FloatArray,
+    norm: _Normalisation,
+    config: EllipseConfig,
+    radius_m: float | None,
+    noise_sigma_m: float | None,
+) -> FloatArray | None:
+    """The direct fit of all the points (normalised) when it explains each of them within
+    the profile's noise, else None: RANSAC must then search.
+
+    It is the start RANSAC itself gives a clean arc (its best hypothesis then holds every
+    point, and its local optimisation is this fit), found without drawing a hypothesis. A
+    point counts as explained within ``config.noise_threshold_sigmas`` times the measured
+    point noise ``noise_sigma_m`` (m; the rule the refits' inliers end with, with the noise
+    measured from neighbouring points rather than from the fit's own residuals, which shape
+    error, clutter or smeared grazing ends pulling the fit would inflate), and within the
+    inlier threshold; the ellipse must be plausible as RANSAC's hypotheses must. None when
+    no noise is given or ``config.noise_threshold_sigmas`` is 0.
+    """
+    if noise_sigma_m is None or config.noise_threshold_sigmas <= 0.0:
+        return None
+    limit_m = min(config.noise_threshold_sigmas * noise_sigma_m, config.inlier_threshold_m)
+    conic_u = _direct_fit_normalised(u)
+    if (
+        conic_u is None
+        or float(np.max(np.abs(sampson_distance(conic_u, u)))) > limit_m / norm.scale
+    ):
+        return None
+    return conic_u if _plausible(ellipse_geometry(conic_u), norm.scale, config, radius_m) else None
+
+
+def _ransac_start(
+    u: FloatArray,
+    norm: _Normalisation,
+    config: EllipseConfig,
+    rng: np.random.Generator,
+    radius_m: float | None,
+) -> tuple[FloatArray, BoolArray]:
+    """RANSAC's ellipse (normalised) refitted directly on its inliers, and those inliers;
+    :class:`_NoPlausibleArc` when no hypothesis is a plausible ellipse."""
+    conic_u = _ransac(u, norm, config, rng, radius_m)
+    if conic_u is None and radius_m is not None:
+        # No hypothesis from five points has a semi-minor axis near the radius: on a short
+        # arc they scatter widely; the refitted ellipse is judged with its axes' uncertainty.
+        conic_u = _ransac(u, norm, config, rng, None)
+    if conic_u is None:
+        raise _NoPlausibleArc(
+            f"no plausible ellipse{_near_radius(radius_m)} among {config.max_iterations} "
+            f"RANSAC hypotheses on {len(u)} points (semi-axes "
+            f"{config.min_semi_axis_m * 1e3:.1f}-{config.max_semi_axis_m * 1e3:.0f} mm, axis "
+            f"ratio <= {config.max_axis_ratio:.1f}); the profile may not show the cylinder, or "
+            "the radius is wrong"
+        )
+    inliers = np.abs(sampson_distance(conic_u, u)) < config.inlier_threshold_m / norm.scale
+    direct = _direct_fit_normalised(u[inliers]) if inliers.sum() > SAMPLE_SIZE else None
+    return (conic_u if direct is None else direct), inliers

@@ -3,7 +3,7 @@ found among the planes of the scene (:mod:`linelaser_calib.core.targets.cylinder
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -51,6 +51,9 @@ class FittedSample:
     arc: ArcFit | None = None
     trimmed: int = 0
     rival: Comparison | None = None
+    _inliers: tuple[EllipseFit, FloatArray] | None = field(
+        default=None, init=False, repr=False, compare=False
+    )
 
     @property
     def index(self) -> int:
@@ -69,8 +72,11 @@ class FittedSample:
 
     @property
     def inlier_points(self) -> FloatArray:
-        """Inlier points (K, 3) in the sensor frame, m."""
-        return self.points[self.ellipse.inliers]
+        """Inlier points (K, 3) in the sensor frame, m: taken once per ellipse (every solve's
+        sample records, the self-check's included, share them)."""
+        if self._inliers is None or self._inliers[0] is not self.ellipse:
+            self._inliers = (self.ellipse, self.points[self.ellipse.inliers])
+        return self._inliers[1]
 
     def centre_xz(self, radius_m: float) -> FloatArray:
         """The centre (2,) a solve on the centres uses, m: the ellipse's, or for a short arc
