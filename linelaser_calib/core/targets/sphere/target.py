@@ -200,7 +200,8 @@ def with_scale_model_spread(held: TargetSolution, estimated: TargetSolution) -> 
     with_model_spread`), with a warning naming the scale and the move: the profiles fix the
     ratio of the x and z scales, not which of them is off (on the ``scales`` face, x +0.6 %
     and z -0.2 % about the sensor origin, the estimated scale reads their difference and its
-    hand-eye is 0.24-0.28 mm off, 4.6-5.2 of its own 1σ and within 1.6 of the widened one).
+    hand-eye is 0.24-0.32 mm off, up to 5.2 of its own 1σ and within 2.1 of the widened one,
+    seeds 0-4).
     An estimated scale beyond :data:`PLAUSIBLE_SCALE_ERROR` is no model of the profiles (the
     12.7 mm ball set: 0.958 with the radius given): the held solution is kept with a warning.
     """
