@@ -17,6 +17,7 @@ from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.cylinder.section import read_cylinder_section
 from linelaser_calib.core.targets.cylinder.target import with_depth_reading
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
+from linelaser_calib.core.targets.sphere.config import estimates_scale
 from linelaser_calib.core.verdict import warning_kind
 from linelaser_calib.settings import Front, render
 from linelaser_calib.sim import SimulatedData, scenario_from_preset, simulate
@@ -204,6 +205,16 @@ def test_the_sphere_estimates_a_scale_the_recording_shows_and_counts_the_other_r
                 2.0 * errors[faces]
                 < truth_error(fixed.T_flange_sensor, data.truth.T_flange_sensor).translation_m
             )
+
+
+def test_the_sphere_self_check_subsets_follow_the_whole_recordings_scale_choice() -> None:
+    """The self-check's subsets (a warm start) estimate the scale where the whole recording
+    kept it estimated, with ``auto`` as with ``free``; ``fixed`` always holds it."""
+    for scale in ("auto", "free"):
+        config = SphereConfig(scale=scale)
+        assert estimates_scale(config, True) and not estimates_scale(config, False)
+    assert estimates_scale(SphereConfig(scale="free")) and not estimates_scale(SphereConfig())
+    assert not estimates_scale(SphereConfig(scale="fixed"), True)
 
 
 def test_the_cylinder_counts_the_x_z_split_only_where_both_readings_are_one_stretch() -> None:
