@@ -334,7 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="cylinder, sphere and line targets, default method: the profiler's along-line (x) "
         "scale (the line's and, radius given, the cylinder's depth (z) scale too), unitless, "
         "estimated with the hand-eye (free) or held at 1 (fixed); default auto: for the "
-        "cylinder and the line free where clearly off 1, for the sphere fixed",
+        "cylinder and the line free where clearly off 1, for the sphere free where clearly "
+        "off 1 and holding it would move the hand-eye beyond its 1 sigma",
     )
     _add_pose_source_arguments(cal_p)
     cal_p.add_argument(

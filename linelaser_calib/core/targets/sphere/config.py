@@ -25,9 +25,10 @@ class SphereConfig:
         The sphere radius, m (``--radius``); None estimates it.
     scale : str
         The sensor's along-line scale in the default method: ``free`` estimates it with the
-        hand-eye; ``fixed`` and ``auto`` (default) hold it at 1 (:func:`estimates_scale`),
-        ``auto`` widening the 1σ by the hand-eye's move with it estimated where that move
-        exceeds it (:func:`~.target.with_scale_model_spread`).
+        hand-eye; ``fixed`` holds it at 1; ``auto`` (default) estimates it where the whole
+        recording shows it clearly off 1 and holding it would move the hand-eye beyond its
+        1σ, and otherwise holds it, the 1σ counting the move between the two
+        (:func:`estimates_scale`, :func:`~.target.with_scale_model_spread`).
     centre_side : str or None
         ``+y`` or ``-y``: the side of the laser plane (sensor y) the sphere centre lies on,
         when the user knows it; None resolves it from the data.
@@ -102,25 +103,23 @@ class SphereConfig:
 
 
 def estimates_scale(config: SphereConfig, warm_estimated: bool | None = None) -> bool:
-    """Whether the default method estimates the sensor's along-line scale: ``free`` always
-    (or as a warm start did, ``warm_estimated``: the self-check's subsets follow the whole
-    recording), ``fixed`` and ``auto`` (default) never.
+    """Whether the default method's first solve estimates the sensor's along-line scale:
+    ``free`` always, ``fixed`` never, ``auto`` (default) not at first; a warm start (the
+    self-check's subsets) follows the whole recording's choice (``warm_estimated``) unless
+    the scale is ``fixed``.
 
-    ``auto`` holds it because the real scans say so. On the real 40 mm ball set with the
-    radius free a free scale reads 0.99911 ± 0.00012, clearly off 1, yet the centres then
-    scatter more (0.262 mm against 0.244 mm held) and the free radius moves from the
-    independent circle fits' 39.977 mm to 40.034 mm: the scale takes up the profiler's own
-    shape error. With the radius given it also takes up a ball that is not the given size
-    (the 12.7 mm set: 0.958 ± 0.003, scatter 1.10 mm against 0.78 mm held), and on the 40 mm
-    set it halved the self-check's held-out 1σ until the authors' published hand-eye lay 6σ
-    away. On the simulator x and z scales off by +0.6 % and -0.2 % about the sensor origin
-    (the stress matrix's ``scales`` face, seed 3) move the ``sphere`` preset's hand-eye
-    0.20 mm with the scale held (1σ 0.27 mm; clean twin 0.19 mm) and 0.32 mm with it
-    estimated (it reads their difference, +0.83 %); on seed 4 the held hand-eye is 0.59 mm
-    off, 5.0 of its 1σ, so ``auto`` solves with the scale estimated as well and counts the
-    move in the 1σ (:func:`~.target.with_scale_model_spread`); ``{setting:scale} free`` is
-    there for a profiler known to be off.
+    ``auto`` then solves with the scale estimated as well and keeps that solution only where
+    the whole recording shows the scale clearly off 1 and holding it would move the hand-eye
+    beyond its 1σ (:func:`~.target.with_scale_model_spread`). The real scans say why not
+    always: on the real 40 mm ball set with the radius free a free scale reads 0.99911 ±
+    0.00012, clearly off 1, yet the centres then scatter more (0.262 mm against 0.244 mm
+    held) and the free radius moves from the independent circle fits' 39.977 mm to
+    40.034 mm: the scale takes up the profiler's own shape error, and the hand-eye moves
+    within its 1σ. With the radius given it also takes up a ball that is not the given size
+    (the 12.7 mm set: 0.958 ± 0.003, beyond a plausible scale error, so it is held).
     """
-    if config.scale == "free":
-        return True if warm_estimated is None else warm_estimated
-    return False
+    if config.scale == "fixed":
+        return False
+    if warm_estimated is not None:
+        return warm_estimated
+    return config.scale == "free"

@@ -51,6 +51,7 @@ from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
     implausible_scale_held,
+    scale_significant,
 )
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
@@ -180,21 +181,29 @@ def extract_feature(
 
 
 def with_scale_model_spread(held: TargetSolution, estimated: TargetSolution) -> TargetSolution:
-    """The solution with the along-line scale held at 1 (``held``), its 1σ widened by the
-    model difference where estimating the scale (``estimated``) moves the hand-eye beyond it.
+    """The solution ``--scale auto`` keeps of the two with the along-line scale held at 1
+    (``held``) and estimated (``estimated``), its 1σ widened by the move to the other where
+    that move exceeds its 1σ on some axis.
 
-    Neither model is right everywhere. On the real 40 mm ball set a free scale reads
-    0.99911 ± 0.00012, clearly off 1, yet scatters the ball centres more (0.262 mm against
-    0.244 mm held) and moves the free radius from the independent circle fits' 39.977 mm to
-    40.034 mm: it takes up the profiler's own shape error. On the simulator's ``scales``
-    face (x and z scales 0.8 % apart) the held scale leaves the hand-eye up to 5.4 of its 1σ
-    off, the estimated one within 1.8. So the held solution is kept and, where the two
-    hand-eyes differ by more than the held one's 1σ on some axis, the difference is added to
-    every axis's 1σ in quadrature as the solution's model spread, which the self-check keeps
-    out of its yardstick (:func:`~linelaser_calib.core.model_spread.with_model_spread`),
-    with a warning naming the scale and the move. An estimated scale beyond
-    :data:`PLAUSIBLE_SCALE_ERROR` is no model of the profiles (the 12.7 mm ball set, radius
-    given: 0.958): the held solution is kept with a warning.
+    The whole recording decides. Where estimating the scale moves the hand-eye within the
+    held solution's 1σ, the simpler model is kept (the real 40 mm ball set: a free scale
+    reads 0.99911 ± 0.00012, clearly off 1, yet scatters the ball centres more, 0.262 mm
+    against 0.244 mm held, and moves the free radius from the independent circle fits'
+    39.977 mm to 40.034 mm: it takes up the profiler's own shape error). Where it moves it
+    beyond, and the scale lies clearly off 1 by its own 1σ (:func:`scale_significant`, the
+    1σ widened by how the profiles scatter it), the held model leaves a bias its 1σ does not
+    see and the estimated solution is kept: on the stress matrix's ``shape`` face (x 1.0 %
+    short of z) it reads 0.9899 ± 0.0002 and the hand-eye is 0.04-0.12 mm off against
+    0.38-0.56 mm held (seeds 0-2; clean twin 0.07-0.10 mm). Either way the move between the
+    two is added to every axis's 1σ in quadrature as the solution's model spread, which the
+    self-check keeps out of its yardstick (:func:`~linelaser_calib.core.model_spread.
+    with_model_spread`), with a warning naming the scale and the move: the profiles fix the
+    ratio of the x and z scales, not which of them is off (on the ``scales`` face, x +0.6 %
+    and z -0.2 % about the sensor origin, the estimated scale reads their difference and its
+    hand-eye is 0.24-0.32 mm off, up to 5.2 of its own 1σ and within 2.1 of the widened one,
+    seeds 0-4).
+    An estimated scale beyond :data:`PLAUSIBLE_SCALE_ERROR` is no model of the profiles (the
+    12.7 mm ball set: 0.958 with the radius given): the held solution is kept with a warning.
     """
     section = estimated.section
     scale = getattr(section, "scale", None)
@@ -204,13 +213,26 @@ def with_scale_model_spread(held: TargetSolution, estimated: TargetSolution) -> 
         return replace(held, warnings=[*held.warnings, implausible_scale_held(scale)])
     scale_sigma = getattr(section, "scale_sigma", None)
     spread = "" if scale_sigma is None else f" ± {scale_sigma:.5f}"
-    return with_model_spread(
+    reading = (
+        f"the along-line scale, held at 1 by default, reads {1.0 + scale:.5f}{spread} "
+        f"({100.0 * scale:+.3f} % from nominal) when estimated"
+    )
+    kept = with_model_spread(
         held,
         estimated,
-        f"the along-line scale, held at 1 by default, reads {1.0 + scale:.5f}{spread} "
-        f"({100.0 * scale:+.3f} % from nominal) when estimated, and estimating it",
+        f"{reading}, and estimating it",
         "A profiler's own shape error can read as a scale; if its x scale is known to be off, "
         "{setting:scale} free estimates it",
+    )
+    if kept is held or not scale_significant(scale, scale_sigma):
+        return kept
+    return with_model_spread(
+        estimated,
+        held,
+        f"{reading}, clearly off 1 and moving the hand-eye beyond its 1 sigma, so it is "
+        "estimated; holding it at 1 instead",
+        "The profiles fix the ratio of the x and z scales, not which one is off: check the "
+        "profiler's x scale on a known length; {setting:scale} fixed holds it at 1",
     )
 
 
@@ -393,10 +415,10 @@ class SphereTarget:
 
         Started at the fixed-point solve, or at the context's warm start (the self-check's
         solves of subsets), whose noise levels then weight the points and poses from the
-        first round on. The along-line scale is estimated with ``{setting:scale} free`` only
-        (:func:`estimates_scale`); a warm start keeps its own choice. With ``auto`` (default)
-        it is estimated as well, and where that moves the hand-eye beyond its 1σ the held
-        solution's 1σ counts the move (:func:`with_scale_model_spread`).
+        first round on. The along-line scale is estimated with ``{setting:scale} free``
+        (:func:`estimates_scale`); a warm start keeps the whole recording's choice. With
+        ``auto`` (default) it is solved held and estimated, and the recording decides which
+        is kept, the 1σ counting the move between them (:func:`with_scale_model_spread`).
         """
         self._require(features, config, context)
         warm = context.warm_start
