@@ -53,7 +53,7 @@ from ...errors import DegenerateError, InputError, SolverError
 from ...geometry import FloatArray, exp_so3, transform_from_rotation_translation
 from ...observability import Observability, analyse_observability, pose_geometry
 from ...profile.along_line import measured_to_true
-from ...profile.noise import LineNoise, learn_line_noise, line_whitening
+from ...profile.noise import LineNoise, learn_line_noise, learning_profiles, line_whitening
 from ...solver import (
     N_HAND_EYE,
     N_LOCAL,
@@ -593,12 +593,17 @@ def recording_line_noise(result: RefineResult, limit_m: float) -> LineNoise | No
     residuals = problem.point_residuals(state) * problem.config.sensor_sigma_m
     mask = problem.mask * (np.abs(residuals) <= limit_m)
     try:
+        rows = learning_profiles(mask)  # the bases of these few, not of the whole recording
+        learned, at = (
+            problem.take(rows),
+            replace(state, omega=state.omega[rows], tau=state.tau[rows]),
+        )
         noise = learn_line_noise(
-            residuals,
-            problem.points[..., 0],
-            problem.depth_cosines(state),
-            mask,
-            problem.unwhitened_local_jacobian(state),
+            residuals[rows],
+            learned.points[..., 0],
+            learned.depth_cosines(at),
+            mask[rows],
+            learned.unwhitened_local_jacobian(at),
         )
     except InputError:
         return None
