@@ -99,6 +99,15 @@ class Rejection:
     reason: str
 
 
+def stored_points(points: FloatArray) -> NDArray[np.floating]:
+    """``points`` to keep for later (a feature's, held through a whole calibration): as
+    float32 where that holds them exactly (a profiler's float32 coordinates, read as
+    float64), else as they are. Half the memory, the same numbers: a user converts them
+    back to float64 before computing with them (``np.asarray(p, dtype=np.float64)``)."""
+    narrow = points.astype(np.float32)
+    return narrow if np.array_equal(narrow, points, equal_nan=True) else points
+
+
 @dataclass(frozen=True)
 class SampleFit:
     """What the solve used of one sample, kept for reports and markers.

@@ -3,18 +3,19 @@ found among the planes of the scene (:mod:`linelaser_calib.core.targets.cylinder
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...model_check import Comparison
 from ...profile.cleaning import clean_profile
-from ...types import Rejection, Sample, SampleFit
+from ...types import BoolArray, Rejection, Sample, SampleFit, stored_points
 from ..base import Progress, extract_each, sample_rng
 from .arc import (
-    ArcFit,
     circle_centre,
     circle_radius,
     fit_arc_in_scene,
@@ -24,7 +25,7 @@ from .arc import (
     without_grazing_ends,
 )
 from .config import CylinderConfig
-from .ellipse import EllipseFit
+from .ellipse import EllipseConfig, EllipseFit
 from .shape import (
     arc_rival_rejection,
     compare_ellipse,
@@ -39,38 +40,39 @@ MIN_RIVAL_POINTS = 8
 
 @dataclass
 class FittedSample:
-    """A sample with the points of its arc and its fitted ellipse (the cylinder target's
-    feature); ``arc`` says how the arc was found, ``trimmed`` how many grazing-angle points
-    were trimmed from it, ``rival`` the comparison when a rival shape fits this one profile
-    clearly better than its ellipse (kept: where most profiles are so, the whole recording
-    decides, :meth:`~.target.CylinderTarget.model_doubt`)."""
+    """A sample's pairing (its profile's ``index`` and ``stamp_ns``, its flange pose) with
+    the points of its arc and its fitted ellipse (the cylinder target's feature); ``trimmed``
+    says how many grazing-angle points were trimmed from the arc, ``rival`` gives the
+    comparison when a rival shape fits this one profile clearly better than its ellipse
+    (kept: where most profiles are so, the whole recording decides,
+    :meth:`~.target.CylinderTarget.model_doubt`).
 
-    sample: Sample
-    points: FloatArray
+    A feature is held through the whole calibration, so it keeps only what the later stages
+    use: not the sample's raw points, and its arc's points as stored points
+    (:func:`~linelaser_calib.core.types.stored_points`); ``grazing``,
+    ``grazing_shift_sigmas`` and ``ellipse_config`` are those of its arc
+    (:class:`.arc.ArcFit`), for the refit without the grazing ends."""
+
+    index: int
+    stamp_ns: int
+    T_base_flange: FloatArray
+    points: NDArray[np.floating]
     ellipse: EllipseFit
-    arc: ArcFit | None = None
+    ellipse_config: EllipseConfig
+    grazing: BoolArray
+    grazing_shift_sigmas: float = math.nan
     trimmed: int = 0
     rival: Comparison | None = None
 
     @property
-    def index(self) -> int:
-        """Profile index in the input stream."""
-        return self.sample.index
-
-    @property
-    def stamp_ns(self) -> int:
-        """Profile stamp, ns."""
-        return self.sample.stamp_ns
-
-    @property
-    def T_base_flange(self) -> FloatArray:
-        """Flange pose (4, 4) as paired."""
-        return self.sample.T_base_flange
-
-    @property
     def inlier_points(self) -> FloatArray:
         """Inlier points (K, 3) in the sensor frame, m."""
-        return self.points[self.ellipse.inliers]
+        return np.asarray(self.points[self.ellipse.inliers], dtype=np.float64)
+
+    @property
+    def points_xz(self) -> FloatArray:
+        """The arc's points (M, 2) in the laser plane, (x, z), m."""
+        return np.asarray(self.points[:, [0, 2]], dtype=np.float64)
 
     def centre_xz(self, radius_m: float) -> FloatArray:
         """The centre (2,) a solve on the centres uses, m: the ellipse's, or for a short arc
@@ -82,9 +84,12 @@ class FittedSample:
 
     def record(self) -> SampleFit:
         """The plain record kept in the result."""
-        s = self.sample
         return SampleFit(
-            s.index, s.stamp_ns, s.T_base_flange, self.inlier_points, self.ellipse.centre_xz
+            self.index,
+            self.stamp_ns,
+            self.T_base_flange,
+            self.inlier_points,
+            self.ellipse.centre_xz,
         )
 
 
@@ -126,8 +131,17 @@ def fit_sample(
                 "ellipse",
                 f"the short arc is not clearly curved: {to_line.describe()}",
             )
-    rival = comparison if comparison.rival_wins else None
-    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc, rival=rival)
+    return FittedSample(
+        sample.index,
+        sample.stamp_ns,
+        sample.T_base_flange,
+        stored_points(cleaned.points[arc.rows]),
+        arc.ellipse,
+        arc.ellipse_config,
+        arc.grazing,
+        arc.grazing_shift_sigmas,
+        rival=comparison if comparison.rival_wins else None,
+    )
 
 
 def fit_samples(
@@ -171,11 +185,10 @@ def fit_samples(
 def _trim_biased_grazing_ends(fitted: list[FittedSample], radius_m: float | None) -> None:
     """Fit the long arcs again without their grazing ends when those ends are biased."""
     long = long_arcs(fitted)
-    arcs = [f.arc for f in long if f.arc is not None]
-    if grazing_ends_biased([a.grazing_shift_sigmas for a in arcs]) is None:
+    if grazing_ends_biased([f.grazing_shift_sigmas for f in long]) is None:
         return
     for f in long:
-        trimmed = None if f.arc is None else without_grazing_ends(f.arc, radius_m)
+        trimmed = without_grazing_ends(f.points_xz, f.grazing, f.ellipse_config, radius_m)
         if trimmed is not None:
             f.trimmed = int(f.ellipse.inliers.sum() - trimmed.inliers.sum())
             f.ellipse = trimmed
@@ -191,7 +204,7 @@ def arc_notes(fitted: list[FittedSample], config: CylinderConfig) -> list[str]:
     short arcs."""
     long = long_arcs(fitted)
     notes = [radius_mismatch([f.ellipse.semi_axes[1] for f in long], config.radius_m)]
-    shift = grazing_ends_biased([f.arc.grazing_shift_sigmas for f in long if f.arc is not None])
+    shift = grazing_ends_biased([f.grazing_shift_sigmas for f in long])
     if shift is not None:
         notes.append(trimming_note([f.trimmed for f in long], shift, config.arc))
     return [note for note in notes if note is not None]

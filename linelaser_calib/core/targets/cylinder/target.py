@@ -315,7 +315,7 @@ class CylinderTarget:
         """The ellipses re-paired with other samples of their profiles (the ellipse is fitted
         in the sensor frame: it does not depend on the flange pose)."""
         by_index = {s.index: s for s in samples}
-        return [replace(f, sample=by_index[f.index]) for f in features]
+        return [replace(f, T_base_flange=by_index[f.index].T_base_flange) for f in features]
 
     def _checked(
         self, features: list[FittedSample], config: CylinderConfig, context: SolveContext
