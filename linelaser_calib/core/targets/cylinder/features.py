@@ -67,7 +67,13 @@ class FittedSample:
     @property
     def inlier_points(self) -> FloatArray:
         """Inlier points (K, 3) in the sensor frame, m."""
-        return np.asarray(self.points[self.ellipse.inliers], dtype=np.float64)
+        return np.asarray(self.stored_inliers, dtype=np.float64)
+
+    @property
+    def stored_inliers(self) -> NDArray[np.floating]:
+        """The inlier points as stored (float32 where exact, :attr:`points`), for a consumer
+        that converts them itself (the refinement's padded arrays)."""
+        return self.points[self.ellipse.inliers]
 
     @property
     def points_xz(self) -> FloatArray:

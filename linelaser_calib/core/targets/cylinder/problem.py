@@ -524,4 +524,10 @@ def lever_arm_m(problem: CylinderProblem) -> float:
     lever = problem.config.observability.lever_m
     if lever is not None:
         return lever
-    return float(np.median(np.linalg.norm(problem.points, axis=2)[problem.mask > 0.0]))
+    M, K = problem.mask.shape
+    step = max(1, CHUNK_POINTS // K)  # a chunk at a time: no (M, K, 3) temporary
+    chunks = (slice(start, start + step) for start in range(0, M, step))
+    distances = [
+        np.linalg.norm(problem.points[rows], axis=2)[problem.mask[rows] > 0.0] for rows in chunks
+    ]
+    return float(np.median(np.concatenate(distances)))

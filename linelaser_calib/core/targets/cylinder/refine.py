@@ -668,6 +668,8 @@ def refine_with_outlier_rejection(
         if removed and all(len(p) >= cfg.min_points_per_profile for p in trimmed):
             points, trimmed_any = trimmed, True
         T0, start = first.T_flange_sensor, first.cylinder
+        if trimmed_any:  # never the outcome now: its problem need not be held
+            first = replace(first, solved=None)
 
     solved_rows: dict[int, int] = {}  # sample -> its row in the last solve's result
 

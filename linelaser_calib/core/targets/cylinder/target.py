@@ -643,7 +643,7 @@ class CylinderTarget:
     ) -> RefineResult:
         """The refinement with outlier samples dropped, at the features' flange poses."""
         return refine_with_outlier_rejection(
-            [f.inlier_points for f in features],
+            [f.stored_inliers for f in features],
             np.stack([f.T_base_flange for f in features]),
             T_flange_sensor,
             cylinder,
