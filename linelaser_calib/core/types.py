@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +17,8 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+#: Points as :func:`stored_points` keeps them: float32 where exact, else float64.
+StoredArray = NDArray[np.floating[Any]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,7 +101,7 @@ class Rejection:
     reason: str
 
 
-def stored_points(points: FloatArray) -> NDArray[np.floating]:
+def stored_points(points: FloatArray) -> StoredArray:
     """``points`` to keep for later (a feature's, held through a whole calibration): as
     float32 where that holds them exactly (a profiler's float32 coordinates, read as
     float64), else as they are. Half the memory, the same numbers: a user converts them

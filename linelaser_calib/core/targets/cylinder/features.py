@@ -7,13 +7,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import NDArray
 
 from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...model_check import Comparison
 from ...profile.cleaning import clean_profile
-from ...types import BoolArray, Rejection, Sample, SampleFit, stored_points
+from ...types import BoolArray, Rejection, Sample, SampleFit, StoredArray, stored_points
 from ..base import Progress, extract_each, sample_rng
 from .arc import (
     circle_centre,
@@ -56,7 +55,7 @@ class FittedSample:
     index: int
     stamp_ns: int
     T_base_flange: FloatArray
-    points: NDArray[np.floating]
+    points: StoredArray
     ellipse: EllipseFit
     ellipse_config: EllipseConfig
     grazing: BoolArray
@@ -70,7 +69,7 @@ class FittedSample:
         return np.asarray(self.stored_inliers, dtype=np.float64)
 
     @property
-    def stored_inliers(self) -> NDArray[np.floating]:
+    def stored_inliers(self) -> StoredArray:
         """The inlier points as stored (float32 where exact, :attr:`points`), for a consumer
         that converts them itself (the refinement's padded arrays)."""
         return self.points[self.ellipse.inliers]

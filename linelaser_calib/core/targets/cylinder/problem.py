@@ -58,7 +58,7 @@ G×G system. Cost and time grow linearly with the number of samples.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -70,6 +70,7 @@ from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis,
 from ...profile.along_line import measured_to_true
 from ...profile.noise import Whitening
 from ...solver import N_HAND_EYE, Linearisation, Residuals
+from ...types import StoredArray
 from .config import RefineConfig
 from .model import Cylinder
 
@@ -424,7 +425,7 @@ def _subsample(points: FloatArray, limit: int) -> FloatArray:
 
 
 def build_problem(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: ArrayLike,
     config: RefineConfig,
     estimate_radius: bool,

@@ -41,7 +41,7 @@ not used (:func:`recording_line_noise`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -69,6 +69,7 @@ from ...solver import (
     variance_factors,
     widen_covariance,
 )
+from ...types import StoredArray
 from ..base import ROBOT_PRIOR_EXCESS
 from .config import RefineConfig
 from .model import Cylinder
@@ -292,7 +293,7 @@ def _observability(
 
 
 def refine(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: ArrayLike,
     T_flange_sensor0: ArrayLike,
     cylinder0: Cylinder,
@@ -543,7 +544,7 @@ def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[Flag]:
 
 
 def point_residuals_m(
-    samples_points: list[FloatArray], T_base_flange: ArrayLike, result: RefineResult
+    samples_points: Sequence[StoredArray], T_base_flange: ArrayLike, result: RefineResult
 ) -> list[FloatArray]:
     """Signed point-to-surface distances at a solution, with its pose corrections.
 
@@ -614,11 +615,11 @@ def recording_line_noise(result: RefineResult, limit_m: float) -> LineNoise | No
 
 
 def _trim_points(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: FloatArray,
     result: RefineResult,
     limit_m: float,
-) -> tuple[list[FloatArray], int]:
+) -> tuple[list[StoredArray], int]:
     """Drop points whose residual exceeds ``limit_m``; returns the samples and the count."""
     residuals = point_residuals_m(samples_points, T_base_flange, result)
     trimmed, removed = [], 0
@@ -630,7 +631,7 @@ def _trim_points(
 
 
 def refine_with_outlier_rejection(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: ArrayLike,
     T_flange_sensor0: ArrayLike,
     cylinder0: Cylinder,
