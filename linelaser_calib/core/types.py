@@ -101,11 +101,13 @@ class Rejection:
     reason: str
 
 
-def stored_points(points: FloatArray) -> StoredArray:
+def stored_points(points: StoredArray) -> StoredArray:
     """``points`` to keep for later (a feature's, held through a whole calibration): as
     float32 where that holds them exactly (a profiler's float32 coordinates, read as
     float64), else as they are. Half the memory, the same numbers: a user converts them
     back to float64 before computing with them (``np.asarray(p, dtype=np.float64)``)."""
+    if points.dtype == np.float32:
+        return points
     narrow = points.astype(np.float32)
     return narrow if np.array_equal(narrow, points, equal_nan=True) else points
 
@@ -121,9 +123,10 @@ class SampleFit:
     stamp_ns : int
     T_base_flange : ndarray, shape (4, 4)
         Flange pose as paired (recorded, not corrected).
-    points : ndarray, shape (K, 3)
+    stored : ndarray, shape (K, 3)
         The points the target's model used, sensor frame, m (e.g. the ellipse inliers, the
-        points of the two V lines).
+        points of the two V lines), kept as :func:`stored_points` keeps them (a result holds
+        every used profile's); :attr:`points` gives them as float64.
     feature_xz : ndarray, shape (2,)
         The profile's feature point in the sensor x-z plane, m: the point of the profile that
         the target's paper method uses (e.g. the ellipse centre, the V corner).
@@ -132,8 +135,16 @@ class SampleFit:
     index: int
     stamp_ns: int
     T_base_flange: FloatArray
-    points: FloatArray
+    stored: StoredArray
     feature_xz: FloatArray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stored", stored_points(np.asarray(self.stored)))
+
+    @property
+    def points(self) -> FloatArray:
+        """The points (K, 3) the target's model used, sensor frame, m, as float64."""
+        return np.asarray(self.stored, dtype=np.float64)
 
 
 class Level(str, Enum):

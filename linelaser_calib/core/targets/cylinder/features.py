@@ -93,7 +93,7 @@ class FittedSample:
             self.index,
             self.stamp_ns,
             self.T_base_flange,
-            self.inlier_points,
+            self.stored_inliers,
             self.ellipse.centre_xz,
         )
 
