@@ -144,7 +144,7 @@ class CylinderProblem:
     nearest it (same cylinder).
     """
 
-    points: FloatArray  # (M, K, 3) sensor frame, m
+    points: StoredArray  # (M, K, 3) sensor frame, m; float32 where the input was exactly so
     mask: FloatArray  # (M, K) 1 for a real point, 0 for padding
     counts: np.ndarray  # (M,) real points per sample
     R_bf: FloatArray  # (M, 3, 3)
@@ -159,6 +159,11 @@ class CylinderProblem:
     @property
     def n_samples(self) -> int:
         return int(self.R_bf.shape[0])
+
+    @property
+    def x_m(self) -> FloatArray:
+        """Each point's place along the line (sensor x), (M, K), m."""
+        return np.asarray(self.points[..., 0], dtype=np.float64)
 
     def take(self, rows: np.ndarray) -> CylinderProblem:
         """The problem of the samples ``rows`` (indices into the sample axis), m as before."""
@@ -453,6 +458,9 @@ def build_problem(
         except ValueError as exc:
             raise InputError(f"T_base_flange[{j}] is not a rigid transform: {exc}") from exc
     stacked: list[FloatArray] = []
+    # Points held as float32 where they all are (stored_points): the same numbers, half the
+    # memory of the largest arrays a refinement holds; every use converts a chunk at a time.
+    narrow = all(np.asarray(p).dtype == np.float32 for p in samples_points)
     for j, p in enumerate(samples_points):
         q = np.asarray(p, dtype=np.float64)
         if q.ndim != 2 or q.shape[1] != 3:
@@ -467,7 +475,7 @@ def build_problem(
         stacked.append(_subsample(q, config.max_points_per_profile))
     counts = np.array([len(q) for q in stacked])
     K = int(counts.max())
-    points = np.empty((M, K, 3))
+    points = np.empty((M, K, 3), dtype=np.float32 if narrow else np.float64)
     mask = np.zeros((M, K))
     for j, q in enumerate(stacked):
         points[j, : len(q)] = q
@@ -529,6 +537,9 @@ def lever_arm_m(problem: CylinderProblem) -> float:
     step = max(1, CHUNK_POINTS // K)  # a chunk at a time: no (M, K, 3) temporary
     chunks = (slice(start, start + step) for start in range(0, M, step))
     distances = [
-        np.linalg.norm(problem.points[rows], axis=2)[problem.mask[rows] > 0.0] for rows in chunks
+        np.linalg.norm(np.asarray(problem.points[rows], dtype=np.float64), axis=2)[
+            problem.mask[rows] > 0.0
+        ]
+        for rows in chunks
     ]
     return float(np.median(np.concatenate(distances)))

@@ -361,7 +361,7 @@ def refine(
     if noise is not None:
         whitening = line_whitening(
             noise,
-            problem.points[..., 0],
+            problem.x_m,
             problem.depth_cosines(state),
             problem.mask,
             cfg.sensor_sigma_m,
@@ -601,14 +601,14 @@ def recording_line_noise(result: RefineResult, limit_m: float) -> LineNoise | No
         )
         noise = learn_line_noise(
             residuals[rows],
-            learned.points[..., 0],
+            learned.x_m,
             learned.depth_cosines(at),
             mask[rows],
             learned.unwhitened_local_jacobian(at),
         )
     except InputError:
         return None
-    x = np.where(mask > 0.0, problem.points[..., 0], np.nan)
+    x = np.where(mask > 0.0, problem.x_m, np.nan)
     extent = float(np.nanmedian(np.nanmax(x, axis=1) - np.nanmin(x, axis=1)))
     smooth = noise.smooth_sigma_m > 0.0
     return noise if smooth and noise.length_m <= MAX_NOISE_LENGTH_FRACTION * extent else None
