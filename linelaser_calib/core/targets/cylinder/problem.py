@@ -77,8 +77,10 @@ from .model import Cylinder
 #: Axis parameters (a, b) in the global block, after the hand-eye's 6.
 N_AXIS = 4
 #: Points per chunk of samples :meth:`CylinderProblem.linearise` builds its Jacobians from:
-#: its per-point intermediates (about twenty arrays of 3 to 12 columns) stay a few MB each.
-CHUNK_POINTS = 1 << 15
+#: its per-point intermediates (about twenty arrays of 3 to 12 columns) stay a few MB each
+#: (about 15 MB together at 2**15 points, a solve's largest transient; 2**14 halves that at
+#: the same CPU time on ur_scancontrol at 1,600 poses).
+CHUNK_POINTS = 1 << 14
 
 
 # --------------------------------------------------------------------------------------
