@@ -1,6 +1,7 @@
 """Typed records shared by every stage of the pipeline.
 
-All arrays are float64 in SI units (metres, radians); stamps are integer nanoseconds.
+All arrays are float64 in SI units (metres, radians), but points kept for later, which may be
+float32 (:func:`stored_points`); stamps are integer nanoseconds.
 """
 
 from __future__ import annotations
@@ -32,12 +33,14 @@ class Profile:
     points : ndarray, shape (N, 3)
         Points in the sensor frame, m. The laser plane is x-z, so y is ~0.
         May still hold NaN/Inf (REP 117); cleaning drops them.
+        float32 where a recording's are kept (:func:`stored_points`): convert before
+        computing with them.
     frame_id : str
         Sensor frame id from the message header.
     """
 
     stamp_ns: int
-    points: FloatArray
+    points: StoredArray
     frame_id: str = "laser"
 
 
@@ -70,13 +73,13 @@ class Sample:
     stamp_ns : int
     T_base_flange : ndarray, shape (4, 4)
     points : ndarray, shape (N, 3)
-        Sensor-frame points, m.
+        Sensor-frame points, m (float32 where its profile's are, :class:`Profile`).
     """
 
     index: int
     stamp_ns: int
     T_base_flange: FloatArray
-    points: FloatArray
+    points: StoredArray
 
 
 @dataclass(frozen=True)
