@@ -170,7 +170,7 @@ def reconstruct_bag(
     clouds = []
     for sample in paired.samples:
         T_base_sensor = sample.T_base_flange @ calibration.T_flange_sensor
-        points = calibration.target.sensor_points(sample.points)
+        points = calibration.target.sensor_points(np.asarray(sample.points, dtype=np.float64))
         clouds.append((sample.stamp_ns, apply_transform(T_base_sensor, points)))
     by_stamp = read_profile_intensities(path, bag.profile_topic)
     intensities = None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import pickle
 from dataclasses import replace
 from pathlib import Path
 
@@ -47,6 +48,24 @@ def test_a_real_like_profile_with_shape_error_is_an_arc(radius_m: float | None) 
     assert fitted.ellipse.inliers.mean() > 0.9
     # One partial arc with a bow pins its semi-minor axis only loosely (here 12 % off).
     assert fitted.ellipse.semi_axes[1] == pytest.approx(RADIUS, rel=0.2)
+
+
+def test_a_feature_holds_its_arc_at_float32_and_no_raw_profile() -> None:
+    """Regression (issue 32): a feature held its sample's raw profile, its segmentation and
+    copies of its arc's points (35 kB a profile, pickled from the forked extraction too);
+    with a profiler's float32 coordinates it now holds the arc's points as float32, and hands
+    them out as float64 of the same values."""
+    rng = np.random.default_rng(4)
+    raw = _real_like_arc(rng, 110.0).astype(np.float32)
+    sample = Sample(0, 0, np.eye(4), np.vstack([raw, np.full((200, 3), np.nan, np.float32)]))
+    fitted = fit_sample(sample, CylinderConfig(), rng)
+    assert isinstance(fitted, FittedSample), fitted
+    assert fitted.points.dtype == np.float32
+    inliers = fitted.inlier_points
+    assert inliers.dtype == np.float64
+    assert np.isin(inliers[:, 0], raw[:, 0].astype(np.float64)).all()  # the raw values
+    assert np.array_equal(fitted.record().points, inliers)
+    assert len(pickle.dumps(fitted)) < 15 * len(fitted.points) + 4000
 
 
 def test_partial_arcs_with_a_free_radius_calibrate() -> None:

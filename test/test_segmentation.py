@@ -139,7 +139,9 @@ def test_biased_grazing_ends_are_found_over_a_recording_and_trimmed() -> None:
         clean_shifts.append(fit_arc_in_scene(clean, EllipseConfig(), rng).grazing_shift_sigmas)
         arc = fit_arc_in_scene(biased, EllipseConfig(), rng)
         biased_shifts.append(arc.grazing_shift_sigmas)
-        trimmed = without_grazing_ends(arc, None)
+        trimmed = without_grazing_ends(
+            arc.points_xz, arc.grazing, arc.ellipse_config, arc.noise_sigma_m, None
+        )
         assert trimmed is not None and arc.grazing.sum() > 0
         assert not np.any(trimmed.inliers & arc.grazing)
         trimmed_error = abs(trimmed.semi_axes[1] - RADIUS)

@@ -165,7 +165,7 @@ def test_subset_solves_hold_no_copy_of_the_points_however_many_subsets() -> None
     def recording_solve(subset: list[Any]) -> TargetSolution:
         # As a real target's: records of every used sample, 48 kB of points each, and a
         # start for solves of subsets of it holding them all.
-        fits = [replace(f.record(), points=np.zeros((2000, 3))) for f in subset]
+        fits = [replace(f.record(), stored=np.zeros((2000, 3))) for f in subset]
         start = np.zeros((len(subset), 2000, 3))
         return replace(toy_solve(subset), sample_fits=fits, subset_start=start)
 
@@ -427,7 +427,7 @@ def test_region_dependent_robot_error_is_detected_and_its_sigma_honest() -> None
     for indices, solution in zip(check.region_indices, check.region_solutions, strict=True):
         assert solution is not None
         for i in indices:
-            fit = replace(fits[i], points=solution.section.sensor_points(fits[i].points))
+            fit = replace(fits[i], stored=solution.section.sensor_points(fits[i].points))
             T = fit.T_base_flange @ solution.T_flange_sensor
             d.append(true_surface.surface_distances(fit, T))
     user_error = float(np.sqrt(np.mean(np.concatenate(d) ** 2)))

@@ -219,7 +219,7 @@ def validate_sample(sample: Sample, config: PipelineConfig) -> Rejection | None:
 
 def check_units(samples: list[Sample]) -> None:
     """Raise InputError when the data is evidently in millimetres rather than metres."""
-    finite = [s.points[np.isfinite(s.points[:, 2]), 2] for s in samples]
+    finite = [np.asarray(s.points[np.isfinite(s.points[:, 2]), 2], np.float64) for s in samples]
     depths = [float(np.median(np.abs(z))) for z in finite if z.size]
     reach = [float(np.linalg.norm(s.T_base_flange[:3, 3])) for s in samples]
     if depths and float(np.median(depths)) > MAX_PLAUSIBLE_DEPTH_M:

@@ -1,13 +1,14 @@
 """Typed records shared by every stage of the pipeline.
 
-All arrays are float64 in SI units (metres, radians); stamps are integer nanoseconds.
+All arrays are float64 in SI units (metres, radians), but points kept for later, which may be
+float32 (:func:`stored_points`); stamps are integer nanoseconds.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import Enum
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,6 +18,8 @@ if TYPE_CHECKING:
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+#: Points as :func:`stored_points` keeps them: float32 where exact, else float64.
+StoredArray = NDArray[np.floating[Any]]
 
 
 @dataclass(frozen=True, slots=True)
@@ -30,12 +33,14 @@ class Profile:
     points : ndarray, shape (N, 3)
         Points in the sensor frame, m. The laser plane is x-z, so y is ~0.
         May still hold NaN/Inf (REP 117); cleaning drops them.
+        float32 where a recording's are kept (:func:`stored_points`): convert before
+        computing with them.
     frame_id : str
         Sensor frame id from the message header.
     """
 
     stamp_ns: int
-    points: FloatArray
+    points: StoredArray
     frame_id: str = "laser"
 
 
@@ -68,13 +73,13 @@ class Sample:
     stamp_ns : int
     T_base_flange : ndarray, shape (4, 4)
     points : ndarray, shape (N, 3)
-        Sensor-frame points, m.
+        Sensor-frame points, m (float32 where its profile's are, :class:`Profile`).
     """
 
     index: int
     stamp_ns: int
     T_base_flange: FloatArray
-    points: FloatArray
+    points: StoredArray
 
 
 @dataclass(frozen=True)
@@ -99,6 +104,17 @@ class Rejection:
     reason: str
 
 
+def stored_points(points: StoredArray) -> StoredArray:
+    """``points`` to keep for later (a feature's, held through a whole calibration): as
+    float32 where that holds them exactly (a profiler's float32 coordinates, read as
+    float64), else as they are. Half the memory, the same numbers: a user converts them
+    back to float64 before computing with them (``np.asarray(p, dtype=np.float64)``)."""
+    if points.dtype == np.float32:
+        return points
+    narrow = points.astype(np.float32)
+    return narrow if np.array_equal(narrow, points, equal_nan=True) else points
+
+
 @dataclass(frozen=True)
 class SampleFit:
     """What the solve used of one sample, kept for reports and markers.
@@ -110,9 +126,10 @@ class SampleFit:
     stamp_ns : int
     T_base_flange : ndarray, shape (4, 4)
         Flange pose as paired (recorded, not corrected).
-    points : ndarray, shape (K, 3)
+    stored : ndarray, shape (K, 3)
         The points the target's model used, sensor frame, m (e.g. the ellipse inliers, the
-        points of the two V lines).
+        points of the two V lines), kept as :func:`stored_points` keeps them (a result holds
+        every used profile's); :attr:`points` gives them as float64.
     feature_xz : ndarray, shape (2,)
         The profile's feature point in the sensor x-z plane, m: the point of the profile that
         the target's paper method uses (e.g. the ellipse centre, the V corner).
@@ -121,8 +138,16 @@ class SampleFit:
     index: int
     stamp_ns: int
     T_base_flange: FloatArray
-    points: FloatArray
+    stored: StoredArray
     feature_xz: FloatArray
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stored", stored_points(np.asarray(self.stored)))
+
+    @property
+    def points(self) -> FloatArray:
+        """The points (K, 3) the target's model used, sensor frame, m, as float64."""
+        return np.asarray(self.stored, dtype=np.float64)
 
 
 class Level(str, Enum):

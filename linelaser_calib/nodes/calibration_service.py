@@ -393,7 +393,8 @@ class CalibrationServiceNode(Node):
         except MessageError as err:
             self._bad_sample(err)
             return
-        self._warn(self._store.add_profile(profile.stamp_ns, profile.points, profile.frame_id))
+        points = np.asarray(profile.points, dtype=np.float64)
+        self._warn(self._store.add_profile(profile.stamp_ns, points, profile.frame_id))
 
     def _on_pose(self, msg: PoseStamped) -> None:
         try:

@@ -265,6 +265,25 @@ class _Reml:
         return cost, gradient
 
 
+def learning_profiles(mask: FloatArray) -> NDArray[np.intp]:
+    """The rows (profiles) of a padded (M, K) point ``mask`` that :func:`learn_line_noise`
+    learns from: at most :data:`LEARN_PROFILES` of those with :data:`MIN_POINTS` points,
+    evenly spaced. A caller may hand :func:`learn_line_noise` these rows alone (the same
+    outcome) and so compute the bases of a few profiles, not of the whole recording.
+
+    Raises
+    ------
+    InputError
+        Fewer than two profiles with :data:`MIN_POINTS` points.
+    """
+    keep = np.sum(np.asarray(mask) > 0.0, axis=1) >= MIN_POINTS
+    if np.count_nonzero(keep) < 2:
+        raise InputError(f"learn_line_noise needs two profiles of {MIN_POINTS}+ points")
+    rows = np.flatnonzero(keep)
+    spread = np.linspace(0, len(rows) - 1, min(len(rows), LEARN_PROFILES)).astype(int)
+    return np.asarray(rows[np.unique(spread)])
+
+
 def learn_line_noise(
     residuals_m: FloatArray,
     x_m: FloatArray,
@@ -304,16 +323,9 @@ def learn_line_noise(
     shapes = {np.shape(a) for a in (residuals_m, x_m, cosine, mask)}
     if len(shapes) != 1 or np.shape(bases)[:2] != np.shape(mask):
         raise InputError(f"learn_line_noise: array shapes differ: {shapes}, {np.shape(bases)}")
-    m = np.asarray(mask) > 0.0
-    keep = np.sum(m, axis=1) >= MIN_POINTS
-    if np.count_nonzero(keep) < 2:
-        raise InputError(f"learn_line_noise needs two profiles of {MIN_POINTS}+ points")
+    rows = learning_profiles(mask)
     every = max(1, math.ceil(np.shape(mask)[1] / LEARN_POINTS))
-    rows = np.flatnonzero(keep)
-    rows = rows[
-        np.unique(np.linspace(0, len(rows) - 1, min(len(rows), LEARN_PROFILES)).astype(int))
-    ]
-    m = m[rows, ::every]
+    m = (np.asarray(mask) > 0.0)[rows, ::every]
     r = np.where(m, residuals_m[rows, ::every], 0.0)
     x = np.where(m, x_m[rows, ::every], 0.0)
     c = np.where(m, cosine[rows, ::every], 0.0)

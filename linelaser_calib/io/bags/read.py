@@ -9,6 +9,7 @@ from __future__ import annotations
 import shutil
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -19,7 +20,7 @@ from rosbags.rosbag2 import Reader
 
 from linelaser_calib.core.pose_track import PoseTrack
 from linelaser_calib.core.robot.kinematics import JointStates
-from linelaser_calib.core.types import Profile
+from linelaser_calib.core.types import Profile, stored_points
 from linelaser_calib.io.bags.cdr import decode_message, flange_poses, reading_store
 from linelaser_calib.io.bags.records import (
     JOINT_STATE_TOPIC,
@@ -225,11 +226,14 @@ def raw_messages(
 
 
 def _profile(topic: str, msg: Any, invalid_values_m: Sequence[float]) -> Profile | SkippedMessage:
-    """Profile of a decoded PointCloud2; a malformed one becomes a :class:`SkippedMessage`."""
+    """Profile of a decoded PointCloud2, its points as
+    :func:`~linelaser_calib.core.types.stored_points` keeps them (a recording's profiles are
+    held through the whole calibration); a malformed one becomes a :class:`SkippedMessage`."""
     try:
-        return profile_from_pointcloud2(msg, invalid_values_m=invalid_values_m)
+        profile = profile_from_pointcloud2(msg, invalid_values_m=invalid_values_m)
     except MessageError as err:
         return SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err))
+    return replace(profile, points=stored_points(profile.points))
 
 
 def read_bag(

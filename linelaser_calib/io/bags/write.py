@@ -17,7 +17,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.robot.kinematics import JointStates
 from linelaser_calib.core.tf import StampedTransform
-from linelaser_calib.core.types import FlangePose, Profile
+from linelaser_calib.core.types import FlangePose, Profile, StoredArray
 from linelaser_calib.io.bags.cdr import jazzy_typestore
 from linelaser_calib.io.bags.records import (
     JOINT_STATE_TYPE,
@@ -86,7 +86,7 @@ class _ProfilePoseWriter:
     def write_profile(
         self,
         stamp_ns: int,
-        points: NDArray[np.float64],
+        points: StoredArray,
         frame_id: str,
         *,
         intensity: NDArray[np.float64] | None,

@@ -328,7 +328,9 @@ def _advice_scan(
     T = forward_kinematics(setup.model, q) @ T_flange_sensor
     points = []
     for profile, T_bs in zip(profiles, T, strict=True):
-        x = profile.points[np.all(np.isfinite(profile.points), axis=1)]
+        x = np.asarray(
+            profile.points[np.all(np.isfinite(profile.points), axis=1)], dtype=np.float64
+        )
         v = x @ T_bs[:3, :3].T + T_bs[:3, 3] - cylinder.point
         radial = v - np.outer(v @ cylinder.direction, cylinder.direction)
         points.append(x[np.abs(np.linalg.norm(radial, axis=1) - cylinder.radius) < 5e-4])

@@ -31,7 +31,7 @@ from scipy.optimize import least_squares
 from ...errors import ProfileRejected
 from ...model_check import median
 from ...profile.cleaning import MAD_TO_SIGMA
-from ...profile.segmentation import IntArray, SegmentationConfig, SegmentedProfile, segment_profile
+from ...profile.segmentation import IntArray, SegmentationConfig, segment_profile
 from ...types import BoolArray, FloatArray
 from .conic import centre_from_conic, sampson_distance
 from .ellipse import EllipseConfig, EllipseFit, fit_ellipse_ransac, refine_conic
@@ -84,13 +84,13 @@ class ArcFit:
     rows : ndarray of int, shape (M,)
         Their rows in the input points.
     ellipse : EllipseFit
-    segmented : SegmentedProfile
-        The segmentation (noise estimate, straight segments set aside).
     ellipse_config : EllipseConfig
         The ellipse parameters used, inlier threshold scaled to the noise.
     grazing : ndarray of bool, shape (M,)
         The inliers seen at more than ``grazing_angle_rad`` from the surface normal (all
         False when fewer than ``min_grazing_points``).
+    noise_sigma_m : float
+        The profile's measured noise (its segmentation's), m.
     grazing_shift_sigmas : float
         Mean outward distance of the grazing inliers from the ellipse through the other
         inliers, less the median of the others', in noise sigmas (NaN when not measured).
@@ -99,9 +99,9 @@ class ArcFit:
     points_xz: FloatArray
     rows: IntArray
     ellipse: EllipseFit
-    segmented: SegmentedProfile
     ellipse_config: EllipseConfig
     grazing: BoolArray
+    noise_sigma_m: float
     grazing_shift_sigmas: float = math.nan
 
 
@@ -150,26 +150,33 @@ def _grazing_shift(
     return grazing, (ends - others) / sigma_m
 
 
-def without_grazing_ends(arc: ArcFit, radius_m: float | None) -> EllipseFit | None:
-    """The arc's ellipse fitted again without its grazing inliers (None if that fails).
+def without_grazing_ends(
+    points_xz: FloatArray,
+    grazing: BoolArray,
+    ellipse_config: EllipseConfig,
+    noise_sigma_m: float,
+    radius_m: float | None,
+) -> EllipseFit | None:
+    """An arc's ellipse fitted again without its grazing inliers (None if that fails): the
+    arc's ``points_xz``, ``grazing``, ``ellipse_config`` and ``noise_sigma_m``
+    (:class:`ArcFit`).
 
-    Its ``inliers`` mask covers the same rows as ``arc.ellipse.inliers``, the grazing
-    ones False.
+    Its ``inliers`` mask covers the arc's rows, the grazing ones False.
     """
-    if not arc.grazing.any():
+    if not grazing.any():
         return None
-    keep = ~arc.grazing
+    keep = ~grazing
     try:
         fit = fit_ellipse_ransac(
-            arc.points_xz[keep],
-            arc.ellipse_config,
-            np.random.default_rng(len(arc.points_xz)),
+            points_xz[keep],
+            ellipse_config,
+            np.random.default_rng(len(points_xz)),
             radius_m,
-            arc.segmented.noise.sigma_m,
+            noise_sigma_m,
         )
     except ProfileRejected:
         return None
-    inliers = np.zeros(len(arc.points_xz), dtype=np.bool_)
+    inliers = np.zeros(len(points_xz), dtype=np.bool_)
     inliers[np.flatnonzero(keep)[fit.inliers]] = True
     return replace(fit, inliers=inliers)
 
@@ -235,7 +242,7 @@ def fit_arc_in_scene(
         raise first_error
     fit, rows = best
     grazing, shift = _grazing_shift(fit, p[rows], sigma, config)
-    return ArcFit(p[rows], rows, fit, segmented, scaled, grazing, shift)
+    return ArcFit(p[rows], rows, fit, scaled, grazing, sigma, shift)
 
 
 def circle_radius(points_xz: FloatArray) -> float:

@@ -3,7 +3,9 @@ found among the planes of the scene (:mod:`linelaser_calib.core.targets.cylinder
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -11,10 +13,9 @@ from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...model_check import Comparison
 from ...profile.cleaning import clean_profile
-from ...types import Rejection, Sample, SampleFit
+from ...types import BoolArray, Rejection, Sample, SampleFit, StoredArray, stored_points
 from ..base import Progress, extract_each, sample_rng
 from .arc import (
-    ArcFit,
     circle_centre,
     circle_radius,
     fit_arc_in_scene,
@@ -24,7 +25,7 @@ from .arc import (
     without_grazing_ends,
 )
 from .config import CylinderConfig
-from .ellipse import EllipseFit
+from .ellipse import EllipseConfig, EllipseFit
 from .shape import (
     arc_rival_rejection,
     compare_ellipse,
@@ -39,44 +40,56 @@ MIN_RIVAL_POINTS = 8
 
 @dataclass
 class FittedSample:
-    """A sample with the points of its arc and its fitted ellipse (the cylinder target's
-    feature); ``arc`` says how the arc was found, ``trimmed`` how many grazing-angle points
-    were trimmed from it, ``rival`` the comparison when a rival shape fits this one profile
-    clearly better than its ellipse (kept: where most profiles are so, the whole recording
-    decides, :meth:`~.target.CylinderTarget.model_doubt`)."""
+    """A sample's pairing (its profile's ``index`` and ``stamp_ns``, its flange pose) with
+    the points of its arc and its fitted ellipse (the cylinder target's feature); ``trimmed``
+    says how many grazing-angle points were trimmed from the arc, ``rival`` gives the
+    comparison when a rival shape fits this one profile clearly better than its ellipse
+    (kept: where most profiles are so, the whole recording decides,
+    :meth:`~.target.CylinderTarget.model_doubt`).
 
-    sample: Sample
-    points: FloatArray
+    A feature is held through the whole calibration, so it keeps only what the later stages
+    use: not the sample's raw points, and its arc's points as stored points
+    (:func:`~linelaser_calib.core.types.stored_points`); ``grazing``,
+    ``noise_sigma_m``, ``grazing_shift_sigmas`` and ``ellipse_config`` are those of its arc
+    (:class:`.arc.ArcFit`), for the refit without the grazing ends."""
+
+    index: int
+    stamp_ns: int
+    T_base_flange: FloatArray
+    points: StoredArray
     ellipse: EllipseFit
-    arc: ArcFit | None = None
+    ellipse_config: EllipseConfig
+    grazing: BoolArray
+    noise_sigma_m: float
+    grazing_shift_sigmas: float = math.nan
     trimmed: int = 0
     rival: Comparison | None = None
-    _inliers: tuple[EllipseFit, FloatArray] | None = field(
+    _inliers: tuple[EllipseFit, StoredArray] | None = field(
         default=None, init=False, repr=False, compare=False
     )
 
-    @property
-    def index(self) -> int:
-        """Profile index in the input stream."""
-        return self.sample.index
-
-    @property
-    def stamp_ns(self) -> int:
-        """Profile stamp, ns."""
-        return self.sample.stamp_ns
-
-    @property
-    def T_base_flange(self) -> FloatArray:
-        """Flange pose (4, 4) as paired."""
-        return self.sample.T_base_flange
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled (a forked worker's result) without the inlier cache, taken again on use."""
+        return {**self.__dict__, "_inliers": None}
 
     @property
     def inlier_points(self) -> FloatArray:
-        """Inlier points (K, 3) in the sensor frame, m: taken once per ellipse (every solve's
-        sample records, the self-check's included, share them)."""
+        """Inlier points (K, 3) in the sensor frame, m (float64)."""
+        return np.asarray(self.stored_inliers, dtype=np.float64)
+
+    @property
+    def stored_inliers(self) -> StoredArray:
+        """The inlier points as stored (float32 where exact, :attr:`points`), for a consumer
+        that converts them itself (the refinement's padded arrays): taken once per ellipse,
+        so every solve's sample records, the self-check's included, share one array."""
         if self._inliers is None or self._inliers[0] is not self.ellipse:
             self._inliers = (self.ellipse, self.points[self.ellipse.inliers])
         return self._inliers[1]
+
+    @property
+    def points_xz(self) -> FloatArray:
+        """The arc's points (M, 2) in the laser plane, (x, z), m."""
+        return np.asarray(self.points[:, [0, 2]], dtype=np.float64)
 
     def centre_xz(self, radius_m: float) -> FloatArray:
         """The centre (2,) a solve on the centres uses, m: the ellipse's, or for a short arc
@@ -88,9 +101,12 @@ class FittedSample:
 
     def record(self) -> SampleFit:
         """The plain record kept in the result."""
-        s = self.sample
         return SampleFit(
-            s.index, s.stamp_ns, s.T_base_flange, self.inlier_points, self.ellipse.centre_xz
+            self.index,
+            self.stamp_ns,
+            self.T_base_flange,
+            self.stored_inliers,
+            self.ellipse.centre_xz,
         )
 
 
@@ -132,8 +148,18 @@ def fit_sample(
                 "ellipse",
                 f"the short arc is not clearly curved: {to_line.describe()}",
             )
-    rival = comparison if comparison.rival_wins else None
-    return FittedSample(sample, cleaned.points[arc.rows], arc.ellipse, arc, rival=rival)
+    return FittedSample(
+        sample.index,
+        sample.stamp_ns,
+        sample.T_base_flange,
+        stored_points(cleaned.points[arc.rows]),
+        arc.ellipse,
+        arc.ellipse_config,
+        arc.grazing,
+        arc.noise_sigma_m,
+        arc.grazing_shift_sigmas,
+        rival=comparison if comparison.rival_wins else None,
+    )
 
 
 def fit_samples(
@@ -177,11 +203,12 @@ def fit_samples(
 def _trim_biased_grazing_ends(fitted: list[FittedSample], radius_m: float | None) -> None:
     """Fit the long arcs again without their grazing ends when those ends are biased."""
     long = long_arcs(fitted)
-    arcs = [f.arc for f in long if f.arc is not None]
-    if grazing_ends_biased([a.grazing_shift_sigmas for a in arcs]) is None:
+    if grazing_ends_biased([f.grazing_shift_sigmas for f in long]) is None:
         return
     for f in long:
-        trimmed = None if f.arc is None else without_grazing_ends(f.arc, radius_m)
+        trimmed = without_grazing_ends(
+            f.points_xz, f.grazing, f.ellipse_config, f.noise_sigma_m, radius_m
+        )
         if trimmed is not None:
             f.trimmed = int(f.ellipse.inliers.sum() - trimmed.inliers.sum())
             f.ellipse = trimmed
@@ -197,7 +224,7 @@ def arc_notes(fitted: list[FittedSample], config: CylinderConfig) -> list[str]:
     short arcs."""
     long = long_arcs(fitted)
     notes = [radius_mismatch([f.ellipse.semi_axes[1] for f in long], config.radius_m)]
-    shift = grazing_ends_biased([f.arc.grazing_shift_sigmas for f in long if f.arc is not None])
+    shift = grazing_ends_biased([f.grazing_shift_sigmas for f in long])
     if shift is not None:
         notes.append(trimming_note([f.trimmed for f in long], shift, config.arc))
     return [note for note in notes if note is not None]

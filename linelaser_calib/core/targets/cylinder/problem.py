@@ -58,7 +58,7 @@ G×G system. Cost and time grow linearly with the number of samples.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -70,14 +70,17 @@ from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis,
 from ...profile.along_line import measured_to_true
 from ...profile.noise import Whitening
 from ...solver import N_HAND_EYE, Linearisation, Residuals
+from ...types import StoredArray
 from .config import RefineConfig
 from .model import Cylinder
 
 #: Axis parameters (a, b) in the global block, after the hand-eye's 6.
 N_AXIS = 4
 #: Points per chunk of samples :meth:`CylinderProblem.linearise` builds its Jacobians from:
-#: its per-point intermediates (about twenty arrays of 3 to 12 columns) stay a few MB each.
-CHUNK_POINTS = 1 << 15
+#: its per-point intermediates (about twenty arrays of 3 to 12 columns) stay a few MB each
+#: (about 15 MB together at 2**15 points, a solve's largest transient; 2**14 halves that at
+#: the same CPU time on ur_scancontrol at 1,600 poses).
+CHUNK_POINTS = 1 << 14
 
 
 # --------------------------------------------------------------------------------------
@@ -143,7 +146,7 @@ class CylinderProblem:
     nearest it (same cylinder).
     """
 
-    points: FloatArray  # (M, K, 3) sensor frame, m
+    points: StoredArray  # (M, K, 3) sensor frame, m; float32 where the input was exactly so
     mask: FloatArray  # (M, K) 1 for a real point, 0 for padding
     counts: np.ndarray  # (M,) real points per sample
     R_bf: FloatArray  # (M, 3, 3)
@@ -158,6 +161,11 @@ class CylinderProblem:
     @property
     def n_samples(self) -> int:
         return int(self.R_bf.shape[0])
+
+    @property
+    def x_m(self) -> FloatArray:
+        """Each point's place along the line (sensor x), (M, K), m."""
+        return np.asarray(self.points[..., 0], dtype=np.float64)
 
     def take(self, rows: np.ndarray) -> CylinderProblem:
         """The problem of the samples ``rows`` (indices into the sample axis), m as before."""
@@ -424,7 +432,7 @@ def _subsample(points: FloatArray, limit: int) -> FloatArray:
 
 
 def build_problem(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: ArrayLike,
     config: RefineConfig,
     estimate_radius: bool,
@@ -452,6 +460,9 @@ def build_problem(
         except ValueError as exc:
             raise InputError(f"T_base_flange[{j}] is not a rigid transform: {exc}") from exc
     stacked: list[FloatArray] = []
+    # Points held as float32 where they all are (stored_points): the same numbers, half the
+    # memory of the largest arrays a refinement holds; every use converts a chunk at a time.
+    narrow = all(np.asarray(p).dtype == np.float32 for p in samples_points)
     for j, p in enumerate(samples_points):
         q = np.asarray(p, dtype=np.float64)
         if q.ndim != 2 or q.shape[1] != 3:
@@ -466,7 +477,7 @@ def build_problem(
         stacked.append(_subsample(q, config.max_points_per_profile))
     counts = np.array([len(q) for q in stacked])
     K = int(counts.max())
-    points = np.empty((M, K, 3))
+    points = np.empty((M, K, 3), dtype=np.float32 if narrow else np.float64)
     mask = np.zeros((M, K))
     for j, q in enumerate(stacked):
         points[j, : len(q)] = q
@@ -524,4 +535,13 @@ def lever_arm_m(problem: CylinderProblem) -> float:
     lever = problem.config.observability.lever_m
     if lever is not None:
         return lever
-    return float(np.median(np.linalg.norm(problem.points, axis=2)[problem.mask > 0.0]))
+    M, K = problem.mask.shape
+    step = max(1, CHUNK_POINTS // K)  # a chunk at a time: no (M, K, 3) temporary
+    chunks = (slice(start, start + step) for start in range(0, M, step))
+    distances = [
+        np.linalg.norm(np.asarray(problem.points[rows], dtype=np.float64), axis=2)[
+            problem.mask[rows] > 0.0
+        ]
+        for rows in chunks
+    ]
+    return float(np.median(np.concatenate(distances)))

@@ -41,7 +41,7 @@ not used (:func:`recording_line_noise`).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import NamedTuple
 
@@ -53,7 +53,7 @@ from ...errors import DegenerateError, InputError, SolverError
 from ...geometry import FloatArray, exp_so3, transform_from_rotation_translation
 from ...observability import Observability, analyse_observability, pose_geometry
 from ...profile.along_line import measured_to_true
-from ...profile.noise import LineNoise, learn_line_noise, line_whitening
+from ...profile.noise import LineNoise, learn_line_noise, learning_profiles, line_whitening
 from ...solver import (
     N_HAND_EYE,
     N_LOCAL,
@@ -69,6 +69,7 @@ from ...solver import (
     variance_factors,
     widen_covariance,
 )
+from ...types import StoredArray
 from ..base import ROBOT_PRIOR_EXCESS
 from .config import RefineConfig
 from .model import Cylinder
@@ -292,7 +293,7 @@ def _observability(
 
 
 def refine(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: ArrayLike,
     T_flange_sensor0: ArrayLike,
     cylinder0: Cylinder,
@@ -360,7 +361,7 @@ def refine(
     if noise is not None:
         whitening = line_whitening(
             noise,
-            problem.points[..., 0],
+            problem.x_m,
             problem.depth_cosines(state),
             problem.mask,
             cfg.sensor_sigma_m,
@@ -543,7 +544,7 @@ def _outlier_samples(result: RefineResult, config: RefineConfig) -> list[Flag]:
 
 
 def point_residuals_m(
-    samples_points: list[FloatArray], T_base_flange: ArrayLike, result: RefineResult
+    samples_points: Sequence[StoredArray], T_base_flange: ArrayLike, result: RefineResult
 ) -> list[FloatArray]:
     """Signed point-to-surface distances at a solution, with its pose corrections.
 
@@ -593,27 +594,32 @@ def recording_line_noise(result: RefineResult, limit_m: float) -> LineNoise | No
     residuals = problem.point_residuals(state) * problem.config.sensor_sigma_m
     mask = problem.mask * (np.abs(residuals) <= limit_m)
     try:
+        rows = learning_profiles(mask)  # the bases of these few, not of the whole recording
+        learned, at = (
+            problem.take(rows),
+            replace(state, omega=state.omega[rows], tau=state.tau[rows]),
+        )
         noise = learn_line_noise(
-            residuals,
-            problem.points[..., 0],
-            problem.depth_cosines(state),
-            mask,
-            problem.unwhitened_local_jacobian(state),
+            residuals[rows],
+            learned.x_m,
+            learned.depth_cosines(at),
+            mask[rows],
+            learned.unwhitened_local_jacobian(at),
         )
     except InputError:
         return None
-    x = np.where(mask > 0.0, problem.points[..., 0], np.nan)
+    x = np.where(mask > 0.0, problem.x_m, np.nan)
     extent = float(np.nanmedian(np.nanmax(x, axis=1) - np.nanmin(x, axis=1)))
     smooth = noise.smooth_sigma_m > 0.0
     return noise if smooth and noise.length_m <= MAX_NOISE_LENGTH_FRACTION * extent else None
 
 
 def _trim_points(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: FloatArray,
     result: RefineResult,
     limit_m: float,
-) -> tuple[list[FloatArray], int]:
+) -> tuple[list[StoredArray], int]:
     """Drop points whose residual exceeds ``limit_m``; returns the samples and the count."""
     residuals = point_residuals_m(samples_points, T_base_flange, result)
     trimmed, removed = [], 0
@@ -625,7 +631,7 @@ def _trim_points(
 
 
 def refine_with_outlier_rejection(
-    samples_points: list[FloatArray],
+    samples_points: Sequence[StoredArray],
     T_base_flange: ArrayLike,
     T_flange_sensor0: ArrayLike,
     cylinder0: Cylinder,
@@ -663,6 +669,8 @@ def refine_with_outlier_rejection(
         if removed and all(len(p) >= cfg.min_points_per_profile for p in trimmed):
             points, trimmed_any = trimmed, True
         T0, start = first.T_flange_sensor, first.cylinder
+        if trimmed_any:  # never the outcome now: its problem need not be held
+            first = replace(first, solved=None)
 
     solved_rows: dict[int, int] = {}  # sample -> its row in the last solve's result
 

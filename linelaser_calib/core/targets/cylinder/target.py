@@ -337,7 +337,7 @@ class CylinderTarget:
         """The ellipses re-paired with other samples of their profiles (the ellipse is fitted
         in the sensor frame: it does not depend on the flange pose)."""
         by_index = {s.index: s for s in samples}
-        return [replace(f, sample=by_index[f.index]) for f in features]
+        return [replace(f, T_base_flange=by_index[f.index].T_base_flange) for f in features]
 
     def _checked(
         self, features: list[FittedSample], config: CylinderConfig, context: SolveContext
@@ -525,7 +525,9 @@ class CylinderTarget:
     ) -> TargetSolution:
         """:meth:`solve_default` with the along-line scale estimated (``free``) or held, and
         the depth scale estimated (``depth``) or held; ``again``, a solution of the same
-        features with other scales, is solved again with these (:func:`_solved_again`)."""
+        features with other scales, is solved again with these (:func:`_solved_again`), or
+        from the start where that does not converge (``cluttered_camera`` with the radius
+        free: holding its 0.5 % along-line scale moves the optimum too far)."""
         mismatch = radius_mismatch(
             [f.ellipse.semi_axes[1] for f in long_arcs(features)], config.radius_m
         )
@@ -536,6 +538,15 @@ class CylinderTarget:
         subset = _subset_start(features, context)
         seed_history: dict[str, Any] = {}
         screened: list[Rejection] = []
+        warm = None
+        if subset is None and again is not None and isinstance(again.subset_start, _SubsetStart):
+            context.progress("refine", 0, 1)
+            warm = _solved_again(features, again.subset_start, config.refine)
+            if warm.converged:
+                screened = [r for r in again.rejections if r.stage == "outlier"]
+                seed_history = {k: v for k, v in again.history.items() if k != "refine_cost"}
+            else:  # the other model's optimum is far from this one's: solved from the start
+                warm = None
         if subset is not None:
             start, features, screened = subset
             context.progress("refine", 0, 1)
@@ -550,11 +561,8 @@ class CylinderTarget:
                 if same_prior
                 else refine_screened(start.solved, rows, config.refine)
             )
-        elif again is not None and isinstance(again.subset_start, _SubsetStart):
-            context.progress("refine", 0, 1)
-            refined = _solved_again(features, again.subset_start, config.refine)
-            screened = [r for r in again.rejections if r.stage == "outlier"]
-            seed_history = {k: v for k, v in again.history.items() if k != "refine_cost"}
+        elif warm is not None:
+            refined = warm
         else:
             T_init, cylinder0, seed_history = self._start(features, config, context)
             context.progress("refine", 0, 1)
@@ -674,7 +682,7 @@ class CylinderTarget:
     ) -> RefineResult:
         """The refinement with outlier samples dropped, at the features' flange poses."""
         return refine_with_outlier_rejection(
-            [f.inlier_points for f in features],
+            [f.stored_inliers for f in features],
             np.stack([f.T_base_flange for f in features]),
             T_flange_sensor,
             cylinder,

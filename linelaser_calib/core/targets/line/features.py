@@ -68,7 +68,7 @@ def _feature_corner(
     sample: Sample, finite: np.ndarray, config: LineFeatureConfig
 ) -> CornerSample | Rejection:
     """The seam point of a feature-point message (see the module docstring)."""
-    p = sample.points[finite]
+    p = np.asarray(sample.points[finite], dtype=np.float64)
     xz = p[:, [0, 2]][np.argsort(p[:, 0])]
     if len(xz) == 2:
         return Rejection(
