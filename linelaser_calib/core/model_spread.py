@@ -50,3 +50,29 @@ def with_model_spread(
         sigma_model_spread=move,
         warnings=[*kept.warnings, warning],
     )
+
+
+def with_held_sigma(kept: TargetSolution, free: TargetSolution) -> TargetSolution:
+    """``kept``, which holds a scale of the sensor at 1 that its reading did not find clearly
+    off, with its 1σ per axis widened to ``free``'s (the same profiles with that scale
+    estimated) where that is wider.
+
+    Held at 1, the scale is still known only to its reading's 1σ σ_s; in the linearised
+    model the free solution is the held one moved by K ŝ, with variance σ_free² =
+    σ_kept² + K² σ_s², so a scale off 1 by about its own 1σ, which no test can see, leaves
+    the held hand-eye off by about √(σ_free² − σ_kept²) per axis. That part is kept as the
+    model spread (:attr:`~.targets.base.TargetSolution.sigma_model_spread`, out of the
+    self-check's yardstick); nothing says the scale is off, so no warning is added.
+    Unchanged where the free 1σ is nowhere wider or either solution has none.
+    """
+    sigma, wider = reported_sigma(kept), reported_sigma(free)
+    if sigma is None or wider is None or not np.any(wider > sigma):
+        return kept
+    spread = np.sqrt(np.maximum(wider**2 - sigma**2, 0.0))
+    widened = np.maximum(sigma, wider)
+    return replace(
+        kept,
+        sigma_rotation_rad=widened[:3],
+        sigma_translation_m=widened[3:],
+        sigma_model_spread=spread,
+    )
