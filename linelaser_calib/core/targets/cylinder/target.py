@@ -169,9 +169,9 @@ def with_depth_reading(
     as a depth scale 0.012 and 0.016 mm. So with the x scale held the move counts too where
     the z reading is clearly off 1 (:func:`scale_significant`); where it is not, counting
     its move would widen clean recordings' 1σ by the reading's own noise (``make demo``'s
-    ``cylinder_keyence`` 0.024 -> 0.078 mm along z, its error 0.022 mm), so the 1σ counts
-    what the depth scale's own 1σ moves instead (:func:`with_held_sigma`: the 1σ of the
-    solve with it free, where wider). The z reading is
+    ``cylinder_keyence`` 0.024 -> 0.078 mm along z, its error 0.022 mm, and the warning
+    makes it USE WITH CARE), so there the 1σ counts the larger of that move and what the
+    depth scale's own 1σ moves, without a warning (:func:`with_held_sigma`). The z reading is
     unbiased since the residuals are kept in the sensor's measured units
     (:mod:`.problem`, "Scales and the noise's units"); before, it read +0.20 to +0.35 %
     with the z scale true, and counting it widened clean recordings' 1σ several times.
