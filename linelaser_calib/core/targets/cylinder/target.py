@@ -504,6 +504,10 @@ class CylinderTarget:
             or abs(x) > PLAUSIBLE_SCALE_ERROR
         ):
             return solution
+        kept_section = solution.section
+        assert isinstance(kept_section, CylinderSection)
+        if kept_section.line_noise is None:  # weighed as the kept solution: no noise to learn
+            config = replace(config, refine=replace(config.refine, learn_line_noise=False))
         try:
             other = self._solve_default(features, config, context, radius, False, True)
         except CalibrationError:
