@@ -245,3 +245,39 @@ def test_the_cylinder_counts_the_x_z_split_only_where_both_readings_are_one_stre
             assert warning_kind(read.warnings[0]).id == "scale-model-spread"
         else:
             assert read is kept
+
+
+def test_the_cylinder_holding_its_x_scale_still_counts_the_depth_scale_it_cannot_pin() -> None:
+    """An x reading not clearly off 1 (held) does not make the z scale 1 (``cylinder_gocator``,
+    z 0.1 % long: x reads -0.097 ± 0.040 %, z +0.101 ± 0.038 %; held, the hand-eye is 0.127
+    mm off along z at a 1σ of 0.022 mm). A z reading clearly off 1 counts its move, with the
+    warning; one that is not widens the 1σ by the larger of that move and what the z
+    scale's own 1σ moves (the free solve's 1σ), with no warning."""
+    cylinder = Cylinder(np.zeros(3), np.array([0.0, 0.0, 1.0]), 0.02)
+    held_sigma, free_sigma = np.full(3, 2e-5), np.array([2e-5, 2e-5, 4e-5])
+
+    def solution(section: CylinderSection, z: float, sigma: np.ndarray) -> TargetSolution:
+        T = np.eye(4)
+        T[2, 3] = z
+        return TargetSolution(
+            T, section, "default", [], [], 0.0, {}, sigma, held_sigma, [], {}, [], 1e-5
+        )
+
+    held = solution(CylinderSection(cylinder, True), 0.0, held_sigma)
+    for z, significant in ((0.0013, True), (0.0008, False)):
+        other = CylinderSection(cylinder, True, depth_scale=z, depth_scale_sigma=0.0004)
+        read = with_depth_reading(held, solution(other, 1.3e-4, free_sigma), (-0.001, 0.0004))
+        assert read.sigma_translation_m is not None and read.sigma_model_spread is not None
+        if significant:
+            assert read.sigma_translation_m[2] == pytest.approx(np.hypot(2e-5, 1.3e-4))
+            assert warning_kind(read.warnings[0]).id == "scale-model-spread"
+        else:
+            assert read.sigma_translation_m[2] == pytest.approx(np.hypot(2e-5, 1.3e-4))
+            np.testing.assert_allclose(read.sigma_translation_m[:2], free_sigma[:2])
+            assert not read.warnings
+    # A move within the z scale's own 1σ: the free solve's 1σ stands.
+    other = CylinderSection(cylinder, True, depth_scale=0.0002, depth_scale_sigma=0.0004)
+    read = with_depth_reading(held, solution(other, 1e-5, free_sigma), (-0.0002, 0.0004))
+    assert read.sigma_translation_m is not None and read.sigma_model_spread is not None
+    np.testing.assert_allclose(read.sigma_translation_m, free_sigma)
+    assert read.sigma_model_spread[5] == pytest.approx(np.sqrt(4e-5**2 - 2e-5**2))

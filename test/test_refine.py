@@ -73,27 +73,32 @@ def test_noise_free_data_is_recovered_exactly(estimate_radius: bool) -> None:
     assert abs(float(result.cylinder.point @ result.cylinder.direction)) < 1e-12
 
 
-@pytest.mark.parametrize("estimate_scale", [False, True])
-def test_jacobian_matches_finite_differences(estimate_scale: bool) -> None:
+@pytest.mark.parametrize("scales", [(False, False), (True, False), (True, True)])
+def test_jacobian_matches_finite_differences(scales: tuple[bool, bool]) -> None:
+    """With a scale estimated the residuals are kept in measured units (their stretch's
+    shares of the noise), whose derivative the scale columns carry too."""
     rng = np.random.default_rng(2)
     scene = make_scene(rng, n_poses=6, n_points=15)
     # Unequal profile lengths exercise the padded layout (padding rows must stay zero).
     points = [p[: 10 + j] for j, p in enumerate(scene.points)]
-    config = RefineConfig(estimate_scale=estimate_scale)
+    config = RefineConfig(estimate_scale=scales[0], estimate_depth_scale=scales[1])
     problem = build_problem(points, scene.T_base_flange, config, True)
     T0, cylinder0 = perturbed_start(rng, scene, radius_offset=1e-3)
     state = initial_state(problem, T0, cylinder0, cylinder0.radius)
-    # Evaluate away from zero corrections (and scale) so that the right Jacobian of Exp and
+    problem = problem.with_scale_shares(state)
+    assert (problem.scale_shares is not None) is scales[0]
+    # Evaluate away from zero corrections (and scales) so that the right Jacobian of Exp and
     # the scaled points matter.
     start_step = np.zeros(problem.n_global)
-    if problem.scale_index is not None:
-        start_step[problem.scale_index] = 0.01
+    for index, value in ((problem.scale_index, 0.01), (problem.depth_scale_index, -0.02)):
+        if index is not None:
+            start_step[index] = value
     state = problem.retract(
         state,
         start_step,
         np.hstack([rng.normal(0.0, 0.05, (6, 3)), rng.normal(0.0, 2e-3, (6, 3))]),
     )
-    assert state.scale == pytest.approx(0.01 if estimate_scale else 0.0)
+    assert state.scale == pytest.approx(0.01 if scales[0] else 0.0)
     linearisation = problem.linearise(state)
     J_global, J_local = linearisation.J_global, linearisation.J_local
 

@@ -50,3 +50,32 @@ def with_model_spread(
         sigma_model_spread=move,
         warnings=[*kept.warnings, warning],
     )
+
+
+def with_held_sigma(kept: TargetSolution, free: TargetSolution) -> TargetSolution:
+    """``kept``, which holds a scale of the sensor at 1 that its reading did not find clearly
+    off, with its 1σ per axis widened by what that scale may move the hand-eye: the larger
+    of the move to ``free`` (the same profiles with the scale estimated) and the part of
+    ``free``'s 1σ the scale adds.
+
+    Held at 1, the scale is still known only to its reading ŝ ± σ_s. In the linearised
+    model the free hand-eye is the held one moved by K ŝ, with variance σ_free² =
+    σ_kept² + K² σ_s², and the held one is off by K s for the true s: so the 1σ counts
+    K · max(|ŝ|, σ_s) per axis, the move (|K ŝ|) or √(σ_free² − σ_kept²), whichever is
+    larger, in quadrature. That part is kept as the model spread
+    (:attr:`~.targets.base.TargetSolution.sigma_model_spread`, out of the self-check's
+    yardstick); nothing says the scale is off, so no warning is added. Unchanged where
+    either solution has no 1σ.
+    """
+    sigma, wider = reported_sigma(kept), reported_sigma(free)
+    if sigma is None or wider is None:
+        return kept
+    move = np.abs(hand_eye_difference(kept.T_flange_sensor, free.T_flange_sensor))
+    spread = np.maximum(move, np.sqrt(np.maximum(wider**2 - sigma**2, 0.0)))
+    widened = np.hypot(sigma, spread)
+    return replace(
+        kept,
+        sigma_rotation_rad=widened[:3],
+        sigma_translation_m=widened[3:],
+        sigma_model_spread=spread,
+    )

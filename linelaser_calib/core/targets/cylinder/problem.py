@@ -34,6 +34,24 @@ Minimising their sum (``½ Σ loss + ½ Σ prior²``) is the joint maximum a-pos
 the hand-eye, axis, radius and pose corrections; in the linearised (Gaussian) model the
 hand-eye part equals the maximum-likelihood estimate with the corrections integrated out.
 
+Scales and the noise's units
+----------------------------
+With a scale estimated, the point residuals are kept in the sensor's own (measured) units:
+each is multiplied by g = 1 + a s + b s_z, a and b the shares of its noise that the sensor
+reports along the line (x) and in depth (z) (:meth:`CylinderProblem.with_scale_shares`).
+A scale maps the measured points, noise included, to true ones (z / (1 + s_z)), so in true
+units every residual shrinks by 1 / (1 + s_z) as s_z grows, and a least-squares fit buys
+that shrink with a stretch: the scale's regressor is the measured depth, noise and all
+(errors in variables), and the normal equations' score at the truth is off by the
+residuals' χ² (about one per point), so s_z reads high by about (points) × σ_z²,
+σ_z its own 1σ. The measured-unit residual (the likelihood of the measured points) has no
+such shrink. On ``cylinder_gocator`` with its z scale true (12 µm smooth shape error,
+about 18,000 points, σ_z 0.04 %) the depth scale read +0.20 to +0.35 % over 9 seeds
+(5-8σ) and moved the hand-eye 0.2-0.45 mm along the sensor's depth; so weighed it reads
+-0.11 to +0.01 %. The smooth shape error only widens σ_z (0.015 % without it), which is
+why it seemed to cause the bias. The x scale reads high in the same way by its share of
+the white noise.
+
 Parametrisation and solver
 --------------------------
 Every iteration linearises around the current estimate in local coordinates:
@@ -157,6 +175,7 @@ class CylinderProblem:
     estimate_scale: bool = False
     estimate_depth_scale: bool = False
     whitening: Whitening | None = None  # per-sample W with W C Wᵀ = I, or None
+    scale_shares: FloatArray | None = None  # (M, K, 2) a, b of g = 1 + a s + b s_z, or None
 
     @property
     def n_samples(self) -> int:
@@ -177,6 +196,7 @@ class CylinderProblem:
             R_bf=self.R_bf[rows],
             t_bf=self.t_bf[rows],
             whitening=None if self.whitening is None else self.whitening.take(rows),
+            scale_shares=None if self.scale_shares is None else self.scale_shares[rows],
         )
 
     @property
@@ -270,7 +290,40 @@ class CylinderProblem:
 
     def _point_residuals(self, state: CylinderState, geo: _Geometry) -> FloatArray:
         e = (geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m)
+        if self.scale_shares is not None:
+            e = e * self._stretch(state)
         return e if self.whitening is None else self.whitening.apply(e)
+
+    def _stretch(self, state: CylinderState) -> FloatArray:
+        """g = 1 + a s + b s_z per point (M, K): a true-unit residual times g is in the
+        sensor's measured units (module docstring, "Scales and the noise's units")."""
+        assert self.scale_shares is not None
+        a, b = self.scale_shares[..., 0], self.scale_shares[..., 1]
+        return np.asarray(1.0 + a * state.scale + b * state.depth_scale)
+
+    def with_scale_shares(self, state: CylinderState) -> CylinderProblem:
+        """The problem with its residuals kept in measured units (:attr:`scale_shares`) when
+        it estimates a scale; unchanged otherwise.
+
+        The shares follow the noise model the points are weighed by: white noise alike in
+        every direction of the laser plane (the learned line noise's white part, or every
+        point's noise without one) and a smooth error in depth. Of a point's white noise
+        the along-line part is n_x² / (n_x² + n_z²) (n the surface normal in the sensor
+        frame at ``state``), and the weighed fit counts it by the point's white share of
+        its weight, w² (C⁻¹)_ii (1 without a whitening); a = that product, and b = 1 − a
+        is the depth part, the smooth error's included. Then Σ a and Σ b are the
+        expectations of the χ² parts the two scales' regressors carry (tr(C⁻¹ C_x) and
+        tr(C⁻¹ C_z)), which the g term of their Jacobian cancels.
+        """
+        if not (self.estimate_scale or self.estimate_depth_scale):
+            return self
+        n = self._per_point(state, lambda part, at: _sensor_normals(part, at)[..., 0])
+        n_z = self.depth_cosines(state)
+        a = n**2 / np.maximum(n**2 + n_z**2, 1e-300)
+        if self.whitening is not None:
+            a = a * _white_share(self.whitening)
+        a = a * self.mask
+        return replace(self, scale_shares=np.stack([a, self.mask - a], axis=-1))
 
     def _pose_prior(self, state: CylinderState) -> FloatArray:
         cfg = self.config
@@ -333,6 +386,14 @@ class CylinderProblem:
         J_omega = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
         J_global = np.concatenate(columns, axis=2)
         J_local = np.concatenate([J_omega, n_corrected], axis=2)
+        if self.scale_shares is not None:
+            # d (g e) = g de + e dg, dg / ds = a, dg / ds_z = b (e the true-unit residual)
+            g = self._stretch(state)[..., None]
+            J_global, J_local = J_global * g, J_local * g
+            e = (geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m)
+            for index, share in ((self.scale_index, 0), (self.depth_scale_index, 1)):
+                if index is not None:
+                    J_global[..., index] += e * self.scale_shares[..., share]
         if self.whitening is not None:
             J_global = self.whitening.apply(J_global)
             J_local = self.whitening.apply(J_local)
@@ -340,13 +401,7 @@ class CylinderProblem:
 
     def depth_cosines(self, state: CylinderState) -> FloatArray:
         """|cosine| (M, K) between each point's surface normal and the sensor's depth axis."""
-
-        def cosines(part: CylinderProblem, at: CylinderState) -> FloatArray:
-            geo = _geometry(part, at)
-            n_sensor = np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ at.R_fs
-            return np.asarray(np.abs(n_sensor[..., 2]))
-
-        return self._per_point(state, cosines)
+        return self._per_point(state, lambda part, at: np.abs(_sensor_normals(part, at)[..., 2]))
 
     def unwhitened_local_jacobian(self, state: CylinderState) -> FloatArray:
         """d point residual / d (ω, τ) of each point's sample (M, K, 6), m per unit, never
@@ -397,6 +452,20 @@ def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
     distance = np.sqrt(np.sum(radial**2, axis=2))
     normal = radial / np.maximum(distance, 1e-300)[..., None]
     return _Geometry(p, y, RE, distance, normal, along)
+
+
+def _sensor_normals(problem: CylinderProblem, state: CylinderState) -> FloatArray:
+    """Each point's unit surface normal in the sensor frame (M, K, 3)."""
+    geo = _geometry(problem, state)
+    return np.asarray(np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ state.R_fs)
+
+
+def _white_share(whitening: Whitening) -> FloatArray:
+    """w² (C⁻¹)_ii per point (M, K): the share of a point's weight in the whitened fit that
+    its white noise holds. C⁻¹ = WᵀW = (I − U diag(2g − g²) Uᵀ) / w² (:class:`Whitening`)."""
+    U = whitening.U.astype(np.float64)
+    g = whitening.shrink
+    return np.asarray(1.0 - np.einsum("mkr,mr->mk", U**2, 2.0 * g - g**2))
 
 
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:

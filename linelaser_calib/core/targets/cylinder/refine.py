@@ -367,6 +367,7 @@ def refine(
             cfg.sensor_sigma_m,
         )
         problem = replace(problem, whitening=whitening)
+    problem = problem.with_scale_shares(state)
     geometric = normal_equations(
         problem.linearise_chunks(state), cfg.solver, np.ones_like(problem.mask)
     )

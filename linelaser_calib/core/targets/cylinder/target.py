@@ -45,7 +45,7 @@ import numpy as np
 from ...errors import CalibrationError, DegenerateError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray
 from ...model_check import shape_doubt
-from ...model_spread import with_model_spread
+from ...model_spread import with_held_sigma, with_model_spread
 from ...profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
     SIGNIFICANT_SCALE_SIGMAS,
@@ -140,11 +140,14 @@ def estimates_scale(config: CylinderConfig) -> tuple[bool, bool]:
     return free, free and config.radius_m is not None
 
 
-def with_depth_reading(kept: TargetSolution, other: TargetSolution) -> TargetSolution:
-    """The solution whose along-line (x) scale was kept with the radius free (``kept``),
-    with the move to ``other``, the same stretch read as a depth (z) scale (x held at 1), as
-    its model spread (:func:`~linelaser_calib.core.model_spread.with_model_spread`) where
-    the two read one stretch and the move exceeds the 1σ.
+def with_depth_reading(
+    kept: TargetSolution, other: TargetSolution, x_reading: tuple[float, float] | None = None
+) -> TargetSolution:
+    """The solution of the radius-free cylinder (``kept``: its along-line (x) scale kept, or
+    held at 1 where the reading ``x_reading`` (value, 1σ) was not clearly off it), with the
+    move to ``other``, the same stretch read as a depth (z) scale (x held at 1), as its
+    model spread (:func:`~linelaser_calib.core.model_spread.with_model_spread`) where the
+    two read one stretch and the move exceeds the 1σ.
 
     With the radius free the profiles fix the ratio of the two scales, not how it splits
     between them: a z scale about the sensor origin moves every point by s_z times its
@@ -157,16 +160,26 @@ def with_depth_reading(kept: TargetSolution, other: TargetSolution) -> TargetSol
     hand-eye moves 1.0 mm: the truth lies between the readings, and their difference counts
     in the 1σ. Where the z reading is no reading of the same ratio (beyond
     :data:`SIGNIFICANT_SCALE_SIGMAS` of their combined 1σ), the two are not one stretch and
-    the kept one stands alone: ``cylinder_scancontrol`` (x 0.1 % short, z true) reads
-    x +0.100 ± 0.029 % but z +0.179 ± 0.027 %, 7σ from one ratio. That gap is not
-    necessarily information: a profiler's smooth shape error (5 mm correlated) biases the
-    z reading by about +0.25 % on its own (``cylinder_gocator`` with its z scale true:
-    +0.20 to +0.30 %, 5-8σ; +0.02 ± 0.01 % with the shape error off), so counting the
-    z reading wherever the x scale is held would widen clean recordings' 1σ several times.
+    the kept one stands alone.
+
+    An x reading not clearly off 1 does not make the z scale 1: the held solution assumes
+    it, and a depth scale below the detection limit still moves the hand-eye by s_z times
+    the points' depth. ``cylinder_gocator`` (z 0.1 % long, x true; seeds 1, 2) reads x
+    -0.097 ± 0.040 % and -0.110 ± 0.041 % (held), z +0.101 ± 0.038 % and +0.116 ± 0.037 %;
+    held, the hand-eye is 0.127 and 0.120 mm off along z at a 1σ of 0.022 mm (5.8σ), read
+    as a depth scale 0.012 and 0.016 mm. So with the x scale held the move counts too where
+    the z reading is clearly off 1 (:func:`scale_significant`); where it is not, counting
+    its move would widen clean recordings' 1σ by the reading's own noise (``make demo``'s
+    ``cylinder_keyence`` 0.024 -> 0.078 mm along z, its error 0.022 mm, and the warning
+    makes it USE WITH CARE), so there the 1σ counts the larger of that move and what the
+    depth scale's own 1σ moves, without a warning (:func:`with_held_sigma`). The z reading is
+    unbiased since the residuals are kept in the sensor's measured units
+    (:mod:`.problem`, "Scales and the noise's units"); before, it read +0.20 to +0.35 %
+    with the z scale true, and counting it widened clean recordings' 1σ several times.
     """
     section, alternative = kept.section, other.section
     assert isinstance(section, CylinderSection) and isinstance(alternative, CylinderSection)
-    x, sigma_x = section.scale, section.scale_sigma
+    x, sigma_x = (section.scale, section.scale_sigma) if x_reading is None else x_reading
     z, sigma_z = alternative.depth_scale, alternative.depth_scale_sigma
     if x is None or sigma_x is None or z is None or sigma_z is None:
         return kept
@@ -174,6 +187,8 @@ def with_depth_reading(kept: TargetSolution, other: TargetSolution) -> TargetSol
     gap = math.log1p(x) + math.log1p(z)
     if abs(gap) > SIGNIFICANT_SCALE_SIGMAS * math.hypot(sigma_x / (1 + x), sigma_z / (1 + z)):
         return kept
+    if section.scale is None and not scale_significant(z, sigma_z):
+        return with_held_sigma(kept, other)
     return with_model_spread(
         kept,
         other,
@@ -469,10 +484,10 @@ class CylinderTarget:
         at the context's warm start). With ``{setting:scale} auto`` the scales of
         :func:`estimates_scale` are estimated and each is held at 1 again when its estimate
         is implausible, poorly determined or not clearly off 1 (:func:`scale_significant`;
-        the x scale only with the radius free); a warm start keeps its own choice. An x
-        scale kept with the radius free is read as a depth scale too, and where that is the
-        same stretch and moves the hand-eye beyond its 1σ, the move counts in the 1σ
-        (:func:`with_depth_reading`)."""
+        the x scale only with the radius free); a warm start keeps its own choice. With the
+        radius free the x reading (kept, or held as not clearly off 1) is read as a depth
+        scale too, and where that is the same stretch and moves the hand-eye beyond its 1σ,
+        the move counts in the 1σ (:func:`with_depth_reading`)."""
         radius = self._checked(features, config, context)
         warm = context.warm_start
         free, depth = estimates_scale(config)
@@ -505,13 +520,23 @@ class CylinderTarget:
                 for (value, _), axis in zip(estimates, ("along-line", "depth"), strict=True)
                 if value is not None and abs(value) > PLAUSIBLE_SCALE_ERROR
             )
-        if config.radius_m is not None or kept != [True, False]:
+        x, sigma_x = estimates[0]
+        if (
+            config.radius_m is not None
+            or x is None
+            or sigma_x is None
+            or abs(x) > PLAUSIBLE_SCALE_ERROR
+        ):
             return solution
+        kept_section = solution.section
+        assert isinstance(kept_section, CylinderSection)
+        if kept_section.line_noise is None:  # weighed as the kept solution: no noise to learn
+            config = replace(config, refine=replace(config.refine, learn_line_noise=False))
         try:
             other = self._solve_default(features, config, context, radius, False, True, solution)
         except CalibrationError:
             return solution
-        return with_depth_reading(solution, other)
+        return with_depth_reading(solution, other, (x, sigma_x))
 
     def _solve_default(
         self,
