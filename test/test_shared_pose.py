@@ -1,5 +1,5 @@
-"""The robot's pose error shared by neighbouring views (:mod:`~linelaser_calib.core.targets.
-line.shared_pose`): learned from the residuals, counted in the line target's 1σ."""
+"""The robot's pose error shared by neighbouring views (:mod:`~linelaser_calib.core.
+shared_pose`): learned from the residuals, counted in the line and known-point targets' 1σ."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ import numpy as np
 
 from linelaser_calib.core.geometry import rotvec_from_matrix
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.targets import get_target
-from linelaser_calib.core.targets.base import SolveContext
-from linelaser_calib.core.targets.line.config import LineConfig
-from linelaser_calib.core.targets.line.shared_pose import (
+from linelaser_calib.core.shared_pose import (
     ViewsLinearised,
     pose_separations,
     shared_pose_error,
 )
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.base import SolveContext
+from linelaser_calib.core.targets.line.config import LineConfig
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 
 #: Views of the synthetic sweep, their step (m) and the global parameters.

@@ -18,7 +18,7 @@ The shared block solver (:mod:`linelaser_calib.core.solver`) minimises it, each 
 correction eliminated (Schur complement). The information of the hand-eye from the views
 alone (prior left out, line and corrections marginalised) feeds the observability diagnosis.
 Its covariance is the per-view model's; :func:`shared_error` gives the estimate's covariance
-where neighbouring views share their pose error (:mod:`.shared_pose`).
+where neighbouring views share their pose error (:mod:`...shared_pose`).
 """
 
 from __future__ import annotations
@@ -35,12 +35,12 @@ from ...geometry import (
     transform_from_rotation_translation,
 )
 from ...profile.along_line import measured_to_true
+from ...shared_pose import SharedPoseError, ViewsLinearised, shared_pose_error
 from ...solver import Linearisation, SolverConfig, solve
 from ...solver.lm import Residuals
 from ...types import FloatArray
 from .config import LineConfig
 from .model import N_LINE, Line, LineResiduals, line_residuals, retract_line
-from .shared_pose import SharedPoseError, ViewsLinearised, shared_pose_error
 
 #: Global parameters without the scales: hand-eye (6) and line (4).
 N_GLOBAL = 6 + N_LINE
@@ -291,24 +291,13 @@ def shared_error(
     refined: LineRefinement, learned: SharedPoseError | None = None
 ) -> SharedPoseError | None:
     """How the robot's pose error of the views ``refined`` solved is shared between
-    neighbours, and the 1σ of its estimate under that (:func:`~.shared_pose.
+    neighbours, and the 1σ of its estimate under that (:func:`~...shared_pose.
     shared_pose_error`, ``learned`` the sharing learned on a superset of the views; its
     covariance in the order of :attr:`LineRefinement.covariance`)."""
     problem = refined.problem
     R_L, offset = refined.line.frame()
     pose = np.zeros((len(problem.corners_xz), 6))
     lin = problem.linearise(_State(refined.T_flange_sensor, R_L, offset, pose, refined.scales))
-    J_prior = lin.global_prior_jacobian
-    assert J_prior is not None
     return shared_pose_error(
-        ViewsLinearised(
-            lin.residuals.points,
-            lin.J_global,
-            lin.J_local / problem.precision,
-            1.0 / problem.precision,
-            lin.residuals.global_prior,
-            J_prior,
-            problem.T_base_flange,
-        ),
-        learned,
+        ViewsLinearised.from_linearisation(lin, problem.T_base_flange), learned
     )

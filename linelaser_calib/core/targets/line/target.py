@@ -43,6 +43,7 @@ from ...profile.corner import (
     corners_shown,
 )
 from ...seam_grid import paper_correction, weld_points_base
+from ...shared_pose import SharedPoseError
 from ...solver import (
     Flag,
     recording_chi2_scale,
@@ -65,7 +66,6 @@ from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
 from .refine import LineRefinement, refine_line, shared_error
 from .section import LineSection, read_line_section
-from .shared_pose import SharedPoseError
 
 #: A default-method fit whose RMS residual exceeds this many times the noise the model
 #: expects is refused.
@@ -354,7 +354,7 @@ class LineTarget:
     ) -> TargetSolution:
         """:meth:`solve_default` with the x and z scale errors estimated where
         ``free_scales`` says, held at 0 elsewhere; the 1σ counts the robot's error shared
-        by neighbouring views (:mod:`.shared_pose`: as ``learned`` on a superset of the
+        by neighbouring views (:mod:`...shared_pose`: as ``learned`` on a superset of the
         features, else learned here), kept as the solution's ``subset_start``."""
         X0 = context.initial_T_flange_sensor
         c, cov, T = _stack(features)

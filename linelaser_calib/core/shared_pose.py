@@ -1,18 +1,22 @@
 """The robot's pose error shared by neighbouring views, learned from the recording.
 
-A real arm errs by region: poses near each other share most of their error. The refinement
-(:mod:`.refine`) gives each view its own pose correction with an independent prior, which is
-a fair estimator when the sharing is unknown but the wrong yardstick: where neighbouring
-views err alike, their corners do not average the robot's error away, and the hand-eye
-scatters more than the per-view covariance says.
+A real arm errs by region: poses near each other share most of their error. A refinement
+that gives each view its own pose correction with an independent prior (the line's and the
+known point's, through :mod:`.solver`) is a fair estimator when the sharing is unknown but
+the wrong yardstick: where neighbouring views err alike, their residuals do not average the
+robot's error away, and the hand-eye scatters more than the per-view covariance says. This
+module knows no target: a target hands it its views linearised at the solution
+(:meth:`ViewsLinearised.from_linearisation`, the solver's own record) and reports the 1σ of
+:func:`shared_pose_error` where it is wider than its own.
 
 The model
 ---------
-Linearised at the solution with every pose correction at zero, the whitened corners are
-y = X·Δx + Σ_j A_j e_j + n: X (2M, G) the Jacobian of the global parameters (hand-eye first),
-A_j (2, 6) view j's pose Jacobian times the robot's prior 1σ (σ_r, σ_t per axis), e_j its pose
-error in units of that prior, n the corner noise (whitened: unit covariance as fitted, times
-a variance factor s). The pose errors are Gaussian with
+Linearised at the solution with every pose correction at zero, the whitened residuals (K per
+view: a line's corner 2, a known point's 3) are y = X·Δx + Σ_j A_j e_j + n: X (KM, G) the
+Jacobian of the global parameters (hand-eye first), A_j (K, 6) view j's pose Jacobian times
+the robot's prior 1σ (σ_r, σ_t per axis), e_j its pose error in units of that prior, n the
+measurement noise (whitened: unit covariance as fitted, times a variance factor s). The pose
+errors are Gaussian with
 
     Cov(e_i, e_j) = exp(−d_ij / ℓ) · I₆,
 
@@ -53,8 +57,9 @@ from scipy.linalg import LinAlgError, cho_factor, cho_solve
 from scipy.optimize import minimize_scalar
 from scipy.spatial.distance import cdist
 
-from ...geometry import FloatArray
-from ...regions import CLUSTER_ANGLE_RAD, CLUSTER_RADIUS_M, DISTANCE_BLOCK
+from .geometry import FloatArray
+from .regions import CLUSTER_ANGLE_RAD, CLUSTER_RADIUS_M, DISTANCE_BLOCK
+from .solver import Linearisation
 
 #: Most views whose residuals the likelihood search uses (evenly spaced through the
 #: recording); the sandwich uses all. Each evaluation factors a (2N, 2N) matrix.
@@ -100,6 +105,23 @@ class ViewsLinearised(NamedTuple):
     J_prior: FloatArray
     T_base_flange: FloatArray
 
+    @classmethod
+    def from_linearisation(cls, lin: Linearisation, T_base_flange: FloatArray) -> ViewsLinearised:
+        """The views of a refinement's linearisation (:class:`~.solver.Linearisation`) at its
+        solution with every pose correction at zero, flange poses (M, 4, 4); its global prior
+        is the one the reported covariance counts."""
+        precision = lin.pose_prior_sqrt_information
+        J_prior = lin.global_prior_jacobian
+        return cls(
+            lin.residuals.points,
+            lin.J_global,
+            lin.J_local / precision,
+            1.0 / precision,
+            lin.residuals.global_prior,
+            np.zeros((0, lin.J_global.shape[2])) if J_prior is None else J_prior,
+            T_base_flange,
+        )
+
 
 @dataclass(frozen=True)
 class SharedPoseError:
@@ -127,9 +149,9 @@ class SharedPoseError:
 
 def pose_separations(T_a: FloatArray, T_b: FloatArray) -> FloatArray:
     """(A, B) separations of flange poses (A, 4, 4) and (B, 4, 4): the position step over
-    :data:`~...regions.CLUSTER_RADIUS_M` plus the turn over :data:`~...regions.
+    :data:`~.regions.CLUSTER_RADIUS_M` plus the turn over :data:`~.regions.
     CLUSTER_ANGLE_RAD`, the turn measured as the chord ‖R_a − R_b‖ / √2 (the angle, for small
-    ones). Unlike :func:`~...regions.pose_distances` a turn about the flange axis counts (it
+    ones). Unlike :func:`~.regions.pose_distances` a turn about the flange axis counts (it
     moves the arm's wrist), and both parts are Euclidean distances, so exp(−d / ℓ) is a
     valid correlation for any ℓ."""
     step = cdist(T_a[:, :3, 3], T_b[:, :3, 3]) / CLUSTER_RADIUS_M
