@@ -7,12 +7,14 @@ flange-pose nuisance δ_i = (ω_i, τ_i) in the flange frame, true pose T_i·D(�
 priors σ_r, σ_t; a prior on the hand-eye from the initial one (loose, plus pinned directions);
 the point p fixed when taught (or with ``point_sigma_m``), else estimated. The predicted corner
 is R_Xᵀ (Exp(ω)ᵀ (R_iᵀ (p − t_i) − τ) − t_X). Global step: θ (3, sensor axes), ρ (3, flange
-axes) and, when estimated, the point (3, base frame).
+axes) and, when estimated, the point (3, base frame). Its covariance is the per-view model's;
+:func:`shared_error` gives the estimate's covariance where neighbouring views share their pose
+error (:mod:`...shared_pose`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -29,6 +31,7 @@ from ...geometry import (
     transform_from_rotation_translation,
 )
 from ...seam_grid import corners_3d
+from ...shared_pose import SharedPoseError, ViewsLinearised, shared_pose_error
 from ...solver import Linearisation, Residuals, SolverConfig, normal_equations, solve
 from .config import KnownPointConfig
 from .linear import HandEyePrior
@@ -254,6 +257,8 @@ class KnownPointRefinement:
     cost_history : list of float
     iterations : int
     converged : bool
+    problem : KnownPointProblem
+        The problem solved (for :func:`shared_error`).
     """
 
     T_flange_sensor: FloatArray
@@ -265,6 +270,7 @@ class KnownPointRefinement:
     cost_history: list[float]
     iterations: int
     converged: bool
+    problem: KnownPointProblem
 
 
 def _check_inputs(
@@ -366,7 +372,29 @@ def refine_known_point(
         cost_history=solution.cost_history,
         iterations=solution.iterations,
         converged=solution.converged,
+        problem=problem,
     )
+
+
+def shared_error(
+    refined: KnownPointRefinement, learned: SharedPoseError | None = None
+) -> SharedPoseError | None:
+    """How the robot's pose error of the views ``refined`` solved is shared between
+    neighbours, and the 1σ of its estimate under that (:func:`~...shared_pose.
+    shared_pose_error`, ``learned`` the sharing learned on a superset of the views; its
+    covariance in the order of :attr:`KnownPointRefinement.covariance`). Pinned directions
+    count with the loose prior only, as in that covariance."""
+    problem = refined.problem
+    prior = problem.hand_eye_prior
+    if prior is not None:
+        problem = replace(problem, hand_eye_prior=replace(prior, pinned=np.zeros((0, 6))))
+    M = len(problem.s)
+    X = refined.T_flange_sensor
+    zero = np.zeros((M, 3))
+    lin = problem.linearise(KnownPointState(X[:3, :3], X[:3, 3], refined.point_base, zero, zero))
+    T = np.tile(np.eye(4), (M, 1, 1))
+    T[:, :3, :3], T[:, :3, 3] = problem.R, problem.t
+    return shared_pose_error(ViewsLinearised.from_linearisation(lin, T), learned)
 
 
 def paper_information(

@@ -53,7 +53,10 @@ Methods
        (``initial_sigma_*``, loose); p fixed when taught (or with ``point_sigma_m``), else
        estimated. Levenberg-Marquardt with the nuisance eliminated per view (Schur
        complement). Views whose residual is implausible (χ², 3 dof) are dropped and the
-       solve repeated (the shared rejection loop).
+       solve repeated (the shared rejection loop). The 1σ counts the robot's error shared
+       by neighbouring views as the residuals show it (:mod:`...shared_pose`, as the line
+       target's): a weld program's views err alike by region, and their corners do not
+       average that away.
 
 Observability (:func:`.diagnosis.analyse_known_point`)
 ------------------------------------------------------
@@ -106,6 +109,7 @@ from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample, corner_doubt, corners_shown
 from ...seam_grid import paper_correction, weld_points_base
+from ...shared_pose import SharedPoseError
 from ...solver import (
     N_HAND_EYE,
     Flag,
@@ -127,7 +131,7 @@ from .config import KnownPointConfig
 from .features import extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
 from .observability import KnownPointObservability, analyse_known_point
-from .refine import KnownPointRefinement, paper_information, refine_known_point
+from .refine import KnownPointRefinement, paper_information, refine_known_point, shared_error
 from .section import KnownPoint, read_known_point_section
 
 #: Accepted values of the ``method`` argument.
@@ -170,6 +174,9 @@ class KnownPointResult:
         ``refine_cost`` (the maximum-likelihood cost per accepted step).
     corners : list of CornerSample
         The samples in the final solve.
+    shared : SharedPoseError or None
+        How the robot's error is shared by neighbouring views (``default``; None for
+        ``paper`` or too few views), counted in the 1σ.
     """
 
     T_flange_sensor: FloatArray
@@ -187,6 +194,7 @@ class KnownPointResult:
     warnings: list[str]
     history: dict[str, list[float]]
     corners: list[CornerSample]
+    shared: SharedPoseError | None = None
 
 
 def _observability_warnings(observability: KnownPointObservability, method: str) -> list[str]:
@@ -361,7 +369,11 @@ def _default_result(
     X0: FloatArray | None,
     taught: FloatArray | None,
     config: KnownPointConfig,
+    learned: SharedPoseError | None = None,
 ) -> KnownPointResult:
+    """Closed form, maximum likelihood with outlier views dropped, the undetermined
+    directions pinned; the 1σ counts the robot's error shared by neighbouring views
+    (:mod:`...shared_pose`: as ``learned`` on a superset of the corners, else learned here)."""
     prior = (
         None
         if X0 is None
@@ -448,6 +460,9 @@ def _default_result(
     if scatter is not None:
         warnings.append(scatter)
     sigma = widen * np.sqrt(np.diag(refined.covariance))
+    shared = shared_error(refined, learned)
+    if shared is not None:
+        sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
     return KnownPointResult(
         T_flange_sensor=X,
         point_base=point,
@@ -464,6 +479,7 @@ def _default_result(
         warnings=warnings,
         history={"refine_cost": list(refined.cost_history)},
         corners=used,
+        shared=shared,
     )
 
 
@@ -490,6 +506,7 @@ def _solution(
         history=dict(result.history),
         sample_fits=[c.record() for c in result.corners],
         noise_m=config.robot_sigma_t_m,
+        subset_start=result.shared,
     )
 
 
@@ -550,7 +567,16 @@ class KnownPointTarget:
             assert X0 is not None and taught is not None  # checked by _inputs
             result = _paper_result(features, rejections, X0, taught, config)
         else:
-            result = _default_result(features, rejections, X0, taught, config)
+            warm = context.warm_start
+            learned = None if warm is None else warm.subset_start
+            result = _default_result(
+                features,
+                rejections,
+                X0,
+                taught,
+                config,
+                learned if isinstance(learned, SharedPoseError) else None,
+            )
         return _solution(result, rejections, config)
 
     def solve_paper(
