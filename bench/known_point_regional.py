@@ -86,7 +86,7 @@ def run(seeds: int, per_anchor: int) -> None:
             initial = bumped(truth.T_flange_sensor, np.random.default_rng(seed))
             for model in MODELS:
                 patch = (
-                    mock.patch.object(known_point_target, "shared_error", lambda *_: None)
+                    mock.patch.object(known_point_target, "shared_pose_error", lambda *_: None)
                     if model == "per-view"
                     else nullcontext()
                 )

@@ -8,8 +8,8 @@ priors σ_r, σ_t; a prior on the hand-eye from the initial one (loose, plus pin
 the point p fixed when taught (or with ``point_sigma_m``), else estimated. The predicted corner
 is R_Xᵀ (Exp(ω)ᵀ (R_iᵀ (p − t_i) − τ) − t_X). Global step: θ (3, sensor axes), ρ (3, flange
 axes) and, when estimated, the point (3, base frame). Its covariance is the per-view model's;
-:func:`shared_error` gives the estimate's covariance where neighbouring views share their pose
-error (:mod:`...shared_pose`).
+:meth:`KnownPointRefinement.views` gives what :mod:`...shared_pose` needs for the estimate's
+covariance where neighbouring views share their pose error.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from ...geometry import (
     transform_from_rotation_translation,
 )
 from ...seam_grid import corners_3d
-from ...shared_pose import SharedPoseError, ViewsLinearised, shared_pose_error
+from ...shared_pose import ViewsLinearised
 from ...solver import Linearisation, Residuals, SolverConfig, normal_equations, solve
 from .config import KnownPointConfig
 from .linear import HandEyePrior
@@ -258,7 +258,7 @@ class KnownPointRefinement:
     iterations : int
     converged : bool
     problem : KnownPointProblem
-        The problem solved (for :func:`shared_error`).
+        The problem solved (for :meth:`views`).
     """
 
     T_flange_sensor: FloatArray
@@ -271,6 +271,21 @@ class KnownPointRefinement:
     iterations: int
     converged: bool
     problem: KnownPointProblem
+
+    def views(self) -> ViewsLinearised:
+        """The views linearised at the solution with every pose correction at zero, for
+        :func:`~...shared_pose.shared_pose_error` (its covariance in the order of
+        :attr:`covariance`); pinned directions count with the loose prior only, as there."""
+        problem = self.problem
+        prior = problem.hand_eye_prior
+        if prior is not None:
+            problem = replace(problem, hand_eye_prior=replace(prior, pinned=np.zeros((0, 6))))
+        M = len(problem.s)
+        X, zero = self.T_flange_sensor, np.zeros((M, 3))
+        state = KnownPointState(X[:3, :3], X[:3, 3], self.point_base, zero, zero)
+        T = np.tile(np.eye(4), (M, 1, 1))
+        T[:, :3, :3], T[:, :3, 3] = problem.R, problem.t
+        return ViewsLinearised.from_linearisation(problem.linearise(state), T)
 
 
 def _check_inputs(
@@ -374,27 +389,6 @@ def refine_known_point(
         converged=solution.converged,
         problem=problem,
     )
-
-
-def shared_error(
-    refined: KnownPointRefinement, learned: SharedPoseError | None = None
-) -> SharedPoseError | None:
-    """How the robot's pose error of the views ``refined`` solved is shared between
-    neighbours, and the 1σ of its estimate under that (:func:`~...shared_pose.
-    shared_pose_error`, ``learned`` the sharing learned on a superset of the views; its
-    covariance in the order of :attr:`KnownPointRefinement.covariance`). Pinned directions
-    count with the loose prior only, as in that covariance."""
-    problem = refined.problem
-    prior = problem.hand_eye_prior
-    if prior is not None:
-        problem = replace(problem, hand_eye_prior=replace(prior, pinned=np.zeros((0, 6))))
-    M = len(problem.s)
-    X = refined.T_flange_sensor
-    zero = np.zeros((M, 3))
-    lin = problem.linearise(KnownPointState(X[:3, :3], X[:3, 3], refined.point_base, zero, zero))
-    T = np.tile(np.eye(4), (M, 1, 1))
-    T[:, :3, :3], T[:, :3, 3] = problem.R, problem.t
-    return shared_pose_error(ViewsLinearised.from_linearisation(lin, T), learned)
 
 
 def paper_information(

@@ -109,7 +109,7 @@ from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample, corner_doubt, corners_shown
 from ...seam_grid import paper_correction, weld_points_base
-from ...shared_pose import SharedPoseError
+from ...shared_pose import SharedPoseError, shared_pose_error
 from ...solver import (
     N_HAND_EYE,
     Flag,
@@ -131,7 +131,7 @@ from .config import KnownPointConfig
 from .features import extract_corner, extract_corners
 from .linear import HandEyePrior, solve_linear
 from .observability import KnownPointObservability, analyse_known_point
-from .refine import KnownPointRefinement, paper_information, refine_known_point, shared_error
+from .refine import KnownPointRefinement, paper_information, refine_known_point
 from .section import KnownPoint, read_known_point_section
 
 #: Accepted values of the ``method`` argument.
@@ -460,7 +460,7 @@ def _default_result(
     if scatter is not None:
         warnings.append(scatter)
     sigma = widen * np.sqrt(np.diag(refined.covariance))
-    shared = shared_error(refined, learned)
+    shared = shared_pose_error(refined.views(), learned)
     if shared is not None:
         sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
     return KnownPointResult(

@@ -17,8 +17,9 @@ the hand-eye; about the origin the two are told apart by the corners' spread in 
 The shared block solver (:mod:`linelaser_calib.core.solver`) minimises it, each view's
 correction eliminated (Schur complement). The information of the hand-eye from the views
 alone (prior left out, line and corrections marginalised) feeds the observability diagnosis.
-Its covariance is the per-view model's; :func:`shared_error` gives the estimate's covariance
-where neighbouring views share their pose error (:mod:`...shared_pose`).
+Its covariance is the per-view model's; :meth:`LineRefinement.views` gives what
+:mod:`...shared_pose` needs for the estimate's covariance where neighbouring views share
+their pose error.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ from ...geometry import (
     transform_from_rotation_translation,
 )
 from ...profile.along_line import measured_to_true
-from ...shared_pose import SharedPoseError, ViewsLinearised, shared_pose_error
+from ...shared_pose import ViewsLinearised
 from ...solver import Linearisation, SolverConfig, solve
 from ...solver.lm import Residuals
 from ...types import FloatArray
@@ -180,7 +181,7 @@ class LineRefinement:
     iterations : int
     converged : bool
     problem : _LineProblem
-        The problem solved (for :func:`shared_error`).
+        The problem solved (for :meth:`views`).
     """
 
     T_flange_sensor: FloatArray
@@ -196,6 +197,16 @@ class LineRefinement:
     iterations: int
     converged: bool
     problem: _LineProblem
+
+    def views(self) -> ViewsLinearised:
+        """The views linearised at the solution with every pose correction at zero, for
+        :func:`~...shared_pose.shared_pose_error` (its covariance in the order of
+        :attr:`covariance`)."""
+        problem = self.problem
+        R_L, offset = self.line.frame()
+        pose = np.zeros((len(problem.corners_xz), 6))
+        state = _State(self.T_flange_sensor, R_L, offset, pose, self.scales)
+        return ViewsLinearised.from_linearisation(problem.linearise(state), problem.T_base_flange)
 
 
 def refine_line(
@@ -284,20 +295,4 @@ def refine_line(
         iterations=solution.iterations,
         converged=solution.converged,
         problem=problem,
-    )
-
-
-def shared_error(
-    refined: LineRefinement, learned: SharedPoseError | None = None
-) -> SharedPoseError | None:
-    """How the robot's pose error of the views ``refined`` solved is shared between
-    neighbours, and the 1σ of its estimate under that (:func:`~...shared_pose.
-    shared_pose_error`, ``learned`` the sharing learned on a superset of the views; its
-    covariance in the order of :attr:`LineRefinement.covariance`)."""
-    problem = refined.problem
-    R_L, offset = refined.line.frame()
-    pose = np.zeros((len(problem.corners_xz), 6))
-    lin = problem.linearise(_State(refined.T_flange_sensor, R_L, offset, pose, refined.scales))
-    return shared_pose_error(
-        ViewsLinearised.from_linearisation(lin, problem.T_base_flange), learned
     )

@@ -43,7 +43,7 @@ from ...profile.corner import (
     corners_shown,
 )
 from ...seam_grid import paper_correction, weld_points_base
-from ...shared_pose import SharedPoseError
+from ...shared_pose import SharedPoseError, shared_pose_error
 from ...solver import (
     Flag,
     recording_chi2_scale,
@@ -64,7 +64,7 @@ from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
 from .observability import analyse_line
-from .refine import LineRefinement, refine_line, shared_error
+from .refine import LineRefinement, refine_line
 from .section import LineSection, read_line_section
 
 #: A default-method fit whose RMS residual exceeds this many times the noise the model
@@ -405,7 +405,7 @@ class LineTarget:
         sigma = widen * np.sqrt(np.diag(refined.covariance))
         # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
         # of the same estimate under it, where wider.
-        shared = shared_error(refined, learned)
+        shared = shared_pose_error(refined.views(), learned)
         if shared is not None:
             sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
         rejections = [
