@@ -30,9 +30,10 @@ and each target on each face.
     ``line_ridge``, the thinning at incidence), ``after`` is the preset as it is.
 ``faces``
     Each target on each face of :data:`~linelaser_calib.sim.sensor_models.REAL_FACES` at
-    full size, beside its clean twin (the stress matrix's scenes: ``ur_scancontrol`` 12 poses
-    of 320 points, ``sphere`` 14 views, ``line`` 24 waypoints, ``weld_seam_general`` 20
-    poses).
+    full size, and on :data:`COMBINED` (the faces that combine: ``scales`` and ``shape``
+    each set the x scale), beside its clean twin (the stress matrix's scenes:
+    ``ur_scancontrol`` 12 poses of 320 points, ``sphere`` 14 views, ``line`` 24 waypoints,
+    ``weld_seam_general`` 20 poses).
 
 Per row, over seeds: profiles used of those recorded (pooled), refused runs, the hand-eye
 error against truth (RMS over seeds, deg and mm), the 1σ as reported (RMS over seeds of the
@@ -94,6 +95,9 @@ PRESETS = {
 #: The sensor-model terms turned off for a preset's ``before`` row.
 BEFORE = {"gap_rate": 0.0, "x_scale_error": 0.0, "z_scale_error": 0.0}
 TARGETS = ("cylinder", "sphere", "line", "known_point")
+#: The faces of one recording in the ``faces`` table's last row, as the realistic presets
+#: combine them.
+COMBINED = ("grazing", "gaps", "shape")
 SLOPE_BANDS_DEG = (0.0, 30.0, 50.0, 60.0, 70.0, 80.0)
 #: A gap is a run of missing columns longer than this many pitches.
 GAP_PITCHES = 2.0
@@ -305,9 +309,8 @@ def _preset_data(preset: str, before: bool, seed: int) -> Any:
     return simulate_line(line_scenario_from_preset(preset, **sensor), seed)
 
 
-def _face_data(target: str, face: str, seed: int) -> Any:
-    """The stress matrix's small scene of ``target`` with one ``face`` ('' for clean)."""
-    faces = (face,) if face else ()
+def _face_data(target: str, faces: tuple[str, ...], seed: int) -> Any:
+    """The stress matrix's small scene of ``target`` with ``faces`` (none for clean)."""
     if target == "cylinder":
         scenario = scenario_from_preset("ur_scancontrol", n_poses=12, resolution=320)
         return simulate(replace(scenario, sensor=with_faces(scenario.sensor, *faces)), seed)
@@ -381,11 +384,11 @@ def faces_table(targets: list[str], seeds: int) -> list[str]:
     print(f"{'target, face':<34}{HEAD}")
     notes = []
     for target in targets:
-        for face in ("", *REAL_FACES):
+        for faces in ((), *((face,) for face in REAL_FACES), COMBINED):
             tally = Tally()
             for seed in range(seeds):
-                calibrate(_face_data(target, face, seed), target, tally, seed)
-            label = f"{target}, {face or 'clean'}"
+                calibrate(_face_data(target, faces, seed), target, tally, seed)
+            label = f"{target}, {'+'.join(faces) or 'clean'}"
             print(_row(label, tally), flush=True)
             notes.extend(f"{label} refused {text}" for text in tally.refused)
     return notes

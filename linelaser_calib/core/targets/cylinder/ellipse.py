@@ -169,9 +169,10 @@ class EllipseConfig:
         ``radius_tolerance * R`` of R and the semi-major axis at least
         ``(1 - radius_tolerance) * R``. Relative, dimensionless.
     min_short_arc_turn_rad : float
-        An arc whose ellipse is implausible or too short (``min_arc_coverage_rad``) is kept
-        as a short arc when its tangent turns by at least this much from one end to the
-        other, and by less than ``min_arc_coverage_rad``, rad (0 refuses short arcs). Its
+        An arc whose ellipse is too short (``min_arc_coverage_rad``), or implausible with
+        its tangent turning by less than ``min_arc_coverage_rad``, is kept as a short arc
+        when its tangent turns by at least this much from one end to the other, rad (0
+        refuses short arcs). Its
         centre and semi-axes are left unused; its points still constrain the surface in the
         joint fit of all profiles. The default 15 deg is a 13 mm wide arc of a 100 mm shaft,
         and 25 times the turn of a profiler's 40 mm line bowed by 50 um, so that a plane's
@@ -547,12 +548,17 @@ def fit_ellipse_ransac(
     -------
     EllipseFit
         ``inliers`` is a mask over ``points_xz``; ``rms_m`` is the RMS Sampson distance of
-        the inliers, m; ``coverage_rad`` is in the ellipse's parametric angle. An arc with
-        no plausible ellipse, or shorter than ``config.min_arc_coverage_rad``, is fitted
-        again with any ellipse and no radius; it is returned as a short arc (``short``)
-        when its tangent turns by ``config.min_short_arc_turn_rad`` or more and by less
-        than ``config.min_arc_coverage_rad`` (a longer arc fixes its ellipse: the first
-        rejection stands). So is an arc turning by that much whose plausible ellipse has a
+        the inliers, m; ``coverage_rad`` is in the ellipse's parametric angle. A plausible
+        ellipse whose arc is shorter than ``config.min_arc_coverage_rad`` is returned as a
+        short arc (``short``) when its tangent turns by ``config.min_short_arc_turn_rad``
+        or more: its points are a cut of the cylinder, only its centre is unreliable. (How
+        far the tangent turns does not measure the coverage: about the ends of the major
+        axis it turns faster than the parametric angle, and a thinned arc covering 58.4 deg
+        whose tangent turned by 83 deg was rejected whole.) An arc with no plausible
+        ellipse is fitted again with any ellipse and no radius, and returned as a short
+        arc when its tangent turns by ``config.min_short_arc_turn_rad`` or more and by
+        less than ``config.min_arc_coverage_rad`` (a longer arc fixes its ellipse: the
+        first rejection stands). So is an arc turning by that much whose plausible ellipse has a
         semi-minor axis uncertain by more than ``config.radius_tolerance``
         (:data:`AXIS_SLACK_SIGMAS` standard errors): a wrong small ellipse through a short
         noisy arc can pass the coverage and the size bounds.
@@ -573,6 +579,10 @@ def fit_ellipse_ransac(
         raise ProfileRejected(f"all {len(p)} points coincide: no ellipse can be fitted")
     try:
         fit = _fit(p, norm, config, rng, radius_m, noise_sigma_m)
+    except _TooShortForItsCentre as exc:
+        if config.min_short_arc_turn_rad <= 0.0:
+            raise
+        return _short_arc(exc.fit, p, config, str(exc))
     except _NoPlausibleArc as exc:
         if config.min_short_arc_turn_rad <= 0.0:
             raise
@@ -580,16 +590,9 @@ def fit_ellipse_ransac(
             fit = _fit(p, norm, _any_ellipse(config), rng, None, noise_sigma_m)
         except ProfileRejected:
             raise exc from None
-        turn = turning_angle(fit.conic, p[fit.inliers])
-        if turn >= config.min_arc_coverage_rad:
+        if turning_angle(fit.conic, p[fit.inliers]) >= config.min_arc_coverage_rad:
             raise  # a long arc: its points fix the ellipse, which is no cylinder's
-        if turn < config.min_short_arc_turn_rad:
-            raise ProfileRejected(
-                f"{exc}; nor is it a short arc: its tangent turns by "
-                f"{math.degrees(turn):.1f} deg, below the "
-                f"{math.degrees(config.min_short_arc_turn_rad):.1f} deg of a short arc"
-            ) from None
-        return replace(fit, short=True)
+        return _short_arc(fit, p, config, str(exc))
     if not fit.short or config.min_short_arc_turn_rad <= 0.0:
         return replace(fit, short=False)
     turn = turning_angle(fit.conic, p[fit.inliers])
@@ -605,8 +608,28 @@ def fit_ellipse_ransac(
     return fit
 
 
+def _short_arc(fit: EllipseFit, p: FloatArray, config: EllipseConfig, why: str) -> EllipseFit:
+    """``fit`` as a short arc, or :class:`ProfileRejected` (``why`` and the turn) where its
+    tangent turns by less than ``config.min_short_arc_turn_rad``."""
+    turn = turning_angle(fit.conic, p[fit.inliers])
+    if turn < config.min_short_arc_turn_rad:
+        raise ProfileRejected(
+            f"{why}; nor is it a short arc: its tangent turns by {math.degrees(turn):.1f} deg, "
+            f"below the {math.degrees(config.min_short_arc_turn_rad):.1f} deg of a short arc"
+        )
+    return replace(fit, short=True)
+
+
 class _NoPlausibleArc(ProfileRejected):
     """No plausible ellipse, or an arc too short for its centre (a short arc may remain)."""
+
+
+class _TooShortForItsCentre(_NoPlausibleArc):
+    """A plausible cylinder cut (``fit``) whose arc covers less than its centre needs."""
+
+    def __init__(self, message: str, fit: EllipseFit) -> None:
+        super().__init__(message)
+        self.fit = fit
 
 
 def _any_ellipse(config: EllipseConfig) -> EllipseConfig:
@@ -682,15 +705,9 @@ def _fit(
         major_axis=geometry_u.major_axis,
     )
     coverage = arc_coverage(geometry, p[inliers])
-    if coverage < config.min_arc_coverage_rad:
-        raise _NoPlausibleArc(
-            f"the ellipse arc covers only {math.degrees(coverage):.1f} deg, below the "
-            f"{math.degrees(config.min_arc_coverage_rad):.1f} deg needed for a reliable "
-            "centre; aim the laser line across more of the cylinder"
-        )
     rms = float(np.sqrt(np.mean(sampson_distance(conic_u, u[inliers]) ** 2))) * norm.scale
     uncertain = slack[1] > config.radius_tolerance * geometry.semi_axes[1]
-    return EllipseFit(
+    fit = EllipseFit(
         centre_xz=np.asarray(geometry.centre, dtype=np.float64),
         conic=normalise_conic(norm.conic_to_metres(conic_u), _length_scale(p)),
         semi_axes=np.asarray(geometry.semi_axes, dtype=np.float64),
@@ -699,6 +716,14 @@ def _fit(
         rms_m=rms,
         short=bool(uncertain),
     )
+    if coverage < config.min_arc_coverage_rad:
+        raise _TooShortForItsCentre(
+            f"the ellipse arc covers only {math.degrees(coverage):.1f} deg, below the "
+            f"{math.degrees(config.min_arc_coverage_rad):.1f} deg needed for a reliable "
+            "centre; aim the laser line across more of the cylinder",
+            fit,
+        )
+    return fit
 
 
 def _near_radius(radius_m: float | None) -> str:
