@@ -11,6 +11,7 @@ and that a profile is set aside only as an outlier among its own recording's pro
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,7 @@ from linelaser_calib.core.types import Sample
 from linelaser_calib.io.bags import read_bag
 from linelaser_calib.io.results import read_reference_yaml
 from linelaser_calib.offline import calibrate_bag
+from linelaser_calib.sim.line import line_scenario_from_preset
 
 BAGS = Path(__file__).resolve().parent.parent / "bags"
 REAL_BAG = BAGS / "robcalibrator_sphere"
@@ -121,23 +123,57 @@ def test_a_v_is_a_line_pair_not_a_circle() -> None:
 
 
 @pytest.mark.parametrize(
-    ("options", "own"),
+    ("bag", "options", "own", "named"),
     [
-        (["--target", "sphere"], "only 0 profiles show a usable circle"),
-        # The clock-offset search meets the same refusal first, and names the rival too.
-        (["--target", "cylinder", "--clock-offset", "auto"], "only 0 of 20 recorded profiles"),
+        (
+            "weld_seam",
+            ["--target", "sphere"],
+            "only 0 profiles show a usable circle",
+            "known_point",
+        ),
+        # The clock-offset search meets the same refusal first, and names the rival too ...
+        (
+            "weld_seam",
+            ["--target", "cylinder", "--clock-offset", "auto"],
+            "only 0 of 20 recorded profiles",
+            "known_point",
+        ),
+        # ... judged at the rival's own offset: a seam swept in motion paired at another
+        # target's offset misfits by the latency times the speed.
+        (
+            "line",
+            ["--target", "cylinder", "--clock-offset", "auto"],
+            "only 0 of 244 recorded profiles",
+            "line",
+        ),
     ],
 )
-def test_v_seam_scans_given_to_a_curved_target_are_refused_naming_the_seam(
-    capsys: pytest.CaptureFixture[str], tmp_path: Path, options: list[str], own: str
+def test_seam_scans_given_to_a_curved_target_are_refused_naming_the_seam(
+    capsys: pytest.CaptureFixture[str],
+    tmp_path: Path,
+    bag: str,
+    options: list[str],
+    own: str,
+    named: str,
 ) -> None:
     out = tmp_path / "result.yaml"
-    argv = ["calibrate", str(BAGS / "weld_seam"), *options, "--output", str(out)]
+    argv = ["calibrate", str(BAGS / bag), *options, "--output", str(out)]
     assert main(argv) == 1
     err = capsys.readouterr().err
     assert not out.exists() and "No result was written" in err
-    assert own in err and "--target known_point" in err
-    assert "the known point fitted with the poses explains 20 of the 20 recorded" in err
+    assert own in err and f"--target {named}" in err
+    if named == "known_point":
+        assert "the known point fitted with the poses explains 20 of the 20 recorded" in err
+        return
+    found = re.search(
+        r"the straight line fitted with the poses at its own clock offset of ([-+0-9.]+) ms "
+        r"explains 244 of the 244 recorded profiles and leaves ([0-9.]+) um RMS",
+        err,
+    )
+    assert found is not None, err
+    latency_s = line_scenario_from_preset("line").rig.latency_s
+    assert float(found[1]) * 1e-3 == pytest.approx(-latency_s, abs=0.5e-3)
+    assert float(found[2]) < 50.0  # the corners' noise, not the 12 ms misfit (~250 um)
 
 
 def test_the_recording_scale_sets_aside_only_its_own_outliers() -> None:

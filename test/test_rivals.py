@@ -96,11 +96,11 @@ def rival_leaves(monkeypatch: pytest.MonkeyPatch) -> Any:
             if state["check_fails"]:
                 raise ModelMismatch("the tube model does not fit these data")
 
-    def fit(name: str, samples: Any, context: Any) -> Any:
+    def fit(name: str, samples: Any, context: Any, rival_samples: Any) -> Any:
         state["fits"] += 1
         if state["distance_m"] is None:
             return None
-        return Tube(), solution(state["distance_m"])
+        return rivals.Fit(Tube(), solution(state["distance_m"]), {})  # type: ignore[arg-type]
 
     monkeypatch.setattr(rivals, "_rival_solution", fit)
     monkeypatch.setattr(rivals, "get_target", lambda name: Tube())

@@ -52,7 +52,7 @@ from .targets.base import (
     rejection_digest,
     sample_rng,
 )
-from .targets.rivals import check_model, refuse_without_fit
+from .targets.rivals import RivalSamples, check_model, refuse_without_fit
 from .thinning import DEFAULT_PER_NEIGHBOURHOOD, thin_samples
 from .types import FlangePose, Profile, Rejection, Sample
 from .verdict import no_self_check_reason, warning_kind
@@ -176,11 +176,15 @@ class Extracted:
         Profile indices of the samples they were extracted from, in order.
     features : list
     rejections : list of Rejection
+    rival_samples : RivalSamples or None
+        Each rival target's samples at its own best offset, for the rival checks
+        (:meth:`OffsetSearch.rival`).
     """
 
     indices: tuple[int, ...]
     features: list[Any]
     rejections: list[Rejection]
+    rival_samples: RivalSamples | None = None
 
     def of(self, samples: list[Sample]) -> tuple[list[Any], list[Rejection]] | None:
         """The features and rejections of the profiles of ``samples``, when every one of
@@ -361,12 +365,13 @@ def calibrate_samples(
         placements=others,
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
+    rival_samples = None if extracted is None else extracted.rival_samples
     try:
         solution = solve[config.method](features, target_config, context)
     except TooFewFeatures as refusal:
-        refuse_without_fit(target, samples, refusal, context)
+        refuse_without_fit(target, samples, refusal, context, rival_samples)
         raise
-    check_model(target, target_config, samples, features, solution, context)
+    check_model(target, target_config, samples, features, solution, context, rival_samples)
     if placements and solution.kinematics is None:
         raise InputError(
             f"the {target.title} target does not estimate kinematic corrections, so its "
@@ -597,7 +602,10 @@ def search_clock_offset(
     ``tolerance_s``. The features are extracted once. Where the cost is flat (step-and-shoot:
     the flange stands still at every profile) the configured offset is returned.
     ``progress`` hears of the extraction and of each evaluation of the cost; ``trace``, when
-    given, receives every (offset in s, cost) evaluated, for a figure.
+    given, receives every (offset in s, cost) evaluated, for a figure. Where the target's
+    model is in doubt (here: too few profiles show its feature; after the solve:
+    :func:`~.targets.rivals.check_model`), each rival target is judged at its own best
+    offset, searched likewise from the same samples (:class:`OffsetSearch`).
 
     Raises
     ------
@@ -605,9 +613,11 @@ def search_clock_offset(
         The target cannot estimate the offset.
     PairingError, DegenerateError
         As :func:`run_pipeline` would for the same data.
+    ModelMismatch
+        Too few profiles show the target's feature and a rival, at its own offset, explains
+        the recording clearly better.
     """
     target, target_config = config.target_impl, config.target_config
-    start = config.pairing.clock_offset_s
     moving = replace(config.pairing, max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
     paired = pair_profiles(profiles, poses, moving)
     if not paired.samples:
@@ -617,52 +627,130 @@ def search_clock_offset(
         samples, target_config, config.seed, progress, config.workers
     )
     context = SolveContext(seed=config.seed, rejections=rejections, n_samples=len(paired.samples))
-    extracted = Extracted(tuple(s.index for s in samples), features, rejections)
-    try:
-        cost_of_poses = target.offset_cost(features, target_config, context)
-    except TooFewFeatures as refusal:
-        refuse_without_fit(target, samples, refusal, context)
-        raise
-    if cost_of_poses is None:
-        raise InputError(
-            f"the clock offset cannot be estimated from {target.title} scans; give it with "
-            "{setting:clock_offset_s} SECONDS"
-        )
     buffer = PoseBuffer()
     buffer.extend(poses)
-    stamps_ns = np.array([f.stamp_ns for f in features], dtype=np.int64)
-    tolerance_ns = round(config.pairing.sync_tolerance_s * NS_PER_S)
-    step = 2.0 * half_range_s / (GRID_POINTS - 1)
-    evaluations = GRID_POINTS + REFINING_EVALUATIONS
-    evaluated = [0]
+    search = OffsetSearch(buffer, config.pairing, config.seed, half_range_s, tolerance_s)
+    extracted = Extracted(tuple(s.index for s in samples), features, rejections, search.rival)
+    try:
+        offset = search.best(target, target_config, features, context, progress, trace)
+    except TooFewFeatures as refusal:
+        refuse_without_fit(target, samples, refusal, context, search.rival)
+        raise
+    return offset, extracted
 
-    def cost(offset_s: float) -> float:
-        evaluated[0] += 1
-        progress("clock offset", min(evaluated[0], evaluations - 1), evaluations)
-        shift = round(offset_s * NS_PER_S)
-        T, found = buffer.track.at(stamps_ns + shift, tolerance_ns)
-        value = float(cost_of_poses(T)) if found.all() else float("inf")
-        if trace is not None:
-            trace.append((offset_s, value))
-        return value
 
-    grid = np.linspace(start - half_range_s, start + half_range_s, GRID_POINTS)
-    costs = np.array([cost(float(t)) for t in grid])
-    finite = costs[np.isfinite(costs)]
-    if finite.size == 0 or float(np.max(finite) - np.min(finite)) < 1.0:
+@dataclass(frozen=True)
+class OffsetSearch:
+    """The clock-offset search of :func:`search_clock_offset` over one pose stream, for the
+    target and for each of its rivals.
+
+    Attributes
+    ----------
+    buffer : PoseBuffer
+        The recording's flange poses.
+    pairing : PairingConfig
+        The configured pairing: the search is centred on its clock offset.
+    seed : int
+    half_range_s, tolerance_s : float
+        The offsets searched, ``pairing.clock_offset_s`` +- ``half_range_s``, to
+        ``tolerance_s``.
+    """
+
+    buffer: PoseBuffer
+    pairing: PairingConfig
+    seed: int
+    half_range_s: float
+    tolerance_s: float
+
+    def best(
+        self,
+        target: Target[Any],
+        target_config: Any,
+        features: list[Any],
+        context: SolveContext,
+        progress: Progress = _no_progress,
+        trace: list[tuple[float, float]] | None = None,
+    ) -> float:
+        """The offset (s) at which ``target``'s features (extracted from samples paired at
+        the configured offset) fit it best (see :func:`search_clock_offset`).
+
+        Raises
+        ------
+        InputError
+            The target cannot estimate the offset.
+        TooFewFeatures
+            As the target's solve would.
+        """
+        start = self.pairing.clock_offset_s
+        cost_of_poses = target.offset_cost(features, target_config, context)
+        if cost_of_poses is None:
+            raise InputError(
+                f"the clock offset cannot be estimated from {target.title} scans; give it "
+                "with {setting:clock_offset_s} SECONDS"
+            )
+        stamps_ns = np.array([f.stamp_ns for f in features], dtype=np.int64)
+        tolerance_ns = round(self.pairing.sync_tolerance_s * NS_PER_S)
+        step = 2.0 * self.half_range_s / (GRID_POINTS - 1)
+        evaluations = GRID_POINTS + REFINING_EVALUATIONS
+        evaluated = [0]
+
+        def cost(offset_s: float) -> float:
+            evaluated[0] += 1
+            progress("clock offset", min(evaluated[0], evaluations - 1), evaluations)
+            shift = round(offset_s * NS_PER_S)
+            T, found = self.buffer.track.at(stamps_ns + shift, tolerance_ns)
+            value = float(cost_of_poses(T)) if found.all() else float("inf")
+            if trace is not None:
+                trace.append((offset_s, value))
+            return value
+
+        grid = np.linspace(start - self.half_range_s, start + self.half_range_s, GRID_POINTS)
+        costs = np.array([cost(float(t)) for t in grid])
+        finite = costs[np.isfinite(costs)]
+        if finite.size == 0 or float(np.max(finite) - np.min(finite)) < 1.0:
+            progress("clock offset", evaluations, evaluations)
+            return start
+        best = float(grid[int(np.argmin(costs))])
+        ceiling = float(np.max(finite)) + 1.0  # where poses run out: worse than any offset seen
+
+        def bounded(offset_s: float) -> float:
+            return min(cost(offset_s), ceiling)
+
+        found = minimize_scalar(
+            bounded,
+            bounds=(best - step, best + step),
+            method="bounded",
+            options={"xatol": self.tolerance_s},
+        )
         progress("clock offset", evaluations, evaluations)
-        return start, extracted
-    best = float(grid[int(np.argmin(costs))])
-    ceiling = float(np.max(finite)) + 1.0  # where poses run out: worse than any offset seen
+        return float(found.x)
 
-    def bounded(offset_s: float) -> float:
-        return min(cost(offset_s), ceiling)
+    def rival(self, rival: Target[Any], samples: list[Sample]) -> tuple[list[Sample], float | None]:
+        """The :data:`~.targets.rivals.RivalSamples` of the search: the profiles of
+        ``samples`` paired at the offset that fits ``rival`` best (its default settings,
+        searched from the configured offset; the profiles that no pose brackets there left
+        out, no speed gate applied again), and that offset; the samples unchanged and None
+        for a rival that estimates no offset.
 
-    found = minimize_scalar(
-        bounded,
-        bounds=(best - step, best + step),
-        method="bounded",
-        options={"xatol": tolerance_s},
-    )
-    progress("clock offset", evaluations, evaluations)
-    return float(found.x), extracted
+        Raises
+        ------
+        CalibrationError
+            The rival cannot be fitted to these samples.
+        """
+        if not rival.estimates_clock_offset:
+            return samples, None
+        rival_config = rival.config_type()
+        features, rejections = rival.extract(samples, rival_config, self.seed, _no_progress)
+        context = SolveContext(seed=self.seed, rejections=rejections, n_samples=len(samples))
+        offset = self.best(rival, rival_config, features, context)
+        # The samples passed the speed gates where the target's did: re-paired only.
+        at_offset = replace(
+            self.pairing,
+            clock_offset_s=offset,
+            max_linear_speed_m_s=0.0,
+            max_angular_speed_rad_s=0.0,
+        )
+        repaired = self.buffer.pair_many(
+            [Profile(s.stamp_ns, s.points) for s in samples], [s.index for s in samples], at_offset
+        )
+        return [s for s in repaired if isinstance(s, Sample)], offset

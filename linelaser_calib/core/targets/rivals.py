@@ -33,6 +33,14 @@ models (:func:`check_model`, called by the pipeline after the solve; and
    with the figures), but never one that failed on the robot's error (e.g. a sphere centre
    given on the wrong side). A target that names no rival keeps its fit check's refusals.
 
+Where the clock offset between profile and pose stamps is estimated (continuous scanning:
+:func:`~linelaser_calib.core.pipeline.search_clock_offset`), each rival that estimates one is
+judged at its own: the same profiles are paired again at the offset that fits the rival best
+(the pipeline's :data:`RivalSamples`), since a sweep in motion paired at another target's
+offset misfits by the latency times the speed. Each fit is then judged with its own
+pairing's flange poses, and a rival's figure says the offset it was judged at. That search
+runs only where rivals are fitted at all: where the target's own model is in doubt.
+
 Where too few profiles show the target's feature to solve at all (a ball's arcs given to the
 line target, a V given to the sphere; :class:`~linelaser_calib.core.errors.TooFewFeatures`),
 the rivals are fitted likewise, in the target's order: the first whose fit passes its own
@@ -46,13 +54,14 @@ own refusal stands, naming no rival.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..errors import CalibrationError, ModelMismatch, TooFewFeatures
+from ..geometry import FloatArray
 from ..types import Sample, SampleFit
 from . import get_target
 from .base import ROBOT_PRIOR_EXCESS, SolveContext, Target, TargetSolution, _no_progress
@@ -63,6 +72,11 @@ from .base import ROBOT_PRIOR_EXCESS, SolveContext, Target, TargetSolution, _no_
 CLEAR_FACTOR = 2.0
 #: A fit that needs a robot pose error this many times the prior does not fit.
 MISFIT_ROBOT_EXCESS = 10.0
+
+#: Where the clock offset is estimated: given a rival target and the target's samples, the
+#: same profiles paired with the flange poses at the rival's own best clock offset, and that
+#: offset (s; None, with the samples unchanged, for a rival that estimates none).
+RivalSamples = Callable[[Target[Any], list[Sample]], tuple[list[Sample], float | None]]
 
 
 @dataclass(frozen=True)
@@ -79,6 +93,9 @@ class WholeFit:
         RMS distance of the profiles' points from the fitted target, recorded poses, m.
     n_points, n_profiles : int
         What the RMS was taken over.
+    offset_s : float or None
+        The clock offset the target's own pairing was searched to, s (a rival's, where the
+        offset is estimated); None where it is the recording's.
     """
 
     title: str
@@ -86,45 +103,97 @@ class WholeFit:
     rms_m: float
     n_points: int
     n_profiles: int
+    offset_s: float | None = None
 
     def text(self) -> str:
-        """'the sphere fitted with the poses leaves 98.1 um RMS' for messages."""
-        return f"the {self.title} fitted with the poses leaves {self.rms_m * 1e6:.1f} um RMS"
+        """'the sphere fitted with the poses leaves 98.1 um RMS' for messages (with 'at its
+        own clock offset of +12.0 ms' after 'poses' where it has one)."""
+        return f"the {self.title} fitted with the poses{self.at_offset()} leaves " + (
+            f"{self.rms_m * 1e6:.1f} um RMS"
+        )
+
+    def at_offset(self) -> str:
+        """' at its own clock offset of +12.0 ms', or '' where it has none."""
+        if self.offset_s is None:
+            return ""
+        return f" at its own clock offset of {self.offset_s * 1e3:+.1f} ms"
 
 
-def whole_rms_m(solution: TargetSolution, fits: Sequence[SampleFit]) -> tuple[float, int]:
-    """RMS distance (m) of the fits' points, mapped with their recorded flange poses and the
-    solution's hand-eye, from the solution's target, and the number of points."""
+@dataclass(frozen=True)
+class Fit:
+    """A target's full fit and the flange pose its pairing gave each profile.
+
+    Attributes
+    ----------
+    target : Target
+    solution : TargetSolution
+    poses : mapping of int to ndarray, shape (4, 4)
+        ``T_base_flange`` of each profile index as this target's samples paired it.
+    offset_s : float or None
+        The clock offset of that pairing where it was the target's own (a rival's); None
+        where it is the recording's.
+    """
+
+    target: Target[Any]
+    solution: TargetSolution
+    poses: Mapping[int, FloatArray]
+    offset_s: float | None = None
+
+
+def _poses(samples: Sequence[Sample]) -> dict[int, FloatArray]:
+    return {s.index: s.T_base_flange for s in samples}
+
+
+def whole_rms_m(
+    solution: TargetSolution, fits: Sequence[SampleFit], poses: Mapping[int, FloatArray]
+) -> tuple[float, int]:
+    """RMS distance (m) of the fits' points, each mapped with its profile's flange pose in
+    ``poses`` (the fit's own where it holds none) and the solution's hand-eye, from the
+    solution's target, and the number of points."""
     distances = [
-        solution.section.surface_distances(fit, fit.T_base_flange @ solution.T_flange_sensor)
+        solution.section.surface_distances(
+            fit, poses.get(fit.index, fit.T_base_flange) @ solution.T_flange_sensor
+        )
         for fit in fits
     ]
     d = np.concatenate(distances) if distances else np.zeros(0)
     return (float(np.sqrt(np.mean(d**2))) if len(d) else math.inf), len(d)
 
 
-def _judged(target: Target[Any], solution: TargetSolution, fits: Sequence[SampleFit]) -> WholeFit:
-    rms, n = whole_rms_m(solution, fits)
-    return WholeFit(target.title, target.name, rms, n, len(fits))
+def _judged(fit: Fit, fits: Sequence[SampleFit]) -> WholeFit:
+    rms, n = whole_rms_m(fit.solution, fits, fit.poses)
+    return WholeFit(fit.target.title, fit.target.name, rms, n, len(fits), fit.offset_s)
+
+
+def _mapped_with(judged: Sequence[WholeFit]) -> str:
+    """How the figures' points were mapped, for messages."""
+    if any(w.offset_s is not None for w in judged):
+        return "the flange poses at each target's own clock offset"
+    return "the recorded flange poses"
 
 
 def _rival_solution(
-    name: str, samples: list[Sample], context: SolveContext
-) -> tuple[Target[Any], TargetSolution] | None:
-    """The rival target's default fit of the samples with its default settings; None when
-    it cannot calibrate them (a refusal, or a singular system in its solve: the rival's
-    model leaves a direction undetermined on these samples)."""
+    name: str,
+    samples: list[Sample],
+    context: SolveContext,
+    rival_samples: RivalSamples | None = None,
+) -> Fit | None:
+    """The rival target's default fit of the samples with its default settings (paired at
+    its own clock offset by ``rival_samples`` where given); None when it cannot calibrate
+    them (a refusal, or a singular system in its solve: the rival's model leaves a direction
+    undetermined on these samples)."""
     rival = get_target(name)
     config = rival.config_type()
     try:
-        features, rejections = rival.extract(samples, config, context.seed, _no_progress)
+        own, offset = (samples, None) if rival_samples is None else rival_samples(rival, samples)
+        features, rejections = rival.extract(own, config, context.seed, _no_progress)
         quiet = SolveContext(
             seed=context.seed,
             rejections=rejections,
             n_samples=len(samples),
             progress=_no_progress,
         )
-        return rival, rival.solve_default(features, config, quiet)
+        return Fit(rival, rival.solve_default(features, config, quiet), _poses(own), offset)
     except (CalibrationError, np.linalg.LinAlgError):
         return None
 
@@ -171,10 +240,12 @@ def check_model(
     features: list[Any],
     solution: TargetSolution,
     context: SolveContext,
+    rival_samples: RivalSamples | None = None,
 ) -> None:
     """Refuse a solution whose target a rival explains clearly better, or that does not fit
     and is not consistent (see the module docstring); a failed fit check that every rival
-    explains clearly worse becomes a warning on the solution.
+    explains clearly worse becomes a warning on the solution. ``rival_samples``: where the
+    clock offset was estimated, each rival's samples at its own offset.
 
     Raises
     ------
@@ -192,21 +263,21 @@ def check_model(
     if problem is None and not doubts:
         return
     declared = tuple(getattr(target, "rivals", ()))
-    tried = {name: _rival_solution(name, samples, context) for name in declared}
+    tried = {name: _rival_solution(name, samples, context, rival_samples) for name in declared}
     rivals = [found for found in tried.values() if found is not None]
     unfit = [get_target(name).title for name, found in tried.items() if found is None]
-    fits = {f.index: f for _, s in rivals for f in s.sample_fits}
+    fits = {f.index: f for r in rivals for f in r.solution.sample_fits}
     fits.update({f.index: f for f in solution.sample_fits})
     every = [fits[k] for k in sorted(fits)]
-    own = _judged(target, solution, every)
-    judged = sorted((_judged(t, s, every) for t, s in rivals), key=lambda w: w.rms_m)
+    own = _judged(Fit(target, solution, _poses(samples)), every)
+    judged = sorted((_judged(r, every) for r in rivals), key=lambda w: w.rms_m)
     misfit = [] if problem is None else [_what(problem)]
     if any("flange-pose corrections" in m for m in misfit):
         doubts = [d for d in doubts if not d.startswith("its fit needs a robot pose error")]
     why = "; ".join(doubts + misfit)
     figures = (
-        f"over {own.n_points} points of {own.n_profiles} profiles mapped with the recorded "
-        "flange poses"
+        f"over {own.n_points} points of {own.n_profiles} profiles mapped with "
+        + _mapped_with(judged)
     )
     if judged and judged[0].rms_m * CLEAR_FACTOR < own.rms_m:
         best = judged[0]
@@ -274,11 +345,16 @@ def _explains(rival: Target[Any], solution: TargetSolution) -> bool:
 
 
 def refuse_without_fit(
-    target: Target[Any], samples: list[Sample], refusal: TooFewFeatures, context: SolveContext
+    target: Target[Any],
+    samples: list[Sample],
+    refusal: TooFewFeatures,
+    context: SolveContext,
+    rival_samples: RivalSamples | None = None,
 ) -> None:
     """Where too few profiles show the target's feature (``refusal``), refuse naming a rival
     target that explains the recording clearly better, with both figures (see the module
-    docstring); return otherwise (the caller's own refusal stands).
+    docstring); return otherwise (the caller's own refusal stands). ``rival_samples``: where
+    the clock offset is estimated, each rival's samples at its own offset.
 
     The rivals are fitted in the target's order (its ``rivals``) up to the first that
     explains the recording.
@@ -291,26 +367,27 @@ def refuse_without_fit(
     """
     fitted = []
     for name in getattr(target, "rivals", ()):
-        found = _rival_solution(name, samples, context)
+        found = _rival_solution(name, samples, context, rival_samples)
         if found is None:
             continue
         fitted.append(found)
-        rival, solution = found
+        solution = found.solution
         enough = len(solution.samples_used) >= max(CLEAR_FACTOR * refusal.found, 1.0)
-        if enough and _explains(rival, solution):
+        if enough and _explains(found.target, solution):
             break
     else:
         return
-    fits = {f.index: f for _, s in fitted for f in s.sample_fits}
+    fits = {f.index: f for r in fitted for f in r.solution.sample_fits}
     every = [fits[k] for k in sorted(fits)]
-    *tried, best = [_judged(t, s, every) for t, s in fitted]
+    judged = [_judged(r, every) for r in fitted]
+    *tried, best = judged
     others = "".join(f"; {w.text()}" for w in tried)
     own = str(refusal).split(". ", 1)[0]
     raise ModelMismatch(
         f"the {target.title} model does not explain these data: {own}; but the {best.title} "
-        f"fitted with the poses explains {len(solution.samples_used)} of the "
-        f"{context.n_samples} recorded profiles and leaves {best.rms_m * 1e6:.1f} um RMS (over "
-        f"{best.n_points} points of {best.n_profiles} profiles mapped with the recorded flange "
-        f"poses{others}). The scans show a {best.title}: choose {{setting:target}} "
-        f"{best.name}. No result was written."
+        f"fitted with the poses{best.at_offset()} explains {len(solution.samples_used)} of "
+        f"the {context.n_samples} recorded profiles and leaves {best.rms_m * 1e6:.1f} um RMS "
+        f"(over {best.n_points} points of {best.n_profiles} profiles mapped with "
+        f"{_mapped_with(judged)}{others}). The scans show a {best.title}: choose "
+        f"{{setting:target}} {best.name}. No result was written."
     )
