@@ -161,10 +161,6 @@ class Residuals:
     pose_prior: FloatArray
     global_prior: FloatArray = field(default_factory=lambda: np.zeros(0))
 
-    def take(self, rows: NDArray[np.intp]) -> Residuals:
-        """The residuals of the samples ``rows`` (indices, in that order)."""
-        return Residuals(self.points[rows], self.pose_prior[rows], self.global_prior)
-
 
 @dataclass(frozen=True)
 class Linearisation:
@@ -635,8 +631,9 @@ def solve(
     :meth:`BlockNormal.take`), instead of the first linearisation. The first linearisation
     gives the starting cost too."""
     first = linearised(problem, state, config) if start is None else start
-    pending: tuple[BlockNormal, Residuals] | None = first
     cost_now = cost(first[1], config)
+    pending: tuple[BlockNormal, Residuals] | None = first
+    del first  # held by ``pending`` until the loop takes it, then let go
     history = [cost_now]
     damping, growth = INITIAL_DAMPING, 2.0
     scale = problem.step_scale

@@ -60,7 +60,6 @@ from ...solver import (
     BlockNormal,
     Flag,
     RejectionOutcome,
-    Residuals,
     Solution,
     dispersion_warning,
     evaluate_loss,
@@ -249,15 +248,15 @@ class RefineResult:
 class SolvedProblem:
     """A refinement's problem (its points trimmed and subsampled), its state at the
     solution, the line noise it was weighed by, the sensor and robot variance factors it
-    estimated there and its normal equations and residuals there: where
-    :func:`.warm.refine_subset` starts a solve of some of its samples (whose first
-    linearisation is then these equations' rows)."""
+    estimated there and its normal equations there (robust weights there): where
+    :func:`.warm.refine_subset` starts a solve of some of its samples, whose first
+    linearisation is then these equations' rows."""
 
     problem: CylinderProblem
     state: CylinderState
     noise: LineNoise | None = None
     variance_factors: tuple[float, float] = (1.0, 1.0)
-    linearised: tuple[BlockNormal, Residuals] | None = None
+    normal: BlockNormal | None = None
 
 
 def _marginal_hand_eye(information: FloatArray) -> FloatArray:
@@ -497,7 +496,7 @@ def summarise(
         n_points=n_points,
         observability=observability,
         warnings=warnings,
-        solved=SolvedProblem(problem, state, noise, factors, (normal, solution.residuals)),
+        solved=SolvedProblem(problem, state, noise, factors, normal),
         line_noise=noise,
         sample_dispersion=None if dispersion is None else dispersion[:N_HAND_EYE],
     )

@@ -99,13 +99,13 @@ def refine_subset(
     problem = full.take(keep)
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
     # The solved problem's equations at its solution hold these samples' own: the first
-    # linearisation, where the problem stays the same.
+    # linearisation, where the problem stays the same (its residuals, about a third of a
+    # linearisation's cost, are formed again rather than kept beside every solved problem).
     linearised = None
     if prior is not None:
         problem, start = _under(prior, problem, start)
-    elif solved.linearised is not None:
-        normal, residuals = solved.linearised
-        linearised = (normal.take(keep), residuals.take(keep))
+    elif solved.normal is not None:
+        linearised = (solved.normal.take(keep), problem.residuals(start))
     tolerances = (
         problem.config.solver
         if final
@@ -226,10 +226,6 @@ def refine_at_poses(
     solution = _solve_near(
         problem, solved.state, "at other flange poses", _near(problem, max_iterations)
     )
-    moved = replace(
-        solved,
-        problem=problem,
-        state=solution.state,
-        linearised=(solution.normal, solution.residuals),
-    )
+    # Without equations: no subset is solved from it, and they would hold memory.
+    moved = replace(solved, problem=problem, state=solution.state, normal=None)
     return moved, solution.cost_history[-1]
