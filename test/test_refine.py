@@ -13,6 +13,7 @@ from _cylinder_points import Scene, make_scene, perturbed_start
 from linelaser_calib.core.errors import DegenerateError, InputError
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
 from linelaser_calib.core.solver import normal_equations, solve_damped
+from linelaser_calib.core.solver.lm import linearised
 from linelaser_calib.core.targets.cylinder.config import RefineConfig
 from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.targets.cylinder.problem import build_problem, initial_state
@@ -150,6 +151,26 @@ def test_schur_solve_equals_dense_solve() -> None:
     dense = np.linalg.solve(H + damping * np.diag(np.diag(H)), -g)
     np.testing.assert_allclose(step_global, dense[:G], rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(step_local.ravel(), dense[G:], rtol=1e-6, atol=1e-12)
+
+
+def test_subset_equations_taken_from_the_whole_are_its_own() -> None:
+    """A subset's solve starts from the solved problem's equations (BlockNormal.take): they
+    must be those of linearising the subset alone at the same state."""
+    rng = np.random.default_rng(4)
+    scene = make_scene(rng, n_poses=9, n_points=30)
+    problem = build_problem(scene.points, scene.T_base_flange, RefineConfig(), True)
+    T0, cylinder0 = perturbed_start(rng, scene)
+    state = initial_state(problem, T0, cylinder0, RADIUS)
+    state = replace(state, omega=rng.normal(0, 1e-4, (9, 3)), tau=rng.normal(0, 1e-4, (9, 3)))
+    solver = RefineConfig().solver
+    whole, residuals = linearised(problem, state, solver)
+    rows = np.array([6, 0, 3, 4])
+    part = replace(state, omega=state.omega[rows], tau=state.tau[rows])
+    own, own_residuals = linearised(problem.take(rows), part, solver)
+    taken = whole.take(rows)
+    for name in ("A", "B", "C_data", "g_global", "g_local", "A_sample", "g_sample"):
+        np.testing.assert_allclose(getattr(taken, name), getattr(own, name), rtol=1e-12)
+    np.testing.assert_allclose(residuals.points[rows], own_residuals.points, rtol=1e-12)
 
 
 def test_paper_noise_accuracy_beats_plain_least_squares() -> None:

@@ -50,6 +50,7 @@ from dataclasses import dataclass, field
 from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
+from numpy.typing import NDArray
 
 from ..errors import InputError
 from ..geometry import FloatArray
@@ -267,6 +268,8 @@ class BlockNormal:
         needs; A is their sum plus the global priors).
     g_sample : ndarray, shape (M, G)
         Each sample's share of g_global from its measurements.
+    global_prior : tuple of ndarray (G, G) and (G,), or None
+        The global priors' share of A and of g_global (None: no global prior).
     """
 
     A: FloatArray
@@ -277,6 +280,22 @@ class BlockNormal:
     g_local: FloatArray
     A_sample: FloatArray
     g_sample: FloatArray
+    global_prior: tuple[FloatArray, FloatArray] | None = None
+
+    def take(self, rows: NDArray[np.intp]) -> BlockNormal:
+        """The normal equations of the samples ``rows`` (indices, in that order) at the same
+        state: what linearising those samples alone there gives (the per-sample blocks are
+        each sample's own; A and g_global their sums plus the global priors)."""
+        A_sample, g_sample = self.A_sample[rows], self.g_sample[rows]
+        return _assembled(
+            A_sample,
+            g_sample,
+            self.B[rows],
+            self.C_data[rows],
+            self.prior_precision,
+            self.g_local[rows],
+            self.global_prior,
+        )
 
     def C(self, sensor_factor: float = 1.0, robot_factor: float = 1.0) -> FloatArray:
         """Local blocks (M, 6, 6) with the measurement and prior information divided by the
@@ -367,24 +386,42 @@ def _accumulated(
     A_sample, g_sample, B, C_data, g_local, points, pose_prior = (
         np.concatenate([part[k] for part in parts]) for k in range(7)
     )
-    A, g_global = A_sample.sum(axis=0), g_sample.sum(axis=0)
     r = first.residuals
     Jp = first.global_prior_jacobian
-    if Jp is not None and len(Jp):
-        A = A + Jp.T @ Jp
-        g_global = g_global + Jp.T @ r.global_prior
+    prior = None if Jp is None or not len(Jp) else (Jp.T @ Jp, Jp.T @ r.global_prior)
     sqrt_info = first.pose_prior_sqrt_information
-    normal = BlockNormal(
+    normal = _assembled(
+        A_sample, g_sample, B, C_data, sqrt_info**2, g_local + pose_prior * sqrt_info, prior
+    )
+    return normal, Residuals(points, pose_prior, r.global_prior)
+
+
+def _assembled(
+    A_sample: FloatArray,
+    g_sample: FloatArray,
+    B: FloatArray,
+    C_data: FloatArray,
+    prior_precision: FloatArray,
+    g_local: FloatArray,
+    global_prior: tuple[FloatArray, FloatArray] | None,
+) -> BlockNormal:
+    """The block normal equations from the per-sample blocks and the global priors' share
+    (:class:`BlockNormal`)."""
+    A, g_global = A_sample.sum(axis=0), g_sample.sum(axis=0)
+    if global_prior is not None:
+        A = A + global_prior[0]
+        g_global = g_global + global_prior[1]
+    return BlockNormal(
         A=0.5 * (A + A.T),
         B=B,
         C_data=C_data,
-        prior_precision=sqrt_info**2,
+        prior_precision=prior_precision,
         g_global=g_global,
-        g_local=g_local + pose_prior * sqrt_info,
+        g_local=g_local,
         A_sample=A_sample,
         g_sample=g_sample,
+        global_prior=global_prior,
     )
-    return normal, Residuals(points, pose_prior, r.global_prior)
 
 
 def linearised(
@@ -581,9 +618,22 @@ def _left(size: float, last_size: float) -> float:
     return size / (1.0 - size / last_size)
 
 
-def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> Solution[State]:
-    """Minimise the problem's cost from ``state`` (see the module docstring)."""
-    cost_now = cost(problem.residuals(state), config)
+def solve(
+    problem: BlockProblem[State],
+    state: State,
+    config: SolverConfig,
+    start: tuple[BlockNormal, Residuals] | None = None,
+) -> Solution[State]:
+    """Minimise the problem's cost from ``state`` (see the module docstring).
+
+    ``start``: the normal equations and residuals of ``problem`` at ``state`` where the
+    caller has them (a subset of a solved problem's samples at its solution,
+    :meth:`BlockNormal.take`), instead of the first linearisation. The first linearisation
+    gives the starting cost too."""
+    first = linearised(problem, state, config) if start is None else start
+    cost_now = cost(first[1], config)
+    pending: tuple[BlockNormal, Residuals] | None = first
+    del first  # held by ``pending`` until the loop takes it, then let go
     history = [cost_now]
     damping, growth = INITIAL_DAMPING, 2.0
     scale = problem.step_scale
@@ -595,7 +645,8 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
     while iterations < config.max_iterations:
         sigma = None
         if normal is None:
-            normal, residuals = linearised(problem, state, config)
+            normal, residuals = linearised(problem, state, config) if pending is None else pending
+            pending = None
             iterations += 1
             sigma = _sigma(normal, config) if config.step_sigmas > 0.0 else None
         step_global, step_local = solve_damped(normal, damping)
@@ -637,7 +688,7 @@ def solve(problem: BlockProblem[State], state: State, config: SolverConfig) -> S
                 converged = True
                 break
     if normal is None or residuals is None:  # the state moved since the last one
-        normal, residuals = linearised(problem, state, config)
+        normal, residuals = linearised(problem, state, config) if pending is None else pending
     return Solution(
         state=state,
         residuals=residuals,

@@ -57,6 +57,7 @@ from ...profile.noise import LineNoise, learn_line_noise, learning_profiles, lin
 from ...solver import (
     N_HAND_EYE,
     N_LOCAL,
+    BlockNormal,
     Flag,
     RejectionOutcome,
     Solution,
@@ -246,14 +247,16 @@ class RefineResult:
 @dataclass(frozen=True)
 class SolvedProblem:
     """A refinement's problem (its points trimmed and subsampled), its state at the
-    solution, the line noise it was weighed by and the sensor and robot variance factors it
-    estimated there: where :func:`.warm.refine_subset` starts a solve of some of its
-    samples."""
+    solution, the line noise it was weighed by, the sensor and robot variance factors it
+    estimated there and its normal equations there (robust weights there): where
+    :func:`.warm.refine_subset` starts a solve of some of its samples, whose first
+    linearisation is then these equations' rows."""
 
     problem: CylinderProblem
     state: CylinderState
     noise: LineNoise | None = None
     variance_factors: tuple[float, float] = (1.0, 1.0)
+    normal: BlockNormal | None = None
 
 
 def _marginal_hand_eye(information: FloatArray) -> FloatArray:
@@ -494,7 +497,7 @@ def summarise(
         n_points=n_points,
         observability=observability,
         warnings=warnings,
-        solved=SolvedProblem(problem, state, noise, factors),
+        solved=SolvedProblem(problem, state, noise, factors, normal),
         line_noise=noise,
         sample_dispersion=None if dispersion is None else dispersion[:N_HAND_EYE],
     )

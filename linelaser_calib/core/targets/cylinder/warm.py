@@ -11,7 +11,7 @@ import numpy as np
 
 from ...errors import DegenerateError, SolverError
 from ...geometry import FloatArray
-from ...solver import Solution, SolverConfig, solve
+from ...solver import BlockNormal, Residuals, Solution, SolverConfig, solve
 from .config import RefineConfig
 from .problem import CylinderProblem, CylinderState
 from .refine import RefineResult, SolvedProblem, outlier_rounds, screened, summarise
@@ -98,8 +98,14 @@ def refine_subset(
         )
     problem = full.take(keep)
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
+    # The solved problem's equations at its solution hold these samples' own: the first
+    # linearisation, where the problem stays the same (its residuals, about a third of a
+    # linearisation's cost, are formed again rather than kept beside every solved problem).
+    linearised = None
     if prior is not None:
         problem, start = _under(prior, problem, start)
+    elif solved.normal is not None:
+        linearised = (solved.normal.take(keep), problem.residuals(start))
     tolerances = (
         problem.config.solver
         if final
@@ -109,7 +115,7 @@ def refine_subset(
             variance_factors=solved.variance_factors,
         )
     )
-    solution = _solve_near(problem, start, "of a subset", tolerances)
+    solution = _solve_near(problem, start, "of a subset", tolerances, linearised)
     return summarise(problem, solution, solved.noise)
 
 
@@ -184,11 +190,16 @@ def _near(problem: CylinderProblem, max_iterations: int | None = None) -> Solver
 
 
 def _solve_near(
-    problem: CylinderProblem, start: CylinderState, what: str, tolerances: SolverConfig
+    problem: CylinderProblem,
+    start: CylinderState,
+    what: str,
+    tolerances: SolverConfig,
+    linearised: tuple[BlockNormal, Residuals] | None = None,
 ) -> Solution[CylinderState]:
     """The solve of a problem from a state near its optimum with ``tolerances``
-    (:func:`_near`), SolverError on non-finite numbers, naming ``what``."""
-    solution = solve(problem, start, tolerances)
+    (:func:`_near`), SolverError on non-finite numbers, naming ``what``; ``linearised``, its
+    normal equations and residuals at ``start`` where known."""
+    solution = solve(problem, start, tolerances, linearised)
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError(f"the refinement {what} produced non-finite values")
     return solution
@@ -215,4 +226,6 @@ def refine_at_poses(
     solution = _solve_near(
         problem, solved.state, "at other flange poses", _near(problem, max_iterations)
     )
-    return replace(solved, problem=problem, state=solution.state), solution.cost_history[-1]
+    # Without equations: no subset is solved from it, and they would hold memory.
+    moved = replace(solved, problem=problem, state=solution.state, normal=None)
+    return moved, solution.cost_history[-1]
