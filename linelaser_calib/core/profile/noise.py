@@ -230,8 +230,8 @@ class _Profile:
     (Harville 1977). One eigendecomposition S = Q Λ Qᵀ per profile and ℓ makes it cheap for
     any (σ_w, τ): C = σ_w² Q (1 + τΛ) Qᵀ, and σ_w² has the closed form rᵀP₁r / (N − p) (P₁
     at σ_w = 1; N points, p fitted directions), so the cost is a function of τ alone,
-    minimised on a grid of τ (:data:`TAU_GRID`) and refined between the best one's
-    neighbours. ℓ = 0 is the family's limit where the smooth part is uncorrelated from point
+    minimised on a grid of τ (:data:`TAU_GRID`) and refined by a parabola through the best
+    and its neighbours. ℓ = 0 is the family's limit where the smooth part is uncorrelated from point
     to point (S diagonal, c_i²): a variance that grows with the cosine, no correlation.
     """
 
@@ -254,7 +254,7 @@ class _Profile:
         # A profile of lower rank has zero columns: 1 on their diagonal keeps XᵀC⁻¹X
         # invertible and leaves its determinant alone.
         self.zero_columns = np.all(bases == 0.0, axis=1)  # (M, P)
-        self.free = float(np.count_nonzero(m) - np.count_nonzero(~self.zero_columns))
+        self.free = max(float(np.count_nonzero(m) - np.count_nonzero(~self.zero_columns)), 1.0)
 
     def __call__(self, length_m: float) -> tuple[float, float, float]:
         """(cost, σ_w, τ) at the best τ for correlation length ``length_m`` (0: the
