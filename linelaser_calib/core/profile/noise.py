@@ -20,13 +20,21 @@ axis (a depth error moves a point off a tilted surface by c times itself).
 over all the recording's profiles, by restricted maximum likelihood (REML): each profile's
 residuals are scored only in the directions its own fitted parameters (its pose
 correction) leave free, so that the smooth error those parameters absorbed is not missed.
+The likelihood is multimodal in ℓ, so ℓ is searched globally (its profile likelihood on a
+log-spaced grid, then refined), the same wherever a caller starts.
 :func:`line_whitening` turns the model into one linear map per profile that makes its
 residuals independent and of unit variance (generalised least squares).
 
-The smooth part is kept only where the residuals call for it: a likelihood-ratio test of
-the fit against white noise alone (REML, 2 more parameters, χ² at
-:data:`SMOOTH_FALSE_ALARM`). White-noise residuals learn ``smooth_sigma_m`` 0, and a
-refinement then weighs the points as independent, as before.
+The smooth part is kept only where the residuals call for it, by two likelihood-ratio
+tests (REML, χ² at :data:`SMOOTH_FALSE_ALARM`): against white noise alone (2 more
+parameters, σ_s and ℓ), and against the model's own uncorrelated limit ℓ → 0 (1 more, ℓ),
+where the depth part is drawn anew at every point. A smooth part that the second test
+does not find is no error correlated along the line but a point variance that varies
+with the cosine (a profiler whose depth noise exceeds its lateral one, or a surface
+normal out of the laser plane): the residuals of ``paper`` (5 µm in x and z) and
+``ur_scancontrol`` (8 µm depth, 6 µm lateral) favour that limit by 8 and 80 over any
+ℓ ≥ one learning point spacing. White-noise residuals, and these, learn
+``smooth_sigma_m`` 0, and a refinement then weighs the points as independent.
 """
 
 from __future__ import annotations
@@ -52,9 +60,18 @@ LEARN_POINTS = 100
 LEARN_PROFILES = 16
 #: Relative singular-value floor below which a profile's fitted directions are dependent.
 RANK_TOLERANCE = 1e-6
-#: False-alarm probability of the test that finds a smooth part in white-noise residuals
+#: False-alarm probability of the tests that find a smooth part in white-noise residuals
 #: (the 3σ two-sided normal tail, as the self-check's tests).
 SMOOTH_FALSE_ALARM = 0.0027
+#: Ratio of neighbouring correlation lengths on :func:`learn_line_noise`'s grid (from one
+#: point spacing to twice the span; 13-15 lengths on the committed bags), each costing an
+#: eigendecomposition per learning profile; the best is refined between its neighbours.
+LENGTH_STEP = 1.5
+#: Grid of the smooth-to-white variance ratio τ = σ_s² / σ_w² at one correlation length
+#: (σ_s from 1/1000 to 1000 times σ_w, steps of 1.33 in σ_s), refined by a parabola through
+#: the best and its neighbours. A cost that still falls at its top marks a smooth part of
+#: unbounded size: a pattern in the residuals (a misfit) that no noise level explains.
+TAU_GRID = tuple(float(t) for t in np.geomspace(1e-6, 1e6, 49))
 
 
 @dataclass(frozen=True)
@@ -203,14 +220,19 @@ def line_whitening(
     return Whitening(white, U, shrink)
 
 
-class _Reml:
-    """Minus twice the restricted log-likelihood of (σ_w, σ_s, ℓ) and its gradient, for
-    one set of padded profiles (constants dropped; everything in units of ``unit_m``).
+class _Profile:
+    """Minus twice the restricted log-likelihood of one set of padded profiles at a fixed
+    correlation length ℓ, minimised over the two variances (constants dropped; everything
+    in units of ``unit_m``).
 
-    With C the covariance, X the fitted directions and P = C⁻¹ − C⁻¹X (XᵀC⁻¹X)⁻¹ XᵀC⁻¹,
-    the cost is log|C| + log|XᵀC⁻¹X| + rᵀPr and its derivative by a parameter θ is
-    tr(P ∂C/∂θ) − (Pr)ᵀ ∂C/∂θ (Pr) (Harville 1977). The point distances are computed
-    once, so a likelihood evaluation costs a Cholesky factor and a few products per profile.
+    With C = σ_w² (I + τ S), S the smooth part's shape (c_i c_k exp(−d²/(2ℓ²))), X the fitted
+    directions and P = C⁻¹ − C⁻¹X (XᵀC⁻¹X)⁻¹ XᵀC⁻¹, the cost is log|C| + log|XᵀC⁻¹X| + rᵀPr
+    (Harville 1977). One eigendecomposition S = Q Λ Qᵀ per profile and ℓ makes it cheap for
+    any (σ_w, τ): C = σ_w² Q (1 + τΛ) Qᵀ, and σ_w² has the closed form rᵀP₁r / (N − p) (P₁
+    at σ_w = 1; N points, p fitted directions), so the cost is a function of τ alone,
+    minimised on a grid of τ (:data:`TAU_GRID`) and refined by a parabola through the best
+    and its neighbours. ℓ = 0 is the family's limit where the smooth part is uncorrelated from point
+    to point (S diagonal, c_i²): a variance that grows with the cosine, no correlation.
     """
 
     def __init__(
@@ -224,45 +246,59 @@ class _Reml:
     ) -> None:
         m = mask > 0.0
         both = m[:, :, None] & m[:, None, :]
-        d = x_m[:, :, None] - x_m[:, None, :]
-        self.d2 = np.where(both, d**2, 0.0)
+        self.d2 = np.where(both, (x_m[:, :, None] - x_m[:, None, :]) ** 2, 0.0)
         self.cc = np.where(both, cosine[:, :, None] * cosine[:, None, :], 0.0)
-        self.eye_real = np.eye(x_m.shape[1]) * m[:, :, None]
-        self.eye_pad = np.eye(x_m.shape[1]) * ~m[:, :, None]
-        self.r = np.where(m, residuals, 0.0)[..., None] / unit_m
+        self.c2 = np.where(m, cosine**2, 0.0)
+        self.r = np.where(m, residuals, 0.0) / unit_m
         self.X = bases
+        # A profile of lower rank has zero columns: 1 on their diagonal keeps XᵀC⁻¹X
+        # invertible and leaves its determinant alone.
+        self.zero_columns = np.all(bases == 0.0, axis=1)  # (M, P)
+        self.free = max(float(np.count_nonzero(m) - np.count_nonzero(~self.zero_columns)), 1.0)
 
-    def __call__(self, log_params: FloatArray) -> tuple[float, FloatArray]:
-        white2, smooth2, length2 = np.exp(2.0 * np.asarray(log_params))
-        shape = self.cc * np.exp(-0.5 * self.d2 / length2)
-        smooth = smooth2 * shape
-        C = white2 * self.eye_real + smooth + self.eye_pad
-        L = np.linalg.cholesky(C)
-        Ci = np.linalg.inv(C)  # symmetric positive definite, well conditioned (white part)
-        X, r = self.X, self.r
-        A = Ci @ X  # C⁻¹ X
-        XtCiX = X.transpose(0, 2, 1) @ A
-        # A profile of lower rank has zero columns: 1 on their diagonal keeps M invertible.
-        XtCiX = XtCiX + np.eye(X.shape[2]) * (np.einsum("mii->mi", XtCiX) == 0.0)[:, None, :]
-        P = Ci - A @ np.linalg.solve(XtCiX, A.transpose(0, 2, 1))
-        Pr = P @ r
-        logdet_C = 2.0 * np.sum(np.log(np.einsum("mii->mi", L)))
-        _, logdet_X = np.linalg.slogdet(XtCiX)
-        cost = float(logdet_C + np.sum(logdet_X) + np.sum(r * Pr))
-        # tr(P ∂C) − (Pr)ᵀ ∂C (Pr) for ∂C/∂log σ_w = 2σ_w² I (real points), ∂C/∂log σ_s =
-        # 2 × smooth, ∂C/∂log ℓ = smooth × d²/ℓ².
-        Q = P - Pr * Pr.transpose(0, 2, 1)
-        Qs = Q * smooth
-        gradient = np.array(
-            [
-                2.0
-                * white2
-                * np.sum(np.einsum("mii->mi", Q) * np.einsum("mii->mi", self.eye_real)),
-                2.0 * np.sum(Qs),
-                np.sum(Qs * self.d2) / length2,
-            ]
+    def __call__(self, length_m: float) -> tuple[float, float, float]:
+        """(cost, σ_w, τ) at the best τ for correlation length ``length_m`` (0: the
+        uncorrelated limit); σ_w in units of ``unit_m``. τ is the grid's largest where the
+        cost still falls there (a smooth part of unbounded size)."""
+        if length_m > 0.0:
+            lam, Q = np.linalg.eigh(self.cc * np.exp(-0.5 * self.d2 / length_m**2))
+            rq = np.einsum("mki,mk->mi", Q, self.r)
+            Xq = Q.transpose(0, 2, 1) @ self.X
+        else:
+            lam, rq, Xq = self.c2, self.r, self.X
+        lam = np.maximum(lam, 0.0)
+        log_tau = np.log(TAU_GRID)
+        costs, white2 = self._cost(lam, rq, Xq, np.exp(log_tau))
+        i = int(np.argmin(costs))
+        if 0 < i < len(log_tau) - 1:  # the vertex of the parabola through i and its neighbours
+            y0, y1, y2 = costs[i - 1 : i + 2]
+            h = log_tau[1] - log_tau[0]
+            vertex = log_tau[i] + 0.5 * h * (y0 - y2) / max(y0 - 2.0 * y1 + y2, 1e-300)
+            cost, white2_at = self._cost(lam, rq, Xq, np.exp([vertex]))
+            if cost[0] < costs[i]:
+                return float(cost[0]), math.sqrt(float(white2_at[0])), math.exp(vertex)
+        return float(costs[i]), math.sqrt(float(white2[i])), TAU_GRID[i]
+
+    def white_only(self) -> tuple[float, float]:
+        """(cost, σ_w) of white noise alone (τ = 0), in units of ``unit_m``."""
+        cost, white2 = self._cost(self.c2, self.r, self.X, np.zeros(1))
+        return float(cost[0]), math.sqrt(float(white2[0]))
+
+    def _cost(
+        self, lam: FloatArray, rq: FloatArray, Xq: FloatArray, tau: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Cost and σ_w² at each τ of ``tau`` (T,), in the eigenbasis of S (eigenvalues
+        ``lam`` (M, K), residuals ``rq`` (M, K) and directions ``Xq`` (M, K, P) in it)."""
+        d = 1.0 + tau[:, None, None] * lam  # (T, M, K): C's eigenvalues over σ_w²
+        Xd = Xq / d[..., None]
+        A = Xq.transpose(0, 2, 1) @ Xd + np.eye(Xq.shape[2]) * self.zero_columns[:, None, :]
+        b = np.einsum("tmkp,mk->tmp", Xd, rq)
+        quad = np.sum(rq**2 / d, axis=(1, 2)) - np.sum(
+            b * np.linalg.solve(A, b[..., None])[..., 0], axis=(1, 2)
         )
-        return cost, gradient
+        white2 = np.maximum(quad, 1e-300) / self.free
+        logdet = np.sum(np.log(d), axis=(1, 2)) + np.sum(np.linalg.slogdet(A)[1], axis=1)
+        return self.free * np.log(white2) + logdet, white2
 
 
 def learning_profiles(mask: FloatArray) -> NDArray[np.intp]:
@@ -317,7 +353,7 @@ def learn_line_noise(
     InputError
         Fewer than two profiles with :data:`MIN_POINTS` points, or shapes that differ.
     """
-    from scipy.optimize import minimize  # loaded only where used
+    from scipy.optimize import minimize_scalar  # loaded only where used
     from scipy.special import chdtri
 
     shapes = {np.shape(a) for a in (residuals_m, x_m, cosine, mask)}
@@ -336,34 +372,53 @@ def learn_line_noise(
     span = float(
         np.median(np.max(np.where(m, x, -np.inf), axis=1) - np.min(np.where(m, x, np.inf), axis=1))
     )
-    d2 = np.diff(r, n=2, axis=1)[m[:, 2:] & m[:, 1:-1] & m[:, :-2]]
-    white0 = float(np.sqrt(np.mean(d2**2) / 6.0)) if len(d2) else unit
-    start = np.log([max(white0, 1e-3 * unit) / unit, 1.0, 0.2 * span])
     spacing = span / max(float(np.median(np.sum(m, axis=1))) - 1.0, 1.0)
-    bounds = [(math.log(1e-4), math.log(10.0))] * 2 + [
-        (math.log(spacing), math.log(max(2.0 * span, 2.0 * spacing)))
-    ]
-    reml = _Reml(r, x, c, m.astype(np.float64), X, unit)
-    best = minimize(
-        reml,
-        np.clip(start, [b[0] for b in bounds], [b[1] for b in bounds]),
-        method="L-BFGS-B",
-        jac=True,
-        bounds=bounds,
-        # Relative to a cost of thousands: 1e-3 or less, against a test threshold of 11.8.
-        options={"ftol": 1e-7},
+    profile = _Profile(r, x, c, m.astype(np.float64), X, unit)
+    # The likelihood is multimodal in ℓ (and flat where the smooth part is small): its
+    # profile over a log-spaced grid from one point spacing to twice the span, then a
+    # bounded search between the best grid point's neighbours.
+    lengths = np.geomspace(
+        spacing,
+        max(2.0 * span, 2.0 * spacing),
+        max(2, math.ceil(math.log(max(2.0 * span / spacing, 2.0)) / math.log(LENGTH_STEP)) + 1),
     )
-    white, smooth, length = np.exp(best.x)
-    # White noise alone: the REML variance is closed form, the residual's part outside the
-    # fitted directions over its degrees of freedom (the bases are orthonormal).
-    free = np.count_nonzero(m) - np.count_nonzero(np.any(X != 0.0, axis=1))
-    outside = np.sum(r**2) - np.sum((X.transpose(0, 2, 1) @ r[..., None]) ** 2)
-    white_only = 0.5 * math.log(max(outside / max(free, 1), 1e-300)) - math.log(unit)
-    white_only = float(np.clip(white_only, *bounds[0]))
-    white_only_cost, _ = reml(np.array([white_only, bounds[1][0], best.x[2]]))
-    if white_only_cost - best.fun < chdtri(2.0, SMOOTH_FALSE_ALARM):
-        return LineNoise(float(math.exp(white_only) * unit), 0.0, float(length))
-    return LineNoise(float(white * unit), float(smooth * unit), float(length))
+    top = TAU_GRID[-1]
+
+    def proper(length: float) -> float:
+        """The profile's cost at ``length``, +inf where the smooth part is unbounded."""
+        cost, _, tau = profile(length)
+        return cost if tau < top else math.inf
+
+    costs = [proper(float(length)) for length in lengths]
+    i = int(np.argmin(costs))
+    length = float(lengths[i])
+    if math.isfinite(costs[i]):
+        refined = minimize_scalar(
+            lambda log_length: min(proper(math.exp(log_length)), costs[i] + 1.0),
+            bounds=(
+                math.log(lengths[max(i - 1, 0)]),
+                math.log(lengths[min(i + 1, len(lengths) - 1)]),
+            ),
+            method="bounded",
+            options={"xatol": 0.03},
+        )
+        length = math.exp(refined.x) if refined.fun < costs[i] else length
+    best, white, tau = profile(length)
+    white_cost, white_only = profile.white_only()
+    uncorrelated, _, _ = profile(0.0)
+    # A smooth part is kept where it explains the residuals better than white noise alone
+    # (σ_s and ℓ: 2 degrees of freedom) and better than its own uncorrelated limit (ℓ: 1):
+    # where ℓ → 0 fits as well, the residuals show a variance that varies with the cosine
+    # (e.g. a profiler's depth noise larger than its lateral one), not an error correlated
+    # along the line, and the points are weighed as independent.
+    smooth = (
+        math.isfinite(costs[i])
+        and white_cost - best >= chdtri(2.0, SMOOTH_FALSE_ALARM)
+        and uncorrelated - best >= chdtri(1.0, SMOOTH_FALSE_ALARM)
+    )
+    if not smooth:
+        return LineNoise(float(white_only * unit), 0.0, float(length))
+    return LineNoise(float(white * unit), float(math.sqrt(tau) * white * unit), float(length))
 
 
 def _orthonormal_bases(bases: FloatArray) -> FloatArray:
