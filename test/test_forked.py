@@ -138,7 +138,11 @@ def test_a_subset_solve_started_at_the_full_solve_equals_one_from_its_own_seed(
     assert translation < 1e-3 * float(np.min(cold.sigma_translation_m))
     assert rotation < 1e-3 * float(np.min(cold.sigma_rotation_rad))
     assert cold.samples_used == warm.samples_used
-    np.testing.assert_allclose(warm.sigma_translation_m, cold.sigma_translation_m, rtol=1e-4)
+    # The cold solve's held x scale (--scale auto) also counts in its 1σ what the scale's
+    # own 1σ moves (with_held_sigma, about 3 % here); the warm one keeps the full solve's
+    # choice without that term: never wider, and within a few per cent.
+    assert np.all(warm.sigma_translation_m <= cold.sigma_translation_m * (1.0 + 1e-4))
+    np.testing.assert_allclose(warm.sigma_translation_m, cold.sigma_translation_m, rtol=0.05)
     # ... in a few linearisations, without a seed solve (whose cost history it lacks; the
     # cold solve's own scale-held re-solve is warm too, from its free solve).
     assert len(warm.history["refine_cost"]) <= 4
@@ -215,7 +219,10 @@ def test_a_scale_held_by_auto_is_solved_again_from_the_free_solve_as_from_scratc
     dropped = sorted(r.index for r in auto.rejections if r.stage == "outlier")
     assert dropped == sorted(r.index for r in own.rejections if r.stage == "outlier")
     assert set(dropped) >= {samples[j].index for j in wrong}
-    np.testing.assert_allclose(auto.sigma_translation_m, own.sigma_translation_m, rtol=1e-3)
+    # The held scale's 1σ counts what the scale's own 1σ moves (with_held_sigma, about 3 %
+    # here), which --scale fixed does not: never narrower, and within a few per cent.
+    assert np.all(auto.sigma_translation_m >= own.sigma_translation_m * (1.0 - 1e-3))
+    np.testing.assert_allclose(auto.sigma_translation_m, own.sigma_translation_m, rtol=0.05)
     assert len(auto.history["refine_cost"]) < len(own.history["refine_cost"])
 
 
