@@ -77,6 +77,9 @@ DISPERSION_WARNING = 4.0
 #: Points per chunk of samples :func:`normal_equations` sums over: its weighted copies of the
 #: Jacobians stay a few MB however long the recording.
 CHUNK_POINTS = 1 << 15
+#: Samples :func:`sample_dispersion` takes at a time: its dozen per-sample (G, G) arrays
+#: stay well under a MB each however long the recording.
+DISPERSION_CHUNK_SAMPLES = 512
 #: Names of the hand-eye parameters, for messages.
 HAND_EYE_AXES = (
     "rotation about x",
@@ -237,11 +240,23 @@ def evaluate_loss(e: FloatArray, config: SolverConfig) -> tuple[FloatArray, Floa
     return c**2 * 2.0 * (root - 1.0), 1.0 / root
 
 
+def robust_costs(e: FloatArray, config: SolverConfig) -> FloatArray:
+    """The robust cost terms c²·ρ(s) of :func:`evaluate_loss` (twice the cost), shaped like
+    ``e`` (M, K), computed a chunk of :data:`CHUNK_POINTS` points at a time: the loss's
+    intermediates and its weights never span the whole recording."""
+    out = np.empty_like(e)
+    step = max(1, CHUNK_POINTS // max(e.shape[1], 1)) if e.ndim == 2 else max(len(e), 1)
+    for start in range(0, len(e), step):
+        out[start : start + step] = evaluate_loss(e[start : start + step], config)[0]
+    return out
+
+
 def cost(residuals: Residuals, config: SolverConfig) -> float:
     """½ Σ robust point cost + ½ Σ pose prior² + ½ Σ global prior², dimensionless."""
-    rho, _ = evaluate_loss(residuals.points, config)
     return 0.5 * float(
-        np.sum(rho) + np.sum(residuals.pose_prior**2) + np.sum(residuals.global_prior**2)
+        np.sum(robust_costs(residuals.points, config))
+        + np.sum(residuals.pose_prior**2)
+        + np.sum(residuals.global_prior**2)
     )
 
 
@@ -330,7 +345,8 @@ def _accumulated(
 ) -> tuple[BlockNormal, Residuals]:
     """:func:`normal_equations` and the residuals (the chunks' joined)."""
     chunks = [linearisation] if isinstance(linearisation, Linearisation) else linearisation
-    parts: list[tuple[FloatArray, ...]] = []
+    # Per block (A_sample, g_sample, B, C_data, g_local, residuals, pose prior), each chunk's.
+    parts: list[list[FloatArray]] = [[] for _ in range(7)]
     first: Linearisation | None = None
     row = 0
     for lin in chunks:
@@ -350,23 +366,21 @@ def _accumulated(
             J_global, J_local = lin.J_global[rows], lin.J_local[rows]
             WJ_global = J_global * w[..., None]
             WJ_local = J_local * w[..., None]
-            parts.append(
-                (
-                    WJ_global.transpose(0, 2, 1) @ J_global,
-                    np.einsum("mkg,mk->mg", WJ_global, e),
-                    WJ_global.transpose(0, 2, 1) @ J_local,
-                    WJ_local.transpose(0, 2, 1) @ J_local,
-                    np.einsum("mkl,mk->ml", WJ_local, e),
-                    e,
-                    lin.residuals.pose_prior[rows],
-                )
+            blocks = (
+                WJ_global.transpose(0, 2, 1) @ J_global,
+                np.einsum("mkg,mk->mg", WJ_global, e),
+                WJ_global.transpose(0, 2, 1) @ J_local,
+                WJ_local.transpose(0, 2, 1) @ J_local,
+                np.einsum("mkl,mk->ml", WJ_local, e),
+                e,
+                lin.residuals.pose_prior[rows],
             )
+            for part, block in zip(parts, blocks, strict=True):
+                part.append(block)
         row += M
     if first is None:
         raise InputError("the normal equations need at least one sample")
-    A_sample, g_sample, B, C_data, g_local, points, pose_prior = (
-        np.concatenate([part[k] for part in parts]) for k in range(7)
-    )
+    A_sample, g_sample, B, C_data, g_local, points, pose_prior = (_joined(part) for part in parts)
     A, g_global = A_sample.sum(axis=0), g_sample.sum(axis=0)
     r = first.residuals
     Jp = first.global_prior_jacobian
@@ -385,6 +399,14 @@ def _accumulated(
         g_sample=g_sample,
     )
     return normal, Residuals(points, pose_prior, r.global_prior)
+
+
+def _joined(chunks: list[FloatArray]) -> FloatArray:
+    """The chunks of one block joined, the list emptied as it goes: each block of the normal
+    equations is held twice (its chunks and the whole) only while it is joined."""
+    whole = np.concatenate(chunks)
+    chunks.clear()
+    return whole
 
 
 def linearised(
@@ -509,25 +531,40 @@ def sample_dispersion(
     M, G, _ = normal.B.shape
     if M - G < MIN_DISPERSION_REDUNDANCY:
         return None
-    u, A = normal.g_sample, normal.A_sample
-    BC = normal.B @ np.linalg.inv(normal.C())
-    BCB = np.einsum("mgk,mhk->mgh", BC, normal.B)
-    S_j = A - BCB
     S = normal.schur_information()
-    # Per-sample score covariance under the model: the points' part (residuals minus the
-    # pose correction's fit of them) and the pose prior's.
-    V_j = sensor_factor * (
-        A - 2.0 * BCB + np.einsum("mgk,mkl,mhl->mgh", BC, normal.C_data, BC)
-    ) + robot_factor * np.einsum("mgk,k,mhk->mgh", BC, normal.prior_precision, BC)
-    H = np.linalg.solve(S, S_j.transpose(0, 2, 1)).transpose(0, 2, 1)  # S_j S⁻¹
-    E_j = V_j - H @ V_j - V_j @ H.transpose(0, 2, 1) + H @ V_j.sum(axis=0) @ H.transpose(0, 2, 1)
-    leave_out = np.linalg.inv(S[None] - S_j)
-    d = np.einsum("mgh,mh->mg", leave_out, u)
-    observed = np.sum(d * d, axis=0)
-    expected = np.einsum("mgg->g", leave_out @ E_j @ leave_out)
+    step = DISPERSION_CHUNK_SAMPLES
+    chunks = [slice(start, start + step) for start in range(0, M, step)]
+    V = sum(
+        _score_terms(normal, rows, sensor_factor, robot_factor)[1].sum(axis=0) for rows in chunks
+    )
+    observed, expected = np.zeros(G), np.zeros(G)
+    for rows in chunks:
+        S_j, V_j = _score_terms(normal, rows, sensor_factor, robot_factor)
+        H = np.linalg.solve(S, S_j.transpose(0, 2, 1)).transpose(0, 2, 1)  # S_j S⁻¹
+        E_j = V_j - H @ V_j - V_j @ H.transpose(0, 2, 1) + H @ V @ H.transpose(0, 2, 1)
+        leave_out = np.linalg.inv(S[None] - S_j)
+        d = np.einsum("mgh,mh->mg", leave_out, normal.g_sample[rows])
+        observed += np.sum(d * d, axis=0)
+        expected += np.einsum("mgg->g", leave_out @ E_j @ leave_out)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = observed / expected
     return np.asarray(np.where(expected > 0.0, ratio, 1.0))
+
+
+def _score_terms(
+    normal: BlockNormal, rows: slice, sensor_factor: float, robot_factor: float
+) -> tuple[FloatArray, FloatArray]:
+    """Of the samples ``rows``: each one's share S_j of the Schur information (m, G, G) and
+    the covariance V_j of its score under the noise model (m, G, G): the points' part
+    (residuals minus the pose correction's fit of them) and the pose prior's
+    (:func:`sample_dispersion`)."""
+    A, B, C_data = normal.A_sample[rows], normal.B[rows], normal.C_data[rows]
+    BC = B @ np.linalg.inv(C_data + np.diag(normal.prior_precision))
+    BCB = np.einsum("mgk,mhk->mgh", BC, B)
+    V_j = sensor_factor * (
+        A - 2.0 * BCB + np.einsum("mgk,mkl,mhl->mgh", BC, C_data, BC)
+    ) + robot_factor * np.einsum("mgk,k,mhk->mgh", BC, normal.prior_precision, BC)
+    return A - BCB, V_j
 
 
 def dispersion_warning(ratio: FloatArray | None) -> str | None:
