@@ -347,47 +347,29 @@ def _accumulated(
     chunks = [linearisation] if isinstance(linearisation, Linearisation) else linearisation
     # Per block (A_sample, g_sample, B, C_data, g_local, residuals, pose prior), each chunk's.
     parts: list[list[FloatArray]] = [[] for _ in range(7)]
-    first: Linearisation | None = None
+    first: tuple[FloatArray, FloatArray | None, FloatArray] | None = None  # its priors
     row = 0
     for lin in chunks:
-        first = lin if first is None else first
-        M, K = lin.J_global.shape[:2]
-        step = max(1, CHUNK_POINTS // max(K, 1))
-        for start in range(0, M, step):
-            rows = slice(start, start + step)
-            e = lin.residuals.points[rows]
-            w = (
-                evaluate_loss(e, config)[1]
-                if weights is None
-                else weights[row + start : row + start + e.shape[0]]
+        if first is None:
+            first = (
+                lin.residuals.global_prior,
+                lin.global_prior_jacobian,
+                lin.pose_prior_sqrt_information,
             )
-            # Each sample's blocks apart (no stacked copy of the Jacobian): one small
-            # product per sample for its share of A, B and C.
-            J_global, J_local = lin.J_global[rows], lin.J_local[rows]
-            WJ_global = J_global * w[..., None]
-            WJ_local = J_local * w[..., None]
-            blocks = (
-                WJ_global.transpose(0, 2, 1) @ J_global,
-                np.einsum("mkg,mk->mg", WJ_global, e),
-                WJ_global.transpose(0, 2, 1) @ J_local,
-                WJ_local.transpose(0, 2, 1) @ J_local,
-                np.einsum("mkl,mk->ml", WJ_local, e),
-                e,
-                lin.residuals.pose_prior[rows],
-            )
+        M = lin.J_global.shape[0]
+        for blocks in _blocks(lin, config, None if weights is None else weights[row : row + M]):
             for part, block in zip(parts, blocks, strict=True):
                 part.append(block)
         row += M
+        del lin  # this chunk's Jacobians are let go before the next chunk's are built
     if first is None:
         raise InputError("the normal equations need at least one sample")
     A_sample, g_sample, B, C_data, g_local, points, pose_prior = (_joined(part) for part in parts)
     A, g_global = A_sample.sum(axis=0), g_sample.sum(axis=0)
-    r = first.residuals
-    Jp = first.global_prior_jacobian
+    global_prior, Jp, sqrt_info = first
     if Jp is not None and len(Jp):
         A = A + Jp.T @ Jp
-        g_global = g_global + Jp.T @ r.global_prior
-    sqrt_info = first.pose_prior_sqrt_information
+        g_global = g_global + Jp.T @ global_prior
     normal = BlockNormal(
         A=0.5 * (A + A.T),
         B=B,
@@ -398,7 +380,35 @@ def _accumulated(
         A_sample=A_sample,
         g_sample=g_sample,
     )
-    return normal, Residuals(points, pose_prior, r.global_prior)
+    return normal, Residuals(points, pose_prior, global_prior)
+
+
+def _blocks(
+    lin: Linearisation, config: SolverConfig, weights: FloatArray | None
+) -> Iterator[tuple[FloatArray, ...]]:
+    """The normal equations' blocks of one chunk's samples (A_sample, g_sample, B, C_data,
+    g_local) with its residuals and pose prior, :data:`CHUNK_POINTS` points at a time;
+    ``weights`` (M, K) None uses the robust IRLS weights."""
+    M, K = lin.J_global.shape[:2]
+    step = max(1, CHUNK_POINTS // max(K, 1))
+    for start in range(0, M, step):
+        rows = slice(start, start + step)
+        e = lin.residuals.points[rows]
+        w = evaluate_loss(e, config)[1] if weights is None else weights[rows]
+        # Each sample's blocks apart (no stacked copy of the Jacobian): one small product
+        # per sample for its share of A, B and C.
+        J_global, J_local = lin.J_global[rows], lin.J_local[rows]
+        WJ_global = J_global * w[..., None]
+        WJ_local = J_local * w[..., None]
+        yield (
+            WJ_global.transpose(0, 2, 1) @ J_global,
+            np.einsum("mkg,mk->mg", WJ_global, e),
+            WJ_global.transpose(0, 2, 1) @ J_local,
+            WJ_local.transpose(0, 2, 1) @ J_local,
+            np.einsum("mkl,mk->ml", WJ_local, e),
+            e,
+            lin.residuals.pose_prior[rows],
+        )
 
 
 def _joined(chunks: list[FloatArray]) -> FloatArray:

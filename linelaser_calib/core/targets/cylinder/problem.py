@@ -306,13 +306,19 @@ class CylinderProblem:
         nor the per-point intermediates ever span the whole recording."""
         sqrt_information = self._prior_sqrt_information()
         for _, part, at in self._chunks(state):
-            e, J_global, J_local = part._jacobians(at)
-            yield Linearisation(
-                residuals=Residuals(e, part._pose_prior(at)),
-                J_global=J_global,
-                J_local=J_local,
-                pose_prior_sqrt_information=sqrt_information,
-            )
+            # Built in a call: this generator keeps no chunk's Jacobians while the next's
+            # are built.
+            yield part._linearisation(at, sqrt_information)
+
+    def _linearisation(self, state: CylinderState, sqrt_information: FloatArray) -> Linearisation:
+        """:meth:`linearise` of all samples at once (a chunk's)."""
+        e, J_global, J_local = self._jacobians(state)
+        return Linearisation(
+            residuals=Residuals(e, self._pose_prior(state)),
+            J_global=J_global,
+            J_local=J_local,
+            pose_prior_sqrt_information=sqrt_information,
+        )
 
     def _jacobians(self, state: CylinderState) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Point residuals (M, K) and their Jacobians (M, K, G) and (M, K, 6) of all samples
