@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from linelaser_calib.core.solver import (
     Linearisation,
     Residuals,
     Solution,
     SolverConfig,
+    lm,
     normal_equations,
     recording_widening,
     sample_dispersion,
@@ -93,6 +95,19 @@ def test_dispersion_sees_an_error_shared_by_a_profiles_points() -> None:
     solution = _solved(rng, 400, 1.0, 1.0, shared_sigma=0.6)
     ratio = sample_dispersion(solution, 1.0, 1.0)
     assert ratio is not None and np.all(ratio > 2.0), ratio
+
+
+def test_dispersion_is_the_same_taken_a_chunk_of_samples_at_a_time(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # A long recording's jackknife runs over chunks of samples (bounded memory): 400 samples
+    # in chunks of 64 give the ratio of one pass over all of them.
+    solution = _solved(np.random.default_rng(7), 400, 1.0, 1.0, shared_sigma=0.3)
+    whole = sample_dispersion(solution, 1.0, 1.0)
+    monkeypatch.setattr(lm, "DISPERSION_CHUNK_SAMPLES", 64)
+    chunked = sample_dispersion(solution, 1.0, 1.0)
+    assert whole is not None and chunked is not None
+    np.testing.assert_allclose(chunked, whole, rtol=1e-12)
 
 
 def test_dispersion_needs_more_samples_than_globals() -> None:

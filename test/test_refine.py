@@ -127,6 +127,19 @@ def test_jacobian_matches_finite_differences(scales: tuple[bool, bool]) -> None:
         )
 
 
+def test_a_problem_of_every_sample_in_order_shares_the_arrays_a_subset_copies() -> None:
+    # The held and plain re-solves take every sample of the solved problem: no second copy
+    # of a long recording's padded points; a subset is its own.
+    scene = make_scene(np.random.default_rng(8), n_poses=7, n_points=20)
+    points = [p[: 12 + j] for j, p in enumerate(scene.points)]
+    problem = build_problem(points, scene.T_base_flange, RefineConfig(), True)
+    assert problem.take(np.arange(7)) is problem
+    subset = problem.take(np.array([4, 1]))
+    assert not np.shares_memory(subset.points, problem.points)
+    np.testing.assert_array_equal(subset.counts, [16, 13])
+    np.testing.assert_array_equal(subset.points[1, :13], points[1])
+
+
 def test_schur_solve_equals_dense_solve() -> None:
     rng = np.random.default_rng(3)
     scene = make_scene(rng, n_poses=7, n_points=20)

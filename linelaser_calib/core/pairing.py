@@ -197,7 +197,8 @@ class PoseBuffer:
         held = self.track
         frame = held.frame_id if len(held) else new.frame_id
         self.out_of_order += int(np.count_nonzero(np.diff(new.stamps_ns) < 0))
-        self.track, duplicates = PoseTrack.concatenate([new, held], frame).sorted()
+        joined = PoseTrack.concatenate([new, held], frame) if len(held) else new
+        self.track, duplicates = joined.sorted()  # a sorted stream is held as it is: no copy
         self.duplicates += duplicates
 
     def ready_for(self, stamp_ns: int, config: PairingConfig) -> bool:

@@ -124,8 +124,10 @@ class PoseTrack:
 
     def sorted(self) -> tuple[PoseTrack, int]:
         """The track sorted by stamp with repeated stamps dropped (the first kept), and the
-        number of poses dropped."""
+        number of poses dropped; the track itself (no copy) when it is so already."""
         stamps = self.stamps_ns
+        if bool(np.all(stamps[1:] > stamps[:-1])):
+            return self, 0
         order = np.argsort(stamps, kind="stable")
         keep = np.ones(len(order), dtype=bool)
         keep[1:] = np.diff(stamps[order]) != 0

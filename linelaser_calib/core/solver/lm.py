@@ -78,6 +78,9 @@ DISPERSION_WARNING = 4.0
 #: Points per chunk of samples :func:`normal_equations` sums over: its weighted copies of the
 #: Jacobians stay a few MB however long the recording.
 CHUNK_POINTS = 1 << 15
+#: Samples :func:`sample_dispersion` takes at a time: its dozen per-sample (G, G) arrays
+#: stay well under a MB each however long the recording.
+DISPERSION_CHUNK_SAMPLES = 512
 #: Names of the hand-eye parameters, for messages.
 HAND_EYE_AXES = (
     "rotation about x",
@@ -238,11 +241,23 @@ def evaluate_loss(e: FloatArray, config: SolverConfig) -> tuple[FloatArray, Floa
     return c**2 * 2.0 * (root - 1.0), 1.0 / root
 
 
+def robust_costs(e: FloatArray, config: SolverConfig) -> FloatArray:
+    """The robust cost terms c²·ρ(s) of :func:`evaluate_loss` (twice the cost), shaped like
+    ``e`` (M, K), computed a chunk of :data:`CHUNK_POINTS` points at a time: the loss's
+    intermediates and its weights never span the whole recording."""
+    out = np.empty_like(e)
+    step = max(1, CHUNK_POINTS // max(e.shape[1], 1)) if e.ndim == 2 else max(len(e), 1)
+    for start in range(0, len(e), step):
+        out[start : start + step] = evaluate_loss(e[start : start + step], config)[0]
+    return out
+
+
 def cost(residuals: Residuals, config: SolverConfig) -> float:
     """½ Σ robust point cost + ½ Σ pose prior² + ½ Σ global prior², dimensionless."""
-    rho, _ = evaluate_loss(residuals.points, config)
     return 0.5 * float(
-        np.sum(rho) + np.sum(residuals.pose_prior**2) + np.sum(residuals.global_prior**2)
+        np.sum(robust_costs(residuals.points, config))
+        + np.sum(residuals.pose_prior**2)
+        + np.sum(residuals.global_prior**2)
     )
 
 
@@ -349,51 +364,32 @@ def _accumulated(
 ) -> tuple[BlockNormal, Residuals]:
     """:func:`normal_equations` and the residuals (the chunks' joined)."""
     chunks = [linearisation] if isinstance(linearisation, Linearisation) else linearisation
-    parts: list[tuple[FloatArray, ...]] = []
-    first: Linearisation | None = None
+    # Per block (A_sample, g_sample, B, C_data, g_local, residuals, pose prior), each chunk's.
+    parts: list[list[FloatArray]] = [[] for _ in range(7)]
+    first: tuple[FloatArray, FloatArray | None, FloatArray] | None = None  # its priors
     row = 0
     for lin in chunks:
-        first = lin if first is None else first
-        M, K = lin.J_global.shape[:2]
-        step = max(1, CHUNK_POINTS // max(K, 1))
-        for start in range(0, M, step):
-            rows = slice(start, start + step)
-            e = lin.residuals.points[rows]
-            w = (
-                evaluate_loss(e, config)[1]
-                if weights is None
-                else weights[row + start : row + start + e.shape[0]]
+        if first is None:
+            first = (
+                lin.residuals.global_prior,
+                lin.global_prior_jacobian,
+                lin.pose_prior_sqrt_information,
             )
-            # Each sample's blocks apart (no stacked copy of the Jacobian): one small
-            # product per sample for its share of A, B and C.
-            J_global, J_local = lin.J_global[rows], lin.J_local[rows]
-            WJ_global = J_global * w[..., None]
-            WJ_local = J_local * w[..., None]
-            parts.append(
-                (
-                    WJ_global.transpose(0, 2, 1) @ J_global,
-                    np.einsum("mkg,mk->mg", WJ_global, e),
-                    WJ_global.transpose(0, 2, 1) @ J_local,
-                    WJ_local.transpose(0, 2, 1) @ J_local,
-                    np.einsum("mkl,mk->ml", WJ_local, e),
-                    e,
-                    lin.residuals.pose_prior[rows],
-                )
-            )
+        M = lin.J_global.shape[0]
+        for blocks in _blocks(lin, config, None if weights is None else weights[row : row + M]):
+            for part, block in zip(parts, blocks, strict=True):
+                part.append(block)
         row += M
+        del lin  # this chunk's Jacobians are let go before the next chunk's are built
     if first is None:
         raise InputError("the normal equations need at least one sample")
-    A_sample, g_sample, B, C_data, g_local, points, pose_prior = (
-        np.concatenate([part[k] for part in parts]) for k in range(7)
-    )
-    r = first.residuals
-    Jp = first.global_prior_jacobian
-    prior = None if Jp is None or not len(Jp) else (Jp.T @ Jp, Jp.T @ r.global_prior)
-    sqrt_info = first.pose_prior_sqrt_information
+    A_sample, g_sample, B, C_data, g_local, points, pose_prior = (_joined(part) for part in parts)
+    global_residual, Jp, sqrt_info = first
+    prior = None if Jp is None or not len(Jp) else (Jp.T @ Jp, Jp.T @ global_residual)
     normal = _assembled(
         A_sample, g_sample, B, C_data, sqrt_info**2, g_local + pose_prior * sqrt_info, prior
     )
-    return normal, Residuals(points, pose_prior, r.global_prior)
+    return normal, Residuals(points, pose_prior, global_residual)
 
 
 def _assembled(
@@ -422,6 +418,42 @@ def _assembled(
         g_sample=g_sample,
         global_prior=global_prior,
     )
+
+
+def _blocks(
+    lin: Linearisation, config: SolverConfig, weights: FloatArray | None
+) -> Iterator[tuple[FloatArray, ...]]:
+    """The normal equations' blocks of one chunk's samples (A_sample, g_sample, B, C_data,
+    g_local) with its residuals and pose prior, :data:`CHUNK_POINTS` points at a time;
+    ``weights`` (M, K) None uses the robust IRLS weights."""
+    M, K = lin.J_global.shape[:2]
+    step = max(1, CHUNK_POINTS // max(K, 1))
+    for start in range(0, M, step):
+        rows = slice(start, start + step)
+        e = lin.residuals.points[rows]
+        w = evaluate_loss(e, config)[1] if weights is None else weights[rows]
+        # Each sample's blocks apart (no stacked copy of the Jacobian): one small product
+        # per sample for its share of A, B and C.
+        J_global, J_local = lin.J_global[rows], lin.J_local[rows]
+        WJ_global = J_global * w[..., None]
+        WJ_local = J_local * w[..., None]
+        yield (
+            WJ_global.transpose(0, 2, 1) @ J_global,
+            np.einsum("mkg,mk->mg", WJ_global, e),
+            WJ_global.transpose(0, 2, 1) @ J_local,
+            WJ_local.transpose(0, 2, 1) @ J_local,
+            np.einsum("mkl,mk->ml", WJ_local, e),
+            e,
+            lin.residuals.pose_prior[rows],
+        )
+
+
+def _joined(chunks: list[FloatArray]) -> FloatArray:
+    """The chunks of one block joined, the list emptied as it goes: each block of the normal
+    equations is held twice (its chunks and the whole) only while it is joined."""
+    whole = np.concatenate(chunks)
+    chunks.clear()
+    return whole
 
 
 def linearised(
@@ -546,25 +578,40 @@ def sample_dispersion(
     M, G, _ = normal.B.shape
     if M - G < MIN_DISPERSION_REDUNDANCY:
         return None
-    u, A = normal.g_sample, normal.A_sample
-    BC = normal.B @ np.linalg.inv(normal.C())
-    BCB = np.einsum("mgk,mhk->mgh", BC, normal.B)
-    S_j = A - BCB
     S = normal.schur_information()
-    # Per-sample score covariance under the model: the points' part (residuals minus the
-    # pose correction's fit of them) and the pose prior's.
-    V_j = sensor_factor * (
-        A - 2.0 * BCB + np.einsum("mgk,mkl,mhl->mgh", BC, normal.C_data, BC)
-    ) + robot_factor * np.einsum("mgk,k,mhk->mgh", BC, normal.prior_precision, BC)
-    H = np.linalg.solve(S, S_j.transpose(0, 2, 1)).transpose(0, 2, 1)  # S_j S⁻¹
-    E_j = V_j - H @ V_j - V_j @ H.transpose(0, 2, 1) + H @ V_j.sum(axis=0) @ H.transpose(0, 2, 1)
-    leave_out = np.linalg.inv(S[None] - S_j)
-    d = np.einsum("mgh,mh->mg", leave_out, u)
-    observed = np.sum(d * d, axis=0)
-    expected = np.einsum("mgg->g", leave_out @ E_j @ leave_out)
+    step = DISPERSION_CHUNK_SAMPLES
+    chunks = [slice(start, start + step) for start in range(0, M, step)]
+    V = sum(
+        _score_terms(normal, rows, sensor_factor, robot_factor)[1].sum(axis=0) for rows in chunks
+    )
+    observed, expected = np.zeros(G), np.zeros(G)
+    for rows in chunks:
+        S_j, V_j = _score_terms(normal, rows, sensor_factor, robot_factor)
+        H = np.linalg.solve(S, S_j.transpose(0, 2, 1)).transpose(0, 2, 1)  # S_j S⁻¹
+        E_j = V_j - H @ V_j - V_j @ H.transpose(0, 2, 1) + H @ V @ H.transpose(0, 2, 1)
+        leave_out = np.linalg.inv(S[None] - S_j)
+        d = np.einsum("mgh,mh->mg", leave_out, normal.g_sample[rows])
+        observed += np.sum(d * d, axis=0)
+        expected += np.einsum("mgg->g", leave_out @ E_j @ leave_out)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = observed / expected
     return np.asarray(np.where(expected > 0.0, ratio, 1.0))
+
+
+def _score_terms(
+    normal: BlockNormal, rows: slice, sensor_factor: float, robot_factor: float
+) -> tuple[FloatArray, FloatArray]:
+    """Of the samples ``rows``: each one's share S_j of the Schur information (m, G, G) and
+    the covariance V_j of its score under the noise model (m, G, G): the points' part
+    (residuals minus the pose correction's fit of them) and the pose prior's
+    (:func:`sample_dispersion`)."""
+    A, B, C_data = normal.A_sample[rows], normal.B[rows], normal.C_data[rows]
+    BC = B @ np.linalg.inv(C_data + np.diag(normal.prior_precision))
+    BCB = np.einsum("mgk,mhk->mgh", BC, B)
+    V_j = sensor_factor * (
+        A - 2.0 * BCB + np.einsum("mgk,mkl,mhl->mgh", BC, C_data, BC)
+    ) + robot_factor * np.einsum("mgk,k,mhk->mgh", BC, normal.prior_precision, BC)
+    return A - BCB, V_j
 
 
 def dispersion_warning(ratio: FloatArray | None) -> str | None:

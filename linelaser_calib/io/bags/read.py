@@ -337,7 +337,9 @@ def read_bag(
     convert_poses()
     frame = next((t.frame_id for t in tracks if len(t)), "")
     poses = PoseTrack.concatenate(tracks, frame)
-    poses = poses.take(np.argsort(poses.stamps_ns, kind="stable"))
+    stamps = poses.stamps_ns
+    if np.any(stamps[1:] < stamps[:-1]):  # recorded out of order: sorted (a copy)
+        poses = poses.take(np.argsort(stamps, kind="stable"))
 
     for items, topic, what in ((profiles, chosen_profile, "profile"), (poses, chosen_pose, "pose")):
         if not items and topic:

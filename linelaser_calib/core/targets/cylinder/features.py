@@ -83,7 +83,8 @@ class FittedSample:
         that converts them itself (the refinement's padded arrays): taken once per ellipse,
         so every solve's sample records, the self-check's included, share one array."""
         if self._inliers is None or self._inliers[0] is not self.ellipse:
-            self._inliers = (self.ellipse, self.points[self.ellipse.inliers])
+            inliers = self.ellipse.inliers
+            self._inliers = (self.ellipse, self.points if inliers.all() else self.points[inliers])
         return self._inliers[1]
 
     @property

@@ -187,7 +187,12 @@ class CylinderProblem:
         return np.asarray(self.points[..., 0], dtype=np.float64)
 
     def take(self, rows: np.ndarray) -> CylinderProblem:
-        """The problem of the samples ``rows`` (indices into the sample axis), m as before."""
+        """The problem of the samples ``rows`` (indices into the sample axis), m as before;
+        every sample in order shares this problem's arrays (no copy: ``--scale auto``'s held
+        solve and the plain model re-solve the whole solved problem)."""
+        index = np.asarray(rows, dtype=np.intp)
+        if np.array_equal(index, np.arange(self.n_samples)):
+            return self
         return replace(
             self,
             points=self.points[rows],
@@ -354,13 +359,19 @@ class CylinderProblem:
         nor the per-point intermediates ever span the whole recording."""
         sqrt_information = self._prior_sqrt_information()
         for _, part, at in self._chunks(state):
-            e, J_global, J_local = part._jacobians(at)
-            yield Linearisation(
-                residuals=Residuals(e, part._pose_prior(at)),
-                J_global=J_global,
-                J_local=J_local,
-                pose_prior_sqrt_information=sqrt_information,
-            )
+            # Built in a call: this generator keeps no chunk's Jacobians while the next's
+            # are built.
+            yield part._linearisation(at, sqrt_information)
+
+    def _linearisation(self, state: CylinderState, sqrt_information: FloatArray) -> Linearisation:
+        """:meth:`linearise` of all samples at once (a chunk's)."""
+        e, J_global, J_local = self._jacobians(state)
+        return Linearisation(
+            residuals=Residuals(e, self._pose_prior(state)),
+            J_global=J_global,
+            J_local=J_local,
+            pose_prior_sqrt_information=sqrt_information,
+        )
 
     def _jacobians(self, state: CylinderState) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Point residuals (M, K) and their Jacobians (M, K, G) and (M, K, 6) of all samples
@@ -528,27 +539,29 @@ def build_problem(
             check_transform(T, tolerance=1e-4)
         except ValueError as exc:
             raise InputError(f"T_base_flange[{j}] is not a rigid transform: {exc}") from exc
-    stacked: list[FloatArray] = []
     # Points held as float32 where they all are (stored_points): the same numbers, half the
     # memory of the largest arrays a refinement holds; every use converts a chunk at a time.
+    # Each profile is checked and copied into the padded array on its own: no float64 copy
+    # of the whole recording.
     narrow = all(np.asarray(p).dtype == np.float32 for p in samples_points)
     for j, p in enumerate(samples_points):
-        q = np.asarray(p, dtype=np.float64)
-        if q.ndim != 2 or q.shape[1] != 3:
-            raise InputError(f"profile {j} must be an (N, 3) array of points, got shape {q.shape}")
-        if len(q) < config.min_points_per_profile:
+        shape = np.shape(p)
+        if len(shape) != 2 or shape[1] != 3:
+            raise InputError(f"profile {j} must be an (N, 3) array of points, got shape {shape}")
+        if shape[0] < config.min_points_per_profile:
             raise InputError(
-                f"profile {j} has {len(q)} points, fewer than {config.min_points_per_profile}: "
+                f"profile {j} has {shape[0]} points, fewer than {config.min_points_per_profile}: "
                 "drop it or check the profile cleaning"
             )
-        if not np.all(np.isfinite(q)):
-            raise InputError(f"profile {j} contains NaN or Inf: clean the profiles first")
-        stacked.append(_subsample(q, config.max_points_per_profile))
-    counts = np.array([len(q) for q in stacked])
+    limit = config.max_points_per_profile
+    counts = np.array([len(p) if limit == 0 else min(len(p), limit) for p in samples_points])
     K = int(counts.max())
     points = np.empty((M, K, 3), dtype=np.float32 if narrow else np.float64)
     mask = np.zeros((M, K))
-    for j, q in enumerate(stacked):
+    for j, p in enumerate(samples_points):
+        q = _subsample(np.asarray(p), limit)
+        if not np.all(np.isfinite(q)):
+            raise InputError(f"profile {j} contains NaN or Inf: clean the profiles first")
         points[j, : len(q)] = q
         points[j, len(q) :] = q[0]
         mask[j, : len(q)] = 1.0

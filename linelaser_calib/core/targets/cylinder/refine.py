@@ -62,8 +62,8 @@ from ...solver import (
     RejectionOutcome,
     Solution,
     dispersion_warning,
-    evaluate_loss,
     normal_equations,
+    robust_costs,
     sample_dispersion,
     solve,
     solve_with_rejection,
@@ -373,8 +373,8 @@ def refine(
     problem = problem.with_scale_shares(state)
     geometric = normal_equations(
         problem.linearise_chunks(state), cfg.solver, np.ones_like(problem.mask)
-    )
-    _observability(problem, state, geometric.schur_information()).raise_if_unobservable()
+    ).schur_information()
+    _observability(problem, state, geometric).raise_if_unobservable()
 
     centroid = data_centroid(problem, state)
     problem = replace(problem, centroid=centroid)
@@ -392,8 +392,8 @@ def summarise(
     cfg = problem.config
     state, normal = solution.state, solution.normal
     e, prior = solution.residuals.points, solution.residuals.pose_prior
-    rho, _ = evaluate_loss(e, cfg.solver)
-    point_cost, prior_cost = float(np.sum(rho)), float(np.sum(prior**2))
+    point_cost = float(np.sum(robust_costs(e, cfg.solver)))
+    prior_cost = float(np.sum(prior**2))
     weighed_rms = np.sqrt(np.sum(e**2, axis=1) / problem.counts)
     if problem.whitening is not None:
         e = problem.point_residuals(state)  # per-point statistics on the plain residuals

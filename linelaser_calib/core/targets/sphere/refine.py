@@ -77,7 +77,7 @@ from linelaser_calib.core.profile.along_line import measured_to_true
 from linelaser_calib.core.solver import (
     Linearisation,
     SolverConfig,
-    evaluate_loss,
+    robust_costs,
     sample_dispersion,
     solve,
     variance_factors,
@@ -482,10 +482,9 @@ def refine_sphere(
             raise SolverError("the sphere refinement diverged (non-finite estimate)")
         if not config.estimate_variance_factors:
             break
-        rho, _ = evaluate_loss(solution.residuals.points, solver_config)
         sensor, robot = variance_factors(
             solution.normal,
-            float(np.sum(rho)),
+            float(np.sum(robust_costs(solution.residuals.points, solver_config))),
             float(np.sum(solution.residuals.pose_prior**2)),
             problem.n_points,
             problem.n_global,
