@@ -7,7 +7,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 import numpy as np
+import pytest
 
+from linelaser_calib.core.errors import SolverError
 from linelaser_calib.core.solver import Linearisation, Residuals, SolverConfig, solve
 
 G, K, M = 8, 30, 60
@@ -65,3 +67,15 @@ def test_a_solve_stopped_at_a_fraction_of_its_1_sigma_is_that_close_to_the_optim
         # optimum is a little further than the steps told (here up to 1.2 times).
         assert np.all(np.abs(stopped.state[0] - optimum.state[0]) < 1.5 * fraction * sigma)
         assert stopped.iterations < by_cost.iterations
+
+
+def test_a_global_number_the_data_do_not_determine_is_a_solver_error() -> None:
+    """A state where one global number has no information at all (a sphere fitted to a
+    cylinder's profiles shrank its along-line scale without bound) is refused as the solver's
+    failure, which the caller can turn into a message, not a linear-algebra traceback."""
+    rng = np.random.default_rng(3)
+    J_global = rng.normal(size=(M, K, G))
+    J_global[..., -1] = 0.0
+    problem = LinearBlocks(J_global, rng.normal(size=(M, K, 6)), rng.normal(size=(M, K)))
+    with pytest.raises(SolverError, match="no longer determine"):
+        solve(problem, (np.zeros(G), np.zeros((M, 6))), SolverConfig())

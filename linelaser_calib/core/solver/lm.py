@@ -52,7 +52,7 @@ from typing import Any, Generic, Protocol, TypeVar, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import InputError
+from ..errors import InputError, SolverError
 from ..geometry import FloatArray
 
 #: Robust losses: ρ(s) of the squared normalised residual s = (e / scale)².
@@ -474,6 +474,13 @@ def solve_damped(normal: BlockNormal, damping: float) -> tuple[FloatArray, Float
     -------
     step_global : ndarray, shape (G,)
     step_local : ndarray, shape (M, 6)
+
+    Raises
+    ------
+    SolverError
+        Where a global parameter has no information at all (damping scales each diagonal,
+        so it cannot help): a state the solve ran away to, such as a sphere fitted to a
+        cylinder's profiles shrinking its along-line scale without bound.
     """
     A = normal.A + damping * np.diag(np.diag(normal.A))
     C = normal.C()
@@ -482,7 +489,14 @@ def solve_damped(normal: BlockNormal, damping: float) -> tuple[FloatArray, Float
     BC = normal.B @ C_inv
     S = A - np.einsum("mgk,mhk->gh", BC, normal.B)
     rhs = -normal.g_global + np.einsum("mgk,mk->g", BC, normal.g_local)
-    step_global = np.linalg.solve(S, rhs)
+    try:
+        step_global = np.linalg.solve(S, rhs)
+    except np.linalg.LinAlgError as singular:
+        raise SolverError(
+            "the solve reached a state where the profiles no longer determine one of the "
+            "estimated numbers (its information is zero): the model does not fit this "
+            "recording there"
+        ) from singular
     step_local = -np.einsum(
         "mkl,ml->mk", C_inv, normal.g_local + np.einsum("mgk,g->mk", normal.B, step_global)
     )
