@@ -57,13 +57,14 @@ def good() -> CalibrationResult:
 
 
 def test_a_good_run_says_good_and_export_first(good: CalibrationResult, tmp_path: Path) -> None:
-    """bags/ur_scancontrol: the error against the truth is within 1σ on every axis, the
+    """bags/ur_scancontrol: the error against the truth is within 3σ on every axis (the
+    benches' bound; one recording's axes all within 1σ is a one-in-three draw), the
     self-check ran: good, with its accuracy in use, and the next step is to export; the
     result file carries the same verdict and reads it back."""
     truth = read_truth_yaml(BAGS / "ur_scancontrol" / "truth.yaml")
     error = truth_error(good.T_flange_sensor, truth.T_flange_sensor)
     assert good.uncertainty_translation_m is not None
-    assert np.all(np.abs(error.translation_axes_m) < good.uncertainty_translation_m)
+    assert np.all(np.abs(error.translation_axes_m) < 3.0 * good.uncertainty_translation_m)
     first = format_summary(good, truth).splitlines()[0]
     assert re.match(r"Verdict: GOOD \(accuracy in use 0\.0\d+ mm RMS\): .* Next: export it", first)
     assert good.verdict is not None and good.verdict.level is Level.GOOD
