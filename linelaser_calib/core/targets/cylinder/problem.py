@@ -81,7 +81,7 @@ from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from ...errors import DegenerateError, InputError
 from ...geometry import FloatArray, check_transform, exp_so3, orthonormal_basis, right_jacobian_so3
@@ -175,7 +175,7 @@ class CylinderProblem:
     estimate_scale: bool = False
     estimate_depth_scale: bool = False
     whitening: Whitening | None = None  # per-sample W with W C Wᵀ = I, or None
-    scale_shares: FloatArray | None = None  # (M, K, 2) a, b of g = 1 + a s + b s_z, or None
+    scale_shares: NDArray[np.float32] | None = None  # (M, K, 2) a, b of g = 1 + a s + b s_z
 
     @property
     def n_samples(self) -> int:
@@ -304,7 +304,8 @@ class CylinderProblem:
         sensor's measured units (module docstring, "Scales and the noise's units")."""
         assert self.scale_shares is not None
         a, b = self.scale_shares[..., 0], self.scale_shares[..., 1]
-        return np.asarray(1.0 + a * state.scale + b * state.depth_scale)
+        # The shares are held as float32; the stretch is formed in float64.
+        return np.asarray(1.0 + a * np.float64(state.scale) + b * np.float64(state.depth_scale))
 
     def with_scale_shares(self, state: CylinderState) -> CylinderProblem:
         """The problem with its residuals kept in measured units (:attr:`scale_shares`) when
@@ -322,13 +323,19 @@ class CylinderProblem:
         """
         if not (self.estimate_scale or self.estimate_depth_scale):
             return self
-        n = self._per_point(state, lambda part, at: _sensor_normals(part, at)[..., 0])
-        n_z = self.depth_cosines(state)
-        a = n**2 / np.maximum(n**2 + n_z**2, 1e-300)
+        # In place: a recording's (M, K) temporaries are few (this runs beside its points).
+        a = self._per_point(state, lambda part, at: _sensor_normals(part, at)[..., 0]) ** 2
+        total = self.depth_cosines(state)
+        np.square(total, out=total)
+        total += a
+        a /= np.maximum(total, 1e-300, out=total)
+        del total
         if self.whitening is not None:
-            a = a * _white_share(self.whitening)
-        a = a * self.mask
-        return replace(self, scale_shares=np.stack([a, self.mask - a], axis=-1))
+            a *= _white_share(self.whitening)
+        a *= self.mask
+        # Shares lie in [0, 1]: float32 keeps them to 6e-8, and halves the (M, K, 2) array.
+        shares = np.stack([a, self.mask - a], axis=-1, dtype=np.float32)
+        return replace(self, scale_shares=shares)
 
     def _pose_prior(self, state: CylinderState) -> FloatArray:
         cfg = self.config
@@ -400,7 +407,8 @@ class CylinderProblem:
         if self.scale_shares is not None:
             # d (g e) = g de + e dg, dg / ds = a, dg / ds_z = b (e the true-unit residual)
             g = self._stretch(state)[..., None]
-            J_global, J_local = J_global * g, J_local * g
+            J_global *= g
+            J_local *= g
             e = (geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m)
             for index, share in ((self.scale_index, 0), (self.depth_scale_index, 1)):
                 if index is not None:
