@@ -100,7 +100,7 @@ def rival_leaves(monkeypatch: pytest.MonkeyPatch) -> Any:
         state["fits"] += 1
         if state["distance_m"] is None:
             return None
-        return rivals.Fit(Tube(), solution(state["distance_m"]), {})  # type: ignore[arg-type]
+        return rivals.PairedFit(Tube(), solution(state["distance_m"]), {})  # type: ignore[arg-type]
 
     monkeypatch.setattr(rivals, "_rival_solution", fit)
     monkeypatch.setattr(rivals, "get_target", lambda name: Tube())

@@ -120,7 +120,7 @@ class WholeFit:
 
 
 @dataclass(frozen=True)
-class Fit:
+class PairedFit:
     """A target's full fit and the flange pose its pairing gave each profile.
 
     Attributes
@@ -160,7 +160,7 @@ def whole_rms_m(
     return (float(np.sqrt(np.mean(d**2))) if len(d) else math.inf), len(d)
 
 
-def _judged(fit: Fit, fits: Sequence[SampleFit]) -> WholeFit:
+def _judged(fit: PairedFit, fits: Sequence[SampleFit]) -> WholeFit:
     rms, n = whole_rms_m(fit.solution, fits, fit.poses)
     return WholeFit(fit.target.title, fit.target.name, rms, n, len(fits), fit.offset_s)
 
@@ -177,7 +177,7 @@ def _rival_solution(
     samples: list[Sample],
     context: SolveContext,
     rival_samples: RivalSamples | None = None,
-) -> Fit | None:
+) -> PairedFit | None:
     """The rival target's default fit of the samples with its default settings (paired at
     its own clock offset by ``rival_samples`` where given); None when it cannot calibrate
     them (a refusal, or a singular system in its solve: the rival's model leaves a direction
@@ -193,7 +193,7 @@ def _rival_solution(
             n_samples=len(samples),
             progress=_no_progress,
         )
-        return Fit(rival, rival.solve_default(features, config, quiet), _poses(own), offset)
+        return PairedFit(rival, rival.solve_default(features, config, quiet), _poses(own), offset)
     except (CalibrationError, np.linalg.LinAlgError):
         return None
 
@@ -269,7 +269,7 @@ def check_model(
     fits = {f.index: f for r in rivals for f in r.solution.sample_fits}
     fits.update({f.index: f for f in solution.sample_fits})
     every = [fits[k] for k in sorted(fits)]
-    own = _judged(Fit(target, solution, _poses(samples)), every)
+    own = _judged(PairedFit(target, solution, _poses(samples)), every)
     judged = sorted((_judged(r, every) for r in rivals), key=lambda w: w.rms_m)
     misfit = [] if problem is None else [_what(problem)]
     if any("flange-pose corrections" in m for m in misfit):
