@@ -49,8 +49,8 @@ gives, beside a plain fit of the same data (no robot error modelled, every profi
     scatter ≤ 1.10 × the plain fit's.
 
 Run: ``.venv/bin/python bench/private_twins.py [--seeds N] [--only cell|cylinder|edge]``
-(default 3 seeds for ``cell`` and ``edge``, the first seed for ``cylinder``; about 10 min on
-a loaded machine, 7 of them the cylinder's 13 calibrations).
+(default 3 seeds for ``cell`` and ``edge``, the first seed for ``cylinder``; 2.5 min of CPU,
+about 7 min wall on a loaded machine, most of it the cylinder's 13 calibrations).
 """
 
 from __future__ import annotations
