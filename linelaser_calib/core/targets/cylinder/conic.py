@@ -38,9 +38,14 @@ def conic_matrix(conic: ArrayLike) -> FloatArray:
     -------
     M : ndarray, shape (..., 3, 3)
     """
-    a, b, c, d, e, f = np.moveaxis(np.asarray(conic, dtype=np.float64), -1, 0)
-    rows = [[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]]
-    return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
+    k = np.asarray(conic, dtype=np.float64)
+    half = k / 2
+    M = np.empty((*k.shape[:-1], 3, 3))
+    M[..., 0, 0], M[..., 1, 1], M[..., 2, 2] = k[..., 0], k[..., 2], k[..., 5]
+    M[..., 0, 1] = M[..., 1, 0] = half[..., 1]
+    M[..., 0, 2] = M[..., 2, 0] = half[..., 3]
+    M[..., 1, 2] = M[..., 2, 1] = half[..., 4]
+    return M
 
 
 def conic_from_matrix(M: ArrayLike) -> FloatArray:

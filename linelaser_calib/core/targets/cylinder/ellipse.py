@@ -52,6 +52,7 @@ from .conic import (
     arc_coverage,
     conic_from_matrix,
     conic_matrix,
+    design_rows,
     ellipse_geometry,
     normalise_conic,
     refine_geometric,
@@ -296,14 +297,9 @@ def _direct_fits_normalised(u: FloatArray, masks: FloatArray) -> tuple[FloatArra
     ok : ndarray of bool, shape (K,)
         False where the subset admits no ellipse (collinear, degenerate).
     """
-    x, z = u[:, 0], u[:, 1]
-    D1 = np.column_stack([x * x, x * z, z * z])
-    D2 = np.column_stack([x, z, np.ones_like(x)])
-    W1 = masks[:, :, None] * D1  # (K, N, 3)
-    W2 = masks[:, :, None] * D2
-    S1 = W1.transpose(0, 2, 1) @ D1
-    S2 = W1.transpose(0, 2, 1) @ D2
-    S3 = W2.transpose(0, 2, 1) @ D2
+    design = design_rows(u)  # (N, 6): the quadratic part's columns, then the linear part's
+    scatter = (masks[:, :, None] * design).transpose(0, 2, 1) @ design  # (K, 6, 6)
+    S1, S2, S3 = scatter[:, :3, :3], scatter[:, :3, 3:], scatter[:, 3:, 3:]
     with np.errstate(divide="ignore", invalid="ignore"):
         ok = np.asarray(np.linalg.cond(S3) <= 1e12, dtype=np.bool_)
     S3 = np.where(ok[:, None, None], S3, np.eye(3))
