@@ -14,7 +14,12 @@ from linelaser_calib.core.targets.cylinder.conic import (
     centre_from_conic,
     centre_from_gradient,
     ellipse_geometry,
+    is_ellipse,
+    refine_geometric,
     sampson_distance,
+    sampson_from_rows,
+    sampson_jacobian,
+    sampson_rows,
 )
 from linelaser_calib.core.targets.cylinder.ellipse import (
     EllipseConfig,
@@ -315,6 +320,27 @@ def test_ellipse_geometry_recovers_axes_and_flags_non_ellipses() -> None:
     hyperbola = np.array([1.0, 0.0, -1.0, 0.0, 0.0, -1.0])  # x^2 - z^2 = 1
     empty = np.array([1.0, 0.0, 1.0, 0.0, 0.0, 1.0])  # x^2 + z^2 = -1
     assert not ellipse_geometry(np.stack([hyperbola, empty])).valid.any()
+
+
+def test_the_refits_shortcuts_agree_with_the_array_forms() -> None:
+    """The scalar ellipse check is ellipse_geometry's, distances from held rows are
+    sampson_distance's, and a refit's held Jacobian is the one at its conic."""
+    rng = np.random.default_rng(12)
+    hyperbola, empty = [1.0, 0, -1, 0, 0, -1], [1.0, 0, 1, 0, 0, 1]
+    conics = np.concatenate([rng.normal(size=(400, 6)), [hyperbola, empty]])
+    assert [is_ellipse(k) for k in conics] == ellipse_geometry(conics).valid.tolist()
+    points, _, _ = random_arc(rng, 90.0, n=60)
+    u = (points - points.mean(axis=0)) / points.std()
+    rows = sampson_rows(u)
+    np.testing.assert_allclose(
+        sampson_from_rows(conics[0], rows), sampson_distance(conics[0], u), rtol=1e-12
+    )
+    start = np.linalg.svd(rows[0])[2][-1]  # the algebraic fit
+    fit = refine_geometric(start, u, rows)
+    assert fit.residual is not None and fit.jacobian is not None
+    residual, jacobian = sampson_jacobian(fit.conic, rows)
+    np.testing.assert_allclose(fit.residual, residual, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(fit.jacobian, jacobian, rtol=1e-12, atol=1e-15)
 
 
 def test_direct_fit_is_exact_on_an_ellipse() -> None:

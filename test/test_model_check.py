@@ -25,6 +25,7 @@ from linelaser_calib.core.model_check import (
     conic_fit,
     effective_count,
     line_pair_fit,
+    median,
     recording_scale,
 )
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
@@ -219,3 +220,12 @@ def test_the_real_scans_use_every_profile_and_the_free_radius_is_the_balls() -> 
     published, _ = read_reference_yaml(REAL_BAG / "reference.yaml")
     rot, trans = transform_error(result.T_flange_sensor, published)
     assert rot < math.radians(2.0) and trans < 3e-3
+
+
+def test_median_is_numpys() -> None:
+    """The partition median gives np.median's value, NaN with a NaN and for no values."""
+    rng = np.random.default_rng(5)
+    for n in [1, 2, 3, 8, 9, 240, 241]:
+        values = np.round(rng.normal(size=n), 1)  # ties too
+        assert median(values) == float(np.median(values))
+    assert math.isnan(median([1.0, math.nan, 2.0])) and math.isnan(median([]))

@@ -36,6 +36,7 @@ into the arc.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -278,13 +279,12 @@ def spike_residuals(
     # straddle it; the others (near a segment's ends) are treated in general.
     centred = low == index - w
     rows = np.flatnonzero(centred)
-    before, after = rows[:, None] + np.arange(-w, 0), rows[:, None] + np.arange(1, w + 1)
-    a, b = np.repeat(before, w, axis=1), np.tile(after, (1, w))
+    before, after, first, second = _window_pairs(w)
+    a, b = rows[:, None] + before, rows[:, None] + after
     residual[rows] = _nanmedian_rows(_pair_distances(x, z, rows, a, b))
     rows = np.flatnonzero(~centred)
     window = low[rows, None] + np.arange(2 * w + 1)
     neighbours = window[window != rows[:, None]].reshape(len(rows), 2 * w)
-    first, second = np.triu_indices(2 * w, k=1)
     distance = _pair_distances(x, z, rows, neighbours[:, first], neighbours[:, second])
     later = neighbours > rows[:, None]
     straddles = later[:, first] != later[:, second]
@@ -295,6 +295,18 @@ def spike_residuals(
     at_end = end & near[:, first] & near[:, second]
     residual[rows] = _nanmedian_rows(np.where(straddles | at_end, distance, np.nan))
     return residual, np.asarray(spacing, dtype=np.float64)
+
+
+@functools.cache
+def _window_pairs(w: int) -> tuple[IntArray, IntArray, IntArray, IntArray]:
+    """The pairs of a spike window of half-width ``w`` (:func:`spike_residuals`), formed once
+    per width: the offsets from the point of each straddling pair's two points (w * w,
+    before and after it), and every pair of the 2w neighbours (their positions, first and
+    second, ``np.triu_indices``)."""
+    before = np.repeat(np.arange(-w, 0), w)
+    after = np.tile(np.arange(1, w + 1), w)
+    first, second = np.triu_indices(2 * w, k=1)
+    return before, after, first, second
 
 
 def _pair_distances(

@@ -145,8 +145,10 @@ def _grazing_shift(
         front = refine_conic(fit.conic, points_xz[sampled])
     except ProfileRejected:
         return grazing, math.nan
-    ends = float(np.mean(outward_distance(front, points_xz[grazing])))
-    others = median(outward_distance(front, points_xz[rest]))
+    outward = outward_distance(front, points_xz[inlier_rows])
+    at_grazing = grazing[inlier_rows]
+    ends = float(np.mean(outward[at_grazing]))
+    others = median(outward[~at_grazing])
     return grazing, (ends - others) / sigma_m
 
 

@@ -12,11 +12,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.linalg.lapack import dgesv
 
+from ...model_check import effective_count, robust_scale_m
 from ...types import BoolArray, FloatArray
 
 #: An F smaller than this times the conic's size at the points counts as ~0 (see
@@ -36,9 +38,14 @@ def conic_matrix(conic: ArrayLike) -> FloatArray:
     -------
     M : ndarray, shape (..., 3, 3)
     """
-    a, b, c, d, e, f = np.moveaxis(np.asarray(conic, dtype=np.float64), -1, 0)
-    rows = [[a, b / 2, d / 2], [b / 2, c, e / 2], [d / 2, e / 2, f]]
-    return np.moveaxis(np.array(rows), (0, 1), (-2, -1))
+    k = np.asarray(conic, dtype=np.float64)
+    half = k / 2
+    M = np.empty((*k.shape[:-1], 3, 3))
+    M[..., 0, 0], M[..., 1, 1], M[..., 2, 2] = k[..., 0], k[..., 2], k[..., 5]
+    M[..., 0, 1] = M[..., 1, 0] = half[..., 1]
+    M[..., 0, 2] = M[..., 2, 0] = half[..., 3]
+    M[..., 1, 2] = M[..., 2, 1] = half[..., 4]
+    return M
 
 
 def conic_from_matrix(M: ArrayLike) -> FloatArray:
@@ -153,16 +160,12 @@ def ellipse_geometry(conic: ArrayLike) -> EllipseGeometry:
         length = np.hypot(axis_x, axis_z)
         axis_x = np.where(length > 0, axis_x / length, 1.0)
         axis_z = np.where(length > 0, axis_z / length, 0.0)
-    valid = (det > 0) & (q_centre * half_trace < 0) & np.isfinite(semi_major)
-
-    def pair(first: FloatArray, second: FloatArray) -> FloatArray:
-        return np.where(valid[..., None], np.stack([first, second], axis=-1), np.nan)
-
+    valid = np.asarray((det > 0) & (q_centre * half_trace < 0) & np.isfinite(semi_major))
+    # One array for the three pairs, NaN where invalid: a third of the calls of three.
+    pairs = np.stack([centre_x, centre_z, semi_major, semi_minor, axis_x, axis_z], axis=-1)
+    pairs[~valid] = np.nan
     return EllipseGeometry(
-        valid=np.asarray(valid, dtype=np.bool_),
-        centre=pair(centre_x, centre_z),
-        semi_axes=pair(semi_major, semi_minor),
-        major_axis=pair(axis_x, axis_z),
+        valid=valid, centre=pairs[..., 0:2], semi_axes=pairs[..., 2:4], major_axis=pairs[..., 4:6]
     )
 
 
@@ -277,7 +280,19 @@ def sampson_jacobian(conic: FloatArray, rows: FloatArray) -> tuple[FloatArray, F
     return q / norm, (rows[0] - along) / norm[:, None]
 
 
-def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
+class GeometricFit(NamedTuple):
+    """A conic refined by :func:`refine_geometric`: the conic (6,), and where it is the
+    optimum (not the start handed back), its Sampson distances (N,) and their Jacobian (N, 6)
+    at the points, which later steps use again (the inliers' distances, the axes' 1σ)."""
+
+    conic: FloatArray
+    residual: FloatArray | None
+    jacobian: FloatArray | None
+
+
+def refine_geometric(
+    conic_u: FloatArray, u: FloatArray, rows: FloatArray | None = None
+) -> GeometricFit:
     """Least-squares Sampson-distance fit (Levenberg-Marquardt) starting from a conic.
 
     Minimising the sum of squared Sampson distances approximates the geometric
@@ -285,10 +300,11 @@ def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
     (measured: median centre error 131 um instead of 951 um on 60 deg arcs, R = 20 mm,
     5 um noise). The conic's 6 coefficients are the parameters: the Sampson distance is
     invariant to their scale, so the damping fixes that free direction and every step is
-    renormalised. If the optimum is not an ellipse the start is returned.
+    renormalised. If the optimum is not an ellipse the start is returned. ``rows``, the
+    points' :func:`sampson_rows` when the caller holds them, saves forming them again.
     """
     conic = conic_u / np.linalg.norm(conic_u)
-    rows = sampson_rows(u)
+    rows = sampson_rows(u) if rows is None else rows
     residual, jacobian = sampson_jacobian(conic, rows)
     cost = float(residual @ residual)
     damping = 1e-6
@@ -317,7 +333,62 @@ def refine_geometric(conic_u: FloatArray, u: FloatArray) -> FloatArray:
             damping *= 10
             if damping > 1e8:
                 break
-    return conic if bool(ellipse_geometry(conic).valid) else conic_u
+    if is_ellipse(conic):
+        return GeometricFit(conic, residual, jacobian)
+    return GeometricFit(conic_u, None, None)
+
+
+#: Step of the semi-axes' numerical gradient by the unit conic (:func:`semi_axis_sigmas`).
+AXIS_GRADIENT_STEP = 1e-7
+
+
+def semi_axis_sigmas(conic: FloatArray, residual: FloatArray, jacobian: FloatArray) -> FloatArray:
+    """Standard errors (2,) of the semi-axes (major, minor) of a unit ellipse (6,) fitted to
+    points whose Sampson distances (N,) and their Jacobian (N, 6) are ``residual`` and
+    ``jacobian`` (:class:`GeometricFit`), in the points' units; zeros where not finite.
+
+    The conic's covariance is s² (JᵀJ)⁺ with J the Sampson distances' Jacobian and s their
+    robust scale, inflated by N / n_eff for the smooth shape error that makes neighbouring
+    residuals alike (:func:`~linelaser_calib.core.model_check.effective_count`); it is
+    carried to the semi-axes by their central-difference gradient. A partial arc leaves its
+    axes loosely fixed: a 20 deg arc of a 12.5 mm radius with 20 um of shape error allows
+    semi-minor axes several mm apart.
+    """
+    scale = robust_scale_m(residual)
+    scale_sq = scale**2 * len(residual) / effective_count(residual, scale)
+    covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
+    steps = AXIS_GRADIENT_STEP * np.eye(6)
+    axes = ellipse_geometry(np.concatenate([conic + steps, conic - steps])).semi_axes
+    gradient = (axes[:6] - axes[6:]).T / (2.0 * AXIS_GRADIENT_STEP)
+    sigma = np.sqrt(np.maximum(np.einsum("ik,kl,il->i", gradient, covariance, gradient), 0.0))
+    return np.asarray(sigma if np.all(np.isfinite(sigma)) else np.zeros(2), dtype=np.float64)
+
+
+def is_ellipse(conic: FloatArray) -> bool:
+    """:attr:`EllipseGeometry.valid` of one conic (6,), in scalar arithmetic (the same
+    formulas as :func:`ellipse_geometry`, without its arrays' set-up, which costs more than
+    a Sampson refinement's step)."""
+    a, b, c, d, e, f = (float(k) for k in conic)
+    det = 4 * a * c - b * b
+    if not det > 0.0:
+        return False
+    q_centre = f + 0.5 * (d * ((b * e - 2 * c * d) / det) + e * ((b * d - 2 * a * e) / det))
+    half_trace = 0.5 * (a + c)
+    if not q_centre * half_trace < 0.0:
+        return False
+    lam_small = half_trace - math.copysign(math.hypot(0.5 * (a - c), 0.5 * b), half_trace)
+    if lam_small == 0.0:
+        return False
+    semi_major_sq = -q_centre / lam_small
+    return math.isfinite(semi_major_sq) and not semi_major_sq < 0.0
+
+
+def sampson_from_rows(conic: FloatArray, rows: FloatArray) -> FloatArray:
+    """Signed Sampson distances (N,) of the points whose :func:`sampson_rows` are ``rows``
+    from a conic (6,): :func:`sampson_distance` for points whose rows are at hand."""
+    q, gx, gz = rows @ conic
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.asarray(q / np.sqrt(gx * gx + gz * gz), dtype=np.float64)
 
 
 def arc_coverage(geometry: EllipseGeometry, points_xz: FloatArray) -> float:

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ...errors import InputError, ProfileRejected
-from ...model_check import effective_count, median, robust_scale_m
+from ...model_check import median
 from ...profile.cleaning import MAD_TO_SIGMA
 from ...types import BoolArray, FloatArray
 from .conic import (
@@ -52,12 +52,15 @@ from .conic import (
     arc_coverage,
     conic_from_matrix,
     conic_matrix,
+    design_rows,
     ellipse_geometry,
     normalise_conic,
     refine_geometric,
     sampson_distance,
+    sampson_from_rows,
     sampson_jacobian,
     sampson_rows,
+    semi_axis_sigmas,
     turning_angle,
 )
 from .hypotheses import (
@@ -111,9 +114,9 @@ MAX_REFIT_ROUNDS = 10
 MIN_NOISE_THRESHOLD_M = 1e-6
 
 
-#: Standard errors of a fitted ellipse's semi-axes by which the plausibility bounds widen
-#: (:func:`_axis_slack_m`), and the step of their numerical gradient by the unit conic.
-AXIS_SLACK_SIGMAS, AXIS_GRADIENT_STEP = 3.0, 1e-7
+#: Standard errors of a fitted ellipse's semi-axes (:func:`.conic.semi_axis_sigmas`) by
+#: which the plausibility bounds widen (:func:`_plausible`).
+AXIS_SLACK_SIGMAS = 3.0
 
 
 #: Semi-axis bounds of a short arc's ellipse (:func:`fit_ellipse_ransac`), m: any ellipse.
@@ -294,14 +297,9 @@ def _direct_fits_normalised(u: FloatArray, masks: FloatArray) -> tuple[FloatArra
     ok : ndarray of bool, shape (K,)
         False where the subset admits no ellipse (collinear, degenerate).
     """
-    x, z = u[:, 0], u[:, 1]
-    D1 = np.column_stack([x * x, x * z, z * z])
-    D2 = np.column_stack([x, z, np.ones_like(x)])
-    W1 = masks[:, :, None] * D1  # (K, N, 3)
-    W2 = masks[:, :, None] * D2
-    S1 = W1.transpose(0, 2, 1) @ D1
-    S2 = W1.transpose(0, 2, 1) @ D2
-    S3 = W2.transpose(0, 2, 1) @ D2
+    design = design_rows(u)  # (N, 6): the quadratic part's columns, then the linear part's
+    scatter = (masks[:, :, None] * design).transpose(0, 2, 1) @ design  # (K, 6, 6)
+    S1, S2, S3 = scatter[:, :3, :3], scatter[:, :3, 3:], scatter[:, 3:, 3:]
     with np.errstate(divide="ignore", invalid="ignore"):
         ok = np.asarray(np.linalg.cond(S3) <= 1e12, dtype=np.bool_)
     S3 = np.where(ok[:, None, None], S3, np.eye(3))
@@ -393,7 +391,7 @@ def refine_conic(conic: ArrayLike, points_xz: ArrayLike) -> FloatArray:
     (mx, mz), s = norm.mean, norm.scale
     to_metres = np.array([[s, 0.0, mx], [0.0, s, mz], [0.0, 0.0, 1.0]])
     start = conic_from_matrix(to_metres.T @ conic_matrix(conic) @ to_metres)
-    refined = refine_geometric(start, norm.apply(p))
+    refined = refine_geometric(start, norm.apply(p)).conic
     return normalise_conic(norm.conic_to_metres(refined), _length_scale(p))
 
 
@@ -410,8 +408,8 @@ def _plausible(
     """Ellipses whose size and shape fit a cylinder cut; ``scale_m`` maps lengths to m.
 
     ``slack_m`` (semi-major, semi-minor, m) widens every bound by that much of each axis:
-    the axes' uncertainty (:func:`_axis_slack_m`), so that a short arc whose axes the points
-    hardly fix is judged by what they allow, not by its best-fitting values.
+    the axes' uncertainty (:func:`.conic.semi_axis_sigmas`), so that a short arc whose axes
+    the points hardly fix is judged by what they allow, not by its best-fitting values.
     """
     major, minor = geometry.semi_axes[..., 0] * scale_m, geometry.semi_axes[..., 1] * scale_m
     major_low, minor_high = major - slack_m[0], minor + slack_m[1]
@@ -425,32 +423,6 @@ def _plausible(
             ok &= np.abs(minor - radius_m) <= tolerance + slack_m[1]
             ok &= major + slack_m[0] >= radius_m - tolerance
     return np.asarray(ok, dtype=np.bool_)
-
-
-def _axis_slack_m(conic_u: FloatArray, u: FloatArray, scale_m: float) -> tuple[float, float]:
-    """:data:`AXIS_SLACK_SIGMAS` standard errors of the semi-axes (major, minor) of an ellipse
-    fitted to points ``u`` (normalised), m.
-
-    The conic's covariance is s² (JᵀJ)⁺ with J the Sampson distances' Jacobian and s their
-    robust scale, inflated by N / n_eff for the smooth shape error that makes neighbouring
-    residuals alike (:func:`~linelaser_calib.core.model_check.effective_count`); it is
-    carried to the semi-axes by their central-difference gradient. A partial arc leaves its
-    axes loosely fixed: a 20 deg arc of a 12.5 mm radius with 20 um of shape error allows
-    semi-minor axes several mm apart.
-    """
-    conic = conic_u / np.linalg.norm(conic_u)
-    residual, jacobian = sampson_jacobian(conic, sampson_rows(u))
-    scale = robust_scale_m(residual)
-    scale_sq = scale**2 * len(u) / effective_count(residual, scale)
-    covariance = scale_sq * np.linalg.pinv(jacobian.T @ jacobian)
-    steps = AXIS_GRADIENT_STEP * np.eye(6)
-    axes = ellipse_geometry(np.concatenate([conic + steps, conic - steps])).semi_axes
-    gradient = (axes[:6] - axes[6:]).T / (2.0 * AXIS_GRADIENT_STEP)
-    sigma = np.sqrt(np.maximum(np.einsum("ik,kl,il->i", gradient, covariance, gradient), 0.0))
-    if not np.all(np.isfinite(sigma)):
-        return 0.0, 0.0
-    major, minor = AXIS_SLACK_SIGMAS * sigma * scale_m
-    return float(major), float(minor)
 
 
 def _ransac(
@@ -657,18 +629,24 @@ def _fit(
     axis is uncertain by more than ``config.radius_tolerance`` (:data:`AXIS_SLACK_SIGMAS`
     standard errors)."""
     u = norm.apply(p)
+    rows = sampson_rows(u)
     threshold_u = config.inlier_threshold_m / norm.scale
-    start = _whole_arc(u, norm, config, radius_m, noise_sigma_m)
+    start = _whole_arc(u, rows, norm, config, radius_m, noise_sigma_m)
     if start is not None:
         conic_u, inliers = start, np.ones(len(u), dtype=np.bool_)
     else:
         conic_u, inliers = _ransac_start(u, norm, config, rng, radius_m)
+    refined_on = np.zeros(0, dtype=np.bool_)  # the inliers of the last refit: none yet
     for _ in range(MAX_REFIT_ROUNDS):
-        conic_u = refine_geometric(conic_u, u[inliers])
-        distance = np.abs(sampson_distance(conic_u, u))
+        if not np.array_equal(inliers, refined_on):
+            # Only new inliers are refitted: on the same ones the optimum stays where it is.
+            refined, refined_on = refine_geometric(conic_u, u[inliers], rows[:, inliers]), inliers
+            conic_u = refined.conic
+            distance = np.abs(sampson_from_rows(conic_u, rows))
+            spread_u = median(distance[inliers]) if config.noise_threshold_sigmas > 0.0 else 0.0
         settled = True
         if config.noise_threshold_sigmas > 0.0:
-            sigma_m = MAD_TO_SIGMA * median(distance[inliers]) * norm.scale
+            sigma_m = MAD_TO_SIGMA * spread_u * norm.scale
             target_u = max(config.noise_threshold_sigmas * sigma_m, MIN_NOISE_THRESHOLD_M)
             target_u /= norm.scale
             # Halve at most per round, so that a start bent by outliers can straighten.
@@ -689,7 +667,14 @@ def _fit(
             f"{config.min_inliers} and {100.0 * config.min_inlier_fraction:.0f}% are needed"
         )
     geometry_u = ellipse_geometry(conic_u)
-    slack = _axis_slack_m(conic_u, u[inliers], norm.scale) if geometry_u.valid else (0.0, 0.0)
+    slack = (0.0, 0.0)
+    if geometry_u.valid:  # the last refit's Jacobian where it was on these inliers
+        unit = conic_u / np.linalg.norm(conic_u)
+        residual, jacobian = refined.residual, refined.jacobian
+        if residual is None or jacobian is None or not np.array_equal(inliers, refined_on):
+            residual, jacobian = sampson_jacobian(unit, rows[:, inliers])
+        major, minor = AXIS_SLACK_SIGMAS * semi_axis_sigmas(unit, residual, jacobian) * norm.scale
+        slack = (float(major), float(minor))
     if not _plausible(geometry_u, norm.scale, config, radius_m, slack):
         major, minor = geometry_u.semi_axes * norm.scale * 1e3
         sigma_major, sigma_minor = np.asarray(slack) * 1e3 / AXIS_SLACK_SIGMAS
@@ -705,7 +690,7 @@ def _fit(
         major_axis=geometry_u.major_axis,
     )
     coverage = arc_coverage(geometry, p[inliers])
-    rms = float(np.sqrt(np.mean(sampson_distance(conic_u, u[inliers]) ** 2))) * norm.scale
+    rms = float(np.sqrt(np.mean(distance[inliers] ** 2))) * norm.scale
     uncertain = slack[1] > config.radius_tolerance * geometry.semi_axes[1]
     fit = EllipseFit(
         centre_xz=np.asarray(geometry.centre, dtype=np.float64),
@@ -733,12 +718,14 @@ def _near_radius(radius_m: float | None) -> str:
 
 def _whole_arc(
     u: FloatArray,
+    rows: FloatArray,
     norm: _Normalisation,
     config: EllipseConfig,
     radius_m: float | None,
     noise_sigma_m: float | None,
 ) -> FloatArray | None:
-    """The direct fit of all the points (normalised) when it explains each of them within
+    """The direct fit of all the points (normalised; ``rows`` their
+    :func:`.conic.sampson_rows`) when it explains each of them within
     the profile's noise, else None: RANSAC must then search.
 
     It is the start RANSAC itself gives a clean arc (its best hypothesis then holds every
@@ -756,7 +743,7 @@ def _whole_arc(
     conic_u = _direct_fit_normalised(u)
     if (
         conic_u is None
-        or float(np.max(np.abs(sampson_distance(conic_u, u)))) > limit_m / norm.scale
+        or float(np.max(np.abs(sampson_from_rows(conic_u, rows)))) > limit_m / norm.scale
     ):
         return None
     return conic_u if _plausible(ellipse_geometry(conic_u), norm.scale, config, radius_m) else None
