@@ -195,6 +195,7 @@ def test_right_jacobian_and_point_jacobians_match_finite_differences() -> None:
             state.centre_m + step[6:9],
             state.radius_m + step[9],
             state.corrections,
+            step[10],
         )
         return point_residuals(moved, T, points, valid, sigma)[0]
 
@@ -205,7 +206,8 @@ def test_right_jacobian_and_point_jacobians_match_finite_differences() -> None:
 
     # Central differences: the in-plane weight makes the residuals curved enough that a
     # forward difference's error would exceed the tolerance.
-    for k, step in enumerate(np.eye(10) * h):
+    # The along-line scale's column (10) too, at s = 0.
+    for k, step in enumerate(np.eye(11) * h):
         numeric = (moved_global(step) - moved_global(-step)) / (2.0 * h)
         np.testing.assert_allclose(J_global[..., k], numeric, rtol=1e-4, atol=1e-2)
     for k in range(6):

@@ -51,6 +51,7 @@ from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
     implausible_scale_held,
+    measured_to_true,
     scale_significant,
 )
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
@@ -180,28 +181,57 @@ def extract_feature(
     )
 
 
-def with_scale_model_spread(held: TargetSolution, estimated: TargetSolution) -> TargetSolution:
+def read_as_depth(features: list[SphereFeature], scale: float) -> list[SphereFeature]:
+    """The features with the along-line scale error ``scale`` read as a depth scale of the
+    same x/z ratio instead: x true and z reading 1 / (1 + ``scale``) times the true depth
+    (about the sensor origin), so the points' and circle centres' z stretched by
+    1 + ``scale``."""
+    depth = -scale / (1.0 + scale)
+    return [
+        replace(
+            f,
+            points=measured_to_true(f.points, 0.0, depth),
+            circle=replace(f.circle, centre_xz=measured_to_true(f.circle.centre_xz, 0.0, depth)),
+        )
+        for f in features
+    ]
+
+
+def with_scale_model_spread(
+    held: TargetSolution,
+    estimated: TargetSolution,
+    depth_reading: Callable[[float], TargetSolution],
+) -> TargetSolution:
     """The solution ``--scale auto`` keeps of the two with the along-line scale held at 1
-    (``held``) and estimated (``estimated``), its 1σ widened by the move to the other where
-    that move exceeds its 1σ on some axis.
+    (``held``) and estimated (``estimated``), its 1σ widened by the move to the other
+    reading of the profiles where that move exceeds its 1σ on some axis; ``depth_reading``
+    solves the same profiles with a scale error read as a depth scale (:func:`read_as_depth`).
 
     The whole recording decides. Where estimating the scale moves the hand-eye within the
     held solution's 1σ, the simpler model is kept (the real 40 mm ball set: a free scale
     reads 0.99911 ± 0.00012, clearly off 1, yet scatters the ball centres more, 0.262 mm
     against 0.244 mm held, and moves the free radius from the independent circle fits'
-    39.977 mm to 40.034 mm: it takes up the profiler's own shape error). Where it moves it
+    39.977 mm to 40.034 mm: it takes up the profiler's own shape error); where the move
+    exceeds the held 1σ on some axis it is added to that 1σ in quadrature
+    (:func:`~linelaser_calib.core.model_spread.with_model_spread`). Where it moves it
     beyond, and the scale lies clearly off 1 by its own 1σ (:func:`scale_significant`, the
     1σ widened by how the profiles scatter it), the held model leaves a bias its 1σ does not
     see and the estimated solution is kept: on the stress matrix's ``shape`` face (x 1.0 %
     short of z) it reads 0.9899 ± 0.0002 and the hand-eye is 0.04-0.12 mm off against
-    0.38-0.56 mm held (seeds 0-2; clean twin 0.07-0.10 mm). Either way the move between the
-    two is added to every axis's 1σ in quadrature as the solution's model spread, which the
-    self-check keeps out of its yardstick (:func:`~linelaser_calib.core.model_spread.
-    with_model_spread`), with a warning naming the scale and the move: the profiles fix the
-    ratio of the x and z scales, not which of them is off (on the ``scales`` face, x +0.6 %
-    and z -0.2 % about the sensor origin, the estimated scale reads their difference and its
-    hand-eye is 0.24-0.32 mm off, up to 5.2 of its own 1σ and within 2.1 of the widened one,
-    seeds 0-4).
+    0.38-0.56 mm held (seeds 0-2; clean twin 0.07-0.10 mm).
+
+    The profiles fix the ratio of the x and z scales, not which of them is off, so the kept
+    estimated solution's 1σ counts the other reading of that ratio, the same stretch read
+    as a depth scale, not the held solution (a model the recording has just refused, whose
+    bias the move was): with the radius estimated a depth scale s_z moves the hand-eye by
+    about s_z times the points' depth along it, which the x scale cannot take up. On the
+    ``shape`` face read as a z scale instead (z +1.0 %, x true) the estimated hand-eye is
+    1.1-1.5 mm off along the flange's z, and the two readings are 1.1-1.4 mm apart there,
+    where the held solution was 0.3-0.7 mm off; along the rotation about the sensor's x
+    the held move was 0.18-0.34 deg and the readings differ by 0.01-0.15 deg (seeds 0-5).
+    The truth lies anywhere between the two readings (x +0.6 % and z -0.2 % on the
+    ``scales`` face), so the 1σ counts their move over √3, the RMS distance from the kept
+    end. Where the depth reading cannot be solved, the move to the held solution counts.
     An estimated scale beyond :data:`PLAUSIBLE_SCALE_ERROR` is no model of the profiles (the
     12.7 mm ball set: 0.958 with the radius given): the held solution is kept with a warning.
     """
@@ -226,13 +256,24 @@ def with_scale_model_spread(held: TargetSolution, estimated: TargetSolution) -> 
     )
     if kept is held or not scale_significant(scale, scale_sigma):
         return kept
+    advice = (
+        "The profiles fix the ratio of the x and z scales, not which one is off: check the "
+        "profiler's x scale on a known length; {setting:scale} fixed holds it at 1"
+    )
+    estimated_reading = f"{reading}, clearly off 1 and moving the hand-eye beyond its 1 sigma"
+    try:
+        depth = depth_reading(scale)
+    except CalibrationError:
+        return with_model_spread(
+            estimated, held, f"{estimated_reading}, so it is estimated; holding it at 1", advice
+        )
     return with_model_spread(
         estimated,
-        held,
-        f"{reading}, clearly off 1 and moving the hand-eye beyond its 1 sigma, so it is "
-        "estimated; holding it at 1 instead",
-        "The profiles fix the ratio of the x and z scales, not which one is off: check the "
-        "profiler's x scale on a known length; {setting:scale} fixed holds it at 1",
+        depth,
+        f"{estimated_reading}, so it is estimated; read as a depth scale of "
+        f"{1.0 / (1.0 + scale):.5f} instead, the same stretch",
+        advice,
+        between=True,
     )
 
 
@@ -432,7 +473,13 @@ class SphereTarget:
             estimated = self._solve_default(features, config, context, True)
         except CalibrationError:
             return solution
-        return with_scale_model_spread(solution, estimated)
+        return with_scale_model_spread(
+            solution,
+            estimated,
+            lambda scale: self._solve_default(
+                read_as_depth(features, scale), config, context, False
+            ),
+        )
 
     def _solve_default(
         self, features: list[Any], config: SphereConfig, context: SolveContext, free: bool
