@@ -54,6 +54,37 @@ def test_white_residuals_learn_no_smooth_error() -> None:
     learned = learn_line_noise(rng.normal(0.0, 2e-6, x.shape), x, cosine, mask, bases)
     assert learned.white_sigma_m == pytest.approx(2e-6, rel=0.1)
     assert learned.smooth_sigma_m < 0.4 * learned.white_sigma_m
+    assert learned.depth_sigma_m == 0.0  # nor a per-point variance
+
+
+#: A scanCONTROL-class profiler (committed bag ``ur_scancontrol``): 6 µm lateral and 8 µm
+#: depth noise, no smooth error: a point's variance 6² + c² (8² − 6²) µm².
+SCANCONTROL = LineNoise(
+    white_sigma_m=6e-6, smooth_sigma_m=0.0, length_m=1e-3, depth_sigma_m=np.sqrt(28.0) * 1e-6
+)
+
+
+def test_a_variance_growing_with_the_cosine_learns_the_diagonal_model() -> None:
+    """Residuals drawn with the variance σ_w² + c² σ_d² (no correlation along the line)
+    learn σ_w and σ_d, no smooth part, and the whitening weighs each point by its own
+    variance (diagonal, no basis functions)."""
+    rng = np.random.default_rng(2)
+    x, _, mask, _ = _profiles(rng, SCANCONTROL)
+    cosine = np.cos(np.arcsin(np.clip(x / 6.5e-3, -0.95, 0.95)))  # 0.31 to 1
+    bases = np.stack([np.ones_like(x), x / 6e-3, cosine], axis=2) * mask[..., None]
+    residuals = rng.normal(size=x.shape) * np.sqrt(SCANCONTROL.point_variance(cosine))
+    for j in range(len(x)):  # what a fit of each profile's own directions leaves
+        residuals[j] -= bases[j] @ np.linalg.lstsq(bases[j], residuals[j] * mask[j])[0]
+    learned = learn_line_noise(residuals, x, cosine, mask, bases)
+    assert learned.smooth_sigma_m == 0.0
+    assert learned.white_sigma_m == pytest.approx(SCANCONTROL.white_sigma_m, rel=0.1)
+    assert learned.depth_sigma_m == pytest.approx(SCANCONTROL.depth_sigma_m, rel=0.25)
+    whitening = line_whitening(learned, x, cosine, mask, 3e-6)
+    assert whitening.U.shape[2] == 0
+    weights = whitening.apply(mask)[~np.isclose(mask, 0.0)] ** 2  # 1 / σ_i² in 1 / (3 µm)²
+    truth = (3e-6) ** 2 / SCANCONTROL.point_variance(cosine[mask > 0.0])
+    np.testing.assert_allclose(weights, truth, rtol=0.25)
+    assert np.ptp(np.log(weights)) == pytest.approx(np.ptp(np.log(truth)), rel=0.25)
 
 
 def test_the_low_rank_whitening_whitens_the_dense_covariance() -> None:
@@ -61,22 +92,27 @@ def test_the_low_rank_whitening_whitens_the_dense_covariance() -> None:
     matrices) whitens the exact Gaussian-kernel covariance to 0.1 %, on profiles of 400
     points and on a shorter, padded one, and it selects profiles like the dense form."""
     rng = np.random.default_rng(4)
-    noise = LineNoise(white_sigma_m=3e-6, smooth_sigma_m=10e-6, length_m=4e-3)
-    x, cosine, mask, _ = _profiles(rng, noise, m=6, k=400)
+    smooth = LineNoise(white_sigma_m=3e-6, smooth_sigma_m=10e-6, length_m=4e-3)
+    x, cosine, mask, _ = _profiles(rng, smooth, m=6, k=400)
     mask[:5, 150:] = 0.0
     mask[5, 300:] = 0.0
-    whitening = line_whitening(noise, x, cosine, mask, 3e-6)
-    assert whitening.U.shape[2] < 40
-    identity = np.broadcast_to(np.eye(400), (6, 400, 400))
-    W = whitening.apply(np.ascontiguousarray(identity))
-    for j in (0, 5):
-        n = int(mask[j].sum())
-        C = noise.covariance(x[j, :n], cosine[j, :n]) / 3e-6**2
-        np.testing.assert_allclose(W[j, :n, :n] @ C @ W[j, :n, :n].T, np.eye(n), atol=1e-3)
-    residuals = rng.normal(size=(6, 400)) * mask
-    np.testing.assert_allclose(
-        whitening.take([5, 0]).apply(residuals[[5, 0]]), whitening.apply(residuals)[[5, 0]]
-    )
+    # the smooth part alone, with a per-point depth noise beside it, and the latter alone
+    for noise in (smooth, replace(smooth, depth_sigma_m=5e-6), replace(SCANCONTROL)):
+        whitening = line_whitening(noise, x, cosine, mask, 3e-6)
+        assert whitening.U.shape[2] < 40
+        identity = np.broadcast_to(np.eye(400), (6, 400, 400))
+        W = whitening.apply(np.ascontiguousarray(identity))
+        for j in (0, 5):
+            n = int(mask[j].sum())
+            C = noise.covariance(x[j, :n], cosine[j, :n]) / 3e-6**2
+            np.testing.assert_allclose(W[j, :n, :n] @ C @ W[j, :n, :n].T, np.eye(n), atol=1e-3)
+            # the white share w² (C⁻¹)_ii that weighs the scales' regressors
+            share = noise.white_sigma_m**2 * np.diag(np.linalg.inv(C * 3e-6**2))
+            np.testing.assert_allclose(whitening.white_share()[j, :n], share, atol=1e-3)
+        residuals = rng.normal(size=(6, 400)) * mask
+        np.testing.assert_allclose(
+            whitening.take([5, 0]).apply(residuals[[5, 0]]), whitening.apply(residuals)[[5, 0]]
+        )
 
 
 def test_learn_line_noise_refuses_too_few_profiles() -> None:
@@ -128,6 +164,8 @@ def test_line_noise_rejects_bad_values() -> None:
         LineNoise(0.0, 1e-6, 1e-3)
     with pytest.raises(InputError, match="length"):
         replace(KEYENCE, length_m=0.0)
+    with pytest.raises(InputError, match="depth"):
+        replace(KEYENCE, depth_sigma_m=-1e-6)
 
 
 def test_an_error_as_long_as_the_profile_is_not_weighed_by() -> None:
@@ -200,7 +238,9 @@ def test_a_short_correlation_length_is_found_wherever_a_search_would_start() -> 
 def test_the_learned_line_noise_is_reported_and_read_back(tmp_path: Path) -> None:
     """The committed Gocator-class bag (1.2 µm-step depth, 12 µm of smooth shape error over
     5 mm): the result names the line noise that weighed the points, in the summary and in
-    quality.line_noise, and reads it back; bags/paper (white noise) learns none."""
+    quality.line_noise, and reads it back; bags/paper (5 µm in x and z, no smooth error)
+    learns no smooth part but a per-point variance growing with the cosine (surface normals
+    out of the laser plane), a point facing the sensor 4-6 µm, and reads its depth σ back."""
     from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
     from linelaser_calib.core.targets.cylinder import CylinderSection
     from linelaser_calib.io import read_bag, read_result_yaml, write_result_yaml
@@ -219,9 +259,15 @@ def test_the_learned_line_noise_is_reported_and_read_back(tmp_path: Path) -> Non
     assert back.line_noise.length_m == pytest.approx(section.line_noise.length_m, rel=1e-9)
 
     paper = read_bag(root / "paper")
-    white = run_pipeline(paper.profiles, paper.poses, PipelineConfig(self_check_folds=0))
-    assert isinstance(white.target, CylinderSection) and white.target.line_noise is None
-    assert "line noise" not in format_summary(white)
+    diagonal = run_pipeline(paper.profiles, paper.poses, PipelineConfig(self_check_folds=0))
+    section = diagonal.target
+    assert isinstance(section, CylinderSection) and section.line_noise is not None
+    assert section.line_noise.smooth_sigma_m == 0.0 and section.line_noise.depth_sigma_m > 0.0
+    assert 4e-6 < section.line_noise.point_sigma_m < 6e-6
+    assert "um more in depth" in format_summary(diagonal)
+    back = read_result_yaml(write_result_yaml(diagonal, tmp_path / "d.yaml")).target
+    assert isinstance(back, CylinderSection) and back.line_noise is not None
+    assert back.line_noise.depth_sigma_m == pytest.approx(section.line_noise.depth_sigma_m)
 
 
 def test_a_profile_with_a_large_draw_of_the_smooth_error_is_no_outlier() -> None:

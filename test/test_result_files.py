@@ -236,7 +236,7 @@ def test_truth_extras_cannot_replace_the_truth_or_hold_objects(tmp_path: Path) -
         ("set quality.rms_residual_m fast", "key quality.rms_residual_m must be a number"),
         (
             "set quality.line_noise {white_sigma_m: 1.0e-6, smooth_sigma_m: 4.0e-6, length_m: -1}",
-            "key quality.line_noise: line noise: smooth σ >= 0 and length > 0 needed",
+            "key quality.line_noise: line noise: smooth σ >= 0, depth σ >= 0 and length > 0 needed",
         ),
         ("set quality.line_noise {white_sigma_m: 1.0e-6}", "key quality.line_noise needs"),
         ("set quality.line_noise [1, 2]", "key quality.line_noise must be a mapping"),

@@ -313,13 +313,13 @@ class CylinderProblem:
 
         The shares follow the noise model the points are weighed by: white noise alike in
         every direction of the laser plane (the learned line noise's white part, or every
-        point's noise without one) and a smooth error in depth. Of a point's white noise
-        the along-line part is n_x² / (n_x² + n_z²) (n the surface normal in the sensor
-        frame at ``state``), and the weighed fit counts it by the point's white share of
-        its weight, w² (C⁻¹)_ii (1 without a whitening); a = that product, and b = 1 − a
-        is the depth part, the smooth error's included. Then Σ a and Σ b are the
-        expectations of the χ² parts the two scales' regressors carry (tr(C⁻¹ C_x) and
-        tr(C⁻¹ C_z)), which the g term of their Jacobian cancels.
+        point's noise without one) and a depth noise and smooth error in depth. Of a point's
+        white noise the along-line part is n_x² / (n_x² + n_z²) (n the surface normal in the
+        sensor frame at ``state``), and the weighed fit counts it by the point's white share
+        of its weight, w² (C⁻¹)_ii (1 without a whitening); a = that product, and b = 1 − a
+        is the depth part, the depth noise's and the smooth error's included. Then Σ a and
+        Σ b are the expectations of the χ² parts the two scales' regressors carry
+        (tr(C⁻¹ C_x) and tr(C⁻¹ C_z)), which the g term of their Jacobian cancels.
         """
         if not (self.estimate_scale or self.estimate_depth_scale):
             return self
@@ -331,7 +331,7 @@ class CylinderProblem:
         a /= np.maximum(total, 1e-300, out=total)
         del total
         if self.whitening is not None:
-            a *= _white_share(self.whitening)
+            a *= self.whitening.white_share()
         a *= self.mask
         # Shares lie in [0, 1]: float32 keeps them to 6e-8, and halves the (M, K, 2) array.
         shares = np.stack([a, self.mask - a], axis=-1, dtype=np.float32)
@@ -477,14 +477,6 @@ def _sensor_normals(problem: CylinderProblem, state: CylinderState) -> FloatArra
     """Each point's unit surface normal in the sensor frame (M, K, 3)."""
     geo = _geometry(problem, state)
     return np.asarray(np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ state.R_fs)
-
-
-def _white_share(whitening: Whitening) -> FloatArray:
-    """w² (C⁻¹)_ii per point (M, K): the share of a point's weight in the whitened fit that
-    its white noise holds. C⁻¹ = WᵀW = (I − U diag(2g − g²) Uᵀ) / w² (:class:`Whitening`)."""
-    U = whitening.U.astype(np.float64)
-    g = whitening.shrink
-    return np.asarray(1.0 - np.einsum("mkr,mr->mk", U**2, 2.0 * g - g**2))
 
 
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:

@@ -32,11 +32,13 @@ points as independent then costs accuracy and overstates it: on the ``cylinder_k
 preset the translation error was 0.30 mm RMS (4 seeds), against a Cramér–Rao bound of
 0.075 mm for the same points, and 4 times the white-noise twin's. So
 :func:`refine_with_outlier_rejection` learns the recording's line noise (white σ, smooth σ
-and correlation length, :mod:`~linelaser_calib.core.profile.noise`) from the first solve's
-pooled residuals and solves again with every sample's residuals whitened by it
+and correlation length, or a depth σ, :mod:`~linelaser_calib.core.profile.noise`) from the
+first solve's pooled residuals and solves again with every sample's residuals whitened by it
 (generalised least squares); the covariance is then that of the correlated noise
 (bench/realistic_sensors.py). A learned length beyond a third of the profiles' extent is
-not used (:func:`recording_line_noise`).
+not used (:func:`recording_line_noise`). A per-point variance that grows with the cosine
+to the depth axis (depth noise above the lateral one: the smooth part's limit ℓ → 0)
+weighs each point by its own variance (a diagonal whitening, the same path).
 """
 
 from __future__ import annotations
@@ -485,11 +487,7 @@ def summarise(
         # A point's 1σ about the surface: with a learned line noise its white and smooth
         # parts together (the factor then scales the whitened residuals).
         sensor_sigma_estimated_m=float(np.sqrt(factors[0]))
-        * (
-            cfg.sensor_sigma_m
-            if noise is None
-            else np.hypot(noise.white_sigma_m, noise.smooth_sigma_m)
-        ),
+        * (cfg.sensor_sigma_m if noise is None else noise.point_sigma_m),
         robot_sigma_scale=robot_scale,
         cost_history=history,
         iterations=solution.iterations,
@@ -584,13 +582,13 @@ def recording_line_noise(result: RefineResult, limit_m: float) -> LineNoise | No
     (:func:`~linelaser_calib.core.profile.noise.learn_line_noise`), points beyond
     ``limit_m`` left out.
 
-    None (weigh the points as independent) when the solve kept no problem, too few
-    profiles, or the learned correlation length exceeds :data:`MAX_NOISE_LENGTH_FRACTION`
-    of the median profile's extent along the line: an error that smooth moves a whole
-    profile as its pose would, so the residuals cannot tell its size (REML's likelihood is
-    flat along larger σ with longer length), and what they show is more likely a
-    systematic misfit (a scale error, a grazing-angle bias on ``cluttered_camera``:
-    lengths of 17-30 mm on 25 mm arcs) than noise to weigh by.
+    None (weigh the points as independent and alike) when the solve kept no problem, too
+    few profiles, the residuals look white, or the learned correlation length exceeds
+    :data:`MAX_NOISE_LENGTH_FRACTION` of the median profile's extent along the line: an
+    error that smooth moves a whole profile as its pose would, so the residuals cannot tell
+    its size (REML's likelihood is flat along larger σ with longer length), and what they
+    show is more likely a systematic misfit (a scale error, a grazing-angle bias on
+    ``cluttered_camera``: lengths of 17-30 mm on 25 mm arcs) than noise to weigh by.
     """
     if result.solved is None:
         return None
@@ -614,8 +612,9 @@ def recording_line_noise(result: RefineResult, limit_m: float) -> LineNoise | No
         return None
     x = np.where(mask > 0.0, problem.x_m, np.nan)
     extent = float(np.nanmedian(np.nanmax(x, axis=1) - np.nanmin(x, axis=1)))
-    smooth = noise.smooth_sigma_m > 0.0
-    return noise if smooth and noise.length_m <= MAX_NOISE_LENGTH_FRACTION * extent else None
+    if noise.smooth_sigma_m > 0.0:
+        return noise if noise.length_m <= MAX_NOISE_LENGTH_FRACTION * extent else None
+    return noise if noise.depth_sigma_m > 0.0 else None
 
 
 def _trim_points(
@@ -687,11 +686,13 @@ def refine_with_outlier_rejection(
     def _solve_subset(
         keep: list[int], previous: RefineResult | None, noise: LineNoise | None
     ) -> RefineResult:
-        # Weighed by a learned line noise, the solve keeps more points (the whitening's cost
+        # Weighed by a learned smooth error, the solve keeps more points (the whitening's cost
         # grows with the points times its few tens of basis functions, not their square).
+        # A per-point depth σ alone leaves the points independent: as many as white noise
+        # (on 6 ur_scancontrol seeds every point moved the error as much with it as without).
         cfg_solve = (
             cfg
-            if noise is None
+            if noise is None or noise.smooth_sigma_m == 0.0
             else replace(cfg, max_points_per_profile=cfg.max_points_per_profile_correlated)
         )
         if previous is None and first is not None:
@@ -740,7 +741,7 @@ def refine_with_outlier_rejection(
         assert first is not None  # the noise is learned from the first solve
         rms = np.inf if outcome is None else outcome.outcome.rms_residual_m
         if (
-            rms > MAX_NOISE_RESIDUAL_RATIO * np.hypot(noise.white_sigma_m, noise.smooth_sigma_m)
+            rms > MAX_NOISE_RESIDUAL_RATIO * noise.point_sigma_m
             or rms > MAX_FIRST_RESIDUAL_RATIO * first.rms_residual_m
         ):
             # The learned noise explains a misfit, not noise: weigh the points as independent.

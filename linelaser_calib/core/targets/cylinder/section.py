@@ -45,8 +45,8 @@ class CylinderSection:
         not estimated.
     line_noise : LineNoise or None
         The recording's point noise along the line that weighed the points (white σ, smooth
-        σ and its correlation length, learned from the residuals; default method), or None
-        when the points were weighed as independent.
+        σ and its correlation length, or a depth σ, learned from the residuals; default
+        method), or None when the points were weighed as independent and alike.
     """
 
     key: ClassVar[str] = "cylinder"
@@ -92,7 +92,7 @@ class CylinderSection:
     def quality_entries(self) -> dict[str, Any]:
         """``radius_estimated``, the re-estimated noise levels (``noise_estimated``) and the
         learned point noise along the line (``line_noise``: ``white_sigma_m``,
-        ``smooth_sigma_m``, ``length_m``), when there is one."""
+        ``smooth_sigma_m``, ``length_m``, ``depth_sigma_m``), when there is one."""
         entries: dict[str, Any] = {"radius_estimated": bool(self.radius_estimated)}
         if self.noise_levels:
             entries["noise_estimated"] = {k: float(v) for k, v in self.noise_levels.items()}
@@ -102,6 +102,7 @@ class CylinderSection:
                 "white_sigma_m": float(n.white_sigma_m),
                 "smooth_sigma_m": float(n.smooth_sigma_m),
                 "length_m": float(n.length_m),
+                "depth_sigma_m": float(n.depth_sigma_m),
             }
         return entries
 
@@ -110,6 +111,13 @@ class CylinderSection:
         n = self.line_noise
         if n is None:
             return None
+        if n.smooth_sigma_m == 0.0:
+            return (
+                f"learned from the residuals: {n.white_sigma_m * 1e6:.1f} um from point to "
+                f"point and {n.depth_sigma_m * 1e6:.1f} um more in depth (a point's variance "
+                "grows with its surface's cosine to the depth axis); the points are weighed "
+                "each by its own variance"
+            )
         return (
             f"learned from the residuals: {n.white_sigma_m * 1e6:.1f} um from point to point "
             f"and {n.smooth_sigma_m * 1e6:.1f} um smooth along the line over "
@@ -236,13 +244,16 @@ def _line_noise(mapping: Any) -> LineNoise | None:
         return None
     if not isinstance(mapping, Mapping):
         raise ValueError(f"key quality.line_noise must be a mapping, got {mapping!r}")
-    values = [_optional_number(mapping, k) for k in ("white_sigma_m", "smooth_sigma_m", "length_m")]
-    if any(v is None for v in values):
+    white, smooth, length = (
+        _optional_number(mapping, k) for k in ("white_sigma_m", "smooth_sigma_m", "length_m")
+    )
+    if white is None or smooth is None or length is None:
         raise ValueError(
             "key quality.line_noise needs white_sigma_m, smooth_sigma_m and length_m (m)"
         )
+    depth = _optional_number(mapping, "depth_sigma_m")  # absent in files before it
     try:
-        return LineNoise(*(float(v) for v in values if v is not None))
+        return LineNoise(white, smooth, length, depth or 0.0)
     except InputError as err:
         raise ValueError(f"key quality.line_noise: {err}") from None
 
