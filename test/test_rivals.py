@@ -22,6 +22,7 @@ from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, calibrate_samples
 from linelaser_calib.core.targets import rivals
 from linelaser_calib.core.targets.base import RobotError, SolveContext, TargetSolution
+from linelaser_calib.core.targets.extraction import Extractions
 from linelaser_calib.core.types import SampleFit
 from linelaser_calib.settings import Front, pipeline_config
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
@@ -96,7 +97,7 @@ def rival_leaves(monkeypatch: pytest.MonkeyPatch) -> Any:
             if state["check_fails"]:
                 raise ModelMismatch("the tube model does not fit these data")
 
-    def fit(name: str, samples: Any, context: Any, rival_samples: Any) -> Any:
+    def fit(name: str, samples: Any, context: Any, rival_samples: Any, extractions: Any) -> Any:
         state["fits"] += 1
         if state["distance_m"] is None:
             return None
@@ -162,7 +163,7 @@ def test_a_robot_error_twenty_times_the_prior_is_a_misfit_unless_the_rival_is_fa
 
 
 def test_a_rival_that_cannot_calibrate_is_not_a_winner() -> None:
-    assert rivals._rival_solution("sphere", [], SolveContext()) is None
+    assert rivals._rival_solution("sphere", [], SolveContext(), None, Extractions(0)) is None
 
 
 def refuse(found: int) -> None:
