@@ -6,7 +6,7 @@ stamped 12 ms late, a 4 ms pose stream with 0.25 ms stamp jitter, robot error 0.
 0.002 deg per axis). Through the pipeline, as ``linelaser-calib calibrate --target line
 --max-speed 0 --max-angular-speed 0 --clock-offset auto`` does:
 
-- the clock offset is estimated (:func:`~linelaser_calib.core.pipeline.search_clock_offset`,
+- the clock offset is estimated (:func:`~linelaser_calib.core.offset_search.search_clock_offset`,
   the line target's maximum-likelihood cost);
 - ``default``: closed form, then maximum likelihood with the robot's pose error;
 - ``paper``: the weld-seam paper's grid correction with the line's closest point, from the
@@ -33,13 +33,9 @@ import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.geometry import transform_error
+from linelaser_calib.core.offset_search import search_clock_offset
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import (
-    Method,
-    PipelineConfig,
-    run_pipeline,
-    search_clock_offset,
-)
+from linelaser_calib.core.pipeline import Method, PipelineConfig, run_pipeline
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SolveContext, configure
 from linelaser_calib.sim.line import LINE_PRESETS, line_scenario_from_preset, simulate_line

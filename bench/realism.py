@@ -79,13 +79,9 @@ from scipy.optimize import curve_fit, least_squares
 from linelaser_calib.core.errors import CalibrationError
 from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix
 from linelaser_calib.core.model_check import CLEAR_BIC, ShapeFit, compare_models, conic_fit
+from linelaser_calib.core.offset_search import search_clock_offset
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import (
-    Method,
-    calibrate_samples,
-    run_pipeline,
-    search_clock_offset,
-)
+from linelaser_calib.core.pipeline import Method, calibrate_samples, run_pipeline
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.sphere import SphereConfig
 from linelaser_calib.core.targets.sphere.circle import (

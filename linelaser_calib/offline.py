@@ -8,15 +8,9 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from linelaser_calib.core.errors import DegenerateError, InputError, PairingError
+from linelaser_calib.core.offset_search import OFFSET_COSTS, OFFSET_TRIALS, search_clock_offset
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import (
-    OFFSET_COSTS,
-    OFFSET_TRIALS,
-    Extracted,
-    PipelineConfig,
-    run_pipeline,
-    search_clock_offset,
-)
+from linelaser_calib.core.pipeline import Extracted, PipelineConfig, run_pipeline
 from linelaser_calib.core.pose_source import PoseSource
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.joint_calibration import JointCalibrationConfig, KinematicSetup
@@ -156,7 +150,7 @@ def calibrate_bag(
     config : PipelineConfig
     estimate_offset : bool
         Estimate the clock offset between profile and pose stamps (continuous scanning,
-        :func:`~linelaser_calib.core.pipeline.search_clock_offset`), starting from the
+        :func:`~linelaser_calib.core.offset_search.search_clock_offset`), starting from the
         configured one.
     progress : callable, optional
         Called as ``progress(stage, done, total)``.

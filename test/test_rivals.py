@@ -11,7 +11,9 @@ in test_stress_matrix.py (slow)."""
 from __future__ import annotations
 
 import re
+from collections import Counter
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,13 +22,18 @@ import pytest
 from linelaser_calib.core.errors import ModelMismatch, TooFewFeatures
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, calibrate_samples
-from linelaser_calib.core.targets import rivals
+from linelaser_calib.core.targets import get_target, rivals, target_names
 from linelaser_calib.core.targets.base import RobotError, SolveContext, TargetSolution
-from linelaser_calib.core.types import SampleFit
+from linelaser_calib.core.targets.extraction import Extractions
+from linelaser_calib.core.types import Rejection, Sample, SampleFit
+from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.settings import Front, pipeline_config
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.sphere import simulate_sphere, sphere_scenario_from_preset
 from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
+
+BAGS = Path(__file__).resolve().parent.parent / "bags"
+ORIGIN = np.zeros(2)
 
 
 @dataclass
@@ -96,7 +103,7 @@ def rival_leaves(monkeypatch: pytest.MonkeyPatch) -> Any:
             if state["check_fails"]:
                 raise ModelMismatch("the tube model does not fit these data")
 
-    def fit(name: str, samples: Any, context: Any, rival_samples: Any) -> Any:
+    def fit(name: str, samples: Any, context: Any, rival_samples: Any, extractions: Any) -> Any:
         state["fits"] += 1
         if state["distance_m"] is None:
             return None
@@ -162,7 +169,7 @@ def test_a_robot_error_twenty_times_the_prior_is_a_misfit_unless_the_rival_is_fa
 
 
 def test_a_rival_that_cannot_calibrate_is_not_a_winner() -> None:
-    assert rivals._rival_solution("sphere", [], SolveContext()) is None
+    assert rivals._rival_solution("sphere", [], SolveContext(), None, Extractions(0)) is None
 
 
 def refuse(found: int) -> None:
@@ -241,3 +248,70 @@ def test_a_balls_arcs_given_to_the_line_are_refused_naming_the_sphere() -> None:
     assert "only 0 of 8 recorded profiles show a seam corner" in text
     assert "the sphere fitted with the poses explains 8 of the 8 recorded profiles" in text
     assert "choose {setting:target} sphere" in text
+
+
+def test_each_profile_is_extracted_once_where_a_rival_is_judged_at_its_own_clock_offset(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """One weld point given to the cylinder with the clock offset estimated: the cylinder's
+    offset search, then the rivals, the line searched at its own offset and fitted there.
+    Every target extracts each profile once (the line's corners were extracted twice: for
+    its search and for its fit)."""
+    extracted: Counter[tuple[str, int]] = Counter()
+    for name in target_names():
+        kind = type(get_target(name))
+
+        def counted(self: Any, samples: Any, *args: Any, _extract: Any = kind.extract) -> Any:
+            extracted.update((self.name, s.index) for s in samples)
+            return _extract(self, samples, *args)
+
+        monkeypatch.setattr(kind, "extract", counted)
+    config = pipeline_config("cylinder", Method.DEFAULT, {}, Front.CLI)
+    with pytest.raises(ModelMismatch) as refused:
+        calibrate_bag(BAGS / "weld_seam", config, estimate_offset=True)
+    assert "the straight line fitted with the poses at its own clock offset" in str(refused.value)
+    assert {name for name, _ in extracted} == {"cylinder", "known_point", "sphere", "line"}
+    assert set(extracted.values()) == {1}, extracted
+
+
+@dataclass
+class Seam:
+    """A stand-in target whose features re-pair (``with_samples``) or not."""
+
+    name: str
+    repairs: bool
+    calls: int = 0
+
+    def extract(self, samples: list[Any], config: Any, seed: int, *_: Any) -> Any:
+        self.calls += 1
+        features = [
+            SampleFit(k.index, k.stamp_ns, k.T_base_flange, k.points, ORIGIN) for k in samples
+        ]
+        return features, [Rejection(-1, 0, "corner", "stand-in")]
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "with_samples" and self.repairs:
+            return lambda features, samples: [
+                replace(f, T_base_flange=s.T_base_flange)
+                for f, s in zip(features, samples, strict=True)
+            ]
+        raise AttributeError(name)
+
+
+def test_the_runs_store_re_pairs_the_profiles_it_holds_and_extracts_the_rest() -> None:
+    samples = [Sample(k, k, np.eye(4), np.zeros((3, 3))) for k in range(4)]
+    moved = [replace(s, T_base_flange=np.diag([1.0, 1.0, 1.0, 2.0])) for s in samples[1:]]
+    store, seam = Extractions(seed=0), Seam("seam", repairs=True)
+    store.of(seam, "config", samples)  # type: ignore[arg-type]
+    features, rejections = store.of(seam, "config", moved)  # type: ignore[arg-type]
+    assert seam.calls == 1 and [f.index for f in features] == [1, 2, 3] and not rejections
+    assert all(f.T_base_flange[3, 3] == 2.0 for f in features)
+    store.of(seam, "other config", moved)  # type: ignore[arg-type]
+    assert seam.calls == 2
+    more = [*moved, Sample(9, 9, np.eye(4), np.zeros((3, 3)))]
+    store.of(seam, "other config", more)  # type: ignore[arg-type]
+    assert seam.calls == 3
+    fixed = Seam("fixed", repairs=False)
+    store.of(fixed, "config", samples)  # type: ignore[arg-type]
+    store.of(fixed, "config", samples)  # type: ignore[arg-type]
+    assert fixed.calls == 2

@@ -3,7 +3,8 @@
 This is the one pipeline. The CLI (offline, from a bag: :func:`run_pipeline`) and the
 calibration_service node (online, from collected samples) both enter it through
 :func:`calibrate_paired`; where a recording holds many profiles from nearly the same flange
-pose, a representative subset is kept (:mod:`.thinning`).
+pose, a representative subset is kept (:mod:`.thinning`); where the clock offset is
+estimated, :mod:`.offset_search` searches it first and hands on what it extracted.
 What is scanned is a target (:mod:`linelaser_calib.core.targets`): the pipeline hands the
 samples to the chosen target's feature extraction, its ``paper`` or ``default`` solve and its
 model-fit checks, and never asks which target it is.
@@ -28,12 +29,11 @@ from functools import reduce
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from .errors import CalibrationError, DegenerateError, InputError, PairingError, TooFewFeatures
 from .geometry import FloatArray, check_transform
 from .latency import add_clock_diagnosis
-from .pairing import NS_PER_S, PairingConfig, PoseBuffer, pair_profiles
+from .pairing import PairingConfig, pair_profiles
 from .pose_track import PoseTrack
 from .regions import PLAIN_PRIOR_SCALE
 from .result import CalibrationResult
@@ -48,20 +48,15 @@ from .targets.base import (
     Target,
     TargetSolution,
     configure,
-    feature_repairing,
     rejection_digest,
     sample_rng,
 )
+from .targets.extraction import Extractions
 from .targets.rivals import RivalSamples, check_model, refuse_without_fit
 from .thinning import DEFAULT_PER_NEIGHBOURHOOD, thin_samples
 from .types import FlangePose, Profile, Rejection, Sample
 from .verdict import no_self_check_reason, warning_kind
 
-#: Offsets of the clock-offset search's first grid (:func:`search_clock_offset`).
-GRID_POINTS = 11
-#: Evaluations the search takes after its grid, for the progress display (Brent's method
-#: to 0.1 ms from a 20 ms bracket: 6 on bags/line, where a golden-section search took 13).
-REFINING_EVALUATIONS = 8
 #: A profiler's depth is below this, m; larger values mean the data is in millimetres.
 MAX_PLAUSIBLE_DEPTH_M = 5.0
 #: A robot's flange is within this distance of its base, m.
@@ -165,38 +160,27 @@ class PipelineConfig:
 
 @dataclass(frozen=True)
 class Extracted:
-    """Features already extracted from samples (by :func:`search_clock_offset`), for
-    :func:`calibrate_samples` to use again where the target's features do not depend on the
-    flange poses (:func:`~.targets.base.feature_repairing`) and the samples are of profiles
-    among them.
+    """What a clock-offset search (:func:`~.offset_search.search_clock_offset`) hands
+    :func:`calibrate_samples` at the offset it found: the run's features, for each profile's
+    to be extracted once per run.
 
     Attributes
     ----------
     indices : tuple of int
-        Profile indices of the samples they were extracted from, in order.
-    features : list
-    rejections : list of Rejection
+        Profile indices of the samples the search extracted the target's features from, in
+        order (the thinning keeps the same: :func:`~.thinning.thin_samples`).
+    extractions : Extractions
+        The run's features: the target's used again where its features do not depend on
+        the flange poses and the samples are of profiles among them (a few at the ends of
+        the recording may pair at the search's offset only), each rival's extracted once.
     rival_samples : RivalSamples or None
         Each rival target's samples at its own best offset, for the rival checks
-        (:meth:`OffsetSearch.rival`).
+        (:meth:`~.offset_search.OffsetSearch.rival`).
     """
 
     indices: tuple[int, ...]
-    features: list[Any]
-    rejections: list[Rejection]
+    extractions: Extractions
     rival_samples: RivalSamples | None = None
-
-    def of(self, samples: list[Sample]) -> tuple[list[Any], list[Rejection]] | None:
-        """The features and rejections of the profiles of ``samples``, when every one of
-        them was extracted (a few at the ends of the recording may pair at the search's
-        offset only); None otherwise."""
-        wanted = {s.index for s in samples}
-        if not wanted <= set(self.indices):
-            return None
-        return (
-            [f for f in self.features if f.index in wanted],
-            [r for r in self.rejections if r.index in wanted],
-        )
 
 
 def _no_progress(stage: str, done: int, total: int) -> None:
@@ -299,8 +283,9 @@ def calibrate_samples(
         default method): one hand-eye and one set of kinematic corrections from all of them.
         The result's target section, samples and residuals are those of ``samples``.
     extracted : Extracted, optional
-        The features of these samples' profiles, extracted before (at other flange poses):
-        used again, re-paired, where the target allows it, instead of extracting them twice.
+        What a clock-offset search extracted from these samples' profiles (at other flange
+        poses): used again, re-paired, where the target allows it, instead of extracting
+        them twice.
 
     Raises
     ------
@@ -330,14 +315,10 @@ def calibrate_samples(
             joint_notes.append(_outside_note(outside, "the recording"))
     chosen = None if extracted is None else extracted.indices
     samples, thinning = thin_samples(samples, config.per_neighbourhood, chosen)
-    repairing = feature_repairing(target)
-    reused = None if extracted is None or repairing is None else extracted.of(samples)
-    if repairing is not None and reused is not None:
-        features, feature_rejections = repairing(reused[0], samples), reused[1]
-    else:
-        features, feature_rejections = target.extract(
-            samples, target_config, config.seed, progress, config.workers
-        )
+    extractions = (
+        Extractions(config.seed, config.workers) if extracted is None else extracted.extractions
+    )
+    features, feature_rejections = extractions.of(target, target_config, samples, progress)
     rejections += feature_rejections
     target.check_features(features, target_config)
     others = []
@@ -369,9 +350,11 @@ def calibrate_samples(
     try:
         solution = solve[config.method](features, target_config, context)
     except TooFewFeatures as refusal:
-        refuse_without_fit(target, samples, refusal, context, rival_samples)
+        refuse_without_fit(target, samples, refusal, context, rival_samples, extractions)
         raise
-    check_model(target, target_config, samples, features, solution, context, rival_samples)
+    check_model(
+        target, target_config, samples, features, solution, context, rival_samples, extractions
+    )
     if placements and solution.kinematics is None:
         raise InputError(
             f"the {target.title} target does not estimate kinematic corrections, so its "
@@ -573,184 +556,3 @@ def run_pipeline(
         extracted,
         diagnose_clock,
     )
-
-
-#: History keys (``CalibrationResult.history``) of the clock offsets tried by
-#: :func:`search_clock_offset`, s, in increasing order, and their costs.
-OFFSET_TRIALS, OFFSET_COSTS = "clock_offset_trial_s", "clock_offset_cost"
-
-
-def search_clock_offset(
-    profiles: list[Profile],
-    poses: PoseTrack | Sequence[FlangePose],
-    config: PipelineConfig,
-    half_range_s: float = 0.05,
-    tolerance_s: float = 1e-4,
-    progress: Progress = _no_progress,
-    trace: list[tuple[float, float]] | None = None,
-) -> tuple[float, Extracted]:
-    """The clock offset (s) between profile and pose stamps that fits the target best, and
-    the features it was searched on (for :func:`run_pipeline` to use again).
-
-    In continuous scanning a profile stamped with latency τ is paired with the pose the
-    flange had τ earlier or later, and every profile lands slightly off the target. The
-    target's offset cost (for the cylinder: the refinement's maximum-likelihood cost over the
-    points, robot pose error modelled) is evaluated at offsets within ``half_range_s`` of
-    ``config.pairing.clock_offset_s``: a grid of :data:`GRID_POINTS`, then Brent's method
-    (:func:`scipy.optimize.minimize_scalar`, bounded: parabolic steps on a cost that is about
-    quadratic in the offset near its minimum) between the best grid offset's neighbours, to
-    ``tolerance_s``. The features are extracted once. Where the cost is flat (step-and-shoot:
-    the flange stands still at every profile) the configured offset is returned.
-    ``progress`` hears of the extraction and of each evaluation of the cost; ``trace``, when
-    given, receives every (offset in s, cost) evaluated, for a figure. Where the target's
-    model is in doubt (here: too few profiles show its feature; after the solve:
-    :func:`~.targets.rivals.check_model`), each rival target is judged at its own best
-    offset, searched likewise from the same samples (:class:`OffsetSearch`).
-
-    Raises
-    ------
-    InputError
-        The target cannot estimate the offset.
-    PairingError, DegenerateError
-        As :func:`run_pipeline` would for the same data.
-    ModelMismatch
-        Too few profiles show the target's feature and a rival, at its own offset, explains
-        the recording clearly better.
-    """
-    target, target_config = config.target_impl, config.target_config
-    moving = replace(config.pairing, max_linear_speed_m_s=0.0, max_angular_speed_rad_s=0.0)
-    paired = pair_profiles(profiles, poses, moving)
-    if not paired.samples:
-        raise PairingError(paired.explain_nothing_paired(config.pairing))
-    samples, _ = thin_samples(paired.samples, config.per_neighbourhood)
-    features, rejections = target.extract(
-        samples, target_config, config.seed, progress, config.workers
-    )
-    context = SolveContext(seed=config.seed, rejections=rejections, n_samples=len(paired.samples))
-    buffer = PoseBuffer()
-    buffer.extend(poses)
-    search = OffsetSearch(buffer, config.pairing, config.seed, half_range_s, tolerance_s)
-    extracted = Extracted(tuple(s.index for s in samples), features, rejections, search.rival)
-    try:
-        offset = search.best(target, target_config, features, context, progress, trace)
-    except TooFewFeatures as refusal:
-        refuse_without_fit(target, samples, refusal, context, search.rival)
-        raise
-    return offset, extracted
-
-
-@dataclass(frozen=True)
-class OffsetSearch:
-    """The clock-offset search of :func:`search_clock_offset` over one pose stream, for the
-    target and for each of its rivals.
-
-    Attributes
-    ----------
-    buffer : PoseBuffer
-        The recording's flange poses.
-    pairing : PairingConfig
-        The configured pairing: the search is centred on its clock offset.
-    seed : int
-    half_range_s, tolerance_s : float
-        The offsets searched, ``pairing.clock_offset_s`` +- ``half_range_s``, to
-        ``tolerance_s``.
-    """
-
-    buffer: PoseBuffer
-    pairing: PairingConfig
-    seed: int
-    half_range_s: float
-    tolerance_s: float
-
-    def best(
-        self,
-        target: Target[Any],
-        target_config: Any,
-        features: list[Any],
-        context: SolveContext,
-        progress: Progress = _no_progress,
-        trace: list[tuple[float, float]] | None = None,
-    ) -> float:
-        """The offset (s) at which ``target``'s features (extracted from samples paired at
-        the configured offset) fit it best (see :func:`search_clock_offset`).
-
-        Raises
-        ------
-        InputError
-            The target cannot estimate the offset.
-        TooFewFeatures
-            As the target's solve would.
-        """
-        start = self.pairing.clock_offset_s
-        cost_of_poses = target.offset_cost(features, target_config, context)
-        if cost_of_poses is None:
-            raise InputError(
-                f"the clock offset cannot be estimated from {target.title} scans; give it "
-                "with {setting:clock_offset_s} SECONDS"
-            )
-        stamps_ns = np.array([f.stamp_ns for f in features], dtype=np.int64)
-        tolerance_ns = round(self.pairing.sync_tolerance_s * NS_PER_S)
-        step = 2.0 * self.half_range_s / (GRID_POINTS - 1)
-        evaluations = GRID_POINTS + REFINING_EVALUATIONS
-        evaluated = [0]
-
-        def cost(offset_s: float) -> float:
-            evaluated[0] += 1
-            progress("clock offset", min(evaluated[0], evaluations - 1), evaluations)
-            shift = round(offset_s * NS_PER_S)
-            T, found = self.buffer.track.at(stamps_ns + shift, tolerance_ns)
-            value = float(cost_of_poses(T)) if found.all() else float("inf")
-            if trace is not None:
-                trace.append((offset_s, value))
-            return value
-
-        grid = np.linspace(start - self.half_range_s, start + self.half_range_s, GRID_POINTS)
-        costs = np.array([cost(float(t)) for t in grid])
-        finite = costs[np.isfinite(costs)]
-        if finite.size == 0 or float(np.max(finite) - np.min(finite)) < 1.0:
-            progress("clock offset", evaluations, evaluations)
-            return start
-        best = float(grid[int(np.argmin(costs))])
-        ceiling = float(np.max(finite)) + 1.0  # where poses run out: worse than any offset seen
-
-        def bounded(offset_s: float) -> float:
-            return min(cost(offset_s), ceiling)
-
-        found = minimize_scalar(
-            bounded,
-            bounds=(best - step, best + step),
-            method="bounded",
-            options={"xatol": self.tolerance_s},
-        )
-        progress("clock offset", evaluations, evaluations)
-        return float(found.x)
-
-    def rival(self, rival: Target[Any], samples: list[Sample]) -> tuple[list[Sample], float | None]:
-        """The :data:`~.targets.rivals.RivalSamples` of the search: the profiles of
-        ``samples`` paired at the offset that fits ``rival`` best (its default settings,
-        searched from the configured offset; the profiles that no pose brackets there left
-        out, no speed gate applied again), and that offset; the samples unchanged and None
-        for a rival that estimates no offset.
-
-        Raises
-        ------
-        CalibrationError
-            The rival cannot be fitted to these samples.
-        """
-        if not rival.estimates_clock_offset:
-            return samples, None
-        rival_config = rival.config_type()
-        features, rejections = rival.extract(samples, rival_config, self.seed, _no_progress)
-        context = SolveContext(seed=self.seed, rejections=rejections, n_samples=len(samples))
-        offset = self.best(rival, rival_config, features, context)
-        # The samples passed the speed gates where the target's did: re-paired only.
-        at_offset = replace(
-            self.pairing,
-            clock_offset_s=offset,
-            max_linear_speed_m_s=0.0,
-            max_angular_speed_rad_s=0.0,
-        )
-        repaired = self.buffer.pair_many(
-            [Profile(s.stamp_ns, s.points) for s in samples], [s.index for s in samples], at_offset
-        )
-        return [s for s in repaired if isinstance(s, Sample)], offset

@@ -15,8 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from linelaser_calib.core.errors import CalibrationError
+from linelaser_calib.core.offset_search import search_clock_offset
 from linelaser_calib.core.pairing import NS_PER_S, PairingConfig
-from linelaser_calib.core.pipeline import PipelineConfig, search_clock_offset
+from linelaser_calib.core.pipeline import PipelineConfig
 from linelaser_calib.core.types import FlangePose, Profile
 from linelaser_calib.settings import Front, render
 
@@ -57,7 +58,7 @@ class ClockOffsetTracker:
     Samples are kept at most ``samples_per_batch`` per ``period_s`` of stamps, evenly
     spaced, with the flange poses around them. When the pose stream has passed the end of a
     period, :meth:`take_batch` hands out the batch; the node runs
-    :func:`~linelaser_calib.core.pipeline.search_clock_offset` on it (seconds of CPU,
+    :func:`~linelaser_calib.core.offset_search.search_clock_offset` on it (seconds of CPU,
     outside the receive path) and reports the result with :meth:`add_estimate`, which
     tells when the offset drifts.
 
@@ -70,7 +71,7 @@ class ClockOffsetTracker:
     samples_per_batch : int
     half_range_s : float
         Half-width of the offset search, s (as
-        :func:`~linelaser_calib.core.pipeline.search_clock_offset`).
+        :func:`~linelaser_calib.core.offset_search.search_clock_offset`).
     delay_s : float
         Longest delay from a sample's stamp to its :meth:`add_sample` (pairing, storing), s:
         the poses that far back are kept before the first batch starts.

@@ -25,7 +25,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from linelaser_calib.core.geometry import FloatArray, orthonormal_basis
-from linelaser_calib.core.pipeline import OFFSET_COSTS, OFFSET_TRIALS
+from linelaser_calib.core.offset_search import OFFSET_COSTS, OFFSET_TRIALS
 from linelaser_calib.core.planning import SigmaPoint
 from linelaser_calib.core.targets.base import Shape, feature_residuals
 from linelaser_calib.report.data import ReportData

@@ -205,7 +205,7 @@ class Whitening:
 
 
 def line_whitening(
-    noise: LineNoise, x_m: FloatArray, cosine: FloatArray, mask: FloatArray, unit_m: float
+    noise: LineNoise, x_m: FloatArray, cosine: FloatArray, mask: ArrayLike, unit_m: float
 ) -> Whitening:
     """:class:`Whitening` of the points' residuals (in units of ``unit_m``) under ``noise``.
 
@@ -223,11 +223,11 @@ def line_whitening(
     cosine : ndarray, shape (M, K)
         Each point's normal-to-depth cosine.
     mask : ndarray, shape (M, K)
-        1 for a real point, 0 for padding (the map scales padding by 1 / w only).
+        1 (or True) for a real point, 0 for padding (the map scales padding by 1 / w only).
     unit_m : float
         The unit the residuals are in (e.g. the configured sensor σ), m.
     """
-    m = mask > 0.0
+    m = np.asarray(mask) > 0.0
     M, K = x_m.shape
     white = noise.white_sigma_m / unit_m
     diagonal = None
@@ -350,7 +350,7 @@ class _Profile:
         return self.free * np.log(white2) + logdet, white2
 
 
-def learning_profiles(mask: FloatArray) -> NDArray[np.intp]:
+def learning_profiles(mask: ArrayLike) -> NDArray[np.intp]:
     """The rows (profiles) of a padded (M, K) point ``mask`` that :func:`learn_line_noise`
     learns from: at most :data:`LEARN_PROFILES` of those with :data:`MIN_POINTS` points,
     evenly spaced. A caller may hand :func:`learn_line_noise` these rows alone (the same
@@ -373,7 +373,7 @@ def learn_line_noise(
     residuals_m: FloatArray,
     x_m: FloatArray,
     cosine: FloatArray,
-    mask: FloatArray,
+    mask: ArrayLike,
     bases: FloatArray,
 ) -> LineNoise:
     """The recording's :class:`LineNoise` from a first fit's residuals (REML).
@@ -387,7 +387,7 @@ def learn_line_noise(
     cosine : ndarray, shape (M, K)
         Each point's normal-to-depth cosine.
     mask : ndarray, shape (M, K)
-        1 for a real point, 0 for padding.
+        1 (or True) for a real point, 0 for padding.
     bases : ndarray, shape (M, K, P)
         Per profile, the residuals' derivatives by the profile's own fitted parameters (its
         pose correction): directions in which its residuals were fitted away. Dependent

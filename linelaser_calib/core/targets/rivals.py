@@ -34,12 +34,13 @@ models (:func:`check_model`, called by the pipeline after the solve; and
    given on the wrong side). A target that names no rival keeps its fit check's refusals.
 
 Where the clock offset between profile and pose stamps is estimated (continuous scanning:
-:func:`~linelaser_calib.core.pipeline.search_clock_offset`), each rival that estimates one is
-judged at its own: the same profiles are paired again at the offset that fits the rival best
-(the pipeline's :data:`RivalSamples`), since a sweep in motion paired at another target's
-offset misfits by the latency times the speed. Each fit is then judged with its own
-pairing's flange poses, and a rival's figure says the offset it was judged at. That search
-runs only where rivals are fitted at all: where the target's own model is in doubt.
+:func:`~linelaser_calib.core.offset_search.search_clock_offset`), each rival that estimates
+one is judged at its own: the same profiles are paired again at the offset that fits the
+rival best (:data:`RivalSamples`), since a sweep in motion paired at another target's offset
+misfits by the latency times the speed. Each fit is then judged with its own pairing's
+flange poses, and a rival's figure says the offset it was judged at. That search runs only
+where rivals are fitted at all: where the target's own model is in doubt. The rival's
+features are extracted once for its search and its fit (:mod:`.extraction`).
 
 Where too few profiles show the target's feature to solve at all (a ball's arcs given to the
 line target, a V given to the sphere; :class:`~linelaser_calib.core.errors.TooFewFeatures`),
@@ -65,6 +66,7 @@ from ..geometry import FloatArray
 from ..types import Sample, SampleFit
 from . import get_target
 from .base import ROBOT_PRIOR_EXCESS, SolveContext, Target, TargetSolution, _no_progress
+from .extraction import Extractions
 
 #: A rival whose points' RMS distance from its fitted target is this many times smaller than
 #: the target's own wins clearly (and the target is clearly better than a rival leaving this
@@ -176,17 +178,18 @@ def _rival_solution(
     name: str,
     samples: list[Sample],
     context: SolveContext,
-    rival_samples: RivalSamples | None = None,
+    rival_samples: RivalSamples | None,
+    extractions: Extractions,
 ) -> PairedFit | None:
     """The rival target's default fit of the samples with its default settings (paired at
-    its own clock offset by ``rival_samples`` where given); None when it cannot calibrate
-    them (a refusal, or a singular system in its solve: the rival's model leaves a direction
-    undetermined on these samples)."""
+    its own clock offset by ``rival_samples`` where given; its features from the run's
+    ``extractions``); None when it cannot calibrate them (a refusal, or a singular system in
+    its solve: the rival's model leaves a direction undetermined on these samples)."""
     rival = get_target(name)
     config = rival.config_type()
     try:
         own, offset = (samples, None) if rival_samples is None else rival_samples(rival, samples)
-        features, rejections = rival.extract(own, config, context.seed, _no_progress)
+        features, rejections = extractions.of(rival, config, own)
         quiet = SolveContext(
             seed=context.seed,
             rejections=rejections,
@@ -241,11 +244,13 @@ def check_model(
     solution: TargetSolution,
     context: SolveContext,
     rival_samples: RivalSamples | None = None,
+    extractions: Extractions | None = None,
 ) -> None:
     """Refuse a solution whose target a rival explains clearly better, or that does not fit
     and is not consistent (see the module docstring); a failed fit check that every rival
     explains clearly worse becomes a warning on the solution. ``rival_samples``: where the
-    clock offset was estimated, each rival's samples at its own offset.
+    clock offset was estimated, each rival's samples at its own offset; ``extractions``: the
+    run's features (each rival's extracted once; None: a store of this check's own).
 
     Raises
     ------
@@ -263,7 +268,10 @@ def check_model(
     if problem is None and not doubts:
         return
     declared = tuple(getattr(target, "rivals", ()))
-    tried = {name: _rival_solution(name, samples, context, rival_samples) for name in declared}
+    store = Extractions(context.seed) if extractions is None else extractions
+    tried = {
+        name: _rival_solution(name, samples, context, rival_samples, store) for name in declared
+    }
     rivals = [found for found in tried.values() if found is not None]
     unfit = [get_target(name).title for name, found in tried.items() if found is None]
     fits = {f.index: f for r in rivals for f in r.solution.sample_fits}
@@ -350,11 +358,13 @@ def refuse_without_fit(
     refusal: TooFewFeatures,
     context: SolveContext,
     rival_samples: RivalSamples | None = None,
+    extractions: Extractions | None = None,
 ) -> None:
     """Where too few profiles show the target's feature (``refusal``), refuse naming a rival
     target that explains the recording clearly better, with both figures (see the module
     docstring); return otherwise (the caller's own refusal stands). ``rival_samples``: where
-    the clock offset is estimated, each rival's samples at its own offset.
+    the clock offset is estimated, each rival's samples at its own offset; ``extractions``
+    as :func:`check_model`'s.
 
     The rivals are fitted in the target's order (its ``rivals``) up to the first that
     explains the recording.
@@ -366,8 +376,9 @@ def refuse_without_fit(
         feature, and the RMS distances of the rivals fitted.
     """
     fitted = []
+    store = Extractions(context.seed) if extractions is None else extractions
     for name in getattr(target, "rivals", ()):
-        found = _rival_solution(name, samples, context, rival_samples)
+        found = _rival_solution(name, samples, context, rival_samples, store)
         if found is None:
             continue
         fitted.append(found)

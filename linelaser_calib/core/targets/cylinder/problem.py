@@ -165,7 +165,7 @@ class CylinderProblem:
     """
 
     points: StoredArray  # (M, K, 3) sensor frame, m; float32 where the input was exactly so
-    mask: FloatArray  # (M, K) 1 for a real point, 0 for padding
+    mask: NDArray[np.bool_]  # (M, K) True for a real point, False for padding (1 byte a point)
     counts: np.ndarray  # (M,) real points per sample
     R_bf: FloatArray  # (M, 3, 3)
     t_bf: FloatArray  # (M, 3)
@@ -489,7 +489,8 @@ def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
 def data_centroid(problem: CylinderProblem, state: CylinderState) -> FloatArray:
     """Mean of the profiles' centroids in the base frame (3,), m."""
     RE, offset = _sample_transforms(problem, state)
-    means = np.sum(problem.points * problem.mask[..., None], axis=1) / problem.counts[:, None]
+    real = np.multiply(problem.points, problem.mask[..., None], dtype=np.float64)
+    means = np.sum(real, axis=1) / problem.counts[:, None]
     y = measured_to_true(means, state.scale, state.depth_scale) @ state.R_fs.T + state.t_fs
     return np.asarray(np.mean(np.einsum("mij,mj->mi", RE, y) + offset, axis=0))
 
@@ -557,14 +558,14 @@ def build_problem(
     counts = np.array([len(p) if limit == 0 else min(len(p), limit) for p in samples_points])
     K = int(counts.max())
     points = np.empty((M, K, 3), dtype=np.float32 if narrow else np.float64)
-    mask = np.zeros((M, K))
+    mask = np.zeros((M, K), dtype=np.bool_)
     for j, p in enumerate(samples_points):
         q = _subsample(np.asarray(p), limit)
         if not np.all(np.isfinite(q)):
             raise InputError(f"profile {j} contains NaN or Inf: clean the profiles first")
         points[j, : len(q)] = q
         points[j, len(q) :] = q[0]
-        mask[j, : len(q)] = 1.0
+        mask[j, : len(q)] = True
     return CylinderProblem(
         points=points,
         mask=mask,

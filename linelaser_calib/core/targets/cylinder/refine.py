@@ -374,7 +374,7 @@ def refine(
         problem = replace(problem, whitening=whitening)
     problem = problem.with_scale_shares(state)
     geometric = normal_equations(
-        problem.linearise_chunks(state), cfg.solver, np.ones_like(problem.mask)
+        problem.linearise_chunks(state), cfg.solver, np.ones(problem.mask.shape)
     ).schur_information()
     _observability(problem, state, geometric).raise_if_unobservable()
 

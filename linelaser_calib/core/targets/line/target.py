@@ -232,6 +232,19 @@ class LineTarget:
             corners, rejections, config.features.corner.profile_outlier_sigmas
         )
 
+    @staticmethod
+    def with_samples(features: list[Any], samples: list[Sample]) -> list[Any]:
+        """The corners re-paired with other samples of their profiles (a corner is found in
+        the sensor frame: it does not depend on the flange pose)."""
+        poses = {s.index: np.asarray(s.T_base_flange, dtype=np.float64) for s in samples}
+
+        def at(corner: CornerSample) -> CornerSample:
+            T = poses[corner.index]
+            others = tuple(replace(a, T_base_flange=T) for a in corner.alternatives)
+            return replace(corner, T_base_flange=T, alternatives=others)
+
+        return [at(f) for f in features]
+
     def solve_paper(
         self, features: list[Any], config: LineConfig, context: SolveContext
     ) -> TargetSolution:
