@@ -506,11 +506,10 @@ def summarise(
 
 
 def errors_in_variables_move(problem: CylinderProblem, normal: BlockNormal) -> FloatArray:
-    """How far the scales' errors-in-variables correction moves the solution (G,): the
-    global step that the residuals' scale shares (:meth:`.problem.CylinderProblem.
-    with_scale_shares`) add to the normal equations at a solution, Σ a at the along-line
-    scale and Σ b at the depth scale, through the inverse Schur information. Zero without
-    an estimated scale.
+    """How far the along-line scale's errors-in-variables correction moves the solution
+    (G,): the global step that the residuals' along-line shares (Σ a, :meth:`.problem.
+    CylinderProblem.with_scale_shares`) add to the normal equations at a solution, through
+    the inverse Schur information. Zero without an estimated along-line scale.
 
     The shares take away the first-order bias of a scale read on noisy points (the
     expected χ² its regressor carries, module docstring of :mod:`.problem`), a move of
@@ -523,20 +522,16 @@ def errors_in_variables_move(problem: CylinderProblem, normal: BlockNormal) -> F
     long without. So the move counts in the 1σ (:func:`summarise`), a rank-one term that
     carries the hand-eye along with the scale; where the points' own noise sets the
     variance it is a small share of the 1σ (white-noise profiles, the committed bags).
+    The depth scale's share is not counted: with the radius free its reading is a rival
+    model of the same stretch (:func:`.target.with_depth_reading`), whose move is counted
+    there.
     """
     moves = np.zeros(problem.n_global)
-    if problem.scale_shares is None:
+    index = problem.scale_index
+    if problem.scale_shares is None or index is None:
         return moves
-    shares = problem.scale_shares.sum(axis=(0, 1), dtype=np.float64)
-    columns = [
-        (index, float(shares[k]))
-        for k, index in enumerate((problem.scale_index, problem.depth_scale_index))
-        if index is not None
-    ]
-    inverse = np.linalg.inv(normal.schur_information())
-    for index, total in columns:
-        moves += inverse[:, index] * total
-    return moves
+    shares = float(problem.scale_shares[..., 0].sum(dtype=np.float64))
+    return np.asarray(np.linalg.inv(normal.schur_information())[:, index] * shares)
 
 
 # --------------------------------------------------------------------------------------
