@@ -24,6 +24,10 @@ pose's 6 degrees of freedom; r_points = points − globals − r_prior). The cov
 uncertainty is mostly the robot's. On simulated data at the paper's noise the 1σ so formed
 holds the true error 71 % of the time per axis (bench/refine_study.py, 100 seeds).
 
+With the along-line scale estimated, the move that its errors-in-variables correction makes
+is added to the covariance as a rank-one term (:func:`errors_in_variables_move`): under a
+large smooth shape error that first-order correction is no better than its own size.
+
 Correlated point noise
 ----------------------
 A real profiler's smooth shape error along the line (several µm over a few mm, drawn anew
