@@ -25,7 +25,7 @@ uncertainty is mostly the robot's. On simulated data at the paper's noise the 1�
 holds the true error 71 % of the time per axis (bench/refine_study.py, 100 seeds).
 
 With the along-line scale estimated, the move that its errors-in-variables correction makes
-is added to the covariance as a rank-one term (:func:`errors_in_variables_move`): under a
+is added to the covariance as a rank-one term (:func:`.problem.errors_in_variables_move`): under a
 large smooth shape error that first-order correction is no better than its own size.
 
 Correlated point noise
@@ -83,6 +83,7 @@ from .problem import (
     CylinderState,
     build_problem,
     data_centroid,
+    errors_in_variables_move,
     initial_state,
     lever_arm_m,
     recentred,
@@ -507,35 +508,6 @@ def summarise(
         line_noise=noise,
         sample_dispersion=None if dispersion is None else dispersion[:N_HAND_EYE],
     )
-
-
-def errors_in_variables_move(problem: CylinderProblem, normal: BlockNormal) -> FloatArray:
-    """How far the along-line scale's errors-in-variables correction moves the solution
-    (G,): the global step that the residuals' along-line shares (Σ a, :meth:`.problem.
-    CylinderProblem.with_scale_shares`) add to the normal equations at a solution, through
-    the inverse Schur information. Zero without an estimated along-line scale.
-
-    The shares take away the first-order bias of a scale read on noisy points (the
-    expected χ² its regressor carries, module docstring of :mod:`.problem`), a move of
-    about the points' count times the scale's variance. Where a learned smooth shape error
-    sets that variance, the correction is no better than its own size: on
-    ``cylinder_scancontrol`` with the field's 42 µm smooth error over 4 mm (radius free,
-    seeds 0-3) the along-line reading moves 0.4-1.0 % with the shares and lands 0.3-0.75 %
-    short of the truth (4-8 of its 1σ), 0.1-0.9 % long without them; with the white noise
-    made 0.5 µm it still moves 0.3-1.0 % and lands 0.24-0.65 % short, against 0.04-0.32 %
-    long without. So the move counts in the 1σ (:func:`summarise`), a rank-one term that
-    carries the hand-eye along with the scale; where the points' own noise sets the
-    variance it is a small share of the 1σ (white-noise profiles, the committed bags).
-    The depth scale's share is not counted: with the radius free its reading is a rival
-    model of the same stretch (:func:`.target.with_depth_reading`), whose move is counted
-    there.
-    """
-    moves = np.zeros(problem.n_global)
-    index = problem.scale_index
-    if problem.scale_shares is None or index is None:
-        return moves
-    shares = float(problem.scale_shares[..., 0].sum(dtype=np.float64))
-    return np.asarray(np.linalg.inv(normal.schur_information())[:, index] * shares)
 
 
 # --------------------------------------------------------------------------------------
