@@ -295,3 +295,25 @@ def test_the_cylinder_holding_its_x_scale_still_counts_the_depth_scale_it_cannot
     assert read.sigma_translation_m is not None and read.sigma_model_spread is not None
     np.testing.assert_allclose(read.sigma_translation_m, free_sigma)
     assert read.sigma_model_spread[5] == pytest.approx(np.sqrt(4e-5**2 - 2e-5**2))
+
+
+def test_a_large_smooth_shape_error_leaves_the_x_scale_within_its_1_sigma() -> None:
+    """Issue 29: a profiler's 42 µm smooth shape error over 4 mm (the field's SSZN-class
+    figure) on ``cylinder_scancontrol``, radius free. Weighed by the learned line noise, the
+    scales' errors-in-variables correction moved the x reading 0.4-1 % and left it 0.3-0.75 %
+    short of the truth at 4-8 of its 1σ (this seed: -0.66 %, -5.1σ); the 1σ now counts that
+    move, and the hand-eye carried along with the scale."""
+    scenario = scenario_from_preset("cylinder_scancontrol", n_poses=12)
+    sensor = replace(scenario.sensor, shape_sigma_m=4.2e-5, shape_length_m=0.004)
+    data = simulate(replace(scenario, sensor=sensor), 3)
+    result = calibrate(data, CylinderConfig(scale="free"))
+    section = result.target
+    assert isinstance(section, CylinderSection)
+    assert section.scale is not None and section.scale_sigma is not None
+    assert abs(section.scale - sensor.x_scale_error) < 3.0 * section.scale_sigma
+    error = truth_error(result.T_flange_sensor, data.truth.T_flange_sensor)
+    assert result.uncertainty_rotation_rad is not None
+    assert result.uncertainty_translation_m is not None
+    sigma = np.concatenate([result.uncertainty_rotation_rad, result.uncertainty_translation_m])
+    axes = np.concatenate([error.rotation_axes_rad, error.translation_axes_m])
+    assert np.all(np.abs(axes) < 3.0 * sigma), axes / sigma

@@ -24,6 +24,10 @@ pose's 6 degrees of freedom; r_points = points − globals − r_prior). The cov
 uncertainty is mostly the robot's. On simulated data at the paper's noise the 1σ so formed
 holds the true error 71 % of the time per axis (bench/refine_study.py, 100 seeds).
 
+With the along-line scale estimated, the move that its errors-in-variables correction makes
+is added to the covariance as a rank-one term (:func:`.problem.errors_in_variables_move`): under a
+large smooth shape error that first-order correction is no better than its own size.
+
 Correlated point noise
 ----------------------
 A real profiler's smooth shape error along the line (several µm over a few mm, drawn anew
@@ -81,6 +85,7 @@ from .problem import (
     CylinderState,
     build_problem,
     data_centroid,
+    errors_in_variables_move,
     initial_state,
     lever_arm_m,
     recentred,
@@ -409,6 +414,8 @@ def summarise(
     covariance = np.linalg.inv(normal.schur_information(*factors))
     dispersion = sample_dispersion(solution, *factors) if cfg.widen_by_dispersion else None
     covariance = widen_covariance(covariance, dispersion)
+    shares_move = errors_in_variables_move(problem, normal)
+    covariance = covariance + np.outer(shares_move, shares_move)
     sigma = np.sqrt(np.diag(covariance))
     r, s, z = problem.radius_index, problem.scale_index, problem.depth_scale_index
 
