@@ -16,7 +16,7 @@ from scipy.stats import chi2
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.model_spread import with_model_spread
-from linelaser_calib.core.pipeline import PipelineConfig, run_pipeline
+from linelaser_calib.core.pipeline import PipelineConfig, _plain, run_pipeline
 from linelaser_calib.core.regions import (
     PER_POSE,
     PLAIN,
@@ -35,10 +35,12 @@ from linelaser_calib.core.selfcheck import (
     self_check,
     sigma_at_point,
 )
+from linelaser_calib.core.solver import Flag, solve_with_rejection
 from linelaser_calib.core.subsets import region_jackknife, region_subsets, solve_subsets
-from linelaser_calib.core.targets.base import RobotError, TargetSolution
+from linelaser_calib.core.targets import get_target
+from linelaser_calib.core.targets.base import RobotError, SolveContext, TargetSolution, configure
 from linelaser_calib.core.targets.cylinder.section import CylinderSection
-from linelaser_calib.core.types import FloatArray, SampleFit
+from linelaser_calib.core.types import FloatArray, Rejection, SampleFit
 from linelaser_calib.io.results import result_to_dict
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.settings import Front, render
@@ -634,3 +636,43 @@ def test_a_real_profilers_scatter_widens_the_1_sigma_and_says_so() -> None:
     text = format_summary(result)
     row = next(line for line in text.splitlines() if line.strip().startswith("profile scatter"))
     assert "leaving one profile out moves the hand-eye up to" in row
+
+
+def test_the_plain_model_keeps_the_profiles_the_per_pose_model_kept(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Whether a profile is an outlier is decided once, by the per-pose model: the plain
+    model's solves (of all and of subsets) get the default solve's profiles, set none aside
+    (issue 29: a twin of the real cylinder lost two good profiles to the plain model's own
+    outlier rounds), and carry the default solve's rejections."""
+    rng = np.random.default_rng(3)
+    features = toy_features(rng, np.zeros(8), spread_positions(rng, 8))
+    default = toy_solve(features[:7])
+    default.rejections = [Rejection(7, 7, "outlier", "far from the cylinder")]
+    target = get_target("cylinder")
+    config = configure(target, "default", {}, {})
+    seen: list[tuple[list[int], bool, float]] = []
+
+    def solve_default(subset: list[Any], cfg: Any, context: SolveContext) -> TargetSolution:
+        seen.append(
+            ([f.index for f in subset], context.screen_outliers, cfg.refine.robot_sigma_t_m)
+        )
+        return toy_solve(subset)
+
+    monkeypatch.setattr(target, "solve_default", solve_default)
+    plain = _plain(target, config, default, features, SolveContext())
+    assert plain is not None
+    full, solve_subset = plain
+    solve_subset(features[:4])
+    assert [(used, screen) for used, screen, _ in seen] == [
+        (list(range(7)), False),
+        ([0, 1, 2, 3], False),
+    ]
+    assert all(prior < config.refine.robot_sigma_t_m for *_, prior in seen)
+    assert full.samples_used == list(range(7))
+    assert [r.index for r in full.rejections] == [7]
+    # The rule every target's outlier rounds honour: one solve of every sample, none flagged.
+    run = solve_with_rejection(
+        5, lambda kept, _: kept, lambda *_: [Flag(1.0, 0, "x")], 0.5, 2, False
+    )
+    assert (run.kept, run.dropped, run.left_flagged) == ([0, 1, 2, 3, 4], [], [])

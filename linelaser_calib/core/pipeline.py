@@ -449,27 +449,33 @@ def _plain(
     features: list[Any],
     context: SolveContext,
 ) -> tuple[TargetSolution, Callable[[list[Any]], TargetSolution]] | None:
-    """The plain model (:mod:`.regions`): its solve of all features, started at the default
-    ``solution`` (a target with a subset start re-solves that solved problem under the
-    tighter prior: no seed solve, point trimming or line-noise learning again, only the
-    outlier rounds), and its solve of a subset, started at its own. No model-fit check: the
-    default solve passed it on the same data, and the plain model's residual holds the
-    robot's error by design. None when the target's
-    default method takes no robot prior or the plain solve of all features fails."""
+    """The plain model (:mod:`.regions`): its solve of the features the default ``solution``
+    used, started there (a target with a subset start re-solves that solved problem under
+    the tighter prior: no seed solve, point trimming or line-noise learning again), with the
+    default solve's rejections, and its solve of a subset, started at its own. Neither sets
+    a profile aside (``screen_outliers`` False): the plain model's residual holds the robot's
+    error by design, so its outlier test judged the robot (a twin of the real cylinder: two
+    profiles whose robot error was the recording's smallest stood out, robust z 8 and 7,
+    once the hand-eye had absorbed the error's common part). No model-fit check: the default
+    solve passed it on the same data. None when the target's default method takes no robot
+    prior or the plain solve fails."""
     plain_config = _plain_config(target, target_config)
     if plain_config is None:
         return None
+    screened = replace(context, screen_outliers=False)
 
     def solve_from(start: TargetSolution) -> Callable[[list[Any]], TargetSolution]:
         def solve(subset: list[Any]) -> TargetSolution:
-            return target.solve_default(subset, plain_config, replace(context, warm_start=start))
+            return target.solve_default(subset, plain_config, replace(screened, warm_start=start))
 
         return solve
 
+    used = set(solution.samples_used)
     try:
-        full = solve_from(solution)(features)
+        full = solve_from(solution)([f for f in features if f.index in used])
     except CalibrationError:
         return None
+    full.rejections = list(solution.rejections) + list(full.rejections)
     return full, solve_from(full)
 
 

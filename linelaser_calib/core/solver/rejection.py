@@ -105,6 +105,7 @@ def solve_with_rejection(
     flag: Callable[[Outcome, list[int]], list[Flag]],
     max_fraction: float,
     min_samples: int,
+    screen: bool = True,
 ) -> RejectionOutcome[Outcome]:
     """Solve, drop flagged samples (most severe first, within the budget), repeat.
 
@@ -121,9 +122,14 @@ def solve_with_rejection(
         Largest share of the samples dropped over all rounds.
     min_samples : int
         Never drop below this many samples.
+    screen : bool
+        False: the samples are a set already screened (:attr:`~linelaser_calib.core.targets.
+        base.SolveContext.screen_outliers`): one solve of all of them, none flagged.
     """
     budget = min(int(np.floor(max_fraction * n_samples)), n_samples - min_samples)
     kept = list(range(n_samples))
+    if not screen:
+        return RejectionOutcome(solve(kept, None), kept, [], [])
     dropped: list[tuple[int, str]] = []
     previous: Outcome | None = None
     while True:

@@ -361,6 +361,14 @@ class SolveContext:
         A default-method solution from a superset of the features (the self-check's solves
         of subsets start at the solve of all): a target may start its local solve there
         instead of at its global seed.
+    screen_outliers : bool
+        False: the features are a set of profiles already screened, every one to be used;
+        the solve sets none aside as an outlier (its outlier rounds do not run,
+        :func:`~linelaser_calib.core.solver.solve_with_rejection`'s ``screen``). The
+        self-check's plain model (:mod:`~linelaser_calib.core.regions`) solves the default
+        solve's profiles so: a profile's being an outlier is decided once, by the model of
+        the robot's error per pose, since the plain model's residual holds that error by
+        design and its outlier test would judge the robot, not the profile.
     """
 
     initial_T_flange_sensor: FloatArray | None = None
@@ -371,6 +379,7 @@ class SolveContext:
     kinematics: KinematicSetup | None = None
     placements: Sequence[Placement] = ()
     warm_start: TargetSolution | None = None
+    screen_outliers: bool = True
 
 
 @dataclass(frozen=True)

@@ -647,8 +647,10 @@ def refine_with_outlier_rejection(
     cylinder0: Cylinder,
     config: RefineConfig | None = None,
     radius_m: float | None = None,
+    screen: bool = True,
 ) -> RefineResult:
-    """:func:`refine`, then drop samples inconsistent with the rest and solve again.
+    """:func:`refine`, then drop samples inconsistent with the rest and solve again
+    (without ``screen``, a set screened already: no sample dropped).
 
     After each solve a sample is an outlier when its RMS point residual or its pose
     correction's prior χ² is far (``outlier_zscore`` robust standard deviations) above the
@@ -736,7 +738,7 @@ def refine_with_outlier_rejection(
         )
 
     def with_rejection() -> RejectionOutcome[RefineResult]:
-        return outlier_rounds(len(points), solve_subset, cfg)
+        return outlier_rounds(len(points), solve_subset, cfg, screen)
 
     try:
         outcome = with_rejection()
@@ -762,15 +764,18 @@ def outlier_rounds(
     n_samples: int,
     solve_subset: Callable[[list[int], RefineResult | None], RefineResult],
     config: RefineConfig,
+    screen: bool = True,
 ) -> RejectionOutcome[RefineResult]:
     """:func:`~linelaser_calib.core.solver.solve_with_rejection` of ``n_samples`` samples
-    with ``solve_subset`` and the outlier test of :func:`refine_with_outlier_rejection`."""
+    with ``solve_subset`` and the outlier test of :func:`refine_with_outlier_rejection`
+    (none without ``screen``)."""
     return solve_with_rejection(
         n_samples,
         solve_subset,
         lambda result, _keep: _outlier_samples(result, config),
         config.max_outlier_fraction,
         config.min_samples,
+        screen,
     )
 
 

@@ -585,13 +585,21 @@ class CylinderTarget:
                 refine_subset(start.solved, rows)
                 if same_prior
                 else refine_screened(start.solved, rows, config.refine)
+                if context.screen_outliers
+                else refine_subset(start.solved, rows, config.refine)
             )
         elif warm is not None:
             refined = warm
         else:
             T_init, cylinder0, seed_history = self._start(features, config, context)
             context.progress("refine", 0, 1)
-            refined = self._refined(features, T_init, replace(cylinder0, radius=radius), config)
+            refined = self._refined(
+                features,
+                T_init,
+                replace(cylinder0, radius=radius),
+                config,
+                context.screen_outliers,
+            )
         context.progress("refine", 1, 1)
         outcome = None
         placed: list[RefineResult] = []
@@ -704,8 +712,10 @@ class CylinderTarget:
         T_flange_sensor: FloatArray,
         cylinder: Cylinder,
         config: CylinderConfig,
+        screen: bool = True,
     ) -> RefineResult:
-        """The refinement with outlier samples dropped, at the features' flange poses."""
+        """The refinement with outlier samples dropped (with ``screen``), at the features'
+        flange poses."""
         return refine_with_outlier_rejection(
             [f.stored_inliers for f in features],
             np.stack([f.T_base_flange for f in features]),
@@ -713,6 +723,7 @@ class CylinderTarget:
             cylinder,
             config.refine,
             radius_m=config.radius_m,
+            screen=screen,
         )
 
     def check_fit(self, solution: TargetSolution, config: CylinderConfig) -> None:

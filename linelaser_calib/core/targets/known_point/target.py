@@ -370,10 +370,12 @@ def _default_result(
     taught: FloatArray | None,
     config: KnownPointConfig,
     learned: SharedPoseError | None = None,
+    screen: bool = True,
 ) -> KnownPointResult:
-    """Closed form, maximum likelihood with outlier views dropped, the undetermined
-    directions pinned; the 1σ counts the robot's error shared by neighbouring views
-    (:mod:`...shared_pose`: as ``learned`` on a superset of the corners, else learned here)."""
+    """Closed form, maximum likelihood with outlier views dropped (with ``screen``), the
+    undetermined directions pinned; the 1σ counts the robot's error shared by neighbouring
+    views (:mod:`...shared_pose`: as ``learned`` on a superset of the corners, else learned
+    here)."""
     prior = (
         None
         if X0 is None
@@ -418,7 +420,7 @@ def _default_result(
         return flags
 
     outcome = solve_with_rejection(
-        len(corners), solve_subset, flag, config.max_outlier_fraction, config.min_samples
+        len(corners), solve_subset, flag, config.max_outlier_fraction, config.min_samples, screen
     )
     refined, keep = outcome.outcome, outcome.kept
     X, point = refined.T_flange_sensor, refined.point_base
@@ -576,6 +578,7 @@ class KnownPointTarget:
                 taught,
                 config,
                 learned if isinstance(learned, SharedPoseError) else None,
+                context.screen_outliers,
             )
         return _solution(result, rejections, config)
 

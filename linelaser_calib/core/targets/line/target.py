@@ -377,7 +377,12 @@ class LineTarget:
 
         context.progress("refine", 0, 1)
         outcome = solve_with_rejection(
-            len(features), solve_subset, flag, config.max_outlier_fraction, config.min_samples
+            len(features),
+            solve_subset,
+            flag,
+            config.max_outlier_fraction,
+            config.min_samples,
+            context.screen_outliers,
         )
         context.progress("refine", 1, 1)
         refined = outcome.outcome

@@ -572,7 +572,12 @@ class SphereTarget:
             ]
 
         run = solve_with_rejection(
-            len(features), solve, flag, config.max_outlier_fraction, config.min_samples
+            len(features),
+            solve,
+            flag,
+            config.max_outlier_fraction,
+            config.min_samples,
+            context.screen_outliers,
         )
         outcome = run.outcome
         kept = [features[k] for k in run.kept]
