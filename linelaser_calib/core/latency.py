@@ -24,14 +24,17 @@ All times in s, lengths in m.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.stats import norm
 
+from .geometry import FloatArray
 from .pairing import NS_PER_S, ClockOffsetDiagnosis, PairingConfig, PoseBuffer
 from .pose_track import PoseTrack
 from .result import CalibrationResult
-from .types import FlangePose
+from .types import BoolArray, FlangePose
 
 #: Warning code of the diagnosis (the result file's ``quality.pairing.clock_offset_diagnosis``):
 #: the residual follows the flange's velocity, so the clocks look offset.
@@ -56,9 +59,79 @@ def clock_offset_warning(diagnosis: ClockOffsetDiagnosis) -> str:
     )
 
 
+@dataclass(frozen=True)
+class ClockProbe:
+    """What the test reads of the flange pose stream, looked up once at the paired profiles'
+    stamps (shifted by the clock offset): the poses ``step_s`` before, at and after each, and
+    the flange's speeds there. Built before the solve, it lets the caller release the pose
+    stream (141,912 poses, 9 MB, on a 1,600-profile ``ur_scancontrol`` recording) while the
+    calibration runs; the test then reads the rows of the profiles the calibration used.
+
+    Attributes
+    ----------
+    stamps_ns : ndarray, shape (N,), int64
+        The profiles' own stamps, sorted, without repeats, ns.
+    T_base_flange : ndarray, shape (3, N, 4, 4)
+        The poses at each stamp shifted by the clock offset, ``-step_s``, 0 and ``+step_s``
+        from it (m).
+    found : ndarray, shape (3, N), bool
+        Where each of them was within the pairing's sync tolerance.
+    linear, angular : ndarray, shape (N,)
+        The flange's speeds at the shifted stamps (m/s, rad/s), over the default pairing's
+        speed window; ``known`` (N,) where the stream covers that window.
+    step_s : float
+        Half-step of the central difference in the offset, s.
+    """
+
+    stamps_ns: NDArray[np.int64]
+    T_base_flange: FloatArray
+    found: BoolArray
+    linear: FloatArray
+    angular: FloatArray
+    known: BoolArray
+    step_s: float
+
+    @classmethod
+    def of(
+        cls,
+        stamps_ns: Sequence[int],
+        poses: PoseTrack | Sequence[FlangePose],
+        pairing: PairingConfig,
+        step_s: float = STEP_S,
+    ) -> ClockProbe:
+        """The probe of profiles stamped ``stamps_ns`` (ns) paired from ``poses`` with
+        ``pairing`` (its clock offset and sync tolerance)."""
+        buffer = PoseBuffer()
+        buffer.extend(poses)
+        stamps = np.unique(np.asarray(stamps_ns, dtype=np.int64))
+        tolerance_ns = round(pairing.sync_tolerance_s * NS_PER_S)
+        step_ns = round(step_s * NS_PER_S)
+        t = stamps + round(pairing.clock_offset_s * NS_PER_S)
+        looked_up = [buffer.track.at(t + k * step_ns, tolerance_ns) for k in (-1, 0, 1)]
+        window_ns = round(PairingConfig().speed_window_s * NS_PER_S)
+        linear, angular, known = buffer.speeds_at(t, window_ns)
+        return cls(
+            stamps,
+            np.stack([T for T, _ in looked_up]),
+            np.stack([found for _, found in looked_up]),
+            linear,
+            angular,
+            known,
+            step_s,
+        )
+
+    def rows(self, stamps_ns: Sequence[int]) -> NDArray[np.intp]:
+        """The probe's row of each of ``stamps_ns`` (ns; each one of the probe's stamps)."""
+        t = np.asarray(stamps_ns, dtype=np.int64)
+        rows = np.searchsorted(self.stamps_ns, t)
+        if not np.array_equal(self.stamps_ns[np.minimum(rows, len(self.stamps_ns) - 1)], t):
+            raise ValueError("the clock probe was built without some of the profiles asked for")
+        return rows
+
+
 def diagnose_clock_offset(
     result: CalibrationResult,
-    poses: PoseTrack | Sequence[FlangePose],
+    poses: ClockProbe | PoseTrack | Sequence[FlangePose],
     pairing: PairingConfig,
     step_s: float = STEP_S,
 ) -> ClockOffsetDiagnosis | None:
@@ -68,8 +141,9 @@ def diagnose_clock_offset(
     ----------
     result : CalibrationResult
         A calibration with its ``sample_fits``.
-    poses : PoseTrack or sequence of FlangePose
-        The flange pose stream the profiles were paired with.
+    poses : ClockProbe, PoseTrack or sequence of FlangePose
+        The flange pose stream the profiles were paired with, or its probe at the profiles'
+        stamps (:class:`ClockProbe`, built with ``pairing``; its own ``step_s`` holds).
     pairing : PairingConfig
         The pairing the calibration used (its clock offset and sync tolerance).
     step_s : float
@@ -80,19 +154,18 @@ def diagnose_clock_offset(
     ClockOffsetDiagnosis or None
         None when fewer than :data:`MIN_MOVING_PROFILES` profiles were taken while moving.
     """
-    buffer = PoseBuffer()
-    buffer.extend(poses)
+    stamps = [fit.stamp_ns for fit in result.sample_fits]
+    probe = (
+        poses if isinstance(poses, ClockProbe) else ClockProbe.of(stamps, poses, pairing, step_s)
+    )
+    step_s = probe.step_s
     gate = PairingConfig()
-    tolerance_ns = round(pairing.sync_tolerance_s * NS_PER_S)
-    window_ns = round(gate.speed_window_s * NS_PER_S)
-    step_ns = round(step_s * NS_PER_S)
-    shift_ns = round(pairing.clock_offset_s * NS_PER_S)
     T_fs = result.T_flange_sensor
     scores, curvatures, profiles = [], [], []
-    t = np.array([fit.stamp_ns for fit in result.sample_fits], dtype=np.int64) + shift_ns
-    looked_up = [buffer.track.at(t + k * step_ns, tolerance_ns) for k in (-1, 0, 1)]
+    rows = probe.rows(stamps)
+    looked_up = [(probe.T_base_flange[k, rows], probe.found[k, rows]) for k in range(3)]
     everywhere = np.logical_and.reduce([found for _, found in looked_up])
-    linear, angular, known = buffer.speeds_at(t, window_ns)
+    linear, angular, known = probe.linear[rows], probe.angular[rows], probe.known[rows]
     moving = int(
         np.count_nonzero(
             everywhere
@@ -129,7 +202,9 @@ def diagnose_clock_offset(
 
 
 def add_clock_diagnosis(
-    result: CalibrationResult, poses: PoseTrack | Sequence[FlangePose], pairing: PairingConfig
+    result: CalibrationResult,
+    poses: ClockProbe | PoseTrack | Sequence[FlangePose],
+    pairing: PairingConfig,
 ) -> None:
     """Run :func:`diagnose_clock_offset` on a result paired with ``pairing`` and keep it as
     ``result.clock_diagnosis``; a significant offset puts its warning first, before any

@@ -32,8 +32,8 @@ import numpy as np
 
 from .errors import CalibrationError, DegenerateError, InputError, PairingError, TooFewFeatures
 from .geometry import FloatArray, check_transform
-from .latency import add_clock_diagnosis
-from .pairing import PairingConfig, pair_profiles
+from .latency import ClockProbe, add_clock_diagnosis
+from .pairing import PairingConfig, PairingResult, pair_profiles
 from .pose_track import PoseTrack
 from .regions import PLAIN_PRIOR_SCALE
 from .result import CalibrationResult
@@ -495,7 +495,7 @@ def _corrected_poses(
 
 def calibrate_paired(
     samples: list[Sample],
-    poses: PoseTrack | Sequence[FlangePose] | None,
+    poses: ClockProbe | PoseTrack | Sequence[FlangePose] | None,
     config: PipelineConfig,
     rejected: list[Rejection] | None = None,
     notes: Sequence[str] = (),
@@ -509,8 +509,10 @@ def calibrate_paired(
     pairing itself (``result.pairing``, its clock offset) and, with ``diagnose_clock``, the
     test of a clock offset left out (:func:`~.latency.add_clock_diagnosis`, whose warning
     goes first; off where the offset was estimated). Both paths enter here:
-    :func:`run_pipeline` with the recording's pose stream, the calibration service with the
-    poses of its samples. ``poses`` None: the pairing is not known (samples paired
+    :func:`run_pipeline` with the recording's pose stream, the offline calibration
+    (:func:`linelaser_calib.offline.calibrate_bag`) with its :class:`~.latency.ClockProbe`
+    at the samples' stamps (the stream released before the solve), the calibration service
+    with the poses of its samples. ``poses`` None: the pairing is not known (samples paired
     elsewhere), and neither is recorded or tested."""
     result = calibrate_samples(samples, config, rejected, progress, placements, extracted)
     result.warnings[:0] = notes
@@ -523,20 +525,14 @@ def calibrate_paired(
     return result
 
 
-def run_pipeline(
+def pair_recording(
     profiles: list[Profile],
     poses: PoseTrack | Sequence[FlangePose],
     config: PipelineConfig,
     progress: Progress = _no_progress,
-    placements: Sequence[tuple[list[Sample], KinematicSetup]] = (),
-    extracted: Extracted | None = None,
-    diagnose_clock: bool = True,
-) -> CalibrationResult:
-    """Pair profiles with flange poses, then :func:`calibrate_paired` (the offline path).
-
-    ``placements`` are other recordings' samples for a joint calibration, ``extracted`` the
-    features of a clock-offset search (:func:`calibrate_samples`); ``diagnose_clock`` False
-    where the clock offset was estimated.
+) -> PairingResult:
+    """The profiles paired with the flange poses (``config.pairing``): the first half of
+    :func:`run_pipeline`.
 
     Raises
     ------
@@ -551,6 +547,31 @@ def run_pipeline(
     progress("pairing", len(profiles), len(profiles))
     if not paired.samples:
         raise PairingError(paired.explain_nothing_paired(config.pairing))
+    return paired
+
+
+def run_pipeline(
+    profiles: list[Profile],
+    poses: PoseTrack | Sequence[FlangePose],
+    config: PipelineConfig,
+    progress: Progress = _no_progress,
+    placements: Sequence[tuple[list[Sample], KinematicSetup]] = (),
+    extracted: Extracted | None = None,
+    diagnose_clock: bool = True,
+) -> CalibrationResult:
+    """Pair profiles with flange poses (:func:`pair_recording`), then
+    :func:`calibrate_paired`.
+
+    ``placements`` are other recordings' samples for a joint calibration, ``extracted`` the
+    features of a clock-offset search (:func:`calibrate_samples`); ``diagnose_clock`` False
+    where the clock offset was estimated.
+
+    Raises
+    ------
+    PairingError
+        When no profile pairs with a pose; the message gives the median stamp offset.
+    """
+    paired = pair_recording(profiles, poses, config, progress)
     return calibrate_paired(
         paired.samples,
         poses,

@@ -379,7 +379,7 @@ def refine(
         problem = replace(problem, whitening=whitening)
     problem = problem.with_scale_shares(state)
     geometric = normal_equations(
-        problem.linearise_chunks(state), cfg.solver, np.ones(problem.mask.shape)
+        problem.linearise_chunks(state), cfg.solver, np.broadcast_to(1.0, problem.mask.shape)
     ).schur_information()
     _observability(problem, state, geometric).raise_if_unobservable()
 
