@@ -630,13 +630,16 @@ def _trim_points(
     result: RefineResult,
     limit_m: float,
 ) -> tuple[list[StoredArray], int]:
-    """Drop points whose residual exceeds ``limit_m``; returns the samples and the count."""
+    """Drop points whose residual exceeds ``limit_m``; returns the samples and the count. A
+    sample that loses no point is its own array, not a copy (the caller holds the returned
+    samples through the solve: 6 MB of copies on a 1,600-profile recording)."""
     residuals = point_residuals_m(samples_points, T_base_flange, result)
     trimmed, removed = [], 0
     for p, r in zip(samples_points, residuals, strict=True):
         keep = np.abs(r) <= limit_m
-        removed += int(np.count_nonzero(~keep))
-        trimmed.append(np.asarray(p)[keep])
+        dropped = int(np.count_nonzero(~keep))
+        removed += dropped
+        trimmed.append(np.asarray(p)[keep] if dropped else np.asarray(p))
     return trimmed, removed
 
 
