@@ -736,7 +736,7 @@ def solve(
             decrease = cost_now - new_cost
             state, cost_now = candidate, new_cost
             history.append(cost_now)
-            normal = None
+            normal, residuals = None, None  # both of the old state: let go before the next
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
             growth = 2.0
             if decrease <= config.tolerance * max(cost_now, 1e-300):
