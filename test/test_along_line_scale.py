@@ -14,8 +14,8 @@ from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets.base import TargetSolution
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
 from linelaser_calib.core.targets.cylinder.model import Cylinder
+from linelaser_calib.core.targets.cylinder.scales import with_depth_reading
 from linelaser_calib.core.targets.cylinder.section import read_cylinder_section
-from linelaser_calib.core.targets.cylinder.target import with_depth_reading
 from linelaser_calib.core.targets.sphere import SphereConfig, SphereSection
 from linelaser_calib.core.targets.sphere.config import estimates_scale
 from linelaser_calib.core.verdict import warning_kind

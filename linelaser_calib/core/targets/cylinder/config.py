@@ -185,7 +185,7 @@ class CylinderConfig:
         The sensor's along-line (x) scale, and with the radius given its depth (z) scale, in
         the default method: ``free`` estimates them with the hand-eye, ``fixed`` holds them at
         1, ``auto`` (default) estimates them and keeps each only where it lies clearly off 1
-        (the x scale always with the radius given; :func:`.target.estimates_scale`).
+        (the x scale always with the radius given; :func:`.scales.estimates_scale`).
     min_samples : int
         Fewest fitted samples accepted.
     cleaning : CleaningConfig

@@ -507,7 +507,7 @@ def errors_in_variables_move(problem: CylinderProblem, normal: BlockNormal) -> F
     carries the hand-eye along with the scale; where the points' own noise sets the
     variance it is a small share of the 1σ (white-noise profiles, the committed bags).
     The depth scale's share is not counted: with the radius free its reading is a rival
-    model of the same stretch (:func:`.target.with_depth_reading`), whose move is counted
+    model of the same stretch (:func:`.scales.with_depth_reading`), whose move is counted
     there.
     """
     moves = np.zeros(problem.n_global)
