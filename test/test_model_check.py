@@ -222,10 +222,6 @@ def test_the_real_scans_use_every_profile_and_the_free_radius_is_the_balls() -> 
     assert rot < math.radians(2.0) and trans < 3e-3
 
 
-def test_median_is_numpys() -> None:
-    """The partition median gives np.median's value, NaN with a NaN and for no values."""
-    rng = np.random.default_rng(5)
-    for n in [1, 2, 3, 8, 9, 240, 241]:
-        values = np.round(rng.normal(size=n), 1)  # ties too
-        assert median(values) == float(np.median(values))
+def test_median_is_nan_with_a_nan_or_no_values() -> None:
+    """The median of a profile's residuals says NaN rather than a number when it cannot be taken."""
     assert math.isnan(median([1.0, math.nan, 2.0])) and math.isnan(median([]))
