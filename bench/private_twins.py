@@ -68,7 +68,7 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.errors import CalibrationError
-from linelaser_calib.core.geometry import FloatArray, transform_error
+from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, calibrate_samples
 from linelaser_calib.core.profile.along_line import measured_to_true
@@ -187,6 +187,19 @@ def ball_scatter(
     return centre_scatter_m(mapped), mapped.mean(axis=0)
 
 
+def error_over_sigma(result: CalibrationResult, truth: FloatArray) -> float:
+    """The largest per-axis |error| / 1σ of a result's hand-eye (rotation about and
+    translation along the flange axes), NaN without a 1σ."""
+    if result.uncertainty_rotation_rad is None or result.uncertainty_translation_m is None:
+        return math.nan
+    T = result.T_flange_sensor
+    error = np.concatenate(
+        [rotvec_from_matrix(truth[:3, :3].T @ T[:3, :3]), T[:3, 3] - truth[:3, 3]]
+    )
+    sigma = np.concatenate([result.uncertainty_rotation_rad, result.uncertainty_translation_m])
+    return float(np.max(np.abs(error) / sigma))
+
+
 def _linear(samples: list[Sample], radius_m: float) -> FloatArray:
     features, _ = get_target("sphere").extract(
         samples, SphereConfig(radius_m=radius_m), 0, lambda *_: None
@@ -201,7 +214,7 @@ def cell_table(seeds: list[int]) -> None:
     print("Industrial cell twin: two SSZN-class sensors, one 40 mm-radius ball, 18 views each")
     print(
         f"{'seed':>4}{'sensor':>7}{'used':>7}{'tool mm':>9}{'linear mm':>10}{'truth mm':>9}"
-        f"{'ratio':>7}{'own mm':>8}{'ratio':>7}{'tool err mm':>12}{'lin err mm':>11}"
+        f"{'ratio':>7}{'own mm':>8}{'ratio':>7}{'tool err mm':>12}{'|e|/σ':>7}{'lin err mm':>11}"
         f"  {'raw':<5}{'own':<5}set aside"
     )
     apart: list[tuple[int, float, float]] = []
@@ -233,6 +246,7 @@ def cell_table(seeds: list[int]) -> None:
                 f"{lin_scatter * 1e3:>10.3f}{true_scatter * 1e3:>9.3f}{scatter / lin_scatter:>7.2f}"
                 f"{own * 1e3:>8.3f}{own / lin_scatter:>7.2f}"
                 f"{transform_error(result.T_flange_sensor, truth)[1] * 1e3:>12.3f}"
+                f"{error_over_sigma(result, truth):>7.2f}"
                 f"{transform_error(linear, truth)[1] * 1e3:>11.3f}"
                 f"  {_mark(all_used and scatter <= lin_scatter):<5}"
                 f"{_mark(all_used and own <= lin_scatter):<5}"

@@ -182,15 +182,39 @@ def test_the_recording_scale_sets_aside_only_its_own_outliers() -> None:
     # Sensor A of the issue: circles leaving 18.7-32.1 um RMS on one recording are one
     # population, however far above the 3.4-4.6 um local noise.
     spread_out = rng.uniform(18.7e-6, 32.1e-6, 18)
-    assert set_aside_outliers(spread_out, 6.0) == []
+    assert set_aside_outliers(spread_out, np.full(18, 200.0), 6.0) == []
     # A recording at 20 +- 2 um with one profile at 80 um: that one, with its numbers.
     rms = np.append(rng.normal(20e-6, 2e-6, 17), 80e-6)
     scale = recording_scale(rms)
     assert scale.median_m == pytest.approx(20e-6, abs=2e-6)
     assert scale.spread_m == pytest.approx(2e-6, rel=0.5)
-    aside = set_aside_outliers(rms, 6.0)
+    aside = set_aside_outliers(rms, np.full(18, 200.0), 6.0)
     assert [k for k, _ in aside] == [17]
     assert "80.0 um RMS" in aside[0][1] and "robust spreads above the median" in aside[0][1]
+    assert "over its 200 effective points" in aside[0][1]
+
+
+def test_more_smooth_shape_error_on_one_profile_is_kept_and_a_dirty_profile_set_aside() -> None:
+    """Issue 29, the cell twin's sensor A: one profile's circle left 50 um against a median
+    of 31 um, over 4 effective points (one stretch of smooth shape error more), and was set
+    aside by a spread floored at a tenth of the median. A profile's RMS is an estimate over
+    its effective points; a dirty window's white noise raises it over hundreds of them."""
+    rng = np.random.default_rng(29)
+    profiles = [_real_like_profile(rng, bow, 4e-6) for bow in rng.uniform(20e-6, 30e-6, 16)]
+    profiles.append(_real_like_profile(rng, 55e-6, 4e-6))  # twice the median RMS, smooth
+    profiles.append(_real_like_profile(rng, 25e-6, 40e-6))  # ten times the local noise
+    features, rejections = get_target("sphere").extract(
+        [_sample(p, k) for k, p in enumerate(profiles)],
+        SphereConfig(radius_m=0.04),
+        0,
+        lambda *_: None,
+    )
+    typical = np.median([f.circle.rms_m for f in features])
+    assert features[16].index == 16 and features[16].circle.rms_m > 1.8 * typical
+    assert features[16].n_effective < 20
+    assert [r.index for r in rejections] == [17]
+    assert "robust spreads above the median" in rejections[0].reason
+    assert len(features) == 17
 
 
 def _config(method: Method, **settings: object) -> PipelineConfig:

@@ -25,6 +25,14 @@ questions, and knows no target:
    target's model on every profile of one recording (one sensor) gives the recording's
    scale: its median and robust spread across the profiles (:class:`RecordingScale`). A
    profile far above it is set aside; one within it is used, whatever its local noise.
+   A profile's RMS is itself an estimate from its n_eff independent points, with a relative
+   spread of 1/√(2 n_eff) (a χ² of n_eff degrees of freedom): where the caller gives n_eff,
+   that spread is added to the recording's in quadrature (:func:`recording_outliers`). A
+   smooth shape error a few millimetres long leaves a profile few independent points, so a
+   larger RMS there is weak evidence (the ``sphere_sszn`` cell twin: 50 µm over 4 effective
+   points against a median of 31 µm, one such stretch more); point-wise corruption (a dirty
+   window, clutter on the arc) raises the RMS over hundreds of independent points, and is
+   set aside.
 
 Shapes fitted here (points (N, 2) in scan order, m): :func:`line_fit` (2 numbers),
 :func:`circle_fit` (3), :func:`line_pair_fit` (a V or a step's two lines, 5 with the break),
@@ -344,24 +352,42 @@ def recording_scale(values_m: ArrayLike) -> RecordingScale:
     return RecordingScale(median, max(spread, MIN_SPREAD_SHARE * median, 1e-300))
 
 
-def recording_outliers(values_m: ArrayLike, sigmas: float, model: str) -> list[tuple[int, str]]:
+def recording_outliers(
+    values_m: ArrayLike, sigmas: float, model: str, n_effective: ArrayLike | None = None
+) -> list[tuple[int, str]]:
     """Profiles whose model residual (K,), m, lies ``sigmas`` robust spreads above the median
     of the recording's profiles (:func:`recording_scale`): their positions and the reasons,
     with the numbers (none for fewer than 3 profiles). ``model`` names the model in the
-    reasons ("circle", "line pair")."""
+    reasons ("circle", "line pair").
+
+    ``n_effective`` (K,): the independent points each residual is an RMS over
+    (:func:`effective_count`); each profile's spread is then the recording's and its own
+    RMS's sampling spread, median / √(2 n_eff), in quadrature (see the module docstring).
+    """
     v = np.asarray(values_m, dtype=np.float64)
     if len(v) < 3:
         return []
     scale = recording_scale(v)
-    limit = scale.limit_m(sigmas)
+    spread = np.full(len(v), scale.spread_m)
+    if n_effective is not None:
+        sampling = scale.median_m / np.sqrt(2.0 * np.asarray(n_effective, dtype=np.float64))
+        spread = np.hypot(spread, sampling)
+    limit = scale.median_m + sigmas * spread
+
+    def own(k: int) -> str:
+        if n_effective is None:
+            return ""
+        count = float(np.asarray(n_effective, dtype=np.float64)[k])
+        return f", the profiles' and that of an RMS over its {count:.0f} effective points"
+
     return [
         (
             int(k),
             f"the {model} leaves {v[k] * 1e6:.1f} um RMS, "
-            f"{scale.sigmas_above(float(v[k])):.0f} robust spreads above the median "
+            f"{(v[k] - scale.median_m) / spread[k]:.0f} robust spreads above the median "
             f"{scale.median_m * 1e6:.1f} um of this recording's {len(v)} profiles (spread "
-            f"{scale.spread_m * 1e6:.1f} um; limit {limit * 1e6:.1f} um at {sigmas:.0f} "
-            "spreads)",
+            f"{spread[k] * 1e6:.1f} um{own(int(k))}; limit {limit[k] * 1e6:.1f} um at "
+            f"{sigmas:.0f} spreads)",
         )
         for k in np.flatnonzero(v > limit)
     ]

@@ -10,8 +10,8 @@ Built on :mod:`linelaser_calib.core.model_check`:
   within :data:`MAX_AXIS_DIFFERENCE` of each other is that distortion, not a rival (a
   cylinder cut 11 deg or more off its cross-section differs by more).
 - **Per recording** (:func:`set_aside_outliers`): the circles' RMS residual across the
-  recording's profiles gives its scale (median, robust spread); a profile far above it is
-  set aside, with the numbers.
+  recording's profiles gives its scale (median, robust spread); a profile far above it, by
+  that spread and its own RMS's over its effective points, is set aside, with the numbers.
 """
 
 from __future__ import annotations
@@ -51,7 +51,10 @@ def circle_rival_rejection(index: int, stamp_ns: int, comparison: Comparison) ->
     return rival_rejection(index, stamp_ns, "circle", NOT_A_CIRCLE, comparison)
 
 
-def set_aside_outliers(rms_m: FloatArray, sigmas: float) -> list[tuple[int, str]]:
-    """Profiles whose circle RMS (K,), m, lies ``sigmas`` robust spreads above the median of
-    the recording's profiles (:func:`~linelaser_calib.core.model_check.recording_outliers`)."""
-    return recording_outliers(rms_m, sigmas, "circle")
+def set_aside_outliers(
+    rms_m: FloatArray, n_effective: FloatArray, sigmas: float
+) -> list[tuple[int, str]]:
+    """Profiles whose circle RMS (K,), m, an estimate over ``n_effective`` (K,) independent
+    points each, lies ``sigmas`` robust spreads above the median of the recording's profiles
+    (:func:`~linelaser_calib.core.model_check.recording_outliers`)."""
+    return recording_outliers(rms_m, sigmas, "circle", n_effective)
