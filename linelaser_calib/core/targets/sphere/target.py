@@ -54,7 +54,7 @@ from linelaser_calib.core.profile.along_line import (
     measured_to_true,
     scale_significant,
 )
-from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
+from linelaser_calib.core.profile.cleaning import clean_profile
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
 from linelaser_calib.core.targets.base import (
     Option,
@@ -86,6 +86,7 @@ from linelaser_calib.core.targets.sphere.model import (
     side_is_clear,
     solve_fixed_point,
 )
+from linelaser_calib.core.targets.sphere.outliers import sample_flags
 from linelaser_calib.core.targets.sphere.plan import SpherePlanner
 from linelaser_calib.core.targets.sphere.refine import (
     N_LOCAL,
@@ -600,20 +601,12 @@ class SphereTarget:
             )
 
         def flag(outcome: SphereRefinement, kept: list[int]) -> list[Flag]:
-            rms = outcome.sample_rms_m()
-            median = float(np.median(rms))
-            spread = MAD_TO_SIGMA * float(np.median(np.abs(rms - median)))
-            limit = max(median + config.outlier_sigmas * spread, 3.0 * outcome.sensor_sigma_m)
-            return [
-                Flag(
-                    float(value / limit),
-                    k,
-                    f"RMS distance from the sphere {value * 1e6:.1f} um, above the "
-                    f"{limit * 1e6:.1f} um the other profiles allow",
-                )
-                for k, value in enumerate(rms)
-                if value > limit
-            ]
+            return sample_flags(
+                outcome,
+                config.outlier_sigmas,
+                config.refine.robot_sigma_t_m,
+                config.refine.robot_sigma_r_rad,
+            )
 
         run = solve_with_rejection(
             len(features),
