@@ -26,6 +26,7 @@ learned sensor σ.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 from scipy.special import chdtri, ndtr
@@ -36,20 +37,27 @@ from linelaser_calib.core.targets.sphere.refine import SphereRefinement
 from linelaser_calib.core.types import FloatArray
 
 
+def _beyond(values: FloatArray, limit: float, reason: Callable[[int, float], str]) -> list[Flag]:
+    """Flags of the values (K,) above ``limit``, each with its ``reason(k, value)``."""
+    return [
+        Flag(float(value / limit), k, reason(k, float(value)))
+        for k, value in enumerate(values)
+        if value > limit
+    ]
+
+
 def _above(values_m: FloatArray, sigmas: float, floor_m: float, what: str) -> list[Flag]:
     """Flags of the values (K,), m, above the recording's limit, ``what`` naming them."""
     median = float(np.median(values_m))
     limit = max(median + sigmas * robust_scale_m(values_m), floor_m)
-    return [
-        Flag(
-            float(value / limit),
-            k,
-            f"{what} {value * 1e6:.1f} um, above the {limit * 1e6:.1f} um the other profiles "
-            f"allow (median {median * 1e6:.1f} um)",
-        )
-        for k, value in enumerate(values_m)
-        if value > limit
-    ]
+    return _beyond(
+        values_m,
+        limit,
+        lambda k, value: (
+            f"{what} {value * 1e6:.1f} um, above the {limit * 1e6:.1f} um the "
+            f"other profiles allow (median {median * 1e6:.1f} um)"
+        ),
+    )
 
 
 def _pose_flags(
@@ -60,22 +68,19 @@ def _pose_flags(
     centred = corrections - np.median(corrections, axis=0)
     stated = np.repeat([stated_r_rad, stated_t_m], 3)
     scales = np.maximum(MAD_TO_SIGMA * np.median(np.abs(centred), axis=0), stated)
-    chi2 = np.sum((centred / scales) ** 2, axis=1)
     limit = float(chdtri(6, 2.0 * ndtr(-sigmas)))
-    return [
-        Flag(
-            float(value / limit),
-            k,
+    return _beyond(
+        np.sum((centred / scales) ** 2, axis=1),
+        limit,
+        lambda k, value: (
             f"pose correction {np.linalg.norm(centred[k, 3:]) * 1e3:.3f} mm and "
             f"{math.degrees(float(np.linalg.norm(centred[k, :3]))):.4f} deg off the other "
             f"profiles' median, chi2 {value:.0f} on 6 degrees of freedom over their robust "
             f"scales per axis (up to {np.max(scales[3:]) * 1e3:.3f} mm and "
             f"{math.degrees(float(np.max(scales[:3]))):.4f} deg), above {limit:.0f} "
-            f"({sigmas:g} sigma)",
-        )
-        for k, value in enumerate(chi2)
-        if value > limit
-    ]
+            f"({sigmas:g} sigma)"
+        ),
+    )
 
 
 def sample_flags(
