@@ -17,7 +17,8 @@ gives, beside a plain fit of the same data (no robot error modelled, every profi
     (:func:`~linelaser_calib.core.targets.sphere.model.resolve_side`, polished: bench/sphere.py's
     reference) and of the true hand-eye, on the raw profiles; ``own``: the tool's scatter
     with its own profile corrections (the scales it estimated) applied; each hand-eye's
-    translation error against truth. The polished linear solve minimises the raw scatter,
+    translation error against truth, and the tool's largest per-axis |error| / 1σ
+    (:func:`error_over_sigma`). The polished linear solve minimises the raw scatter,
     so no other hand-eye can score below it there (the true one does not); ``raw`` and
     ``own`` judge the goal each way. Then the distance between the two sensors' ball centres
     in the base frame (truth 0). Goals: used 18/18, scatter ≤ the linear solve's, centres
