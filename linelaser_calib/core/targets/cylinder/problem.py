@@ -99,8 +99,8 @@ from .model import Cylinder
 N_AXIS = 4
 #: Points per chunk of samples :meth:`CylinderProblem.linearise` builds its Jacobians from:
 #: its per-point intermediates (about twenty arrays of 3 to 12 columns) stay a few MB each
-#: (about 15 MB together at 2**15 points, a solve's largest transient; 2**14 halves that at
-#: the same CPU time on ur_scancontrol at 1,600 poses).
+#: (about 15 MB together at 2**15 points, a solve's largest transient; 2**13 a quarter of
+#: that, the same CPU time within the machine's noise on ur_scancontrol at 1,600 poses).
 CHUNK_POINTS = 1 << 13
 
 
