@@ -299,3 +299,41 @@ def test_a_profile_with_a_large_draw_of_the_smooth_error_is_no_outlier() -> None
             assert result.sample_rms_m[3] > 1.8 * np.median(result.sample_rms_m)
         else:
             assert 3 in dropped
+
+
+def test_a_learned_noise_dropped_gives_the_first_solve_again(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Regression (issue 32, memory): the first solve's problem is let go once a line noise
+    is learned from it. Where the noise is then dropped (here: any residual too large), the
+    outcome is that first solve, solved again: the result of not learning the noise at all,
+    with its solved problem (where the self-check's subset solves start)."""
+    import importlib
+
+    refine_module = importlib.import_module("linelaser_calib.core.targets.cylinder.refine")
+    rng = np.random.default_rng(2)
+    scene = make_scene(rng, n_poses=16, n_points=150, sensor_sigma=1.5e-6)
+    points = [p.copy() for p in scene.points]
+    for p in points:
+        p[:, 2] += shape_error(
+            rng, SensorModel(shape_sigma_m=6e-6, shape_length_m=3e-3), p[None, :, 0]
+        )[0]
+    T0, cylinder0 = perturbed_start(rng, scene)
+    plain = refine_with_outlier_rejection(
+        points, scene.T_base_flange, T0, cylinder0, RefineConfig(learn_line_noise=False), 0.02
+    )
+    monkeypatch.setattr(refine_module, "MAX_NOISE_RESIDUAL_RATIO", 0.0)
+    dropped = refine_with_outlier_rejection(
+        points, scene.T_base_flange, T0, cylinder0, RefineConfig(learn_line_noise=True), 0.02
+    )
+    assert dropped.line_noise is None
+    assert dropped.solved is not None and dropped.solved.problem.whitening is None
+    sigma = np.concatenate([plain.sigma_rotation_rad, plain.sigma_translation_m])
+    moved = np.concatenate(
+        [
+            rotvec_from_matrix(plain.T_flange_sensor[:3, :3].T @ dropped.T_flange_sensor[:3, :3]),
+            dropped.T_flange_sensor[:3, 3] - plain.T_flange_sensor[:3, 3],
+        ]
+    )
+    assert np.all(np.abs(moved) <= 1e-6 * sigma), moved / sigma
+    assert dropped.used == plain.used

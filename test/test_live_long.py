@@ -1,12 +1,13 @@
 """A live /calibrate on a long session: a few thousand samples of a continuous sweep, through
 the calibration service as the collector would hand them over, against the offline pipeline
-on the same recording."""
+on the same recording: the same hand-eye, each profile's features extracted once by each."""
 
 from __future__ import annotations
 
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,7 +18,8 @@ from std_msgs.msg import Float64MultiArray
 from linelaser_calib.core.forked import available_workers
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import run_pipeline
-from linelaser_calib.core.types import FlangePose, Profile
+from linelaser_calib.core.targets.cylinder.target import CylinderTarget
+from linelaser_calib.core.types import FlangePose, Profile, Sample
 from linelaser_calib.io import read_result_yaml
 from linelaser_calib.nodes.calibration_service import PARAMETERS
 from linelaser_calib.nodes.clock_offset import offset_message
@@ -52,8 +54,16 @@ def axes(T_estimate: np.ndarray, T_reference: np.ndarray) -> np.ndarray:
 
 
 def test_a_long_session_calibrates_live_in_the_time_offline_takes(
-    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+    tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    extracted: list[list[int]] = []  # the profiles of each extraction of the cylinder's features
+    extract = CylinderTarget.extract
+
+    def counted(target: CylinderTarget, samples: list[Sample], *args: Any, **kwargs: Any) -> Any:
+        extracted.append([s.index for s in samples])
+        return extract(target, samples, *args, **kwargs)
+
+    monkeypatch.setattr(CylinderTarget, "extract", counted)
     data = simulate(scenario_from_preset("continuous", **SWEEP), seed=3)
     samples = pair_profiles(data.profiles, data.poses, PAIRING).samples
     assert len(samples) > 3000
@@ -92,6 +102,8 @@ def test_a_long_session_calibrates_live_in_the_time_offline_takes(
     quality = yaml.safe_load(output.read_text())["quality"]
     assert quality["thinning"]["samples_given"] == len(samples)
     assert quality["thinning"]["samples_kept"] < len(samples) / 5
+    # One extraction, of the profiles kept: each profile's features once per /calibrate.
+    assert [len(set(e)) for e in extracted] == [quality["thinning"]["samples_kept"]]
     assert written.pairing == PAIRING  # the collector's pairing travels with the result
     assert "clock_offset_diagnosis" in quality["pairing"]  # the sweep moves: the test ran
     error = axes(written.T_flange_sensor, data.truth.T_flange_sensor)
@@ -107,6 +119,7 @@ def test_a_long_session_calibrates_live_in_the_time_offline_takes(
     started = time.monotonic()
     offline = run_pipeline(data.profiles, data.poses, config)
     offline_s = time.monotonic() - started
+    assert len(extracted) == 2 and sorted(extracted[1]) == sorted(extracted[0])
     moved = axes(written.T_flange_sensor, offline.T_flange_sensor)
     assert np.all(np.abs(moved) <= 0.01 * sigma), moved
     assert live_s <= 3.0 * offline_s + 5.0, (live_s, offline_s)

@@ -99,9 +99,9 @@ from .model import Cylinder
 N_AXIS = 4
 #: Points per chunk of samples :meth:`CylinderProblem.linearise` builds its Jacobians from:
 #: its per-point intermediates (about twenty arrays of 3 to 12 columns) stay a few MB each
-#: (about 15 MB together at 2**15 points, a solve's largest transient; 2**14 halves that at
-#: the same CPU time on ur_scancontrol at 1,600 poses).
-CHUNK_POINTS = 1 << 14
+#: (about 15 MB together at 2**15 points, a solve's largest transient; 2**13 a quarter of
+#: that, the same CPU time within the machine's noise on ur_scancontrol at 1,600 poses).
+CHUNK_POINTS = 1 << 13
 
 
 # --------------------------------------------------------------------------------------
@@ -231,10 +231,10 @@ class CylinderProblem:
     def step_scale(self) -> FloatArray:
         """Rotations and the scales times the lever, lengths as they are."""
         scale = np.ones(self.n_global)
-        scale[:3] = lever_arm_m(self)
+        scale[:3] = lever = lever_arm_m(self)
         for index in (self.scale_index, self.depth_scale_index):
             if index is not None:
-                scale[index] = lever_arm_m(self)
+                scale[index] = lever
         return scale
 
     def with_flange_poses(self, T_base_flange: FloatArray) -> CylinderProblem:
@@ -652,11 +652,14 @@ def lever_arm_m(problem: CylinderProblem) -> float:
         return lever
     M, K = problem.mask.shape
     step = max(1, CHUNK_POINTS // K)  # a chunk at a time: no (M, K, 3) temporary
-    chunks = (slice(start, start + step) for start in range(0, M, step))
-    distances = [
-        np.linalg.norm(np.asarray(problem.points[rows], dtype=np.float64), axis=2)[
-            problem.mask[rows] > 0.0
-        ]
-        for rows in chunks
-    ]
-    return float(np.median(np.concatenate(distances)))
+    real = problem.mask > 0.0
+    # One array of the distances, its median taken in place: no list of chunks, no joined
+    # or sorted copy (three arrays of every point's distance at once before).
+    distances = np.empty(int(np.count_nonzero(real)))
+    filled = 0
+    for start in range(0, M, step):
+        rows = slice(start, start + step)
+        d = np.linalg.norm(np.asarray(problem.points[rows], dtype=np.float64), axis=2)[real[rows]]
+        distances[filled : filled + d.size] = d
+        filled += d.size
+    return float(np.median(distances, overwrite_input=True))

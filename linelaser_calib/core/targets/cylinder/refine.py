@@ -398,6 +398,9 @@ def summarise(
     line noise the problem's whitening was formed with)."""
     cfg = problem.config
     state, normal = solution.state, solution.normal
+    # First: the lever arm's distances of every point are then not held beside e below.
+    observability = _observability(problem, state, normal.schur_information())
+    observability.raise_if_unobservable()
     e, prior = solution.residuals.points, solution.residuals.pose_prior
     point_cost = float(np.sum(robust_costs(e, cfg.solver)))
     prior_cost = float(np.sum(prior**2))
@@ -409,8 +412,6 @@ def summarise(
     factors = (1.0, 1.0)
     if cfg.estimate_variance_factors:
         factors = variance_factors(normal, point_cost, prior_cost, n_points, problem.n_global)
-    observability = _observability(problem, state, normal.schur_information())
-    observability.raise_if_unobservable()
     covariance = np.linalg.inv(normal.schur_information(*factors))
     dispersion = sample_dispersion(solution, *factors) if cfg.widen_by_dispersion else None
     covariance = widen_covariance(covariance, dispersion)
@@ -684,8 +685,8 @@ def refine_with_outlier_rejection(
         if removed and all(len(p) >= cfg.min_points_per_profile for p in trimmed):
             points, trimmed_any = trimmed, True
         T0, start = first.T_flange_sensor, first.cylinder
-        if trimmed_any:  # never the outcome now: its problem need not be held
-            first = replace(first, solved=None)
+        if trimmed_any or noise is not None:  # the outcome only if the noise is dropped
+            first = replace(first, solved=None)  # its problem let go (10 MB of 1,600 profiles)
 
     solved_rows: dict[int, int] = {}  # sample -> its row in the last solve's result
 
@@ -709,7 +710,9 @@ def refine_with_outlier_rejection(
         )
         if previous is None and first is not None:
             if not trimmed_any and noise is None and len(keep) == len(points):
-                return first  # the same problem, solved already
+                if first.solved is not None:  # the same problem, solved already
+                    return first
+                return refine(points, T_all, T_flange_sensor0, cylinder0, cfg, radius_m)  # again
             # From the first solve, its pose corrections included: a few iterations.
             return refine(
                 [points[i] for i in keep],

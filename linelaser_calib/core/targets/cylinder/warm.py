@@ -4,7 +4,7 @@ the full solution and stopped at looser tolerances than the full solve's."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -101,11 +101,14 @@ def refine_subset(
     # The solved problem's equations at its solution hold these samples' own: the first
     # linearisation, where the problem stays the same (its residuals, about a third of a
     # linearisation's cost, are formed again rather than kept beside every solved problem).
-    linearised = None
+    normal = solved.normal if prior is None else None
     if prior is not None:
         problem, start = _under(prior, problem, start)
-    elif solved.normal is not None:
-        linearised = (solved.normal.take(keep), problem.residuals(start))
+
+    def linearised() -> tuple[BlockNormal, Residuals]:
+        assert normal is not None
+        return normal.take(keep), problem.residuals(start)
+
     tolerances = (
         problem.config.solver
         if final
@@ -115,7 +118,8 @@ def refine_subset(
             variance_factors=solved.variance_factors,
         )
     )
-    solution = _solve_near(problem, start, "of a subset", tolerances, linearised)
+    first = None if normal is None else linearised
+    solution = _solve_near(problem, start, "of a subset", tolerances, first)
     return summarise(problem, solution, solved.noise)
 
 
@@ -195,11 +199,11 @@ def _solve_near(
     start: CylinderState,
     what: str,
     tolerances: SolverConfig,
-    linearised: tuple[BlockNormal, Residuals] | None = None,
+    linearised: Callable[[], tuple[BlockNormal, Residuals]] | None = None,
 ) -> Solution[CylinderState]:
     """The solve of a problem from a state near its optimum with ``tolerances``
-    (:func:`_near`), SolverError on non-finite numbers, naming ``what``; ``linearised``, its
-    normal equations and residuals at ``start`` where known."""
+    (:func:`_near`), SolverError on non-finite numbers, naming ``what``; ``linearised`` gives
+    its normal equations and residuals at ``start`` where known (``solve``'s ``start``)."""
     solution = solve(problem, start, tolerances, linearised)
     if not (np.all(np.isfinite(solution.state.R_fs)) and np.isfinite(solution.cost_history[-1])):
         raise SolverError(f"the refinement {what} produced non-finite values")
