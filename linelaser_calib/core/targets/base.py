@@ -234,6 +234,10 @@ class ResultSection(Protocol):
 #: Robot variance factor (as a ratio of 1σ) beyond which the arm is said to be less accurate
 #: than the prior (σ_t, σ_r: its repeatability) assumes.
 ROBOT_PRIOR_EXCESS = 2.0
+#: A fit that needs a robot pose error this many times the prior does not fit
+#: (:mod:`.rivals`); nor does a fit whose residual lies this many times above what the
+#: stated errors explain, where a target's fit check is soft (the line's).
+MISFIT_ROBOT_EXCESS = 10.0
 
 
 @dataclass(frozen=True)
