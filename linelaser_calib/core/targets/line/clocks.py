@@ -12,8 +12,8 @@ the line's own); the F-test of that one-parameter regression
 
 On the line target's test sweep (``line_features``, 248 corners) paired without its 12 ms
 latency, the regression finds about 6 ms and 58 % of the distances (p far below 1e-12);
-paired with the latency, 1 %; on issue 29's recording 1 twin (an arm erring by 0.2 mm by
-region, 29 corners paired right), 3-6 % (p 0.1-0.3).
+paired with the latency, 1 % (p about 0.01); on issue 29's recording 1 twin (an arm erring
+by 0.2 mm by region, 28-29 corners paired right), 3-6 % (p 0.06-0.18).
 """
 
 from __future__ import annotations
