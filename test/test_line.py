@@ -6,6 +6,7 @@ Everything is checked against the simulator's truth (:mod:`linelaser_calib.sim.l
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -232,8 +233,11 @@ def test_the_profilers_x_and_z_scales_are_estimated_where_they_are_off() -> None
 
 def test_unsynchronised_clocks_are_refused(features_run: LineSimulatedData) -> None:
     samples = _paired(features_run, 0.0)
-    with pytest.raises(ModelMismatch, match="clocks are not synchronised"):
+    with pytest.raises(ModelMismatch, match="clocks are not synchronised") as refused:
         calibrate_samples(samples, PipelineConfig(target="line", pairing=MOVING))
+    # The latency is 12 ms; the fit absorbs part of it, the regression finds the rest.
+    found = re.search(r"a clock offset of about ([-+]\d+\.\d) ms", str(refused.value))
+    assert found is not None and -12.0 < float(found.group(1)) < -3.0
 
 
 def _views(T_base_sensor: np.ndarray, X: np.ndarray, line: Line) -> list[CornerSample]:

@@ -39,6 +39,13 @@ class ModelMismatch(CalibrationError):
     """The target's model does not fit the data (another target, units, clocks, motion)."""
 
 
+class GrossMismatch(ModelMismatch):
+    """A failed fit check that no comparison with the rivals may keep: a misfit beyond any
+    robot or profiler error the target allows, or a recording of another kind that the
+    target recognises itself (a target's ``soft_fit_check`` keeps the others' results where
+    every rival is clearly worse)."""
+
+
 class TooFewFeatures(DegenerateError):
     """Too few profiles show the target's feature (an arc, a circle, a V).
 

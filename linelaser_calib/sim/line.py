@@ -14,23 +14,23 @@ number of waypoints of the sweep and its motion must be ``continuous``.
 
 Sweep (waypoint k of M, u = k / (M − 1) from 0 to 1): the laser plane meets the seam at
 ``seam_point_m + (2u − 1) · sweep_half_length_m · s``; there the seam point is seen at depth
-``depth_range_m`` (mid ± half, one period over the sweep) and at x = ``weave_fraction`` of
-the half fan width times sin(2π · ``weaves`` · u + φ) (the S). The orientation is the nominal
-view of the weld scene (sensor z into the groove, laser plane across the seam) tilted about
-the sensor x axis (tipping the laser plane along the seam) by up to ``tilt_along_rad``, about
-its y axis by up to ``tilt_across_rad`` and turned about the viewing axis by up to
-``yaw_rad``, each a sinusoid of its own frequency over the sweep; the phases φ are drawn from
-the seed. The robot runs the rig's continuous motion through the waypoints (a spline, quintic
-ease-in/out); sweeps in which a profile fails to show both flanks with ``min_flank_points``
-returns, or the sensor or flange comes within the rig's ``clearance_m`` of a flank plane, are
-drawn again; so, with ``determined_sigma_m`` set, are sweeps that leave a hand-eye direction
-poorly determined: the line target's own information of the hand-eye from the true corners,
-each known to :data:`PLANNED_CORNER_SIGMA_M`, with the line and both profiler scales
-marginalised, must give every direction a 1σ (rotations times the corners' lever) within
-``determined_sigma_m``. The phases alone decide much: on ``line_ridge`` the first draws of
-seeds 0-9 give a worst 1σ of 0.69-2.03 mm there, and the seeds beyond 1.2 mm (0, 7, 8)
-were refused as undetermined (the target refuses at 1 mm; its corner fits are about 17 µm,
-so 0.9 mm here is about 0.75 mm there).
+``depth_range_m`` (mid ± half, one period over the sweep) and at x = ``weave_centre`` +
+``weave_fraction`` · sin(2π · ``weaves`` · u + φ) of the half fan width (the S). The
+orientation is the nominal view of the weld scene (sensor z into the groove, laser plane
+across the seam) tilted about the sensor x axis (tipping the laser plane along the seam) by
+up to ``tilt_along_rad``, about its y axis by up to ``tilt_across_rad`` and turned about the
+viewing axis by up to ``yaw_rad``, each a sinusoid of its own frequency over the sweep; the
+phases φ are drawn from the seed. The robot runs the rig's continuous motion through the
+waypoints (a spline, quintic ease-in/out); sweeps in which a profile fails to show both
+flanks with ``min_flank_points`` returns, or the sensor or flange comes within the rig's
+``clearance_m`` of a flank plane, are drawn again; so, with ``determined_sigma_m`` set, are
+sweeps that leave a hand-eye direction poorly determined: the line target's own information
+of the hand-eye from the true corners, each known to :data:`PLANNED_CORNER_SIGMA_M`, with
+the line and both profiler scales marginalised, must give every direction a 1σ (rotations
+times the corners' lever) within ``determined_sigma_m``. The phases alone decide much: on
+``line_ridge`` the first draws of seeds 0-9 give a worst 1σ of 0.69-2.03 mm there, and the
+seeds beyond 1.2 mm (0, 7, 8) were refused as undetermined (the target refuses at 1 mm; its
+corner fits are about 17 µm, so 0.9 mm here is about 0.75 mm there).
 
 Timing: the flange-pose stream runs at the rig's ``robot_rate_hz``, each stamp off by a
 Gaussian ``stamp_jitter_s``; profiles are stamped ``latency_s`` late (the rig's).
@@ -128,7 +128,11 @@ class LineScenario(GrooveScene):
     weaves : float
         Sideways periods of the S over the sweep.
     weave_fraction : float
-        Largest |x| of the seam point as a share of the half fan width, in [0, 1).
+        Amplitude of the seam point's x about ``weave_centre``, a share of the half fan
+        width, in [0, 1).
+    weave_centre : float
+        Mean x of the seam point, a share of the half fan width (signed; 0: the middle of
+        the line); ``|weave_centre| + weave_fraction`` < 1.
     depth_range_m : (2,) floats
         Depth of the seam point in the sensor, m.
     tilt_along_rad, tilt_across_rad, yaw_rad : float
@@ -169,6 +173,7 @@ class LineScenario(GrooveScene):
     sweep_half_length_m: float = 0.08
     weaves: float = 3.0
     weave_fraction: float = 0.65
+    weave_centre: float = 0.0
     depth_range_m: tuple[float, float] = (0.08, 0.135)
     tilt_along_rad: float = math.radians(30.0)
     tilt_across_rad: float = math.radians(15.0)
@@ -197,6 +202,10 @@ class LineScenario(GrooveScene):
             "sweep_half_length_m must be shorter than seam_half_length_m",
         )
         require(0.0 <= self.weave_fraction < 1.0, "weave_fraction must be in [0, 1)")
+        require(
+            abs(self.weave_centre) + self.weave_fraction < 1.0,
+            "|weave_centre| + weave_fraction must be < 1",
+        )
         lo, hi = self.depth_range_m
         require(0.0 < lo <= hi, "depth_range_m must satisfy 0 < low <= high")
         for name in ("tilt_along_rad", "tilt_across_rad", "yaw_rad"):
@@ -238,12 +247,13 @@ def sweep_waypoints(scenario: LineScenario, groove: Groove, phases: FloatArray) 
     R0 = nominal_view(groove)
     lo, hi = scenario.depth_range_m
     depth = 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.sin(2.0 * math.pi * u + phases[0])
+    half_width = depth * math.tan(rig.fan_half_angle_rad)
     x = (
         scenario.weave_fraction
         * depth
         * math.tan(rig.fan_half_angle_rad)
         * np.sin(2.0 * math.pi * scenario.weaves * u + phases[1])
-    )
+    ) + scenario.weave_centre * half_width
     tilt_x = scenario.tilt_along_rad * np.sin(2.0 * math.pi * _TILT_X_CYCLES * u + phases[2])
     tilt_y = scenario.view_tilt_rad + scenario.tilt_across_rad * np.sin(
         2.0 * math.pi * _TILT_Y_CYCLES * u + phases[3]

@@ -45,8 +45,9 @@ refinement, target class) whose ``__init__.py`` exposes ``TARGET``, an object sa
    full model may explain its recordings instead) and ``model_doubt(features, config)`` (why
    its own per-profile shapes put its model in doubt, or None), with which
    :func:`~linelaser_calib.core.targets.rivals.check_model` judges the whole recording, and
-   ``soft_fit_check`` (True where a real profiler's shape error alone may fail its fit check:
-   a failed check that no rival explains better is then kept with a warning);
+   ``soft_fit_check`` (True where a real profiler's shape error or a real arm's regional
+   error alone may fail its fit check: a failed check that no rival explains better is then
+   kept with a warning, unless it raised :class:`~..errors.GrossMismatch`);
    ``with_samples`` (features that do not depend on the poses, re-paired:
    :func:`feature_repairing`); on the section, ``surface_map`` (its surface unrolled for the
    report, :func:`surface_map`) and ``feature_distances`` with ``feature_kind`` (the paper's
@@ -234,6 +235,10 @@ class ResultSection(Protocol):
 #: Robot variance factor (as a ratio of 1σ) beyond which the arm is said to be less accurate
 #: than the prior (σ_t, σ_r: its repeatability) assumes.
 ROBOT_PRIOR_EXCESS = 2.0
+#: A fit that needs a robot pose error this many times the prior does not fit
+#: (:mod:`.rivals`); nor does a fit whose residual lies this many times above what the
+#: stated errors explain, where a target's fit check is soft (the line's).
+MISFIT_ROBOT_EXCESS = 10.0
 
 
 @dataclass(frozen=True)

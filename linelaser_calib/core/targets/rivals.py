@@ -24,14 +24,16 @@ models (:func:`check_model`, called by the pipeline after the solve; and
    the rival named with both figures.
 3. **Otherwise** the data are still consistent with the target when a rival was fitted and
    every rival leaves :data:`CLEAR_FACTOR` times more. A fit that needs a robot error
-   :data:`MISFIT_ROBOT_EXCESS` times the prior is refused as a misfit unless they are (its
+   :data:`~.base.MISFIT_ROBOT_EXCESS` times the prior is refused as a misfit unless they are (its
    warnings say how large the error is). A failed fit check is refused too, in the target's
    own words with the figures; only a target whose check a real profiler's shape error
    alone may fail (its optional ``soft_fit_check``: the sphere's and the cylinder's residual
    against what each profile's own shape fit leaves) keeps a result whose check failed where
    every rival is clearly worse or none could be fitted at all (it then becomes a warning
    with the figures), but never one that failed on the robot's error (e.g. a sphere centre
-   given on the wrong side). A target that names no rival keeps its fit check's refusals.
+   given on the wrong side) nor a :class:`~..errors.GrossMismatch` (the line's corners 10
+   times farther from it than the noise explains, or lying around one point). A target
+   that names no rival keeps its fit check's refusals.
 
 Where the clock offset between profile and pose stamps is estimated (continuous scanning:
 :func:`~linelaser_calib.core.offset_search.search_clock_offset`), each rival that estimates
@@ -45,7 +47,7 @@ features are extracted once for its search and its fit (:mod:`.extraction`).
 Where too few profiles show the target's feature to solve at all (a ball's arcs given to the
 line target, a V given to the sphere; :class:`~linelaser_calib.core.errors.TooFewFeatures`),
 the rivals are fitted likewise, in the target's order: the first whose fit passes its own
-checks (fit check, convergence, a robot error within :data:`MISFIT_ROBOT_EXCESS` times the
+checks (fit check, convergence, a robot error within :data:`~.base.MISFIT_ROBOT_EXCESS` times the
 prior) and uses :data:`CLEAR_FACTOR` times as many profiles as show the target's feature
 explains the recording clearly better, and the refusal names it with both figures (the
 profiles each explains; the RMS distances of the rivals fitted). Otherwise the target's
@@ -61,19 +63,24 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import CalibrationError, ModelMismatch, TooFewFeatures
+from ..errors import CalibrationError, GrossMismatch, ModelMismatch, TooFewFeatures
 from ..geometry import FloatArray
 from ..types import Sample, SampleFit
 from . import get_target
-from .base import ROBOT_PRIOR_EXCESS, SolveContext, Target, TargetSolution, _no_progress
+from .base import (
+    MISFIT_ROBOT_EXCESS,
+    ROBOT_PRIOR_EXCESS,
+    SolveContext,
+    Target,
+    TargetSolution,
+    _no_progress,
+)
 from .extraction import Extractions
 
 #: A rival whose points' RMS distance from its fitted target is this many times smaller than
 #: the target's own wins clearly (and the target is clearly better than a rival leaving this
 #: many times more).
 CLEAR_FACTOR = 2.0
-#: A fit that needs a robot pose error this many times the prior does not fit.
-MISFIT_ROBOT_EXCESS = 10.0
 
 #: Where the clock offset is estimated: given a rival target and the target's samples, the
 #: same profiles paired with the flange poses at the rival's own best clock offset, and that
@@ -307,7 +314,8 @@ def check_model(
     # the target's check is a soft one.
     soft = bool(getattr(target, "soft_fit_check", False))
     unrivalled = soft and bool(declared) and (consistent or not judged)
-    if problem is not None and (robot_misfit or not unrivalled):
+    gross = isinstance(problem, GrossMismatch)
+    if problem is not None and (robot_misfit or gross or not unrivalled):
         raise ModelMismatch(_inserted(str(problem), compared))
     if robot_misfit and not consistent:
         assert robot is not None
@@ -340,7 +348,7 @@ def check_model(
 
 def _explains(rival: Target[Any], solution: TargetSolution) -> bool:
     """Whether a rival's fit passes its own checks: its fit check (default settings), its
-    refinement converged, and its robot error within :data:`MISFIT_ROBOT_EXCESS` times the
+    refinement converged, and its robot error within :data:`~.base.MISFIT_ROBOT_EXCESS` times the
     prior."""
     robot = solution.robot_error
     if not solution.converged or (robot is not None and robot.excess > MISFIT_ROBOT_EXCESS):

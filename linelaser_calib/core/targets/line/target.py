@@ -33,7 +33,7 @@ from typing import Any
 import numpy as np
 from scipy.special import chdtri
 
-from ...errors import DegenerateError, ModelMismatch, TooFewFeatures
+from ...errors import DegenerateError, GrossMismatch, ModelMismatch, TooFewFeatures
 from ...model_spread import with_held_sigma
 from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, implausible_scale_held, scale_significant
 from ...profile.corner import (
@@ -52,6 +52,7 @@ from ...solver import (
 )
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
+    MISFIT_ROBOT_EXCESS,
     Option,
     Progress,
     SolveContext,
@@ -60,6 +61,7 @@ from ..base import (
     mismatch_message,
     rejection_digest,
 )
+from .clocks import clock_evidence
 from .config import LineConfig
 from .features import extract_line_feature
 from .model import Line, line_from_points, solve_line_linear
@@ -201,6 +203,12 @@ class LineTarget:
     }
     #: Targets whose full model may explain a recording instead (:mod:`..rivals`).
     rivals: tuple[str, ...] = ("known_point", "sphere", "cylinder")
+    #: Its residual check (against the corner floor and the robot's stated per-pose error)
+    #: fails on a real arm's regional error alone (issue 29's recording 1 twin: the cell's
+    #: field, 0.2 mm 1σ, leaves 3-4 times the stated noise): kept with a warning where every
+    #: rival is clearly worse; a residual beyond :data:`~..base.MISFIT_ROBOT_EXCESS` times
+    #: the noise, or corners around one point, are refused all the same.
+    soft_fit_check = True
 
     def validate(
         self, sample: Sample, config: LineConfig, rng: np.random.Generator
@@ -454,19 +462,26 @@ class LineTarget:
 
     def check_fit(self, solution: TargetSolution, config: LineConfig) -> None:
         """Refuse corners that lie around one point (the known-point target's recording) or
-        far off one line (another target, units, clocks)."""
+        far off one line (another target, units, clocks); a default-method residual between
+        :data:`MISMATCH_FACTOR` and :data:`~..base.MISFIT_ROBOT_EXCESS` times the noise
+        the stated errors explain may be a real arm's regional error (``soft_fit_check``),
+        unless a clock offset explains it (:func:`.clocks.clock_evidence`)."""
         one_point = _one_point(solution)
         if one_point is not None:
-            raise ModelMismatch(one_point)
-        factor = PAPER_MISMATCH_FACTOR if solution.method == "paper" else MISMATCH_FACTOR
+            raise GrossMismatch(one_point)
+        paper = solution.method == "paper"
+        factor = PAPER_MISMATCH_FACTOR if paper else MISMATCH_FACTOR
         if solution.rms_residual_m > factor * solution.noise_m:
-            raise ModelMismatch(
-                mismatch_message(
-                    self.title,
-                    solution.rms_residual_m,
-                    solution.noise_m,
-                    "the profiles' corners do not lie on one straight line",
-                )
+            gross = paper or solution.rms_residual_m > MISFIT_ROBOT_EXCESS * solution.noise_m
+            detail = "the profiles' corners do not lie on one straight line"
+            assert isinstance(solution.section, LineSection)
+            clocks = clock_evidence(
+                solution.sample_fits, solution.section, solution.T_flange_sensor
+            )
+            if clocks is not None and clocks.explains:
+                gross, detail = True, f"{detail}; {clocks.text()}"
+            raise (GrossMismatch if gross else ModelMismatch)(
+                mismatch_message(self.title, solution.rms_residual_m, solution.noise_m, detail)
             )
 
     def offset_cost(
