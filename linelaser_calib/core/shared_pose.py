@@ -53,16 +53,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
+from numpy.typing import NDArray
+from scipy.linalg import LinAlgError, cho_factor, cho_solve, qr
 from scipy.optimize import minimize_scalar
 from scipy.spatial.distance import cdist
 
 from .geometry import FloatArray
 from .regions import CLUSTER_ANGLE_RAD, CLUSTER_RADIUS_M, DISTANCE_BLOCK
-from .solver import Linearisation
+from .solver import BlockProblem, ChunkedProblem, Linearisation, SolverConfig, evaluate_loss
 
 #: Most views whose residuals the likelihood search uses (evenly spaced through the
 #: recording); the sandwich uses all. Each evaluation factors a (2N, 2N) matrix.
@@ -79,6 +80,11 @@ LENGTHS = 8
 NOISE_TOLERANCE = 0.02
 #: Bounds of the corner-noise variance factor s.
 NOISE_FACTOR_BOUNDS = (1e-3, 1e4)
+#: A view's direction in its points' space (:meth:`ViewsLinearised.from_points`) carries
+#: the Jacobians where its pivoted-QR diagonal exceeds this fraction of the view's first:
+#: beyond it the columns are combinations of the others to rounding (a cylinder's rotation
+#: about its axis, the same rigid motion as the hand-eye's and the pose's columns).
+RANK_TOLERANCE = 1e-8
 
 
 class ViewsLinearised(NamedTuple):
@@ -98,6 +104,9 @@ class ViewsLinearised(NamedTuple):
         Whitened residuals and Jacobian of the global parameters' prior (R may be 0).
     T_base_flange : ndarray, shape (M, 4, 4)
         The views' flange poses.
+    pose_rows : int or None
+        The first rows of each view that the likelihood search learns from (those its pose
+        correction moves, :meth:`from_points`); None for all. The 1σ uses all.
     """
 
     residuals: FloatArray
@@ -107,6 +116,7 @@ class ViewsLinearised(NamedTuple):
     prior: FloatArray
     J_prior: FloatArray
     T_base_flange: FloatArray
+    pose_rows: int | None = None
 
     @classmethod
     def from_linearisation(cls, lin: Linearisation, T_base_flange: FloatArray) -> ViewsLinearised:
@@ -124,6 +134,91 @@ class ViewsLinearised(NamedTuple):
             np.zeros((0, lin.J_global.shape[2])) if J_prior is None else J_prior,
             T_base_flange,
         )
+
+    @classmethod
+    def from_points(
+        cls,
+        problem: BlockProblem[Any],
+        solution: Any,
+        corrections: FloatArray,
+        config: SolverConfig,
+        mask: NDArray[np.bool_],
+        T_base_flange: FloatArray,
+        factors: tuple[float, float] = (1.0, 1.0),
+    ) -> ViewsLinearised:
+        """The views of a refinement on many points per view (a cylinder's or a sphere's
+        profile) at its ``solution``, pose corrections (M, 6) in the local coordinates of
+        its retraction, reduced to what the model above can use of them.
+
+        Linearised at the solution (the Jacobians and robust weights of the reported
+        covariance), a view's K whitened point residuals with every pose correction at zero
+        are y = e − J_pose·δ̂ to first order, and y = X·Δx + A·e + n with n white. In an
+        orthonormal basis of the columns of A (the first :attr:`pose_rows`: the views'
+        largest rank, :data:`RANK_TOLERANCE`, pivoted QR on the view's points, ``mask``
+        (M, K)) and then of what X adds to them, the rows keep everything the pose error and
+        the globals move, and their noise stays white; the points' space beyond is not used.
+        The likelihood search learns (s, ℓ) from the first rows alone: where the globals
+        alone move a view (a cylinder's radius against the along-line scale, nearly the same
+        stretch of one arc), a real profile's shape error shows many times the white noise,
+        which is the globals' concern and no sign of the robot's error. ``factors``: the
+        refinement's sensor and robot variance factors (s_s², s_r²), whose model the
+        per-view estimate's 1σ is (V₀ = s_s² + s_r²·A Aᵀ, in units of s_s² here)."""
+        chunks = (
+            problem.linearise_chunks(solution)
+            if isinstance(problem, ChunkedProblem)
+            else [problem.linearise(solution)]
+        )
+        sensor, robot = math.sqrt(factors[0]), math.sqrt(factors[1])
+        views: list[tuple[FloatArray, FloatArray, FloatArray]] = []  # y, X, A of each view
+        row, first = 0, None
+        for lin in chunks:
+            first = lin if first is None else first  # the global prior's, as the solver's
+            e = lin.residuals.points
+            weights = np.sqrt(evaluate_loss(e, config)[1]) / sensor
+            y = e - np.einsum("mkl,ml->mk", lin.J_local, corrections[row : row + len(e)])
+            sigma = robot / first.pose_prior_sqrt_information
+            for j in range(len(e)):
+                rows = mask[row + j]
+                w = weights[j, rows]
+                views.append(
+                    (
+                        y[j, rows] * w,
+                        lin.J_global[j, rows] * w[:, None],
+                        lin.J_local[j, rows] * sigma * w[:, None],
+                    )
+                )
+            row += len(e)
+        assert first is not None
+        pose = max(_rank(A) for _, _, A in views)
+        bases = []
+        for _, X, A in views:
+            Q_A = qr(A, mode="economic", pivoting=True)[0][:, :pose]
+            beyond = X - Q_A @ (Q_A.T @ X)
+            bases.append((Q_A, qr(beyond, mode="economic", pivoting=True)[0], _rank(beyond)))
+        rows_X = max(rank for _, _, rank in bases)
+        reduced = [
+            np.concatenate([Q_A, Q_X[:, :rows_X]], axis=1).T @ np.column_stack([y, X, A])
+            for (y, X, A), (Q_A, Q_X, _) in zip(views, bases, strict=True)
+        ]
+        stacked = np.stack(reduced)
+        G = stacked.shape[2] - 7
+        J_prior = first.global_prior_jacobian
+        return cls(
+            stacked[:, :, 0],
+            stacked[:, :, 1 : G + 1],
+            stacked[:, :, G + 1 :],
+            robot / first.pose_prior_sqrt_information,
+            first.residuals.global_prior,
+            np.zeros((0, G)) if J_prior is None else J_prior,
+            T_base_flange,
+            pose,
+        )
+
+
+def _rank(J: FloatArray) -> int:
+    """Numerical rank of a view's Jacobian (K, P) by pivoted QR (:data:`RANK_TOLERANCE`)."""
+    diagonal = np.abs(np.diag(qr(J, mode="r", pivoting=True)[0]))
+    return int(np.sum(diagonal > RANK_TOLERANCE * diagonal[0])) if diagonal.size else 0
 
 
 @dataclass(frozen=True)
@@ -242,10 +337,11 @@ def _learn(views: ViewsLinearised) -> tuple[float, float] | None:
     longest = float(D.max())
     if not positive.size or longest <= float(np.median(positive)):
         return None
+    rows = slice(None, views.pose_rows)
     likelihood = _Likelihood(
-        views.residuals[pick],
-        views.J_global[pick],
-        views.J_pose[pick],
+        views.residuals[pick, rows],
+        views.J_global[pick, rows],
+        views.J_pose[pick, rows],
         D,
         views.prior,
         views.J_prior,

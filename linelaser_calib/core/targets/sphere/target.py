@@ -55,6 +55,7 @@ from linelaser_calib.core.profile.along_line import (
     scale_significant,
 )
 from linelaser_calib.core.profile.cleaning import MAD_TO_SIGMA, clean_profile
+from linelaser_calib.core.shared_pose import SharedPoseError, shared_pose_error
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
 from linelaser_calib.core.targets.base import (
     Option,
@@ -490,6 +491,7 @@ class SphereTarget:
         )
         scale = 0.0
         warm = context.warm_start
+        learned = None if warm is None else warm.subset_start
         if warm is not None and isinstance(warm.section, SphereSection):
             section = warm.section
             T_start, centre, radius, side = (
@@ -583,6 +585,16 @@ class SphereTarget:
         kept = [features[k] for k in run.kept]
         state = outcome.state
         sigma = np.sqrt(np.maximum(np.diag(outcome.covariance), 0.0))
+        # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
+        # of the same estimate under it, where wider (a warm start's sharing as learned).
+        views = outcome.views()
+        shared = (
+            None
+            if views is None
+            else shared_pose_error(views, learned if isinstance(learned, SharedPoseError) else None)
+        )
+        if shared is not None:
+            sigma[:6] = np.maximum(sigma[:6], np.sqrt(np.diag(shared.covariance)[:6]))
         noise = float(np.median([f.circle.rms_m for f in kept]))
         if self._misfit(outcome.rms_m, noise, outcome.robot_sigma_t_m, config) is None:
             # A model that does not fit is refused by check_fit, not called degenerate. Whether
@@ -648,6 +660,7 @@ class SphereTarget:
             )
             if config.refine.estimate_variance_factors
             else None,
+            subset_start=shared,
         )
 
     def _diagnose(self, covariance: FloatArray, lever_m: float, config: SphereConfig) -> list[str]:
