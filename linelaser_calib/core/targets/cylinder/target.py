@@ -454,7 +454,9 @@ class CylinderTarget:
             refine=replace(config.refine, estimate_scale=free, estimate_depth_scale=depth),
         )
         subset = _subset_start(features, context)
-        learned = None if subset is None else subset[0].shared
+        # The robot's sharing as learned on the whole recording, or by the other scales' solve.
+        solved = subset[0] if subset is not None else None if again is None else again.subset_start
+        learned = solved.shared if isinstance(solved, _SubsetStart) else None
         seed_history: dict[str, Any] = {}
         screened: list[Rejection] = []
         warm = None
