@@ -59,7 +59,7 @@ def _per_view(target: str) -> Any:
     """A patch that leaves the robot's shared error out of ``target``'s 1σ."""
     if target == "cylinder":
         return mock.patch.object(
-            cylinder_target, "with_shared", lambda refined, _=None: (refined, None)
+            cylinder_target, "with_shared", lambda refined, _=None: (refined, None, None)
         )
     return mock.patch.object(sphere_target, "shared_pose_error", lambda *_: None)
 

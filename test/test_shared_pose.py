@@ -144,7 +144,7 @@ def _cylinder_z(per_anchor: int) -> dict[str, np.ndarray]:
     out = {}
     for name in ("per-view", "shared"):
         with (
-            mock.patch.object(cylinder_target, "with_shared", lambda r, _=None: (r, None))
+            mock.patch.object(cylinder_target, "with_shared", lambda r, _=None: (r, None, None))
             if name == "per-view"
             else nullcontext()
         ):

@@ -50,21 +50,17 @@ def shared_error(
 
 def with_shared(
     refined: RefineResult, learned: SharedPoseError | None = None
-) -> tuple[RefineResult, SharedPoseError | None]:
+) -> tuple[RefineResult, SharedPoseError | None, FloatArray | None]:
     """``refined`` with its hand-eye 1σ the wider, per axis, of its own and the one under
-    the robot's error as its views share it (:func:`shared_error`), and that sharing (None
-    without a solved problem or with too few views)."""
+    the robot's error as its views share it (:func:`shared_error`), that sharing and the
+    factors (6,) it widened the 1σ by (None without a solved problem or with too few
+    views)."""
     if refined.solved is None:
-        return refined, None
+        return refined, None, None
     shared = shared_error(refined.solved, learned)
     if shared is None:
-        return refined, None
-    sigma = np.sqrt(np.diag(shared.covariance)[:6])
-    return (
-        replace(
-            refined,
-            sigma_rotation_rad=np.maximum(refined.sigma_rotation_rad, sigma[:3]),
-            sigma_translation_m=np.maximum(refined.sigma_translation_m, sigma[3:]),
-        ),
-        shared,
-    )
+        return refined, None, None
+    own = np.r_[refined.sigma_rotation_rad, refined.sigma_translation_m]
+    sigma = np.maximum(own, np.sqrt(np.diag(shared.covariance)[:6]))
+    widened = replace(refined, sigma_rotation_rad=sigma[:3], sigma_translation_m=sigma[3:])
+    return widened, shared, sigma / own

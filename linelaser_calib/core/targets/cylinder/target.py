@@ -514,9 +514,9 @@ class CylinderTarget:
             joint.dropped = refined.dropped
             joint.warnings[:0] = [outcome.identifiability.describe()]
             refined = joint
-        shared = None
+        shared = shared_factors = None
         if outcome is None:
-            refined, shared = with_shared(refined, learned)
+            refined, shared, shared_factors = with_shared(refined, learned)
         rejections = screened + [
             Rejection(features[j].index, features[j].stamp_ns, "outlier", reason)
             for j, reason in refined.dropped
@@ -559,6 +559,7 @@ class CylinderTarget:
             identifiability=None if outcome is None else outcome.identifiability,
             placement_sections=[CylinderSection(p.cylinder, p.radius_estimated) for p in placed],
             sigma_widening=widening(refined.sample_dispersion),
+            sigma_shared=shared_factors,
             converged=refined.converged,
             robot_error=RobotError(
                 config.refine.robot_sigma_t_m * refined.robot_sigma_scale,

@@ -593,8 +593,9 @@ class SphereTarget:
             if views is None
             else shared_pose_error(views, learned if isinstance(learned, SharedPoseError) else None)
         )
+        own = sigma[:6].copy()
         if shared is not None:
-            sigma[:6] = np.maximum(sigma[:6], np.sqrt(np.diag(shared.covariance)[:6]))
+            sigma[:6] = np.maximum(own, np.sqrt(np.diag(shared.covariance)[:6]))
         noise = float(np.median([f.circle.rms_m for f in kept]))
         if self._misfit(outcome.rms_m, noise, outcome.robot_sigma_t_m, config) is None:
             # A model that does not fit is refused by check_fit, not called degenerate. Whether
@@ -652,6 +653,7 @@ class SphereTarget:
             sigma_widening=None
             if outcome.sample_dispersion is None
             else widening(outcome.sample_dispersion[:6]),
+            sigma_shared=None if shared is None else sigma[:6] / own,
             converged=outcome.converged,
             robot_error=RobotError(
                 outcome.robot_sigma_t_m,
