@@ -587,11 +587,19 @@ class SphereTarget:
         sigma = np.sqrt(np.maximum(np.diag(outcome.covariance), 0.0))
         # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
         # of the same estimate under it, where wider (a warm start's sharing as learned).
+        # Under the stated prior (each solve tightens its own): the self-check's subsets take
+        # the sharing as learned on the whole recording.
         views = outcome.views()
+        stated = config.refine
         shared = (
             None
             if views is None
-            else shared_pose_error(views, learned if isinstance(learned, SharedPoseError) else None)
+            else shared_pose_error(
+                views._replace(
+                    robot_sigma=np.repeat([stated.robot_sigma_r_rad, stated.robot_sigma_t_m], 3)
+                ),
+                learned if isinstance(learned, SharedPoseError) else None,
+            )
         )
         own = sigma[:6].copy()
         if shared is not None:
