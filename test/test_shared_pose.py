@@ -5,6 +5,7 @@ sphere's 1σ."""
 from __future__ import annotations
 
 from contextlib import nullcontext
+from functools import cache
 from unittest import mock
 
 import numpy as np
@@ -25,7 +26,7 @@ from linelaser_calib.core.types import Sample
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.presets import scenario_from_preset
 from linelaser_calib.sim.robot import draw_errors, error_transforms
-from linelaser_calib.sim.simulate import simulate
+from linelaser_calib.sim.simulate import SimulatedData, simulate
 
 #: Views of the synthetic sweep, their step (m) and the global parameters.
 VIEWS, STEP_M, GLOBALS = 60, 0.005, 6
@@ -131,11 +132,16 @@ def _regional(T: np.ndarray, seed: int, per_anchor: int, scenario: object) -> np
     return T @ error_transforms(scenario, errors, position // per_anchor, weight)  # type: ignore[arg-type]
 
 
+@cache
+def _small_cylinder() -> SimulatedData:
+    return simulate(scenario_from_preset("ur_scancontrol", n_poses=40, resolution=320), 1)
+
+
 def _cylinder_z(per_anchor: int) -> dict[str, np.ndarray]:
     """|error| / 1σ of a small cylinder recording (``ur_scancontrol``, 40 poses, seed 1) whose
     arm errs by region (``per_anchor`` 4) or per pose (1), with the per-view 1σ and with the
     shared error counted; and the two 1σ."""
-    data = simulate(scenario_from_preset("ur_scancontrol", n_poses=40, resolution=320), 1)
+    data = _small_cylinder()
     truth = data.truth
     T = _regional(truth.T_base_flange_true, 1, per_anchor, truth.scenario)
     samples = [Sample(k, p.stamp_ns, T[k], p.points) for k, p in enumerate(data.profiles)]
