@@ -390,8 +390,8 @@ def _learn(views: ViewsLinearised) -> tuple[float, float, float] | None:
     M = len(views.residuals)
     if M < MIN_FIT_VIEWS:
         return None
-    rows = views.residuals.shape[1] if views.pose_rows is None else views.pose_rows
-    most = min(MAX_FIT_VIEWS, MAX_FIT_ROWS // max(rows, 1))
+    per_view = views.residuals.shape[1] if views.pose_rows is None else views.pose_rows
+    most = min(MAX_FIT_VIEWS, MAX_FIT_ROWS // max(int(per_view), 1))
     pick = np.unique(np.linspace(0, M - 1, min(M, most)).round().astype(int))
     T = views.T_base_flange[pick]
     D = pose_separations(T, T)
