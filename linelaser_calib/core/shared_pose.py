@@ -1,13 +1,14 @@
 """The robot's pose error shared by neighbouring views, learned from the recording.
 
 A real arm errs by region: poses near each other share most of their error. A refinement
-that gives each view its own pose correction with an independent prior (the line's and the
-known point's, through :mod:`.solver`) is a fair estimator when the sharing is unknown but
+that gives each view its own pose correction with an independent prior (every target's,
+through :mod:`.solver`) is a fair estimator when the sharing is unknown but
 the wrong yardstick: where neighbouring views err alike, their residuals do not average the
 robot's error away, and the hand-eye scatters more than the per-view covariance says. This
 module knows no target: a target hands it its views linearised at the solution
-(:meth:`ViewsLinearised.from_linearisation`, the solver's own record) and reports the 1σ of
-:func:`shared_pose_error` where it is wider than its own.
+(:meth:`ViewsLinearised.from_linearisation`, the solver's own record; a cylinder's or a
+sphere's profile of many points reduced by :meth:`ViewsLinearised.from_points`) and reports
+the 1σ of :func:`shared_pose_error` where it is wider than its own.
 
 The model
 ---------
@@ -29,8 +30,19 @@ largest separation, and the stated prior bounds what it adds.
 
 (s, ℓ) are the restricted maximum-likelihood estimates (REML: the likelihood of the residuals
 with the global parameters integrated out, a loose hand-eye prior included as
-pseudo-observations): ℓ the best of :data:`LENGTHS` log-spaced lengths, s found at each; on
-at most :data:`MAX_FIT_VIEWS` views spread through the recording. The covariance
+pseudo-observations): ℓ the best of :data:`LENGTHS` log-spaced lengths, s found at each, the
+shortest unless a longer one is clearly likelier (:data:`SHARING_EVIDENCE`); on at most
+:data:`MAX_FIT_VIEWS` views spread through the recording. Where the robot's prior is itself
+an estimate (the cylinder's and the sphere's variance factor, judged over all six directions
+while a profile sees three or four of them), its amplitude a ≤ 1 is learned with them
+(V = s·I + a·exp(−d / ℓ) ∘ A Aᵀ): with a held at 1 a prior too large for the directions a
+profile sees was taken for a shared error, since an error shared by all views is absorbed by
+the hand-eye and leaves smaller residuals (``ur_scancontrol``, 40 poses, each erring alone:
+ℓ at up to 4 times the poses' spacing chosen on 4 of 10 seeds, the 1σ up to 2.7 times the
+per-view one; with a learned, 0.33-0.51 on every seed, 2 of 10 share over less than the
+spacing and the 1σ stays within 9 %). On the line a learned a traded against ℓ (an error
+shared by all views and a small one leave alike residuals) and took the worst of seed 6
+back to 3.77: its stated prior stands. The covariance
 of the refinement's per-view estimate under that model is the sandwich
 
     H⁻¹ · (Xᵀ V₀⁻¹ V V₀⁻¹ X + prior) · H⁻¹,    H = Xᵀ V₀⁻¹ X + prior,
@@ -46,27 +58,34 @@ it made independent per view the worst was 2.43); with the sharing learned here 
 there) gives about 1.9 and 2.4 on those two. The known point (20 views of a weld seam's
 point, the paper's pattern, the arm's error drawn at every 4th view and blended;
 ``bench/known_point_regional.py``): the worst of 20 seeds 4.11 -> 2.47; where each view
-errs alone its 1σ stays within 7 % of the per-view one.
+errs alone its 1σ stays within 7 % of the per-view one. The cylinder and the sphere:
+``bench/regional_sigma.py`` (docs/benchmarks.md).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
-from scipy.linalg import LinAlgError, cho_factor, cho_solve
-from scipy.optimize import minimize_scalar
+from numpy.typing import NDArray
+from scipy.linalg import LinAlgError, cho_factor, cho_solve, qr
+from scipy.optimize import minimize, minimize_scalar
 from scipy.spatial.distance import cdist
+from scipy.stats import chi2
 
 from .geometry import FloatArray
 from .regions import CLUSTER_ANGLE_RAD, CLUSTER_RADIUS_M, DISTANCE_BLOCK
-from .solver import Linearisation
+from .solver import BlockProblem, ChunkedProblem, Linearisation, SolverConfig, evaluate_loss
 
 #: Most views whose residuals the likelihood search uses (evenly spaced through the
-#: recording); the sandwich uses all. Each evaluation factors a (2N, 2N) matrix.
+#: recording); the sandwich uses all. Each evaluation factors a (KN, KN) matrix.
 MAX_FIT_VIEWS = 100
+#: Most rows (views times the rows each gives the search) the likelihood search uses: the
+#: line's 100 views (2 rows) and the known point's (3), a cylinder's 75 (4 rows: on the
+#: ``cluttered_camera`` twin 0.31 -> 0.18 s CPU a search, under load).
+MAX_FIT_ROWS = 300
 #: Fewest views for the search: fewer cannot tell a shared error from the corner noise.
 MIN_FIT_VIEWS = 12
 #: The shortest ℓ searched, as a fraction of the poses' median nearest-neighbour separation:
@@ -75,10 +94,27 @@ SHORTEST = 0.1
 #: Lengths ℓ tried, log-spaced from the shortest to the longest (neighbouring ones about a
 #: factor 2 apart on a sweep).
 LENGTHS = 8
-#: How closely log s is found at each length.
+#: The negative log-likelihood by which the best length must beat the shortest for the views
+#: to be taken as sharing their error: half the χ² 95 % point for one degree of freedom. On
+#: a cylinder whose arm errs per pose (``ur_scancontrol``, 40 poses, seed 1) ℓ at 1.3 times
+#: the poses' median spacing was 0.2 likelier than each view alone (the robot's amplitude
+#: held at its prior), and its 1σ 1.3 times the per-view one along flange y; with the error
+#: drawn at every 4th view and blended, 42 (22-38 over seeds 0-9, the amplitude learned).
+#: The line's and the known point's figures below are unchanged by it.
+SHARING_EVIDENCE = 0.5 * float(chi2.ppf(0.95, 1))
+#: How closely log s is found at each length (the robot's amplitude a fixed).
 NOISE_TOLERANCE = 0.02
+#: How closely the negative log-likelihood is minimised over (log s, log a) at each length.
+LEVELS_TOLERANCE = 1e-6
 #: Bounds of the corner-noise variance factor s.
 NOISE_FACTOR_BOUNDS = (1e-3, 1e4)
+#: Bounds of the robot error's variance factor a: the stated prior bounds it.
+AMPLITUDE_BOUNDS = (1e-3, 1.0)
+#: A view's direction in its points' space (:meth:`ViewsLinearised.from_points`) carries
+#: the Jacobians where its pivoted-QR diagonal exceeds this fraction of the view's first:
+#: beyond it the columns are combinations of the others to rounding (a cylinder's rotation
+#: about its axis, the same rigid motion as the hand-eye's and the pose's columns).
+RANK_TOLERANCE = 1e-8
 
 
 class ViewsLinearised(NamedTuple):
@@ -98,6 +134,10 @@ class ViewsLinearised(NamedTuple):
         Whitened residuals and Jacobian of the global parameters' prior (R may be 0).
     T_base_flange : ndarray, shape (M, 4, 4)
         The views' flange poses.
+    pose_rows : int or None
+        The first rows of each view that the likelihood search learns from (those its pose
+        correction moves, :meth:`from_points`), and the robot error's amplitude a with
+        them; None for all rows and a = 1 (the stated prior). The 1σ uses all.
     """
 
     residuals: FloatArray
@@ -107,6 +147,7 @@ class ViewsLinearised(NamedTuple):
     prior: FloatArray
     J_prior: FloatArray
     T_base_flange: FloatArray
+    pose_rows: int | None = None
 
     @classmethod
     def from_linearisation(cls, lin: Linearisation, T_base_flange: FloatArray) -> ViewsLinearised:
@@ -125,6 +166,94 @@ class ViewsLinearised(NamedTuple):
             T_base_flange,
         )
 
+    @classmethod
+    def from_points(
+        cls,
+        problem: BlockProblem[Any],
+        solution: Any,
+        corrections: FloatArray,
+        config: SolverConfig,
+        mask: NDArray[np.bool_],
+        T_base_flange: FloatArray,
+        factors: tuple[float, float] = (1.0, 1.0),
+    ) -> ViewsLinearised:
+        """The views of a refinement on many points per view (a cylinder's or a sphere's
+        profile) at its ``solution``, pose corrections (M, 6) in the local coordinates of
+        its retraction, reduced to what the model above can use of them.
+
+        Linearised at the solution (the Jacobians and robust weights of the reported
+        covariance), a view's K whitened point residuals with every pose correction at zero
+        are y = e − J_pose·δ̂ to first order, and y = X·Δx + A·e + n with n white. In an
+        orthonormal basis of the columns of A (the first :attr:`pose_rows`: the views'
+        largest rank, :data:`RANK_TOLERANCE`, pivoted QR on the view's points, ``mask``
+        (M, K)) and then of what X adds to them, the rows keep everything the pose error and
+        the globals move, and their noise stays white; the points' space beyond is not used.
+        The likelihood search learns (s, ℓ) from the first rows alone: where the globals
+        alone move a view (a cylinder's radius against the along-line scale, nearly the same
+        stretch of one arc), a real profile's shape error shows many times the white noise,
+        which is the globals' concern and no sign of the robot's error. ``factors``: the
+        refinement's sensor and robot variance factors (s_s², s_r²), whose model the
+        per-view estimate's 1σ is (V₀ = s_s² + s_r²·A Aᵀ, in units of s_s² here: the pose
+        Jacobian is times the stated prior and s_r, :attr:`robot_sigma` the stated prior, so
+        that the self-check's subsets, whose s_r differs a little, take the sharing as
+        learned)."""
+        chunks = (
+            problem.linearise_chunks(solution)
+            if isinstance(problem, ChunkedProblem)
+            else [problem.linearise(solution)]
+        )
+        sensor, robot = math.sqrt(factors[0]), math.sqrt(factors[1])
+        views: list[tuple[FloatArray, FloatArray, FloatArray]] = []  # y, X, A of each view
+        row, first = 0, None
+        for lin in chunks:
+            first = lin if first is None else first  # the global prior's, as the solver's
+            e = lin.residuals.points
+            weights = np.sqrt(evaluate_loss(e, config)[1]) / sensor
+            y = e - np.einsum("mkl,ml->mk", lin.J_local, corrections[row : row + len(e)])
+            sigma = robot / first.pose_prior_sqrt_information
+            for j in range(len(e)):
+                rows = mask[row + j]
+                w = weights[j, rows]
+                views.append(
+                    (
+                        y[j, rows] * w,
+                        lin.J_global[j, rows] * w[:, None],
+                        lin.J_local[j, rows] * sigma * w[:, None],
+                    )
+                )
+            row += len(e)
+        assert first is not None
+        pose = max(_rank(A) for _, _, A in views)
+        bases = []
+        for _, X, A in views:
+            Q_A = qr(A, mode="economic", pivoting=True)[0][:, :pose]
+            beyond = X - Q_A @ (Q_A.T @ X)
+            bases.append((Q_A, qr(beyond, mode="economic", pivoting=True)[0], _rank(beyond)))
+        rows_X = max(rank for _, _, rank in bases)
+        reduced = [
+            np.concatenate([Q_A, Q_X[:, :rows_X]], axis=1).T @ np.column_stack([y, X, A])
+            for (y, X, A), (Q_A, Q_X, _) in zip(views, bases, strict=True)
+        ]
+        stacked = np.stack(reduced)
+        G = stacked.shape[2] - 7
+        J_prior = first.global_prior_jacobian
+        return cls(
+            stacked[:, :, 0],
+            stacked[:, :, 1 : G + 1],
+            stacked[:, :, G + 1 :],
+            1.0 / first.pose_prior_sqrt_information,
+            first.residuals.global_prior,
+            np.zeros((0, G)) if J_prior is None else J_prior,
+            T_base_flange,
+            pose,
+        )
+
+
+def _rank(J: FloatArray) -> int:
+    """Numerical rank of a view's Jacobian (K, P) by pivoted QR (:data:`RANK_TOLERANCE`)."""
+    diagonal = np.abs(np.diag(qr(J, mode="r", pivoting=True)[0]))
+    return int(np.sum(diagonal > RANK_TOLERANCE * diagonal[0])) if diagonal.size else 0
+
 
 @dataclass(frozen=True)
 class SharedPoseError:
@@ -134,6 +263,8 @@ class SharedPoseError:
     ----------
     noise_factor : float
         s, the corners' variance over their fitted covariance.
+    amplitude : float
+        a, the robot's pose-error variance over the stated prior's (at most 1).
     length : float
         ℓ, the separation over which they share it, in the units of :func:`pose_separations`
         (1 is 5 cm of flange travel or 8 deg of flange turn).
@@ -145,6 +276,7 @@ class SharedPoseError:
     """
 
     noise_factor: float
+    amplitude: float
     length: float
     covariance: FloatArray
     robot_sigma: FloatArray
@@ -189,9 +321,9 @@ class _Likelihood:
         self.prior_gradient = J_prior.T @ prior
         self.prior_square = float(prior @ prior)
 
-    def __call__(self, log_s: float, log_length: float) -> float:
-        # V = s·I + exp(−d / ℓ) ∘ A Aᵀ
-        V = correlation(self.D, math.exp(log_length)) * self.pose
+    def __call__(self, log_s: float, log_length: float, log_amplitude: float = 0.0) -> float:
+        # V = s·I + a·exp(−d / ℓ) ∘ A Aᵀ
+        V = correlation(self.D, math.exp(log_length)) * (math.exp(log_amplitude) * self.pose)
         V[np.diag_indices_from(V)] += math.exp(log_s)
         try:
             factor = cho_factor(V)
@@ -208,33 +340,59 @@ class _Likelihood:
         return 0.5 * (log_det_V + float(log_det_H) + quadratic)
 
 
-def _best_noise(likelihood: _Likelihood, log_length: float) -> tuple[float, float]:
-    """The REML log s at a given ℓ and its negative likelihood."""
-    found = minimize_scalar(
-        lambda log_s: likelihood(log_s, log_length),
-        bounds=(math.log(NOISE_FACTOR_BOUNDS[0]), math.log(NOISE_FACTOR_BOUNDS[1])),
-        method="bounded",
-        options={"xatol": NOISE_TOLERANCE},
+def _best_levels(
+    likelihood: _Likelihood, log_length: float, free_amplitude: bool, start: FloatArray
+) -> tuple[FloatArray, float]:
+    """The REML (log s, log a) at a given ℓ and its negative likelihood; a = 1 (the stated
+    prior) unless ``free_amplitude``, searched from ``start`` then."""
+    bounds = (math.log(NOISE_FACTOR_BOUNDS[0]), math.log(NOISE_FACTOR_BOUNDS[1]))
+    if not free_amplitude:
+        noise = minimize_scalar(
+            lambda log_s: likelihood(log_s, log_length),
+            bounds=bounds,
+            method="bounded",
+            options={"xatol": NOISE_TOLERANCE},
+        )
+        return np.array([float(noise.x), 0.0]), float(noise.fun)
+    found = minimize(
+        lambda x: likelihood(float(x[0]), log_length, float(x[1])),
+        start,
+        method="L-BFGS-B",
+        bounds=[bounds, (math.log(AMPLITUDE_BOUNDS[0]), math.log(AMPLITUDE_BOUNDS[1]))],
+        options={"ftol": LEVELS_TOLERANCE},
     )
-    return float(found.x), float(found.fun)
+    return np.asarray(found.x, dtype=np.float64), float(found.fun)
 
 
-def _fit(likelihood: _Likelihood, shortest: float, longest: float) -> tuple[float, float]:
-    """The REML estimate (s, ℓ), ℓ on a grid of :data:`LENGTHS` log-spaced from ``shortest``
-    to ``longest``."""
+def _fit(
+    likelihood: _Likelihood, shortest: float, longest: float, free_amplitude: bool
+) -> tuple[float, float, float]:
+    """The REML estimate (s, a, ℓ), ℓ on a grid of :data:`LENGTHS` log-spaced from ``shortest``
+    to ``longest``; the shortest (each view alone) unless a longer one is clearly likelier
+    (:data:`SHARING_EVIDENCE`)."""
     grid = np.linspace(math.log(shortest), math.log(longest), LENGTHS)
-    fits = [(*_best_noise(likelihood, float(log_length)), float(log_length)) for log_length in grid]
-    log_s, _, log_length = min(fits, key=lambda fit: fit[1])
-    return math.exp(log_s), math.exp(log_length)
+    fits: list[tuple[FloatArray, float, float]] = []
+    start = np.array([0.0, math.log(0.5)])
+    for log_ell in grid:  # each length's search starts at the shorter one's levels
+        levels, cost = _best_levels(likelihood, float(log_ell), free_amplitude, start)
+        fits.append((levels, cost, float(log_ell)))
+        start = levels
+    levels, cost, log_length = min(fits, key=lambda fit: fit[1])
+    if fits[0][1] - cost < SHARING_EVIDENCE:
+        levels, _, log_length = fits[0]
+    return math.exp(levels[0]), math.exp(levels[1]), math.exp(log_length)
 
 
-def _learn(views: ViewsLinearised) -> tuple[float, float] | None:
-    """:func:`_fit` on at most :data:`MAX_FIT_VIEWS` views spread through the recording;
+def _learn(views: ViewsLinearised) -> tuple[float, float, float] | None:
+    """:func:`_fit` on at most :data:`MAX_FIT_VIEWS` views (and :data:`MAX_FIT_ROWS` rows)
+    spread through the recording;
     None where too few views or poses that do not differ leave nothing to learn."""
     M = len(views.residuals)
     if M < MIN_FIT_VIEWS:
         return None
-    pick = np.unique(np.linspace(0, M - 1, min(M, MAX_FIT_VIEWS)).round().astype(int))
+    per_view = views.residuals.shape[1] if views.pose_rows is None else views.pose_rows
+    most = min(MAX_FIT_VIEWS, MAX_FIT_ROWS // max(int(per_view), 1))
+    pick = np.unique(np.linspace(0, M - 1, min(M, most)).round().astype(int))
     T = views.T_base_flange[pick]
     D = pose_separations(T, T)
     nearest = np.sort(D, axis=1)[:, 1]
@@ -242,21 +400,26 @@ def _learn(views: ViewsLinearised) -> tuple[float, float] | None:
     longest = float(D.max())
     if not positive.size or longest <= float(np.median(positive)):
         return None
+    rows = slice(None, views.pose_rows)
     likelihood = _Likelihood(
-        views.residuals[pick],
-        views.J_global[pick],
-        views.J_pose[pick],
+        views.residuals[pick, rows],
+        views.J_global[pick, rows],
+        views.J_pose[pick, rows],
         D,
         views.prior,
         views.J_prior,
     )
-    return _fit(likelihood, SHORTEST * float(np.median(positive)), longest)
+    return _fit(
+        likelihood, SHORTEST * float(np.median(positive)), longest, views.pose_rows is not None
+    )
 
 
-def _meat(Z: FloatArray, A: FloatArray, T: FloatArray, s: float, length: float) -> FloatArray:
+def _meat(
+    Z: FloatArray, A: FloatArray, T: FloatArray, s: float, amplitude: float, length: float
+) -> FloatArray:
     """Xᵀ V₀⁻¹ V V₀⁻¹ X (G, G) from Z = V₀⁻¹ X per view (M, K, G): the views' pairs a block
     of rows at a time (no (M, M) array)."""
-    Q = np.einsum("mkg,mkl->mgl", Z, A)  # (M, G, 6): Z_jᵀ A_j
+    Q = np.einsum("mkg,mkl->mgl", Z, A) * math.sqrt(amplitude)  # (M, G, 6): Z_jᵀ A_j √a
     meat = s * np.einsum("mkg,mkh->gh", Z, Z)
     M = len(T)
     for start in range(0, M, DISTANCE_BLOCK):
@@ -276,22 +439,23 @@ def shared_pose_error(
     learned with the same robot prior.
     """
     if learned is not None and np.array_equal(learned.robot_sigma, views.robot_sigma):
-        noise, length = learned.noise_factor, learned.length
+        noise, amplitude, length = learned.noise_factor, learned.amplitude, learned.length
     else:
         fitted = _learn(views)
         if fitted is None:
             return None
-        noise, length = fitted
+        noise, amplitude, length = fitted
     # The refinement's model V₀ = I + diag_j(A_j A_jᵀ): Z_j = V₀_j⁻¹ X_j.
     A = views.J_pose
     Z = np.linalg.solve(np.eye(A.shape[1]) + A @ A.transpose(0, 2, 1), views.J_global)
     information = views.J_prior.T @ views.J_prior
     H = np.einsum("mkg,mkh->gh", views.J_global, Z) + information
-    meat = _meat(Z, A, views.T_base_flange, noise, length)
+    meat = _meat(Z, A, views.T_base_flange, noise, amplitude, length)
     H_inv = np.linalg.inv(H)
     covariance = H_inv @ (meat + information) @ H_inv
     return SharedPoseError(
         noise_factor=noise,
+        amplitude=amplitude,
         length=length,
         covariance=np.asarray(0.5 * (covariance + covariance.T)),
         robot_sigma=np.asarray(views.robot_sigma, dtype=np.float64),

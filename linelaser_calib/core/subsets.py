@@ -55,13 +55,17 @@ def statistical_sigma(solution: TargetSolution) -> FloatArray | None:
 
 def model_sigma(solution: TargetSolution) -> FloatArray | None:
     """(6,) noise-model 1σ [rotation, translation] of a solution (its statistical 1σ without
-    the widening for profiles that scatter it more than the model says), None if it has
-    none. The statistics below compare with the model; the widening is a floor of the
-    final 1σ, to which the model spread is added."""
+    the widening for profiles that scatter it more than the model says, nor for the robot's
+    error that neighbouring views share), None if it has none. The statistics below compare
+    with the model; the widening is a floor of the final 1σ, to which the model spread is
+    added."""
     sigma = statistical_sigma(solution)
-    if sigma is None or solution.sigma_widening is None:
+    if sigma is None:
         return sigma
-    return np.asarray(sigma / solution.sigma_widening)
+    for factors in (solution.sigma_widening, solution.sigma_shared):
+        if factors is not None:
+            sigma = sigma / factors
+    return np.asarray(sigma)
 
 
 @dataclass(frozen=True)

@@ -302,6 +302,11 @@ class TargetSolution:
         profiles scatter the hand-eye more than the noise model predicts
         (:func:`~linelaser_calib.core.solver.sample_dispersion`); None where not checked.
         The 1σ divided by them is the noise model's.
+    sigma_shared : ndarray, shape (6,), or None
+        Factors (>= 1, same order) by which the 1σ above was widened, after that, for the
+        robot's error that neighbouring views share (:mod:`~linelaser_calib.core.
+        shared_pose`); None where not counted that way. The self-check judges the robot's
+        error against the 1σ divided by both.
     sigma_model_spread : ndarray, shape (6,), or None
         The part of the 1σ above ([rotation, translation], added per axis in quadrature) that
         counts another model of the sensor the profiles cannot tell from the one solved: the
@@ -332,6 +337,7 @@ class TargetSolution:
     robot_error: RobotError | None = None
     converged: bool = True
     sigma_widening: FloatArray | None = None
+    sigma_shared: FloatArray | None = None
     sigma_model_spread: FloatArray | None = None
 
 

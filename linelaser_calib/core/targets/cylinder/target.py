@@ -51,6 +51,7 @@ from ...profile.along_line import (
     scale_significant,
 )
 from ...robot.joint_calibration import KinematicSetup
+from ...shared_pose import SharedPoseError
 from ...solver import widening
 from ...types import Rejection, Sample
 from ..base import (
@@ -89,6 +90,7 @@ from .refine import (
 )
 from .scales import estimates_scale, scale_verdict, with_depth_reading
 from .section import CylinderSection, read_cylinder_section
+from .shared import with_shared
 from .warm import refine_at_poses, refine_screened, refine_subset
 
 #: Points per profile in the refinements of the clock-offset search, and the most
@@ -113,11 +115,13 @@ PAPER_MISFIT_FACTOR = 100.0
 
 @dataclass(frozen=True)
 class _SubsetStart:
-    """A default solve's problem and solution (:attr:`TargetSolution.subset_start`) and the
-    row of each used feature (by profile index) in it."""
+    """A default solve's problem and solution (:attr:`TargetSolution.subset_start`), the
+    row of each used feature (by profile index) in it, and how its views share the robot's
+    error (:mod:`.shared`: taken as learned by the subsets' solves)."""
 
     solved: SolvedProblem
     rows: Mapping[int, int]
+    shared: SharedPoseError | None = None
 
 
 def _subset_start(
@@ -450,6 +454,9 @@ class CylinderTarget:
             refine=replace(config.refine, estimate_scale=free, estimate_depth_scale=depth),
         )
         subset = _subset_start(features, context)
+        # The robot's sharing as learned on the whole recording, or by the other scales' solve.
+        solved = subset[0] if subset is not None else None if again is None else again.subset_start
+        learned = solved.shared if isinstance(solved, _SubsetStart) else None
         seed_history: dict[str, Any] = {}
         screened: list[Rejection] = []
         warm = None
@@ -507,6 +514,9 @@ class CylinderTarget:
             joint.dropped = refined.dropped
             joint.warnings[:0] = [outcome.identifiability.describe()]
             refined = joint
+        shared = shared_factors = None
+        if outcome is None:
+            refined, shared, shared_factors = with_shared(refined, learned)
         rejections = screened + [
             Rejection(features[j].index, features[j].stamp_ns, "outlier", reason)
             for j, reason in refined.dropped
@@ -549,6 +559,7 @@ class CylinderTarget:
             identifiability=None if outcome is None else outcome.identifiability,
             placement_sections=[CylinderSection(p.cylinder, p.radius_estimated) for p in placed],
             sigma_widening=widening(refined.sample_dispersion),
+            sigma_shared=shared_factors,
             converged=refined.converged,
             robot_error=RobotError(
                 config.refine.robot_sigma_t_m * refined.robot_sigma_scale,
@@ -561,7 +572,9 @@ class CylinderTarget:
                 None
                 if outcome is not None or refined.solved is None
                 else _SubsetStart(
-                    refined.solved, {features[j].index: k for k, j in enumerate(refined.used)}
+                    refined.solved,
+                    {features[j].index: k for k, j in enumerate(refined.used)},
+                    shared,
                 )
             ),
         )

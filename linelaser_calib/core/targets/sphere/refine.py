@@ -62,7 +62,7 @@ robot's noise levels re-estimated from the residuals
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -74,6 +74,7 @@ from linelaser_calib.core.geometry import (
     transform_from_rotation_translation,
 )
 from linelaser_calib.core.profile.along_line import measured_to_true
+from linelaser_calib.core.shared_pose import ViewsLinearised
 from linelaser_calib.core.solver import (
     Linearisation,
     SolverConfig,
@@ -408,6 +409,9 @@ class SphereRefinement:
         question whether the poses suffice); None when it equals ``covariance``.
     scale_index : int or None
         Where the along-line scale is among the global numbers, when estimated.
+    problem : SphereProblem or None
+        The problem as solved last, with its solver's settings and the variance factors the
+        covariance was formed with, for :meth:`views`.
     """
 
     state: SphereState
@@ -422,6 +426,26 @@ class SphereRefinement:
     sample_dispersion: FloatArray | None = None
     model_covariance: FloatArray | None = None
     scale_index: int | None = None
+    problem: SphereProblem | None = None
+    solver: SolverConfig = field(default_factory=SolverConfig)
+    variance_factors: tuple[float, float] = (1.0, 1.0)
+
+    def views(self) -> ViewsLinearised | None:
+        """The views at the solution for :func:`~...shared_pose.shared_pose_error`
+        (:meth:`~...shared_pose.ViewsLinearised.from_points`; its covariance in the order of
+        :attr:`covariance`), None without the problem."""
+        problem = self.problem
+        if problem is None:
+            return None
+        return ViewsLinearised.from_points(
+            problem,
+            self.state,
+            self.state.corrections,
+            self.solver,
+            problem.valid,
+            problem.T_base_flange,
+            self.variance_factors,
+        )
 
     @property
     def rms_m(self) -> float:
@@ -506,4 +530,7 @@ def refine_sphere(
         cost_history=solution.cost_history,
         converged=solution.converged,
         scale_index=problem.scale_index,
+        problem=problem,
+        solver=solver_config,
+        variance_factors=(sensor, robot),
     )

@@ -55,6 +55,7 @@ from linelaser_calib.core.profile.along_line import (
     scale_significant,
 )
 from linelaser_calib.core.profile.cleaning import clean_profile
+from linelaser_calib.core.shared_pose import SharedPoseError, shared_pose_error
 from linelaser_calib.core.solver import Flag, dispersion_warning, solve_with_rejection, widening
 from linelaser_calib.core.targets.base import (
     Option,
@@ -535,6 +536,7 @@ class SphereTarget:
         )
         scale = 0.0
         warm = context.warm_start
+        learned = None if warm is None else warm.subset_start
         if warm is not None and isinstance(warm.section, SphereSection):
             section = warm.section
             T_start, centre, radius, side = (
@@ -620,6 +622,25 @@ class SphereTarget:
         kept = [features[k] for k in run.kept]
         state = outcome.state
         sigma = np.sqrt(np.maximum(np.diag(outcome.covariance), 0.0))
+        # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
+        # of the same estimate under it, where wider (a warm start's sharing as learned).
+        # Under the stated prior (each solve tightens its own): the self-check's subsets take
+        # the sharing as learned on the whole recording.
+        views = outcome.views()
+        stated = config.refine
+        shared = (
+            None
+            if views is None
+            else shared_pose_error(
+                views._replace(
+                    robot_sigma=np.repeat([stated.robot_sigma_r_rad, stated.robot_sigma_t_m], 3)
+                ),
+                learned if isinstance(learned, SharedPoseError) else None,
+            )
+        )
+        own = sigma[:6].copy()
+        if shared is not None:
+            sigma[:6] = np.maximum(own, np.sqrt(np.diag(shared.covariance)[:6]))
         noise = float(np.median([f.circle.rms_m for f in kept]))
         if self._misfit(outcome.rms_m, noise, outcome.robot_sigma_t_m, config) is None:
             # A model that does not fit is refused by check_fit, not called degenerate. Whether
@@ -677,6 +698,7 @@ class SphereTarget:
             sigma_widening=None
             if outcome.sample_dispersion is None
             else widening(outcome.sample_dispersion[:6]),
+            sigma_shared=None if shared is None else sigma[:6] / own,
             converged=outcome.converged,
             robot_error=RobotError(
                 outcome.robot_sigma_t_m,
@@ -685,6 +707,7 @@ class SphereTarget:
             )
             if config.refine.estimate_variance_factors
             else None,
+            subset_start=shared,
         )
 
     def _diagnose(self, covariance: FloatArray, lever_m: float, config: SphereConfig) -> list[str]:
