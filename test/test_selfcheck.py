@@ -16,7 +16,13 @@ from scipy.stats import chi2
 
 from linelaser_calib.cli import main
 from linelaser_calib.core.model_spread import with_model_spread
-from linelaser_calib.core.pipeline import PipelineConfig, _plain, run_pipeline
+from linelaser_calib.core.pipeline import (
+    PipelineConfig,
+    _plain,
+    _subset_context,
+    calibrate_samples,
+    run_pipeline,
+)
 from linelaser_calib.core.regions import (
     PER_POSE,
     PLAIN,
@@ -40,11 +46,13 @@ from linelaser_calib.core.subsets import region_jackknife, region_subsets, solve
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import RobotError, SolveContext, TargetSolution, configure
 from linelaser_calib.core.targets.cylinder.section import CylinderSection
-from linelaser_calib.core.types import FloatArray, Rejection, SampleFit
+from linelaser_calib.core.targets.known_point import KnownPointConfig
+from linelaser_calib.core.types import FloatArray, Rejection, Sample, SampleFit
 from linelaser_calib.io.results import result_to_dict
 from linelaser_calib.offline import calibrate_bag
 from linelaser_calib.settings import Front, render
 from linelaser_calib.sim import scenario_from_preset, simulate
+from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
 from linelaser_calib.summary import (
     format_summary,
     self_check_rows,
@@ -660,7 +668,7 @@ def test_the_plain_model_keeps_the_profiles_the_per_pose_model_kept(
         return toy_solve(subset)
 
     monkeypatch.setattr(target, "solve_default", solve_default)
-    plain = _plain(target, config, default, features, SolveContext())
+    plain = _plain(target, config, default, features, _subset_context(SolveContext(), default))
     assert plain is not None
     full, solve_subset = plain
     solve_subset(features[:4])
@@ -676,3 +684,36 @@ def test_the_plain_model_keeps_the_profiles_the_per_pose_model_kept(
         5, lambda kept, _: kept, lambda *_: [Flag(1.0, 0, "x")], 0.5, 2, False
     )
     assert (run.kept, run.dropped, run.left_flagged) == ([0, 1, 2, 3, 4], [], [])
+
+
+def test_the_self_checks_subsets_keep_every_profile_the_whole_solve_kept() -> None:
+    """Whether a profile is an outlier is decided once, by the solve of the whole recording:
+    each subset the self-check solves uses every kept profile it holds (issue 29). A weld-seam
+    run of 20 views, three of them 1.5 mm off, with room to set two aside
+    (max_outlier_fraction 0.1): the whole solve keeps view 2, and before, four of the five
+    solves without a region set it aside again (their own outlier rounds), so the held-out
+    figures judged another recording than the result's."""
+    data = simulate_weld(weld_scenario_from_preset("weld_seam_general"), 10)
+    T = data.truth.T_base_flange_recorded.copy()
+    T[[2, 6, 10], 1, 3] += 0.0015
+    samples = [Sample(k, p.stamp_ns, T[k], p.points) for k, p in enumerate(data.profiles)]
+    config = KnownPointConfig(
+        point_m=data.truth.taught_point_m,
+        max_outlier_fraction=0.1,
+        robot_sigma_r_rad=np.radians(0.002),
+    )
+    result = calibrate_samples(
+        samples,
+        PipelineConfig(
+            target="known_point",
+            target_config=config,
+            initial_T_flange_sensor=data.truth.T_flange_sensor,
+        ),
+    )
+    check = result.self_check
+    assert check is not None and check.regions >= 3
+    kept = set(result.samples_used)
+    assert len(kept) == 18 and {r.index for r in result.samples_rejected} < {2, 6, 10}
+    for held, solution in zip(check.region_indices, check.region_solutions, strict=True):
+        assert solution is not None
+        assert sorted(solution.samples_used) == sorted(kept - set(held))

@@ -371,7 +371,7 @@ def calibrate_samples(
         )
     check = None
     if config.method is Method.DEFAULT and config.self_check_folds:
-        quiet = replace(context, progress=_no_progress, warm_start=solution)
+        quiet = _subset_context(context, solution)
         check = self_check(
             features,
             solution,
@@ -428,6 +428,20 @@ def calibrate_samples(
     )
 
 
+def _subset_context(context: SolveContext, solution: TargetSolution) -> SolveContext:
+    """The context of the self-check's solves (the default model's subsets, the plain
+    model's solve of all and of subsets): started at ``solution``, silent, and setting no
+    profile aside (``screen_outliers`` False). They solve profiles the default solve kept,
+    and whether a profile is an outlier is decided once, by that solve on the whole
+    recording: a subset's own outlier rounds judge it against fewer profiles (a held-out
+    region's neighbours missing), and a subset that drops a profile the whole solve kept
+    makes the self-check judge another recording than the result's. The plain model's
+    residual holds the robot's error by design, so its outlier test would judge the robot,
+    not the profile (a twin of the real cylinder: two profiles whose robot error was the
+    recording's smallest stood out, robust z 8 and 7)."""
+    return replace(context, progress=_no_progress, warm_start=solution, screen_outliers=False)
+
+
 def _plain_config(target: Target[Any], target_config: Any) -> Any | None:
     """The target's config for the plain model (:mod:`.regions`): its per-pose robot-error
     prior :data:`~.regions.PLAIN_PRIOR_SCALE` times tighter; None when the default method
@@ -452,21 +466,17 @@ def _plain(
     """The plain model (:mod:`.regions`): its solve of the features the default ``solution``
     used, started there (a target with a subset start re-solves that solved problem under
     the tighter prior: no seed solve, point trimming or line-noise learning again), with the
-    default solve's rejections, and its solve of a subset, started at its own. Neither sets
-    a profile aside (``screen_outliers`` False): the plain model's residual holds the robot's
-    error by design, so its outlier test judged the robot (a twin of the real cylinder: two
-    profiles whose robot error was the recording's smallest stood out, robust z 8 and 7,
-    once the hand-eye had absorbed the error's common part). No model-fit check: the default
-    solve passed it on the same data. None when the target's default method takes no robot
-    prior or the plain solve fails."""
+    default solve's rejections, and its solve of a subset, started at its own; ``context``
+    is the self-check's (:func:`_subset_context`: neither sets a profile aside). No
+    model-fit check: the default solve passed it on the same data. None when the target's
+    default method takes no robot prior or the plain solve fails."""
     plain_config = _plain_config(target, target_config)
     if plain_config is None:
         return None
-    screened = replace(context, screen_outliers=False)
 
     def solve_from(start: TargetSolution) -> Callable[[list[Any]], TargetSolution]:
         def solve(subset: list[Any]) -> TargetSolution:
-            return target.solve_default(subset, plain_config, replace(screened, warm_start=start))
+            return target.solve_default(subset, plain_config, replace(context, warm_start=start))
 
         return solve
 

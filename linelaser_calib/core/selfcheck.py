@@ -1,9 +1,11 @@
 """Self-check of a calibration: accuracy in use by region, the model it picks, an honest 1σ.
 
 One machinery for every target, through the target protocol only (it never asks which target
-it is): the target's own default solve is run again on subsets of its features, and the
-held-out samples are judged by the section's :meth:`~linelaser_calib.core.targets.base.
-ResultSection.surface_distances`.
+it is): the target's own default solve is run again on subsets of the features the solution
+kept, every one of them used (whether a profile is an outlier was decided once, by the
+solve of the whole recording: :attr:`~linelaser_calib.core.targets.base.SolveContext.
+screen_outliers`), and the held-out samples are judged by the section's
+:meth:`~linelaser_calib.core.targets.base.ResultSection.surface_distances`.
 
 What is computed
 ----------------
@@ -466,8 +468,9 @@ def self_check(
     solution : TargetSolution
         The solve of all of them (default method, with a 1σ).
     solve : callable
-        The target's default solve of a subset of the features; a subset too small for it
-        raises a CalibrationError (the check is then skipped, or that part left out).
+        The target's default solve of a subset of the features the solution used, setting
+        none of them aside (the pipeline's: ``screen_outliers`` False); a subset too small
+        for it raises a CalibrationError (the check is then skipped, or that part left out).
     folds : int
         Interleaved folds, and the most regions of the workspace.
     flange_poses : callable, optional

@@ -375,11 +375,14 @@ class SolveContext:
     screen_outliers : bool
         False: the features are a set of profiles already screened, every one to be used;
         the solve sets none aside as an outlier (its outlier rounds do not run,
-        :func:`~linelaser_calib.core.solver.solve_with_rejection`'s ``screen``). The
-        self-check's plain model (:mod:`~linelaser_calib.core.regions`) solves the default
-        solve's profiles so: a profile's being an outlier is decided once, by the model of
-        the robot's error per pose, since the plain model's residual holds that error by
-        design and its outlier test would judge the robot, not the profile.
+        :func:`~linelaser_calib.core.solver.solve_with_rejection`'s ``screen``). Every
+        solve of the self-check (:mod:`~linelaser_calib.core.selfcheck`: the default
+        model's subsets, the plain model's solve of all and of subsets) solves the default
+        solve's kept profiles so: a profile's being an outlier is decided once, by the
+        model of the robot's error per pose on the whole recording. A subset's own rounds
+        would judge it against fewer profiles, and the held-out figures would then judge
+        another recording than the result's; the plain model's residual holds the robot's
+        error by design, so its outlier test would judge the robot, not the profile.
     """
 
     initial_T_flange_sensor: FloatArray | None = None

@@ -129,8 +129,8 @@ def refine_screened(
     """The refinement of some samples of a solved problem under another robot-error
     ``prior`` or scale model (:func:`refine_subset`, ``final`` as there), with the outlier
     rounds of :func:`.refine.refine_with_outlier_rejection` run again (another scale model
-    is another fit of the same robot-error model; the self-check's plain model keeps the
-    solved problem's samples instead, :attr:`~..base.SolveContext.screen_outliers`). Each
+    is another fit of the same robot-error model; the self-check's solves keep the solved
+    problem's samples instead, :attr:`~..base.SolveContext.screen_outliers`). Each
     round starts at the last one's solution. ``used`` and ``dropped`` index ``rows``.
 
     Raises
