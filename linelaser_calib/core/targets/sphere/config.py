@@ -28,7 +28,7 @@ class SphereConfig:
         hand-eye; ``fixed`` holds it at 1; ``auto`` (default) estimates it where the whole
         recording shows it clearly off 1 and holding it would move the hand-eye beyond its
         1σ, and otherwise holds it, the 1σ counting the move between the two
-        (:func:`estimates_scale`, :func:`~.target.with_scale_model_spread`).
+        (:func:`estimates_scale`, :func:`~.scales.with_scale_model_spread`).
     centre_side : str or None
         ``+y`` or ``-y``: the side of the laser plane (sensor y) the sphere centre lies on,
         when the user knows it; None resolves it from the data.
@@ -110,7 +110,7 @@ def estimates_scale(config: SphereConfig, warm_estimated: bool | None = None) ->
 
     ``auto`` then solves with the scale estimated as well and keeps that solution only where
     the whole recording shows the scale clearly off 1 and holding it would move the hand-eye
-    beyond its 1σ (:func:`~.target.with_scale_model_spread`). The real scans say why not
+    beyond its 1σ (:func:`~.scales.with_scale_model_spread`). The real scans say why not
     always: on the real 40 mm ball set with the radius free a free scale reads 0.99911 ±
     0.00012, clearly off 1, yet the centres then scatter more (0.262 mm against 0.244 mm
     held) and the free radius moves from the independent circle fits' 39.977 mm to
