@@ -344,6 +344,7 @@ def calibrate_samples(
         progress=progress,
         kinematics=config.kinematics,
         placements=others,
+        workers=config.workers,
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
     rival_samples = None if extracted is None else extracted.rival_samples
@@ -371,7 +372,8 @@ def calibrate_samples(
         )
     check = None
     if config.method is Method.DEFAULT and config.self_check_folds:
-        quiet = replace(context, progress=_no_progress, warm_start=solution)
+        # The self-check shares its subsets between the processes: each solve uses one.
+        quiet = replace(context, progress=_no_progress, warm_start=solution, workers=1)
         check = self_check(
             features,
             solution,

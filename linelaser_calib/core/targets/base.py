@@ -369,6 +369,9 @@ class SolveContext:
         solve's profiles so: a profile's being an outlier is decided once, by the model of
         the robot's error per pose, since the plain model's residual holds that error by
         design and its outlier test would judge the robot, not the profile.
+    workers : int
+        Processes a solve may use for its independent re-solves (the cylinder's two scale
+        models, :func:`~linelaser_calib.core.forked.map_forked`): 2 on the command line.
     """
 
     initial_T_flange_sensor: FloatArray | None = None
@@ -380,6 +383,7 @@ class SolveContext:
     placements: Sequence[Placement] = ()
     warm_start: TargetSolution | None = None
     screen_outliers: bool = True
+    workers: int = 1
 
 
 @dataclass(frozen=True)
