@@ -229,8 +229,9 @@ def test_a_scale_held_by_auto_is_solved_again_from_the_free_solve_as_from_scratc
 def test_the_self_check_of_the_command_line_equals_one_process(
     paper_samples: tuple[PipelineConfig, list[Sample]],
 ) -> None:
-    """The console script (its own process: a forked child on a second core) and one
-    process."""
+    """The console script (its own process: a forked child on a second core solves the
+    depth reading of ``--scale auto`` beside the held scales' re-solve, then half the
+    self-check's subsets) and one process."""
     config, samples = paper_samples
     one = calibrate_samples(samples, config)
     run = subprocess.run(
@@ -240,7 +241,15 @@ def test_the_self_check_of_the_command_line_equals_one_process(
         check=True,
         timeout=300,
     )
-    quality = json.loads(run.stdout)["quality"]
+    result = json.loads(run.stdout)
+    uncertainty = result["hand_eye"]["uncertainty"]
+    assert one.uncertainty_rotation_rad is not None and one.uncertainty_translation_m is not None
+    np.testing.assert_allclose(
+        uncertainty["rotation_rad"] + uncertainty["translation_m"],
+        np.concatenate([one.uncertainty_rotation_rad, one.uncertainty_translation_m]),
+        rtol=1e-6,
+    )
+    quality = result["quality"]
     assert one.self_check is not None
     assert quality["accuracy_in_use_m"] == pytest.approx(one.self_check.accuracy_in_use_m, rel=1e-6)
     jackknife = quality["self_check"]["jackknife_sigma"]

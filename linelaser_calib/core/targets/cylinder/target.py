@@ -379,7 +379,10 @@ class CylinderTarget:
         the x scale only with the radius free); a warm start keeps its own choice. With the
         radius free the x reading (kept, or held as not clearly off 1) is read as a depth
         scale too, and where that is the same stretch and moves the hand-eye beyond its 1σ,
-        the move counts in the 1σ (:func:`with_depth_reading`)."""
+        the move counts in the 1σ (:func:`with_depth_reading`). Both re-solves (the kept
+        scales' and the depth reading's) start at the first solve's solution, so with
+        ``context.workers`` 2 they run side by side, the depth reading in a forked child
+        (``ur_scancontrol``, 1,600 poses: 0.5 s each)."""
         radius = self._checked(features, config, context)
         warm = context.warm_start
         free, depth = estimates_scale(config)
@@ -412,8 +415,6 @@ class CylinderTarget:
             or abs(x) > PLAUSIBLE_SCALE_ERROR
             else (x, sigma_x)
         )
-        # The kept scales' solve and the depth reading's both start at this solution, so with
-        # ``context.workers`` 2 a forked child solves the depth reading meanwhile.
         other_config = (
             config
             if section.line_noise is not None  # weighed as this one: no noise to learn
