@@ -492,7 +492,7 @@ class CylinderTarget:
             )
             rows = [start.rows[f.index] for f in features]
             refined = (
-                refine_subset(start.solved, rows)
+                refine_subset(start.solved, rows, widen=False)  # the self-check's subsets
                 if same_prior
                 else refine_screened(start.solved, rows, config.refine)
                 if context.screen_outliers
