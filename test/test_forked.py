@@ -20,6 +20,7 @@ from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pairing import pair_profiles
 from linelaser_calib.core.pipeline import PipelineConfig, calibrate_samples
 from linelaser_calib.core.regions import PLAIN_PRIOR_SCALE
+from linelaser_calib.core.subsets import model_sigma
 from linelaser_calib.core.targets.base import SolveContext
 from linelaser_calib.core.types import Sample
 from linelaser_calib.io.bags import read_bag
@@ -139,10 +140,12 @@ def test_a_subset_solve_started_at_the_full_solve_equals_one_from_its_own_seed(
     assert rotation < 1e-3 * float(np.min(cold.sigma_rotation_rad))
     assert cold.samples_used == warm.samples_used
     # The cold solve's held x scale (--scale auto) also counts in its 1σ what the scale's
-    # own 1σ moves (with_held_sigma, about 3 % here); the warm one keeps the full solve's
-    # choice without that term: never wider, and within a few per cent.
+    # own 1σ moves (with_held_sigma, about 3 % here), and its 1σ is widened by the profiles'
+    # scatter; the warm one, a self-check subset, keeps the full solve's choice without that
+    # term and is not widened: never wider. The self-check reads its noise model's 1σ,
+    # which agrees within a few per cent.
     assert np.all(warm.sigma_translation_m <= cold.sigma_translation_m * (1.0 + 1e-4))
-    np.testing.assert_allclose(warm.sigma_translation_m, cold.sigma_translation_m, rtol=0.05)
+    np.testing.assert_allclose(model_sigma(warm), model_sigma(cold), rtol=0.05)
     # ... in a few linearisations, without a seed solve (whose cost history it lacks; the
     # cold solve's own scale-held re-solve is warm too, from its free solve).
     assert len(warm.history["refine_cost"]) <= 4
