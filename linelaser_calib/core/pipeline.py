@@ -344,6 +344,7 @@ def calibrate_samples(
         progress=progress,
         kinematics=config.kinematics,
         placements=others,
+        workers=config.workers,
     )
     solve = {Method.PAPER: target.solve_paper, Method.DEFAULT: target.solve_default}
     rival_samples = None if extracted is None else extracted.rival_samples
@@ -438,8 +439,11 @@ def _subset_context(context: SolveContext, solution: TargetSolution) -> SolveCon
     makes the self-check judge another recording than the result's. The plain model's
     residual holds the robot's error by design, so its outlier test would judge the robot,
     not the profile (a twin of the real cylinder: two profiles whose robot error was the
-    recording's smallest stood out, robust z 8 and 7)."""
-    return replace(context, progress=_no_progress, warm_start=solution, screen_outliers=False)
+    recording's smallest stood out, robust z 8 and 7). The self-check shares its subsets
+    between the processes, so each solve uses one (``workers`` 1)."""
+    return replace(
+        context, progress=_no_progress, warm_start=solution, screen_outliers=False, workers=1
+    )
 
 
 def _plain_config(target: Target[Any], target_config: Any) -> Any | None:

@@ -383,6 +383,9 @@ class SolveContext:
         would judge it against fewer profiles, and the held-out figures would then judge
         another recording than the result's; the plain model's residual holds the robot's
         error by design, so its outlier test would judge the robot, not the profile.
+    workers : int
+        Processes a solve may use for its independent re-solves (the cylinder's two scale
+        models, :func:`~linelaser_calib.core.forked.map_forked`): 2 on the command line.
     """
 
     initial_T_flange_sensor: FloatArray | None = None
@@ -394,6 +397,7 @@ class SolveContext:
     placements: Sequence[Placement] = ()
     warm_start: TargetSolution | None = None
     screen_outliers: bool = True
+    workers: int = 1
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import CalibrationError, DegenerateError, ModelMismatch, TooFewFeatures
+from ...forked import map_forked
 from ...geometry import FloatArray
 from ...model_check import shape_doubt
 from ...profile.along_line import (
@@ -53,6 +54,7 @@ from ...profile.along_line import (
 from ...robot.joint_calibration import KinematicSetup
 from ...shared_pose import SharedPoseError
 from ...solver import widening
+from ...subsets import lean
 from ...types import Rejection, Sample
 from ..base import (
     Option,
@@ -62,6 +64,7 @@ from ..base import (
     RobotError,
     SolveContext,
     TargetSolution,
+    _no_progress,
     mismatch_message,
     rejection_digest,
 )
@@ -380,7 +383,10 @@ class CylinderTarget:
         the x scale only with the radius free); a warm start keeps its own choice. With the
         radius free the x reading (kept, or held as not clearly off 1) is read as a depth
         scale too, and where that is the same stretch and moves the hand-eye beyond its 1σ,
-        the move counts in the 1σ (:func:`with_depth_reading`)."""
+        the move counts in the 1σ (:func:`with_depth_reading`). Both re-solves (the kept
+        scales' and the depth reading's) start at the first solve's solution, so with
+        ``context.workers`` 2 they run side by side, the depth reading in a forked child
+        (``ur_scancontrol``, 1,600 poses: 0.5 s each)."""
         radius = self._checked(features, config, context)
         warm = context.warm_start
         free, depth = estimates_scale(config)
@@ -404,32 +410,47 @@ class CylinderTarget:
             for value, sigma in estimates
         ]
         kept[0] = kept[0] or config.radius_m is not None
-        if kept != [free, depth]:
-            solution = self._solve_default(
-                features, config, context, radius, kept[0], kept[1], solution
+        x, sigma_x = estimates[0]
+        reading = (
+            None
+            if config.radius_m is not None
+            or x is None
+            or sigma_x is None
+            or abs(x) > PLAUSIBLE_SCALE_ERROR
+            else (x, sigma_x)
+        )
+        other_config = (
+            config
+            if section.line_noise is not None  # weighed as this one: no noise to learn
+            else replace(config, refine=replace(config.refine, learn_line_noise=False))
+        )
+        first = solution
+
+        def solve_again(job: str) -> TargetSolution:
+            if job == "kept":
+                return self._solve_default(
+                    features, config, context, radius, kept[0], kept[1], first
+                )
+            quiet = replace(context, progress=_no_progress)
+            return lean(
+                self._solve_default(features, other_config, quiet, radius, False, True, first)
             )
-            solution.warnings.extend(
+
+        jobs = ["kept"] * (kept != [free, depth]) + ["depth"] * (reading is not None)
+        outcomes = dict(zip(jobs, map_forked(solve_again, jobs, context.workers), strict=True))
+        again = outcomes.get("kept", first)
+        if isinstance(again, CalibrationError):
+            raise again
+        if "kept" in outcomes:
+            again.warnings.extend(
                 implausible_scale_held(value, axis)
                 for (value, _), axis in zip(estimates, ("along-line", "depth"), strict=True)
                 if value is not None and abs(value) > PLAUSIBLE_SCALE_ERROR
             )
-        x, sigma_x = estimates[0]
-        if (
-            config.radius_m is not None
-            or x is None
-            or sigma_x is None
-            or abs(x) > PLAUSIBLE_SCALE_ERROR
-        ):
-            return solution
-        kept_section = solution.section
-        assert isinstance(kept_section, CylinderSection)
-        if kept_section.line_noise is None:  # weighed as the kept solution: no noise to learn
-            config = replace(config, refine=replace(config.refine, learn_line_noise=False))
-        try:
-            other = self._solve_default(features, config, context, radius, False, True, solution)
-        except CalibrationError:
-            return solution
-        return with_depth_reading(solution, other, (x, sigma_x))
+        other = outcomes.get("depth")
+        if reading is None or other is None or isinstance(other, CalibrationError):
+            return again
+        return with_depth_reading(again, other, reading)
 
     def _solve_default(
         self,
@@ -478,7 +499,7 @@ class CylinderTarget:
             )
             rows = [start.rows[f.index] for f in features]
             refined = (
-                refine_subset(start.solved, rows)
+                refine_subset(start.solved, rows, widen=False)  # the self-check's subsets
                 if same_prior
                 else refine_screened(start.solved, rows, config.refine)
                 if context.screen_outliers

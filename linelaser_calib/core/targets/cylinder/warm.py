@@ -46,6 +46,7 @@ def refine_subset(
     rows: Sequence[int],
     prior: RefineConfig | None = None,
     final: bool = False,
+    widen: bool = True,
 ) -> RefineResult:
     """The refinement of some samples of a solved problem, started at its solution.
 
@@ -76,6 +77,13 @@ def refine_subset(
         of the gradient, which the subsets' stop leaves too large (``ur_scancontrol``, the x
         scale held: the hand-eye's z seemed to scatter 3.2 times the noise model's, 1.0
         converged), and the subsets' cost tolerance moves the 1σ by 0.1 %.
+    widen : bool
+        False: no 1σ widened by the profiles' scatter
+        (:func:`~linelaser_calib.core.solver.sample_dispersion`), for a solve whose 1σ is
+        read as the noise model's (the self-check's subsets:
+        :func:`~linelaser_calib.core.subsets.model_sigma` divides that widening out again;
+        at their loose stop the scatter reads too large anyway, see ``final``). It saves a
+        seventh of a subset's solve.
 
     Returns
     -------
@@ -97,6 +105,8 @@ def refine_subset(
             f"{full.config.min_samples}"
         )
     problem = full.take(keep)
+    if not widen:
+        problem = replace(problem, config=replace(problem.config, widen_by_dispersion=False))
     start = replace(at, omega=at.omega[keep], tau=at.tau[keep])
     # The solved problem's equations at its solution hold these samples' own: the first
     # linearisation, where the problem stays the same (its residuals, about a third of a
