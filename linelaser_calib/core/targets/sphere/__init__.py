@@ -9,8 +9,9 @@ solve and polish), :mod:`.refine` (point-to-sphere maximum likelihood on the sha
 from __future__ import annotations
 
 from linelaser_calib.core.targets.sphere.config import SphereConfig
+from linelaser_calib.core.targets.sphere.features import SphereFeature
 from linelaser_calib.core.targets.sphere.section import SphereSection
-from linelaser_calib.core.targets.sphere.target import SphereFeature, SphereTarget
+from linelaser_calib.core.targets.sphere.target import SphereTarget
 
 #: The registered sphere target.
 TARGET = SphereTarget()

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 from linelaser_calib.core.errors import CalibrationError, DegenerateError
 from linelaser_calib.core.model_spread import with_model_spread
@@ -17,9 +16,7 @@ from linelaser_calib.core.profile.along_line import (
     scale_significant,
 )
 from linelaser_calib.core.targets.base import TargetSolution
-
-if TYPE_CHECKING:
-    from linelaser_calib.core.targets.sphere.target import SphereFeature
+from linelaser_calib.core.targets.sphere.features import SphereFeature
 
 
 def read_as_depth(features: list[SphereFeature], scale: float) -> list[SphereFeature]:

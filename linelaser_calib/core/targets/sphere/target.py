@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -45,7 +45,7 @@ from linelaser_calib.core.errors import (
     TooFewFeatures,
 )
 from linelaser_calib.core.geometry import FloatArray
-from linelaser_calib.core.model_check import Comparison, effective_count, shape_doubt
+from linelaser_calib.core.model_check import effective_count, shape_doubt
 from linelaser_calib.core.observability import poor_directions, scaled_eigen
 from linelaser_calib.core.profile.along_line import (
     PLAUSIBLE_SCALE_ERROR,
@@ -71,6 +71,7 @@ from linelaser_calib.core.targets.sphere.circle import (
     fit_circle_ransac,
 )
 from linelaser_calib.core.targets.sphere.config import SphereConfig, estimates_scale
+from linelaser_calib.core.targets.sphere.features import SphereFeature
 from linelaser_calib.core.targets.sphere.model import (
     SIDE_LABELS,
     FixedPointSolution,
@@ -98,50 +99,12 @@ from linelaser_calib.core.targets.sphere.shape import (
     compare_circle,
     set_aside_outliers,
 )
-from linelaser_calib.core.types import Rejection, Sample, SampleFit
+from linelaser_calib.core.types import Rejection, Sample
 
 #: Circle radii may exceed a given sphere radius by this share plus
 #: :data:`RADIUS_MARGIN_M` (noise at the equator).
 RADIUS_MARGIN = 0.02
 RADIUS_MARGIN_M = 5e-4
-
-
-@dataclass(frozen=True)
-class SphereFeature:
-    """One profile's circle.
-
-    Attributes
-    ----------
-    index : int
-    stamp_ns : int
-    T_base_flange : ndarray, shape (4, 4)
-    circle : CircleFit
-    points : ndarray, shape (N, 3)
-        The circle's inlier points, sensor frame, m, in scan order.
-    n_effective : float
-        Independent points the circle's inlier residuals are worth
-        (:func:`~linelaser_calib.core.model_check.effective_count`): what its RMS residual
-        is an estimate over, when the recording judges it (:func:`.shape.set_aside_outliers`).
-    rival : Comparison or None
-        The comparison with the rival shapes when a rival fits this one profile clearly
-        better than its circle (a real profiler's smooth shape error makes a conic do so on
-        most profiles): it never rejects the profile, and only a majority of such profiles
-        puts the sphere in doubt (:meth:`SphereTarget.model_doubt`).
-    """
-
-    index: int
-    stamp_ns: int
-    T_base_flange: FloatArray
-    circle: CircleFit
-    points: FloatArray
-    n_effective: float
-    rival: Comparison | None = None
-
-    def record(self) -> SampleFit:
-        """The plain record kept in the result."""
-        return SampleFit(
-            self.index, self.stamp_ns, self.T_base_flange, self.points, self.circle.centre_xz
-        )
 
 
 def extract_feature(
