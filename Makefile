@@ -58,9 +58,12 @@ typecheck: venv
 # Two workers (pytest-xdist): the suite is mostly one process's work, and this machine has
 # two cores; the ROS tests of the two workers use disjoint DDS domains (test/ros_helpers.py).
 # The timed live replays (marked serial) then run alone: at 10x they need a free core.
+# One BLAS thread per test process, as the console scripts and the nodes run
+# (linelaser_calib/entry.py): the tests start nodes in their own process, and a second
+# OpenBLAS thread waiting for a core beside the other worker slowed one live solve 25x.
 unit: venv
-	$(PY) -m pytest -q -n 2 -m "not serial"
-	$(PY) -m pytest -q -m serial
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -n 2 -m "not serial"
+	OPENBLAS_NUM_THREADS=1 $(PY) -m pytest -q -m serial
 
 test: lint typecheck unit
 

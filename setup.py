@@ -41,8 +41,8 @@ setup(
     entry_points={
         "console_scripts": [
             "linelaser-calib = linelaser_calib.entry:main",
-            "collector = linelaser_calib.nodes.collector:main",
-            "calibration_service = linelaser_calib.nodes.calibration_service:main",
+            "collector = linelaser_calib.entry:collector",
+            "calibration_service = linelaser_calib.entry:calibration_service",
         ],
     },
 )

@@ -63,6 +63,19 @@ print(json.dumps({"code": code, "blas": blas, "threads": threads}))
 """
 
 
+NODE_PROBE = """
+import json, os, sys, types
+from linelaser_calib import entry
+seen = {}
+for name in ("collector", "calibration_service"):
+    module = types.ModuleType("linelaser_calib.nodes." + name)
+    module.main = lambda name=name: seen.setdefault(name, os.environ.get("OPENBLAS_NUM_THREADS")) and 0
+    sys.modules[module.__name__] = module
+    getattr(entry, name)()
+print(json.dumps({"blas": seen, "numpy": "numpy" in sys.modules}))
+"""
+
+
 def test_the_console_script_runs_one_blas_thread_unless_the_user_chose() -> None:
     for preset, expected in ((None, "1"), ("2", "2")):
         env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
@@ -73,3 +86,7 @@ def test_the_console_script_runs_one_blas_thread_unless_the_user_chose() -> None
         assert report["blas"] == expected
         if preset is None and report["threads"]:
             assert report["threads"] == [1], "the process runs BLAS threads"
+        # The nodes' console scripts set it too, before anything loads numpy.
+        nodes = probe(NODE_PROBE, env=env)
+        assert nodes["blas"] == {"collector": expected, "calibration_service": expected}
+        assert not nodes["numpy"]
