@@ -67,9 +67,12 @@ NODE_PROBE = """
 import json, os, sys, types
 from linelaser_calib import entry
 seen = {}
+def stand_in(name):
+    seen[name] = os.environ.get("OPENBLAS_NUM_THREADS")
+    return 0
 for name in ("collector", "calibration_service"):
     module = types.ModuleType("linelaser_calib.nodes." + name)
-    module.main = lambda name=name: seen.setdefault(name, os.environ.get("OPENBLAS_NUM_THREADS")) and 0
+    module.main = lambda name=name: stand_in(name)
     sys.modules[module.__name__] = module
     getattr(entry, name)()
 print(json.dumps({"blas": seen, "numpy": "numpy" in sys.modules}))
