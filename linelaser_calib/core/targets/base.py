@@ -376,13 +376,9 @@ class SolveContext:
         False: the features are a set of profiles already screened, every one to be used;
         the solve sets none aside as an outlier (its outlier rounds do not run,
         :func:`~linelaser_calib.core.solver.solve_with_rejection`'s ``screen``). Every
-        solve of the self-check (:mod:`~linelaser_calib.core.selfcheck`: the default
-        model's subsets, the plain model's solve of all and of subsets) solves the default
-        solve's kept profiles so: a profile's being an outlier is decided once, by the
-        model of the robot's error per pose on the whole recording. A subset's own rounds
-        would judge it against fewer profiles, and the held-out figures would then judge
-        another recording than the result's; the plain model's residual holds the robot's
-        error by design, so its outlier test would judge the robot, not the profile.
+        solve of the self-check solves the default solve's kept profiles so: a profile's
+        being an outlier is decided once, on the whole recording (why:
+        :func:`linelaser_calib.core.pipeline._subset_context`).
     workers : int
         Processes a solve may use for its independent re-solves (the cylinder's two scale
         models, :func:`~linelaser_calib.core.forked.map_forked`): 2 on the command line.
