@@ -211,16 +211,15 @@ class ViewsLinearised(NamedTuple):
             weights = np.sqrt(evaluate_loss(e, config)[1]) / sensor
             y = e - np.einsum("mkl,ml->mk", lin.J_local, corrections[row : row + len(e)])
             sigma = robot / first.pose_prior_sqrt_information
-            for j in range(len(e)):
-                rows = mask[row + j]
-                w = weights[j, rows]
-                views.append(
-                    (
-                        y[j, rows] * w,
-                        lin.J_global[j, rows] * w[:, None],
-                        lin.J_local[j, rows] * sigma * w[:, None],
-                    )
-                )
+            G = lin.J_global.shape[2]
+            w = weights[..., None]
+            block = np.concatenate([y[..., None], lin.J_global, lin.J_local * sigma], axis=2) * w
+            block[~mask[row : row + len(e)]] = 0.0  # a padded row: no row
+            # Each view's K rows by their triangular factor: an orthogonal map of its rows
+            # (a zero row changes nothing), so every basis, rank and reduced row below is
+            # the same, at the size of the columns, not of the points.
+            for R in np.linalg.qr(block, mode="r"):
+                views.append((R[:, 0], R[:, 1 : G + 1], R[:, G + 1 :]))
             row += len(e)
         assert first is not None
         pose = max(_rank(A) for _, _, A in views)

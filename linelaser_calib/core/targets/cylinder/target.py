@@ -489,6 +489,7 @@ class CylinderTarget:
                 seed_history = {k: v for k, v in again.history.items() if k != "refine_cost"}
             else:  # the other model's optimum is far from this one's: solved from the start
                 warm = None
+        unwidened = False
         if subset is not None:
             start, features, screened = subset
             context.progress("refine", 0, 1)
@@ -498,8 +499,11 @@ class CylinderTarget:
                 config.refine.robot_sigma_r_rad,
             )
             rows = [start.rows[f.index] for f in features]
+            # The self-check's subsets: it reads their noise-model 1σ (subsets.model_sigma),
+            # so neither the profiles' scatter nor the robot's shared error widens it here.
+            unwidened = same_prior
             refined = (
-                refine_subset(start.solved, rows, widen=False)  # the self-check's subsets
+                refine_subset(start.solved, rows, widen=False)
                 if same_prior
                 else refine_screened(start.solved, rows, config.refine)
                 if context.screen_outliers
@@ -536,7 +540,7 @@ class CylinderTarget:
             joint.warnings[:0] = [outcome.identifiability.describe()]
             refined = joint
         shared = shared_factors = None
-        if outcome is None:
+        if outcome is None and not unwidened:
             refined, shared, shared_factors = with_shared(refined, learned)
         rejections = screened + [
             Rejection(features[j].index, features[j].stamp_ns, "outlier", reason)
