@@ -30,8 +30,9 @@ from collections.abc import Callable
 
 import numpy as np
 from scipy.special import chdtri, ndtr
+from scipy.stats import median_abs_deviation
 
-from linelaser_calib.core.model_check import MAD_TO_SIGMA, robust_scale_m
+from linelaser_calib.core.model_check import robust_scale_m
 from linelaser_calib.core.solver import Flag
 from linelaser_calib.core.targets.sphere.refine import SphereRefinement
 from linelaser_calib.core.types import FloatArray
@@ -67,7 +68,7 @@ def _pose_flags(
     recording's (see the module docstring)."""
     centred = corrections - np.median(corrections, axis=0)
     stated = np.repeat([stated_r_rad, stated_t_m], 3)
-    scales = np.maximum(MAD_TO_SIGMA * np.median(np.abs(centred), axis=0), stated)
+    scales = np.maximum(median_abs_deviation(corrections, axis=0, scale="normal"), stated)
     limit = float(chdtri(6, 2.0 * ndtr(-sigmas)))
     return _beyond(
         np.sum((centred / scales) ** 2, axis=1),
