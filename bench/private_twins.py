@@ -301,26 +301,35 @@ def _perpendicular(d: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 
 def plain_cylinder_fit(
-    T: list[FloatArray], points: list[FloatArray], X0: FloatArray, start: Cylinder
+    T: list[FloatArray],
+    points: list[FloatArray],
+    X0: FloatArray,
+    start: Cylinder,
+    radius: float | None = None,
+    axis: bool = True,
 ) -> tuple[FloatArray, Cylinder]:
-    """Plain least squares over the hand-eye and a cylinder (radius free) on every fourth
-    point of every arc; the hand-eye and the cylinder."""
+    """Plain least squares over the hand-eye and a cylinder (radius free unless given; the
+    axis held at ``start``'s unless ``axis``) on every fourth point of every arc; the
+    hand-eye and the cylinder."""
     u, v = _perpendicular(start.direction)
     thinned = [p[::4] for p in points]
+    free = np.r_[np.ones(6), np.full(4, axis), [radius is None]].astype(bool)
+    x0 = np.concatenate([np.zeros(10), [start.radius if radius is None else radius]])
 
-    def unpack(x: FloatArray) -> tuple[FloatArray, Cylinder]:
+    def unpack(z: FloatArray) -> tuple[FloatArray, Cylinder]:
+        x = x0.copy()
+        x[free] = z
         X = X0.copy()
         X[:3, :3] = Rotation.from_rotvec(x[:3]).as_matrix() @ X0[:3, :3]
         X[:3, 3] += x[3:6]
         direction = Rotation.from_rotvec(x[6] * u + x[7] * v).apply(start.direction)
         return X, Cylinder(start.point + x[8] * u + x[9] * v, direction, x[10])
 
-    def residuals(x: FloatArray) -> FloatArray:
-        X, axis = unpack(x)
-        return _distances(_mapped(T, thinned, X), axis)
+    def residuals(z: FloatArray) -> FloatArray:
+        X, cylinder = unpack(z)
+        return _distances(_mapped(T, thinned, X), cylinder)
 
-    x0 = np.concatenate([np.zeros(10), [start.radius]])
-    return unpack(least_squares(residuals, x0, x_scale="jac").x)
+    return unpack(least_squares(residuals, x0[free], x_scale="jac").x)
 
 
 def _rms_from(

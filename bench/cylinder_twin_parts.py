@@ -1,0 +1,178 @@
+"""Where the real cylinder twin's held-out difference between the tool and a plain fit comes
+from (issue 29): each component of the two fits swapped, per held-out pose cluster.
+
+The twin is ``bench/private_twins.py --only cylinder``'s (``cluttered_camera`` with its 120
+profiles in 12 pose clusters, a 0.7 mm regional robot error field; seed 0); each cluster is
+held out in turn and scored as there: the held-out cluster's bar points (the simulator's
+labels) mapped with the recorded poses and a hand-eye, RMS distance from the TRUE bar, um.
+Per cluster the columns are that figure for:
+
+``tool``     the tool's hand-eye, its along-line scale removed from the points (as the
+             twin scores it); ``tool raw``: the same hand-eye on the raw points.
+``plain``    the plain fit (plain least squares over hand-eye, axis and free radius on the
+             labelled arcs); ``plain+s``: the same on points with the tool's scale removed;
+             ``plain R``: with the radius held at the truth.
+``R given``  the tool run with the true radius given (``--radius``).
+``true``     the true hand-eye (the robot's own share); ``common``: the true hand-eye with
+             the training poses' mean robot error (the regional field's common part, flange
+             frame) taken into it.
+``oracle``   the best constant hand-eye for the training poses: fitted to the TRUE bar on the
+             training clusters' labelled points (the floor of any hand-eye, judged here).
+
+Then each hand-eye's displacement at the bar (the sensor point 1 m out, the distance the
+bar is seen at) from the true one and from the ``common`` one, mm, and against each fit's
+own cylinder (``*``, what a real recording can measure) with the two fits' cylinders
+swapped. Run: ``OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/cylinder_twin_parts.py``
+(about 30 s of CPU).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+
+import numpy as np
+from private_twins import (
+    MIN_ARC_POINTS,
+    _arc_points,
+    _calibrate,
+    _rms_from,
+    error_over_sigma,
+    plain_cylinder_fit,
+)
+from scipy.spatial.transform import Rotation
+
+from linelaser_calib.core.geometry import FloatArray
+from linelaser_calib.core.pairing import PairingConfig, pair_profiles
+from linelaser_calib.core.targets.cylinder import CylinderSection
+from linelaser_calib.sim.presets import scenario_from_preset
+from linelaser_calib.sim.simulate import simulate
+
+CLUSTERS = 12
+#: The sensor-frame point at which a hand-eye's displacement is read: the bar's distance.
+AT_BAR_M = np.array([0.0, 0.0, 1.0, 1.0])
+
+
+def _mean_robot_error(T_recorded: FloatArray, T_true: FloatArray) -> FloatArray:
+    """The mean flange-frame robot error of poses (K, 4, 4): inv(recorded) @ true, its
+    translations averaged and its rotation vectors too (4, 4)."""
+    E = np.linalg.inv(T_recorded) @ T_true
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_matrix(E[:, :3, :3]).mean().as_matrix()
+    out[:3, 3] = E[:, :3, 3].mean(axis=0)
+    return out
+
+
+def _at_bar_mm(X: FloatArray, reference: FloatArray) -> float:
+    return float(np.linalg.norm((X @ AT_BAR_M - reference @ AT_BAR_M)[:3]) * 1e3)
+
+
+def _zero(value: object) -> object:
+    """A scenario field's zero: 0.0, or a tuple of zeros."""
+    return tuple(0.0 for _ in value) if isinstance(value, tuple) else 0.0
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--without",
+        nargs="*",
+        default=[],
+        help="scenario fields set to zero (edge_bias_m, robot_field_m, lateral_scale_error, ...)",
+    )
+    args = parser.parse_args()
+    scenario = scenario_from_preset("cluttered_camera", pose_clusters=CLUSTERS)
+    zero = {name: _zero(getattr(scenario, name)) for name in args.without}
+    data = simulate(replace(scenario, **zero), 0)
+    samples = list(pair_profiles(data.profiles, data.poses, PairingConfig()).samples)
+    truth, X_true, n = data.truth.cylinder, data.truth.T_flange_sensor, len(data.profiles)
+    arcs = {s.index: _arc_points(data, s.index).astype(np.float64) for s in samples}
+    full = _calibrate(samples, "cylinder", {}, PairingConfig())
+    assert not isinstance(full, str)
+    heads = ("tool", "tool raw", "plain", "plain+s", "plain R", "R given", "true", "common")
+    print(f"{'held':>4}" + "".join(f"{h:>9}" for h in (*heads, "oracle")), end="")
+    print(
+        "  at bar mm vs true: tool plain common oracle | vs common: tool plain"
+        "  * um: tool plain tool-Xp/Ap plain-Xp/At"
+    )
+    rows: list[FloatArray] = []
+    for cluster in range(CLUSTERS):
+        train = [s for s in samples if s.index * CLUSTERS // n != cluster]
+        labelled = [s for s in train if len(arcs[s.index]) >= MIN_ARC_POINTS]
+        held = [
+            s
+            for s in samples
+            if s.index * CLUSTERS // n == cluster and len(arcs[s.index]) >= MIN_ARC_POINTS
+        ]
+        tool = _calibrate(train, "cylinder", {}, PairingConfig())
+        given = _calibrate(train, "cylinder", {"radius_m": truth.radius}, PairingConfig())
+        assert not isinstance(tool, str) and not isinstance(given, str)
+        assert isinstance(tool.target, CylinderSection)
+        assert isinstance(given.target, CylinderSection)
+        T_train = [s.T_base_flange for s in labelled]
+        raw_train = [arcs[s.index] for s in labelled]
+        corrected_train = [tool.target.sensor_points(p) for p in raw_train]
+        X_p, A_p = plain_cylinder_fit(
+            T_train, raw_train, tool.T_flange_sensor, tool.target.cylinder
+        )
+        X_ps, _ = plain_cylinder_fit(
+            T_train, corrected_train, tool.T_flange_sensor, tool.target.cylinder
+        )
+        X_pR, _ = plain_cylinder_fit(
+            T_train, raw_train, tool.T_flange_sensor, tool.target.cylinder, radius=truth.radius
+        )
+        X_or, _ = plain_cylinder_fit(
+            T_train, raw_train, X_true, truth, radius=truth.radius, axis=False
+        )
+        index = np.array([s.index for s in train])
+        E_mean = _mean_robot_error(
+            data.truth.T_base_flange_recorded[index], data.truth.T_base_flange_true[index]
+        )
+        X_common = E_mean @ X_true
+        T_held = [s.T_base_flange for s in held]
+        raw = [arcs[s.index] for s in held]
+        fixed = [tool.target.sensor_points(p) for p in raw]
+        fixed_given = [given.target.sensor_points(p) for p in raw]
+        X_t, A_t = tool.T_flange_sensor, tool.target.cylinder
+        figures = (
+            _rms_from(T_held, fixed, X_t, truth),
+            _rms_from(T_held, raw, X_t, truth),
+            _rms_from(T_held, raw, X_p, truth),
+            _rms_from(T_held, fixed, X_ps, truth),
+            _rms_from(T_held, raw, X_pR, truth),
+            _rms_from(T_held, fixed_given, given.T_flange_sensor, truth),
+            _rms_from(T_held, raw, X_true, truth),
+            _rms_from(T_held, raw, X_common, truth),
+            _rms_from(T_held, raw, X_or, truth),
+        )
+        own = (
+            _rms_from(T_held, fixed, X_t, A_t),
+            _rms_from(T_held, raw, X_p, A_p),
+            _rms_from(T_held, fixed, X_t, A_p),
+            _rms_from(T_held, raw, X_p, A_t),
+        )
+        at_bar = [_at_bar_mm(X, X_true) for X in (X_t, X_p, X_common, X_or)]
+        at_bar += [_at_bar_mm(X, X_common) for X in (X_t, X_p)]
+        print(
+            f"{cluster:>4}"
+            + "".join(f"{f * 1e6:>9.1f}" for f in figures)
+            + "   "
+            + " ".join(f"{a:.2f}" for a in at_bar)
+            + "   "
+            + " ".join(f"{o * 1e6:.1f}" for o in own)
+            + f"   R tool {A_t.radius * 1e3:.3f} plain {A_p.radius * 1e3:.3f}"
+            + f" scale {tool.target.scale or 0.0:+.4f}"
+            + f"  |e|/1σ {error_over_sigma(tool, X_true):.2f}"
+        )
+        rows.append(np.r_[figures, at_bar])
+    a = np.array(rows)
+    print(
+        "median"
+        + "".join(f"{f * 1e6:>9.1f}" for f in np.median(a[:, :9], axis=0))
+        + "   "
+        + " ".join(f"{f:.2f}" for f in np.median(a[:, 9:], axis=0))
+    )
+
+
+if __name__ == "__main__":
+    main()
