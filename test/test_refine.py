@@ -11,7 +11,12 @@ import pytest
 from _cylinder_points import Scene, make_scene, perturbed_start
 
 from linelaser_calib.core.errors import DegenerateError, InputError
-from linelaser_calib.core.geometry import FloatArray, rotvec_from_matrix, transform_error
+from linelaser_calib.core.geometry import (
+    FloatArray,
+    matrix_from_rotvec,
+    rotvec_from_matrix,
+    transform_error,
+)
 from linelaser_calib.core.solver import normal_equations, solve_damped
 from linelaser_calib.core.solver.lm import linearised
 from linelaser_calib.core.targets.cylinder.config import RefineConfig
@@ -366,6 +371,26 @@ def test_input_validation() -> None:
         refine(scene.points, scene.T_base_flange, T0, cylinder0, radius_m=-0.02)
     with pytest.raises(InputError, match="loss"):
         RefineConfig(loss="cauchy")
+
+
+def test_a_robot_error_shared_by_every_pose_goes_into_the_hand_eye_whole() -> None:
+    # Issue 29, the real cylinder's twin: an arm whose every reported pose is off by one
+    # flange-frame offset D (here 4-5 times the per-pose prior) is calibrated to D·X, the
+    # hand-eye that is right wherever that arm scans; no recording can tell D from the
+    # hand-eye, so the per-pose corrections, which the prior pulls to zero, keep none of it.
+    scene, T0, cylinder0 = scene_and_start(3, n_poses=20, n_points=200)
+    D = np.eye(4)
+    D[:3, :3] = matrix_from_rotvec(np.deg2rad([0.02, -0.03, 0.01]))
+    D[:3, 3] = [4e-4, -5e-4, 3e-4]
+    off = scene.T_base_flange @ np.linalg.inv(D)
+    as_recorded = refine(scene.points, scene.T_base_flange, T0, cylinder0, radius_m=RADIUS)
+    shared = refine(scene.points, off, T0, cylinder0, radius_m=RADIUS)
+    rotation, translation = transform_error(shared.T_flange_sensor, D @ as_recorded.T_flange_sensor)
+    assert rotation < 1e-7 and translation < 1e-7
+    np.testing.assert_allclose(
+        shared.sigma_translation_m, as_recorded.sigma_translation_m, rtol=1e-3
+    )
+    np.testing.assert_allclose(shared.pose_corrections, as_recorded.pose_corrections, atol=1e-6)
 
 
 def test_profiles_that_err_alike_widen_the_sigma() -> None:
