@@ -2,13 +2,16 @@
 from (issue 29): each component of the two fits swapped, per held-out pose cluster.
 
 The twin is ``bench/private_twins.py --only cylinder``'s (``cluttered_camera`` with its 120
-profiles in 12 pose clusters, a 0.7 mm regional robot error field; seed 0); each cluster is
-held out in turn and scored as there: the held-out cluster's bar points (the simulator's
-labels) mapped with the recorded poses and a hand-eye, RMS distance from the TRUE bar, um.
-Per cluster the columns are that figure for:
+profiles in 12 pose clusters, a 0.7 mm regional robot error field; seed 0 unless
+``--seed``); each cluster is held out in turn and scored as there: the held-out cluster's
+bar points (the simulator's labels) mapped with the recorded poses and a hand-eye, RMS
+distance from the TRUE bar, um. Per cluster the columns are that figure for:
 
 ``tool``     the tool's hand-eye, its along-line scale removed from the points (as the
-             twin scores it); ``tool raw``: the same hand-eye on the raw points.
+             twin scores it); ``tool GLS``: the same moved by one generalised-least-squares
+             step under the robot error's sharing the tool learned (:func:`gls_hand_eye`, a
+             probe of an estimate under that model); ``tool raw``: the tool's on the raw
+             points.
 ``plain``    the plain fit (plain least squares over hand-eye, axis and free radius on the
              labelled arcs); ``plain+s``: the same on points with the tool's scale removed;
              ``plain R``: with the radius held at the truth.
@@ -20,10 +23,13 @@ Per cluster the columns are that figure for:
              training clusters' labelled points (the floor of any hand-eye, judged here).
 
 Then each hand-eye's displacement at the bar (the sensor point 1 m out, the distance the
-bar is seen at) from the true one and from the ``common`` one, mm, and against each fit's
-own cylinder (``*``, what a real recording can measure) with the two fits' cylinders
-swapped. Run: ``OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/cylinder_twin_parts.py``
-(about 30 s of CPU).
+bar is seen at) from the true one and from the ``common`` one, mm; against each fit's own
+cylinder (``*``, what a real recording can measure) with the two fits' cylinders swapped,
+um; and the tool's largest per-axis |error| / 1σ, from the true hand-eye and from
+``common``. ``--without edge_bias_m robot_field_m``
+sets those scenario fields to zero (attribution by cause). Run:
+``OPENBLAS_NUM_THREADS=1 .venv/bin/python bench/cylinder_twin_parts.py [--seed N]
+[--without FIELD ...]`` (about 1.5 min of CPU, 3.5 min wall on a loaded machine).
 """
 
 from __future__ import annotations
@@ -128,11 +134,12 @@ def main() -> None:
         default=[],
         help="scenario fields set to zero (edge_bias_m, robot_field_m, lateral_scale_error, ...)",
     )
+    parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     cylinder_shared.shared_pose_error = _recording_views  # the views of every solve
     scenario = scenario_from_preset("cluttered_camera", pose_clusters=CLUSTERS)
     zero = {name: _zero(getattr(scenario, name)) for name in args.without}
-    data = simulate(replace(scenario, **zero), 0)
+    data = simulate(replace(scenario, **zero), args.seed)
     samples = list(pair_profiles(data.profiles, data.poses, PairingConfig()).samples)
     truth, X_true, n = data.truth.cylinder, data.truth.T_flange_sensor, len(data.profiles)
     arcs = {s.index: _arc_points(data, s.index).astype(np.float64) for s in samples}
@@ -224,6 +231,7 @@ def main() -> None:
             + f"   R tool {A_t.radius * 1e3:.3f} plain {A_p.radius * 1e3:.3f}"
             + f" scale {tool.target.scale or 0.0:+.4f}"
             + f"  |e|/1σ {error_over_sigma(tool, X_true):.2f}"
+            + f" (vs common {error_over_sigma(tool, X_common):.2f})"
         )
         rows.append(np.r_[figures, at_bar])
     a = np.array(rows)
