@@ -5,10 +5,12 @@ sphere's 1σ."""
 from __future__ import annotations
 
 from contextlib import nullcontext
+from dataclasses import replace
 from functools import cache
 from unittest import mock
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.geometry import rotvec_from_matrix
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
@@ -23,6 +25,7 @@ from linelaser_calib.core.targets.cylinder import CylinderConfig
 from linelaser_calib.core.targets.cylinder import target as cylinder_target
 from linelaser_calib.core.targets.line.config import LineConfig
 from linelaser_calib.core.types import Sample
+from linelaser_calib.sim.clutter import field_offsets
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.presets import scenario_from_preset
 from linelaser_calib.sim.robot import draw_errors, error_transforms
@@ -173,3 +176,43 @@ def test_a_cylinder_whose_arm_errs_by_region_is_within_its_1_sigma() -> None:
     independent = _cylinder_z(1)
     ratio = independent["sigma shared"] / independent["sigma per-view"]
     assert np.all((ratio >= 1.0) & (ratio < 1.15)), ratio
+
+
+def test_a_line_whose_arm_errs_far_beyond_its_prior_is_within_3_sigma_and_warned() -> None:
+    """Issue 29's cell: a smooth field of the flange pose (0.4 mm, 0.02 deg, over 0.1 m) on
+    ``line_ridge``, about seven times the stated 0.03 mm. With the shared error bounded by the
+    stated prior seed 1 came out 7.1 of its 1σ off; learned as a smooth error over each
+    view's own it is within 3, every corner used, and a warning names the larger error."""
+    scenario = line_scenario_from_preset("line_ridge")
+    data = simulate_line(scenario, 1)
+    pairing = PairingConfig(
+        max_linear_speed_m_s=0.0,
+        max_angular_speed_rad_s=0.0,
+        clock_offset_s=-scenario.rig.latency_s,
+    )
+    samples = pair_profiles(data.profiles, data.poses, pairing).samples
+    T = np.stack([s.T_base_flange for s in samples])
+    field = [
+        field_offsets(
+            np.random.default_rng(seed),
+            replace(scenario.rig, robot_field_m=(size,) * 3, robot_field_length_m=0.1),
+            T[:, :3, 3],
+        )
+        for seed, size in ((1, 4e-4), (2, np.radians(0.02)))
+    ]
+    T[:, :3, :3] = Rotation.from_rotvec(field[1]).as_matrix() @ T[:, :3, :3]
+    T[:, :3, 3] += field[0]
+    samples = [replace(s, T_base_flange=t) for s, t in zip(samples, T, strict=True)]
+    target, config = get_target("line"), LineConfig()
+    features, _ = target.extract(samples, config, 0, lambda *_: None)
+    solution = target.solve_default(features, config, SolveContext(n_samples=len(samples)))
+    truth = data.truth.T_flange_sensor
+    error = np.r_[
+        rotvec_from_matrix(truth[:3, :3].T @ solution.T_flange_sensor[:3, :3]),
+        solution.T_flange_sensor[:3, 3] - truth[:3, 3],
+    ]
+    assert solution.sigma_rotation_rad is not None and solution.sigma_translation_m is not None
+    sigma = np.r_[solution.sigma_rotation_rad, solution.sigma_translation_m]
+    assert np.all(np.abs(error) <= 3.0 * sigma), error / sigma
+    assert len(solution.samples_used) == len(samples)
+    assert any("the robot's pose error is about" in w for w in solution.warnings)
