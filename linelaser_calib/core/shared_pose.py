@@ -52,8 +52,9 @@ prior (the floor, never less) plus a shared one of learned amplitude a ≥ 0,
 
 d_ij the Euclidean distance of :func:`pose_coordinates` (an arm's absolute-accuracy error is
 a smooth function of where it is: link lengths, joint offsets), a = 0 unless clearly likelier
-(:data:`SHARING_EVIDENCE`). The clearly likelier of the two models is taken, or, where neither
-is, the one whose hand-eye covariance is the wider. On the recording 1 twin
+(:data:`SHARING_EVIDENCE`). The 1σ is the two models' covariances weighed by their REML
+likelihoods (the law of total variance: the estimate is the same under both), so the
+clearly likelier one decides and a tie counts both. On the recording 1 twin
 (``bench/private_twins.py``, 12 seeds) the smooth model wins every seed (evidence 5-36 over
 each view alone) and the worst |error| / 1σ goes 9.58 -> 3.06; on ``line_ridge`` (its arm's
 error at the prior) the rough model stays on 9 of 10 seeds. A doubted view is judged
@@ -92,7 +93,14 @@ from scipy.stats import chi2
 
 from .geometry import FloatArray
 from .regions import CLUSTER_ANGLE_RAD, CLUSTER_RADIUS_M, DISTANCE_BLOCK
-from .solver import BlockProblem, ChunkedProblem, Linearisation, SolverConfig, evaluate_loss
+from .solver import (
+    BlockProblem,
+    ChunkedProblem,
+    Linearisation,
+    SolverConfig,
+    evaluate_loss,
+    recording_chi2_scale,
+)
 
 #: Most views whose residuals the likelihood search uses (evenly spaced through the
 #: recording); the sandwich uses all. Each evaluation factors a (KN, KN) matrix.
@@ -123,6 +131,8 @@ NOISE_TOLERANCE = 0.02
 LEVELS_TOLERANCE = 1e-6
 #: Bounds of the corner-noise variance factor s.
 NOISE_FACTOR_BOUNDS = (1e-3, 1e4)
+#: Models whose likelihood is below this share of the models' together are left out.
+MIN_WEIGHT = 1e-4
 #: Bounds of the robot error's variance factor a (:data:`ROUGH`): the stated prior bounds it.
 AMPLITUDE_BOUNDS = (1e-3, 1.0)
 #: Bounds of the shared error's variance factor a (:data:`SMOOTH`), over each view's own at the
@@ -298,7 +308,12 @@ class SharedPoseError:
         amplitude a, exp(−d² / 2ℓ²)).
     evidence : float
         For :data:`SMOOTH`: how much likelier (negative log-likelihood) the shared error makes
-        the recording than each view's error alone at the stated prior; 0 otherwise.
+        the recording than each view's error alone at the stated prior and than the
+        :data:`ROUGH` model; 0 otherwise.
+    models : tuple of Sharing
+        The models learned, weighed by their likelihood: the covariance is their weighted
+        sum (the law of total variance: the estimate is one); the fields above are the
+        likeliest's.
     """
 
     noise_factor: float
@@ -308,6 +323,7 @@ class SharedPoseError:
     robot_sigma: FloatArray
     kind: str = "rough"
     evidence: float = 0.0
+    models: tuple[Sharing, ...] = ()
 
     @property
     def robot_excess(self) -> float:
@@ -361,9 +377,11 @@ def correlation(separation: FloatArray, length: float) -> FloatArray:
     return np.asarray(np.exp(-separation / length))
 
 
-class _Sharing(NamedTuple):
+class Sharing(NamedTuple):
     """One model of the views' pose errors, as learned: its kind, s, a, ℓ, its negative
-    REML log-likelihood and (:data:`SMOOTH`) its evidence over each view's error alone."""
+    REML log-likelihood, (:data:`SMOOTH`) its evidence over each view's error alone and over
+    the :data:`ROUGH` model, and its weight among the models learned (their REML
+    likelihoods, normalised)."""
 
     kind: str
     noise: float
@@ -371,6 +389,7 @@ class _Sharing(NamedTuple):
     length: float
     cost: float = 0.0
     evidence: float = 0.0
+    weight: float = 1.0
 
     def weights(self, T_a: FloatArray, T_b: FloatArray, same: NDArray[np.bool_]) -> FloatArray:
         """(A, B) covariance of two sets of views' pose errors (flange poses (A, 4, 4) and
@@ -382,7 +401,7 @@ class _Sharing(NamedTuple):
 
 
 class _Likelihood:
-    """The negative restricted log-likelihood of a :class:`_Sharing`'s levels on some views."""
+    """The negative restricted log-likelihood of a :class:`Sharing`'s levels on some views."""
 
     def __init__(self, views: ViewsLinearised, rows: int | None = None) -> None:
         A = views.J_pose[:, :rows]
@@ -400,8 +419,8 @@ class _Likelihood:
         self.prior_gradient = views.J_prior.T @ views.prior
         self.prior_square = float(views.prior @ views.prior)
 
-    def matrix(self, sharing: _Sharing) -> FloatArray:
-        """V = s·I + W ∘ A Aᵀ (W the pose errors' covariance, :meth:`_Sharing.weights`)."""
+    def matrix(self, sharing: Sharing) -> FloatArray:
+        """V = s·I + W ∘ A Aᵀ (W the pose errors' covariance, :meth:`Sharing.weights`)."""
         if sharing.kind == ROUGH:
             W = sharing.amplitude * correlation(self.separation, sharing.length)
         else:
@@ -410,7 +429,7 @@ class _Likelihood:
         V[np.diag_indices_from(V)] += sharing.noise
         return V
 
-    def fitted(self, sharing: _Sharing) -> tuple[Any, FloatArray, FloatArray] | None:
+    def fitted(self, sharing: Sharing) -> tuple[Any, FloatArray, FloatArray] | None:
         """V's Cholesky factor, V⁻¹ X and the residuals with the globals fitted (y − X H⁻¹ g,
         the global prior counted); None where V or H is not positive definite."""
         try:
@@ -427,7 +446,7 @@ class _Likelihood:
         return factor, Vi_X, self.y - self.X @ step
 
     def __call__(self, kind: str, log_s: float, log_length: float, log_amplitude: float) -> float:
-        sharing = _Sharing(kind, math.exp(log_s), math.exp(log_amplitude), math.exp(log_length))
+        sharing = Sharing(kind, math.exp(log_s), math.exp(log_amplitude), math.exp(log_length))
         try:
             factor = cho_factor(self.matrix(sharing))
         except LinAlgError:
@@ -471,7 +490,7 @@ def _best_levels(
 
 def _fit(
     likelihood: _Likelihood, kind: str, shortest: float, longest: float, free_amplitude: bool
-) -> _Sharing:
+) -> Sharing:
     """The REML model of a kind, ℓ on a grid of :data:`LENGTHS` log-spaced from ``shortest``
     to ``longest``. :data:`ROUGH`: the shortest (each view alone) unless a longer one is
     clearly likelier (:data:`SHARING_EVIDENCE`). :data:`SMOOTH`: no shared error (a = 0)
@@ -494,13 +513,13 @@ def _fit(
         evidence = float(alone.fun) - cost
         if evidence < SHARING_EVIDENCE:
             noise = math.exp(float(alone.x))
-            return _Sharing(kind, noise, 0.0, math.exp(log_length), float(alone.fun), evidence)
-        return _Sharing(
+            return Sharing(kind, noise, 0.0, math.exp(log_length), float(alone.fun), evidence)
+        return Sharing(
             kind, math.exp(levels[0]), math.exp(levels[1]), math.exp(log_length), cost, evidence
         )
     if fits[0][1] - cost < SHARING_EVIDENCE:
         levels, cost, log_length = fits[0]
-    return _Sharing(kind, math.exp(levels[0]), math.exp(levels[1]), math.exp(log_length), cost)
+    return Sharing(kind, math.exp(levels[0]), math.exp(levels[1]), math.exp(log_length), cost)
 
 
 def _picked(views: ViewsLinearised) -> NDArray[np.intp]:
@@ -534,7 +553,7 @@ def _lengths(distance: FloatArray) -> tuple[float, float] | None:
     return SHORTEST * float(np.median(positive)), longest
 
 
-def _learn(views: ViewsLinearised) -> list[_Sharing]:
+def _learn(views: ViewsLinearised) -> list[Sharing]:
     """The models of the views' sharing worth a 1σ (see the module docstring), learned on
     :func:`_picked` views; none where too few views or poses that do not differ leave nothing
     to learn. Views of many points (:attr:`ViewsLinearised.pose_rows`): the :data:`ROUGH`
@@ -549,15 +568,21 @@ def _learn(views: ViewsLinearised) -> list[_Sharing]:
         return []
     if views.pose_rows is not None:
         return [_fit(likelihood, ROUGH, *rough, True)]
-    smooth = _lengths(likelihood.distance)
     fits = [_fit(likelihood, ROUGH, *rough, False)]
-    if smooth is not None:
-        fits.append(_fit(likelihood, SMOOTH, *smooth, False))
+    lengths = _lengths(likelihood.distance)
+    if lengths is not None:
+        smooth = _fit(likelihood, SMOOTH, *lengths, False)
+        fits.append(smooth._replace(evidence=min(smooth.evidence, fits[0].cost - smooth.cost)))
     best = min(fit.cost for fit in fits)
-    return [fit for fit in fits if fit.cost - best < SHARING_EVIDENCE]
+    weights = np.exp([best - fit.cost for fit in fits])
+    return [
+        fit._replace(weight=float(w / np.sum(weights)))
+        for fit, w in zip(fits, weights, strict=True)
+        if w / np.sum(weights) > MIN_WEIGHT
+    ]
 
 
-def _meat(Z: FloatArray, A: FloatArray, T: FloatArray, sharing: _Sharing) -> FloatArray:
+def _meat(Z: FloatArray, A: FloatArray, T: FloatArray, sharing: Sharing) -> FloatArray:
     """Xᵀ V₀⁻¹ V V₀⁻¹ X (G, G) from Z = V₀⁻¹ X per view (M, K, G): the views' pairs a block
     of rows at a time (no (M, M) array)."""
     Q = np.einsum("mkg,mkl->mgl", Z, A)  # (M, G, 6): Z_jᵀ A_j
@@ -571,7 +596,7 @@ def _meat(Z: FloatArray, A: FloatArray, T: FloatArray, sharing: _Sharing) -> Flo
     return np.asarray(meat)
 
 
-def _covariance(views: ViewsLinearised, sharing: _Sharing) -> FloatArray:
+def _covariance(views: ViewsLinearised, sharing: Sharing) -> FloatArray:
     """The sandwich covariance (G, G) of the per-view estimate under ``sharing``."""
     # The refinement's model V₀ = I + diag_j(A_j A_jᵀ): Z_j = V₀_j⁻¹ X_j.
     A = views.J_pose
@@ -588,45 +613,56 @@ def shared_pose_error(
 ) -> SharedPoseError | None:
     """The robot's error shared by neighbouring views and the 1σ of the per-view estimate
     under it (see the module docstring); None with fewer than :data:`MIN_FIT_VIEWS` views
-    or poses that do not differ. Where two models are about as likely, the one whose
-    hand-eye covariance is the wider (its determinant). ``learned``: the sharing learned on a
+    or poses that do not differ. Where two models were learned, their covariances weighed by
+    their likelihoods (:attr:`SharedPoseError.models`). ``learned``: the sharing learned on a
     superset of the views (the self-check's subsets of a recording), taken as it is, without
     a search, where it was learned with the same robot prior.
     """
     if learned is not None and np.array_equal(learned.robot_sigma, views.robot_sigma):
-        models = [
-            _Sharing(
-                learned.kind,
-                learned.noise_factor,
-                learned.amplitude,
-                learned.length,
-                evidence=learned.evidence,
-            )
-        ]
+        models = list(learned.models)
     else:
         models = _learn(views)
     if not models:
         return None
-    fits = [(model, _covariance(views, model)) for model in models]
-    model, covariance = max(fits, key=lambda fit: float(np.linalg.slogdet(fit[1][:6, :6])[1]))
+    covariance = sum(model.weight * _covariance(views, model) for model in models)
+    likeliest = max(models, key=lambda model: model.weight)
     return SharedPoseError(
-        noise_factor=model.noise,
-        amplitude=model.amplitude,
-        length=model.length,
-        covariance=covariance,
+        noise_factor=likeliest.noise,
+        amplitude=likeliest.amplitude,
+        length=likeliest.length,
+        covariance=np.asarray(covariance),
         robot_sigma=np.asarray(views.robot_sigma, dtype=np.float64),
-        kind=model.kind,
-        evidence=model.evidence,
+        kind=likeliest.kind,
+        evidence=likeliest.evidence,
+        models=tuple(models),
     )
+
+
+def _left_out(likelihood: _Likelihood, sharing: Sharing) -> FloatArray:
+    """Each view's residual given all the others' (the globals fitted) under ``sharing``, as
+    χ² with K (its rows) degrees of freedom, (M,); NaN where V or H is not positive
+    definite. With P = V⁻¹ − V⁻¹X H⁻¹ XᵀV⁻¹, view i's is (P r)_iᵀ P_ii⁻¹ (P r)_i."""
+    M, K = len(likelihood.T), len(likelihood.y) // len(likelihood.T)
+    fitted = likelihood.fitted(sharing)
+    if fitted is None:
+        return np.full(M, math.nan)
+    factor, Vi_X, residual = fitted
+    H = likelihood.X.T @ Vi_X + likelihood.prior_information
+    P = cho_solve(factor, np.eye(len(likelihood.y))) - Vi_X @ np.linalg.solve(H, Vi_X.T)
+    u = cho_solve(factor, residual).reshape(M, K)
+    blocks = P.reshape(M, K, M, K)[np.arange(M), :, np.arange(M), :]
+    return np.asarray(np.einsum("mk,mk->m", u, np.linalg.solve(blocks, u[..., None])[..., 0]))
 
 
 def neighbour_chi2(views: ViewsLinearised, positions: list[int]) -> FloatArray:
     """How far each view at ``positions`` lies from what the other views predict for it, as
     χ² with K (its rows) degrees of freedom: its residual given the others' under the sharing
-    learned from the others (the likelier model), the globals fitted. A regional robot error
-    moves neighbouring views together, so their residuals predict it; a wrong corner is
-    alone. Infinite (no view is cleared) where the others are too few or their poses do not
-    differ."""
+    learned from the others (the likelier model), the globals fitted, on the scale of the
+    others' own (each given the rest: their median over χ²'s, at least 1, as
+    :func:`~.solver.recording_chi2_scale` judges a view among the recording's). A regional
+    robot error moves neighbouring views together, so their residuals predict it; a wrong
+    corner is alone. Infinite (no view is cleared) where the others are too few or their
+    poses do not differ."""
     out = np.full(len(positions), math.inf)
     doubted = np.zeros(len(views.residuals), dtype=bool)
     doubted[positions] = True
@@ -634,22 +670,14 @@ def neighbour_chi2(views: ViewsLinearised, positions: list[int]) -> FloatArray:
     fits = _learn(_subset(views, others)) if len(others) >= MIN_FIT_VIEWS else []
     if not fits:
         return out
-    sharing = min(fits, key=lambda fit: fit.cost)
+    sharing = max(fits, key=lambda fit: fit.weight)
     neighbours = others[_picked(_subset(views, others))]
-    rows = views.residuals.shape[1]
+    scale = recording_chi2_scale(
+        _left_out(_Likelihood(_subset(views, neighbours)), sharing), views.residuals.shape[1]
+    )
     for n, position in enumerate(positions):
-        likelihood = _Likelihood(_subset(views, np.append(neighbours, position)))
-        fitted = likelihood.fitted(sharing)
-        if fitted is None:
-            continue
-        factor, Vi_X, residual = fitted
-        H = likelihood.X.T @ Vi_X + likelihood.prior_information
-        last = slice(len(likelihood.y) - rows, None)  # the doubted view's rows
-        u = cho_solve(factor, residual)[last]
-        P = cho_solve(factor, np.eye(len(likelihood.y))[:, last])[last] - Vi_X[
-            last
-        ] @ np.linalg.solve(H, Vi_X[last].T)
-        out[n] = float(u @ np.linalg.solve(P, u))
+        chi2 = _left_out(_Likelihood(_subset(views, np.append(neighbours, position))), sharing)
+        out[n] = math.inf if math.isnan(chi2[-1]) else float(chi2[-1]) / scale
     return out
 
 
