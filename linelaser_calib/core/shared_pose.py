@@ -56,9 +56,9 @@ a smooth function of where it is: link lengths, joint offsets), a = 0 unless cle
 likelihoods (the law of total variance: the estimate is the same under both), so the
 clearly likelier one decides and a tie counts both; each axis at least the rough model's
 (correlations kept), so that it never narrows where the stated prior holds. On the recording 1 twin
-(``bench/private_twins.py``, 12 seeds) the smooth model wins every seed (evidence 5-36 over
-each view alone) and the worst |error| / 1σ goes 9.58 -> 3.06; on ``line_ridge`` (its arm's
-error at the prior) the rough model stays on 9 of 10 seeds. A doubted view is judged
+(``bench/private_twins.py``, 12 seeds) the smooth model is the likelier on every seed (by
+4-32 on 11, a tie on seed 10) and the worst |error| / 1σ goes 9.58 -> 3.06; on
+``line_ridge`` (its arm's error near the prior) the rough one keeps its 1σ. A doubted view is judged
 against its neighbours (:func:`neighbour_chi2`). The covariance
 of the refinement's per-view estimate under that model is the sandwich
 
