@@ -5,7 +5,11 @@ Methods
 ``default``
     The closed form of :mod:`.model` (or the initial hand-eye with the line through its
     reconstructed corners), then maximum likelihood (:mod:`.refine`) with views whose
-    residual is implausible (χ², 2 dof) dropped and the solve repeated; the observability
+    residual is implausible (χ², 2 dof) dropped and the solve repeated, where their
+    neighbours do not explain it either (a regional robot error moves neighbouring views
+    together: :func:`~...shared_pose.neighbour_chi2`); the 1σ counts the robot's error
+    neighbouring views share, learned from the recording (:mod:`...shared_pose`, with a
+    warning where it is clearly larger than the stated prior); the observability
     diagnosis (:mod:`.observability`) names what the views fail to determine.
 ``paper``
     The weld-seam paper's correction of an existing hand-eye (two-step grid search on the
