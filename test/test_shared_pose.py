@@ -5,10 +5,12 @@ sphere's 1σ."""
 from __future__ import annotations
 
 from contextlib import nullcontext
+from dataclasses import replace
 from functools import cache
 from unittest import mock
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from linelaser_calib.core.geometry import rotvec_from_matrix
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
@@ -18,11 +20,12 @@ from linelaser_calib.core.shared_pose import (
     shared_pose_error,
 )
 from linelaser_calib.core.targets import get_target
-from linelaser_calib.core.targets.base import SolveContext
+from linelaser_calib.core.targets.base import SolveContext, TargetSolution
 from linelaser_calib.core.targets.cylinder import CylinderConfig
 from linelaser_calib.core.targets.cylinder import target as cylinder_target
 from linelaser_calib.core.targets.line.config import LineConfig
 from linelaser_calib.core.types import Sample
+from linelaser_calib.sim.clutter import field_offsets
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.presets import scenario_from_preset
 from linelaser_calib.sim.robot import draw_errors, error_transforms
@@ -91,31 +94,69 @@ def test_independent_pose_errors_keep_the_per_view_1_sigma() -> None:
     assert np.all(np.abs(ratio - 1.0) < 0.25), ratio
 
 
-def test_line_ridge_seed_6_is_within_3_sigma() -> None:
-    """Regression: the simulated arm's error on ``line_ridge`` is drawn at 8 points of the
-    sweep and blended, so about six neighbouring views share it; with each view's error
-    taken as independent, seed 6 came out 3.79 of its 1σ off (rotation about sensor z)."""
+def _line_ridge(
+    seed: int, cell_field: bool = False, bumped: int | None = None
+) -> tuple[TargetSolution, np.ndarray, int]:
+    """The line target's default solve of ``line_ridge`` (``cell_field``: with issue 29's
+    cell's smooth field of the flange pose added to the recorded poses, 0.4 mm and 0.02 deg
+    over 0.1 m, about seven times the stated 0.03 mm; ``bumped``: that sample's pose alone
+    0.3 mm off along base y), its |error| / 1σ per axis and the profiles recorded."""
     scenario = line_scenario_from_preset("line_ridge")
-    data = simulate_line(scenario, 6)
+    data = simulate_line(scenario, seed)
     pairing = PairingConfig(
         max_linear_speed_m_s=0.0,
         max_angular_speed_rad_s=0.0,
         clock_offset_s=-scenario.rig.latency_s,
     )
     samples = pair_profiles(data.profiles, data.poses, pairing).samples
+    if cell_field:
+        T = np.stack([s.T_base_flange for s in samples])
+        shift, turn = (
+            field_offsets(
+                np.random.default_rng(seed + k),
+                replace(scenario.rig, robot_field_m=(size,) * 3, robot_field_length_m=0.1),
+                T[:, :3, 3],
+            )
+            for k, size in ((0, 4e-4), (1, np.radians(0.02)))
+        )
+        T[:, :3, :3] = Rotation.from_rotvec(turn).as_matrix() @ T[:, :3, :3]
+        T[:, :3, 3] += shift
+        if bumped is not None:
+            T[bumped, 1, 3] += 3e-4
+        samples = [replace(s, T_base_flange=t) for s, t in zip(samples, T, strict=True)]
     target, config = get_target("line"), LineConfig()
     features, _ = target.extract(samples, config, 0, lambda *_: None)
     solution = target.solve_default(features, config, SolveContext(n_samples=len(samples)))
     truth = data.truth.T_flange_sensor
-    error = np.concatenate(
-        [
-            rotvec_from_matrix(truth[:3, :3].T @ solution.T_flange_sensor[:3, :3]),
-            solution.T_flange_sensor[:3, 3] - truth[:3, 3],
-        ]
-    )
+    error = np.r_[
+        rotvec_from_matrix(truth[:3, :3].T @ solution.T_flange_sensor[:3, :3]),
+        solution.T_flange_sensor[:3, 3] - truth[:3, 3],
+    ]
     assert solution.sigma_rotation_rad is not None and solution.sigma_translation_m is not None
-    sigma = np.concatenate([solution.sigma_rotation_rad, solution.sigma_translation_m])
-    assert np.all(np.abs(error) <= 3.0 * sigma), error / sigma
+    sigma = np.r_[solution.sigma_rotation_rad, solution.sigma_translation_m]
+    return solution, np.abs(error) / sigma, len(samples)
+
+
+def test_line_ridge_seed_6_is_within_3_sigma() -> None:
+    """Regression: the simulated arm's error on ``line_ridge`` is drawn at 8 points of the
+    sweep and blended, so about six neighbouring views share it; with each view's error
+    taken as independent, seed 6 came out 3.79 of its 1σ off (rotation about sensor z)."""
+    _, z, _ = _line_ridge(6)
+    assert np.all(z <= 3.0), z
+
+
+def test_a_line_whose_arm_errs_far_beyond_its_prior_is_within_3_sigma_and_warned() -> None:
+    """Issue 29's cell field on ``line_ridge``: with the shared error bounded by the stated
+    prior seed 1 came out 7.1 of its 1σ off; learned as a smooth error over each view's own
+    it is within 3 and a warning names the larger error. The views that err with their
+    neighbours are all used; one whose pose alone is 0.3 mm off is set aside, its
+    neighbours not explaining it."""
+    solution, z, recorded = _line_ridge(1, cell_field=True, bumped=25)
+    assert np.all(z <= 3.0), z
+    assert any("the robot's pose error is about" in w for w in solution.warnings)
+    (aside,) = solution.rejections
+    assert aside.index == 25 and "given its neighbours" in aside.reason
+    assert len(solution.samples_used) == recorded - 1
 
 
 def _regional(T: np.ndarray, seed: int, per_anchor: int, scenario: object) -> np.ndarray:

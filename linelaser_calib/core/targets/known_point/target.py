@@ -97,6 +97,7 @@ target's S-sweep gives ~100 mm) or corners of shapes that are no V.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
@@ -109,7 +110,7 @@ from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
 from ...profile.corner import CornerSample, corner_doubt, corners_shown
 from ...seam_grid import paper_correction, weld_points_base
-from ...shared_pose import SharedPoseError, shared_pose_error
+from ...shared_pose import SharedPoseError, alone_among_neighbours, shared_pose_error
 from ...solver import (
     N_HAND_EYE,
     Flag,
@@ -119,6 +120,7 @@ from ...solver import (
 )
 from ...types import Rejection, Sample
 from ..base import (
+    ROBOT_PRIOR_EXCESS,
     Option,
     Progress,
     ResultSection,
@@ -398,8 +400,10 @@ def _default_result(
     def flag(refined: KnownPointRefinement, keep: list[int]) -> list[Flag]:
         flags = []
         scale = recording_chi2_scale(refined.view_chi2, 3)
-        for j in np.flatnonzero(refined.view_chi2 / scale > limit):
-            view = keep[int(j)]
+        doubted = [int(j) for j in np.flatnonzero(refined.view_chi2 / scale > limit)]
+        alone = alone_among_neighbours(refined.views(), doubted, limit)
+        for j in alone:
+            view = keep[j]
             residual = float(
                 np.linalg.norm(
                     weld_points_base(c[[view]], T[[view]], refined.T_flange_sensor)[0]
@@ -413,8 +417,10 @@ def _default_result(
                     f"the view's weld point lies {residual * 1e3:.3f} mm from the others' "
                     f"(normalised chi2 {refined.view_chi2[j]:.1f} at the robot's 1 sigma "
                     f"{config.robot_sigma_t_m * 1e3:.3f} mm, {refined.view_chi2[j] / scale:.1f} "
-                    f"on the scale of the recording's other views, > {limit:.1f} for 3 dof): wrong "
-                    "corner, a miss of the taught point, or motion during the scan",
+                    "on the scale of the recording's other views"
+                    + ("" if math.isinf(alone[j]) else f", {alone[j]:.1f} given its neighbours")
+                    + f", > {limit:.1f} for 3 dof): wrong corner, a miss of the taught point, or "
+                    "motion during the scan",
                 )
             )
         return flags
@@ -465,6 +471,9 @@ def _default_result(
     shared = shared_pose_error(refined.views(), learned)
     if shared is not None:
         sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
+        note = shared.excess_note(ROBOT_PRIOR_EXCESS)
+        if note is not None:
+            warnings.append(note)
     return KnownPointResult(
         T_flange_sensor=X,
         point_base=point,

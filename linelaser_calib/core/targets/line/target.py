@@ -5,7 +5,11 @@ Methods
 ``default``
     The closed form of :mod:`.model` (or the initial hand-eye with the line through its
     reconstructed corners), then maximum likelihood (:mod:`.refine`) with views whose
-    residual is implausible (χ², 2 dof) dropped and the solve repeated; the observability
+    residual is implausible (χ², 2 dof) dropped and the solve repeated, where their
+    neighbours do not explain it either (a regional robot error moves neighbouring views
+    together: :func:`~...shared_pose.neighbour_chi2`); the 1σ counts the robot's error
+    neighbouring views share, learned from the recording (:mod:`...shared_pose`, with a
+    warning where it is clearly larger than the stated prior); the observability
     diagnosis (:mod:`.observability`) names what the views fail to determine.
 ``paper``
     The weld-seam paper's correction of an existing hand-eye (two-step grid search on the
@@ -43,7 +47,7 @@ from ...profile.corner import (
     corners_shown,
 )
 from ...seam_grid import paper_correction, weld_points_base
-from ...shared_pose import SharedPoseError, shared_pose_error
+from ...shared_pose import SharedPoseError, alone_among_neighbours, shared_pose_error
 from ...solver import (
     Flag,
     recording_chi2_scale,
@@ -53,6 +57,7 @@ from ...solver import (
 from ...types import FloatArray, Rejection, Sample, SampleFit
 from ..base import (
     MISFIT_ROBOT_EXCESS,
+    ROBOT_PRIOR_EXCESS,
     Option,
     Progress,
     SolveContext,
@@ -370,17 +375,21 @@ class LineTarget:
 
         def flag(outcome: LineRefinement, kept: list[int]) -> list[Flag]:
             scale = recording_chi2_scale(outcome.view_chi2, 2)
+            doubted = [j for j, value in enumerate(outcome.view_chi2) if value / scale > limit]
+            alone = alone_among_neighbours(outcome.views(), doubted, limit)
             return [
                 Flag(
                     float(value),
                     j,
                     f"the corner lies {np.linalg.norm(outcome.offsets_xz[j]) * 1e3:.3f} mm from "
                     f"the seam line in its laser plane (normalised chi2 {value:.1f}, "
-                    f"{value / scale:.1f} on the scale of the recording's other corners, > "
-                    f"{limit:.1f} for 2 dof): a wrong corner, spatter, or motion during the scan",
+                    f"{value / scale:.1f} on the scale of the recording's other corners"
+                    + ("" if math.isinf(alone[j]) else f", {alone[j]:.1f} given its neighbours")
+                    + f", > {limit:.1f} for 2 dof): a wrong corner, spatter, or motion during "
+                    "the scan",
                 )
                 for j, value in enumerate(outcome.view_chi2)
-                if value / scale > limit
+                if j in alone
             ]
 
         context.progress("refine", 0, 1)
@@ -434,6 +443,9 @@ class LineTarget:
         shared = shared_pose_error(refined.views(), learned)
         if shared is not None:
             sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
+            note = shared.excess_note(ROBOT_PRIOR_EXCESS)
+            if note is not None:
+                warnings.append(note)
         rejections = [
             Rejection(features[i].index, features[i].stamp_ns, "outlier", reason)
             for i, reason in outcome.dropped
