@@ -444,7 +444,7 @@ def clean_profiles(
     threshold = np.full(count, math.nan)
     if config.spike_half_window > 0 and len(idx):
         residual, spacing = spike_residuals(p[idx][:, [0, 2]], labels, config.spike_half_window)
-        sigma = MAD_TO_SIGMA * _profile_medians(residual, owner[idx], count)
+        sigma = MAD_TO_SIGMA * profile_medians(residual, owner[idx], count)
         threshold = np.maximum(config.spike_factor * sigma, config.spike_floor_m)
         limit = np.maximum(threshold[owner[idx]], config.spike_spacing_factor * spacing)
         idx = idx[residual <= limit]
@@ -472,12 +472,13 @@ def clean_profiles(
     ]
 
 
-def _profile_medians(values: FloatArray, owner: IntArray, count: int) -> FloatArray:
-    """The median of each profile's values (:func:`_nanmedian_rows` of the profiles padded
-    with NaN), shape (count,); NaN for a profile without values."""
+def profile_medians(values: FloatArray, owner: IntArray, count: int) -> FloatArray:
+    """The median of each of ``count`` profiles' values (N,) stacked in turn (``owner`` (N,)
+    the profile of each, non-decreasing), shape (count,); NaN for a profile without values:
+    :func:`_nanmedian_rows` of the profiles padded with NaN, equal to ``np.median``."""
     sizes = np.bincount(owner, minlength=count)
     starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
-    padded = np.full((count, int(sizes.max(initial=0))), math.nan)
+    padded = np.full((count, max(1, int(sizes.max(initial=0)))), math.nan)
     padded[owner, np.arange(len(values)) - starts[owner]] = values
     return _nanmedian_rows(padded)
 

@@ -14,6 +14,7 @@ from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...model_check import Comparison
 from ...profile.cleaning import CleanedProfile, clean_profiles
+from ...profile.segmentation import SegmentedProfile, segment_profiles
 from ...types import BoolArray, Rejection, Sample, SampleFit, StoredArray, stored_points
 from ..base import Progress, extract_chunks, sample_rng
 from .arc import (
@@ -112,8 +113,8 @@ class FittedSample:
         )
 
 
-#: Samples whose cleaning runs as one batch (:func:`fit_chunk`): the stages' array calls
-#: cost about the same for one profile as for a few dozen.
+#: Samples whose cleaning and segmentation run as one batch (:func:`fit_chunk`): the stages'
+#: array calls cost about the same for one profile as for a few dozen.
 CHUNK_SIZE = 32
 
 
@@ -135,8 +136,9 @@ def fit_chunk(
     rngs: Sequence[np.random.Generator],
     radius_m: float | None = None,
 ) -> list[FittedSample | Rejection]:
-    """Clean the samples' profiles (all at once,
-    :func:`~linelaser_calib.core.profile.cleaning.clean_profiles`) and fit each one's
+    """Clean and segment the samples' profiles (all at once,
+    :func:`~linelaser_calib.core.profile.cleaning.clean_profiles`,
+    :func:`~linelaser_calib.core.profile.segmentation.segment_profiles`) and fit each one's
     ellipse, drawing from its generator in ``rngs``; a rejection says why a sample failed.
 
     ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes. A profile without
@@ -148,10 +150,12 @@ def fit_chunk(
     line.
     """
     cleaned = clean_profiles([sample.points for sample in samples], config.cleaning)
+    kept = [profile for profile in cleaned if not isinstance(profile, ProfileRejected)]
+    segmented = iter(segment_profiles([c.points_xz for c in kept], config.arc.segmentation))
     return [
         Rejection(sample.index, sample.stamp_ns, "cleaning", str(profile))
         if isinstance(profile, ProfileRejected)
-        else _fit_cleaned(sample, profile, config, rng, radius_m)
+        else _fit_cleaned(sample, profile, next(segmented), config, rng, radius_m)
         for sample, profile, rng in zip(samples, cleaned, rngs, strict=True)
     ]
 
@@ -159,13 +163,16 @@ def fit_chunk(
 def _fit_cleaned(
     sample: Sample,
     cleaned: CleanedProfile,
+    segmented: SegmentedProfile,
     config: CylinderConfig,
     rng: np.random.Generator,
     radius_m: float | None,
 ) -> FittedSample | Rejection:
-    """The ellipse of one sample's cleaned profile (:func:`fit_chunk`)."""
+    """The ellipse of one sample's cleaned and segmented profile (:func:`fit_chunk`)."""
     try:
-        arc = fit_arc_in_scene(cleaned.points_xz, config.ellipse, rng, radius_m, config.arc)
+        arc = fit_arc_in_scene(
+            cleaned.points_xz, config.ellipse, rng, radius_m, config.arc, segmented
+        )
     except ProfileRejected as exc:
         if len(cleaned.points_xz) >= MIN_RIVAL_POINTS:
             comparison = compare_without_arc(cleaned.points_xz)
