@@ -14,6 +14,7 @@ from linelaser_calib.core.profile.cleaning import (
     MAX_BRIDGED_POINTS,
     CleaningConfig,
     clean_profile,
+    clean_profiles,
     segment_labels,
 )
 from linelaser_calib.core.targets.cylinder.ellipse import EllipseConfig, fit_ellipse_ransac
@@ -176,6 +177,37 @@ def test_points_off_the_laser_plane_are_flagged() -> None:
     assert len(cleaned.warnings) == 1 and "sensor frame" in cleaned.warnings[0]
     with pytest.raises(ProfileRejected, match="not be in the sensor frame"):
         clean_profile(points, CleaningConfig(reject_off_plane=True))
+
+
+@pytest.mark.parametrize("largest", [False, True])
+def test_profiles_cleaned_together_are_each_cleaned_alone(largest: bool) -> None:
+    # No stage links points of neighbouring profiles: a batch gives each profile's own result.
+    rng = np.random.default_rng(9)
+    scenes = []
+    for k in range(12):
+        arc, table = arc_profile(rng, 50e-6 * (1 + k % 3)), table_profile(rng, 100e-6)
+        points, _ = add_spikes(rng, np.vstack([table, arc] if k % 2 else [arc, table]), 0.03)
+        points[rng.random(len(points)) < 0.05] = np.nan
+        scenes.append(points)
+    scenes[3] = scenes[3][:25]  # too few points
+    scenes[5] = np.full((40, 3), np.nan)
+    scenes[7] = np.zeros((0, 3))
+    scenes[8][:, 2] -= CENTRE_Z  # a frame whose origin is not at the emitter: ordered by x
+    config = CleaningConfig(keep_largest_segment=largest)
+    for alone, together in zip(
+        [clean_profiles([p], config)[0] for p in scenes],
+        clean_profiles(scenes, config),
+        strict=True,
+    ):
+        assert type(alone) is type(together)
+        if isinstance(alone, ProfileRejected):
+            assert str(alone) == str(together)
+            continue
+        assert isinstance(together, type(alone))
+        np.testing.assert_array_equal(together.mask, alone.mask)
+        assert together.counts == alone.counts
+        assert together.spike_threshold_m == alone.spike_threshold_m
+    assert sum(isinstance(c, ProfileRejected) for c in clean_profiles(scenes, config)) == 3
 
 
 def test_bad_input_and_config() -> None:

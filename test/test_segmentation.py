@@ -10,7 +10,12 @@ import pytest
 
 from linelaser_calib.core.geometry import transform_error
 from linelaser_calib.core.pipeline import PipelineConfig
-from linelaser_calib.core.profile.segmentation import SegmentKind, estimate_noise, segment_profile
+from linelaser_calib.core.profile.segmentation import (
+    SegmentKind,
+    estimate_noise,
+    segment_profile,
+    segment_profiles,
+)
 from linelaser_calib.core.targets.cylinder import CylinderConfig, CylinderSection
 from linelaser_calib.core.targets.cylinder.arc import (
     fit_arc_in_scene,
@@ -170,6 +175,25 @@ def test_segments_partition_in_scan_order() -> None:
     assert len(np.unique(rows)) == len(rows)
     kinds = {s.kind for s in segmented.segments}
     assert kinds == {SegmentKind.LINE, SegmentKind.CURVE}
+
+
+def test_profiles_segmented_together_are_each_segmented_alone() -> None:
+    # The scan order, noise and gaps of a batch are each profile's own (quantised or not).
+    rng = np.random.default_rng(5)
+    profiles = [_cluttered_profile(rng)[0] for _ in range(6)]
+    profiles[1][:, 1] += rng.normal(0.0, 1e-6, len(profiles[1]))  # no longer quantised
+    profiles[2] = profiles[2][rng.permutation(len(profiles[2]))]
+    profiles[3] = profiles[3][:2]
+    profiles[4] = profiles[4][:0]
+    for alone, together in zip(
+        [segment_profile(p) for p in profiles], segment_profiles(profiles), strict=True
+    ):
+        assert together.noise == alone.noise
+        assert [s.kind for s in together.segments] == [s.kind for s in alone.segments]
+        for a, b in zip(alone.segments, together.segments, strict=True):
+            np.testing.assert_array_equal(b.indices, a.indices)
+    assert segment_profiles(profiles)[0].noise.depth_quantum_m == pytest.approx(QUANTUM)
+    assert segment_profiles(profiles)[1].noise.depth_quantum_m == 0.0
 
 
 def test_committed_cluttered_bag_uses_every_profile_and_names_the_radius_mismatch() -> None:

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,7 +46,6 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.cluster.hierarchy import DisjointSet
 
 from ..errors import InputError, ProfileRejected
-from ..model_check import median
 from ..types import BoolArray, FloatArray
 
 IntArray = NDArray[np.intp]
@@ -172,7 +172,7 @@ class CleanedProfile:
         return np.asarray(self.points[:, [0, 2]], dtype=np.float64)
 
 
-def scan_order(xz: ArrayLike) -> IntArray:
+def scan_order(xz: ArrayLike, owner: IntArray | None = None) -> IntArray:
     """The scan-line order of a profile's points, shape (N,): indices that sort them.
 
     A profiler's columns are rays from its origin, so the points are sorted by their ray
@@ -180,13 +180,20 @@ def scan_order(xz: ArrayLike) -> IntArray:
     depth); sorting by x alone would interleave a near arc with a far background whose
     rays differ but whose x overlap. A frame whose origin is not at the emitter (some z
     <= 0) is sorted by x.
+
+    ``owner`` (N,), the profile of each point where several profiles are stacked (points of
+    one profile together, profiles numbered from 0 in order), orders each profile's points
+    by its own rule and keeps the profiles in turn; None: one profile.
     """
     p = np.asarray(xz, dtype=np.float64)
-    key = np.arctan2(p[:, 0], p[:, 1]) if np.all(p[:, 1] > 0.0) else p[:, 0]
-    return np.asarray(np.argsort(key, kind="stable"), dtype=np.intp)
+    owner = np.zeros(len(p), dtype=np.intp) if owner is None else owner
+    profiles = int(owner[-1]) + 1 if len(owner) else 0
+    positive = np.bincount(owner, weights=p[:, 1] <= 0.0, minlength=profiles) == 0
+    key = np.where(positive[owner], np.arctan2(p[:, 0], p[:, 1]), p[:, 0])
+    return np.asarray(np.lexsort((key, owner)), dtype=np.intp)
 
 
-def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
+def segment_labels(xz: ArrayLike, max_gap_m: float, owner: IntArray | None = None) -> IntArray:
     """Connected pieces of a scan line, bridging up to ``MAX_BRIDGED_POINTS`` stray points.
 
     Points i and i + k (k = 1 .. MAX_BRIDGED_POINTS + 1) of the scan order are linked when
@@ -199,6 +206,9 @@ def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
     xz : array-like, shape (N, 2)
         Points in scan-line order (:func:`scan_order`), m.
     max_gap_m : float
+    owner : ndarray of int, shape (N,), optional
+        The profile of each point where several profiles are stacked (:func:`scan_order`):
+        points of different profiles are never linked.
 
     Returns
     -------
@@ -213,6 +223,8 @@ def segment_labels(xz: ArrayLike, max_gap_m: float) -> IntArray:
         np.linalg.norm(p[k:] - p[:-k], axis=1) <= max_gap_m
         for k in range(1, MAX_BRIDGED_POINTS + 2)
     ]
+    if owner is not None:
+        linked = [near & (owner[k:] == owner[:-k]) for k, near in enumerate(linked, start=1)]
     # Runs of consecutive linked points are connected; the longer links join runs (a spike
     # is a run of its own, bridged over). A profile has few runs, so they are joined in
     # scipy's disjoint set rather than a sparse graph, whose set-up costs more than the
@@ -356,36 +368,59 @@ def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
         Fewer than ``config.min_points`` points remain, or (with ``reject_off_plane``) the
         points are not in the laser plane. The message gives the counts per stage.
     """
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise InputError(f"profile points must have shape (N, 3), got {p.shape}")
-    counts = {"input": len(p)}
+    (cleaned,) = clean_profiles([points], config)
+    if isinstance(cleaned, ProfileRejected):
+        raise cleaned
+    return cleaned
+
+
+#: The stages of :attr:`CleanedProfile.counts` that remove points, in order.
+REMOVED = ("non_finite", "range_gate", "small_segment", "other_segment", "spike")
+
+
+def clean_profiles(
+    profiles: Sequence[ArrayLike], config: CleaningConfig
+) -> list[CleanedProfile | ProfileRejected]:
+    """Clean several profiles at once, each as :func:`clean_profile` would (the same
+    points, counts and thresholds): their points are stacked, each stage runs once over
+    the stack, and no stage links points of different profiles.
+
+    Parameters
+    ----------
+    profiles : sequence of array-like, shape (N_i, 3) each
+        Profile points in the sensor frame, m; may hold NaN/Inf.
+    config : CleaningConfig
+
+    Returns
+    -------
+    list of CleanedProfile or ProfileRejected
+        One per profile, in order: its cleaned points, or the rejection
+        :func:`clean_profile` raises.
+
+    Raises
+    ------
+    InputError
+        A profile is not an (N, 3) array.
+    """
+    arrays = [np.asarray(points, dtype=np.float64) for points in profiles]
+    for p in arrays:
+        if p.ndim != 2 or p.shape[1] != 3:
+            raise InputError(f"profile points must have shape (N, 3), got {p.shape}")
+    sizes = [len(p) for p in arrays]
+    count = len(arrays)
+    p = np.concatenate(arrays) if arrays else np.zeros((0, 3))
+    owner = np.repeat(np.arange(count), sizes)
+
+    def per_profile(rows: IntArray) -> IntArray:
+        return np.bincount(owner[rows], minlength=count)
+
     keep = np.all(np.isfinite(p), axis=1)
-    counts["non_finite"] = int(len(p) - keep.sum())
-    warnings: list[str] = []
-
-    typical_abs_y = float(np.percentile(np.abs(p[keep, 1]), 90)) if keep.any() else math.nan
-    if typical_abs_y > config.max_abs_y_m:
-        message = (
-            f"90% of the points have |y| up to {typical_abs_y * 1e3:.2f} mm, above the "
-            f"{config.max_abs_y_m * 1e3:.2f} mm expected of the laser plane y = 0: the cloud "
-            "may not be in the sensor frame (check the frame_id and the driver's output frame)"
-        )
-        if config.reject_off_plane:
-            raise ProfileRejected(message)
-        warnings.append(message)
-
-    gate = keep.copy()
-    gate[keep] = (
-        (p[keep, 2] >= config.min_depth_m)
-        & (p[keep, 2] <= config.max_depth_m)
-        & (np.abs(p[keep, 0]) <= config.max_abs_x_m)
-    )
-    counts["range_gate"] = int(keep.sum() - gate.sum())
-
+    gate = keep & (p[:, 2] >= config.min_depth_m) & (p[:, 2] <= config.max_depth_m)
+    gate &= np.abs(p[:, 0]) <= config.max_abs_x_m
     idx = np.flatnonzero(gate)
-    idx = idx[scan_order(p[idx][:, [0, 2]])]
-    labels = segment_labels(p[idx][:, [0, 2]], config.max_gap_m)
+    idx = idx[scan_order(p[idx][:, [0, 2]], owner[idx])]
+    labels = segment_labels(p[idx][:, [0, 2]], config.max_gap_m, owner[idx])
+    gated = per_profile(idx)
     big = np.bincount(labels, minlength=1)[labels] >= config.min_segment_points
     # Without the stray pieces, each segment is a run of the scan line; a run can still be
     # short where two large pieces interleave.
@@ -393,38 +428,89 @@ def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
     long_run = np.bincount(runs, minlength=1)[runs] >= config.min_segment_points
     big[big] = long_run
     labels = runs[long_run]
-    counts["small_segment"] = int(len(idx) - big.sum())
     idx = idx[big]
+    segmented = per_profile(idx)
     if config.keep_largest_segment and len(idx):
-        largest = labels == np.argmax(np.bincount(labels))
-        counts["other_segment"] = int(len(idx) - largest.sum())
+        # Each profile's segment with the most points (the first of equals).
+        sizes_of = np.bincount(labels)
+        profile_of = np.zeros(len(sizes_of), dtype=np.intp)
+        profile_of[labels] = owner[idx]
+        order = np.lexsort((-sizes_of, profile_of))
+        firsts = order[np.unique(profile_of[order], return_index=True)[1]]
+        largest = np.isin(labels, firsts)
         idx, labels = idx[largest], labels[largest]
-    else:
-        counts["other_segment"] = 0
+    largest_kept = per_profile(idx)
 
-    threshold = math.nan
+    threshold = np.full(count, math.nan)
     if config.spike_half_window > 0 and len(idx):
         residual, spacing = spike_residuals(p[idx][:, [0, 2]], labels, config.spike_half_window)
-        sigma = MAD_TO_SIGMA * median(residual)
-        threshold = max(config.spike_factor * sigma, config.spike_floor_m)
-        smooth = residual <= np.maximum(threshold, config.spike_spacing_factor * spacing)
-        counts["spike"] = int(len(idx) - smooth.sum())
-        idx = idx[smooth]
-    else:
-        counts["spike"] = 0
-
+        sigma = MAD_TO_SIGMA * profile_medians(residual, owner[idx], count)
+        threshold = np.maximum(config.spike_factor * sigma, config.spike_floor_m)
+        limit = np.maximum(threshold[owner[idx]], config.spike_spacing_factor * spacing)
+        idx = idx[residual <= limit]
     mask = np.zeros(len(p), dtype=np.bool_)
     mask[idx] = True
-    counts["kept"] = int(mask.sum())
-    if counts["kept"] < config.min_points:
-        removed = ", ".join(
-            f"{counts[k]} {k.replace('_', ' ')}"
-            for k in ("non_finite", "range_gate", "small_segment", "other_segment", "spike")
-            if counts[k]
+    kept, finite = per_profile(idx), per_profile(np.flatnonzero(keep))
+    stages = np.stack(
+        [
+            sizes - finite,
+            finite - gated,
+            gated - segmented,
+            segmented - largest_kept,
+            largest_kept - kept,
+        ],
+        axis=1,
+    ).tolist()
+    splits = np.cumsum(sizes)[:-1]
+    return [
+        _cleaned(
+            arrays[k], finite, m, dict(zip(REMOVED, stages[k], strict=True)), threshold[k], config
         )
-        raise ProfileRejected(
+        for k, (finite, m) in enumerate(
+            zip(np.split(keep, splits), np.split(mask, splits), strict=True)
+        )
+    ]
+
+
+def profile_medians(values: FloatArray, owner: IntArray, count: int) -> FloatArray:
+    """The median of each of ``count`` profiles' values (N,) stacked in turn (``owner`` (N,)
+    the profile of each, non-decreasing), shape (count,); NaN for a profile without values:
+    :func:`_nanmedian_rows` of the profiles padded with NaN, equal to ``np.median``."""
+    sizes = np.bincount(owner, minlength=count)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    padded = np.full((count, max(1, int(sizes.max(initial=0)))), math.nan)
+    padded[owner, np.arange(len(values)) - starts[owner]] = values
+    return _nanmedian_rows(padded)
+
+
+def _cleaned(
+    p: FloatArray,
+    finite: BoolArray,
+    mask: BoolArray,
+    removed: dict[str, int],
+    spike_threshold_m: float,
+    config: CleaningConfig,
+) -> CleanedProfile | ProfileRejected:
+    """One profile's :class:`CleanedProfile` (its points ``p``, the ``finite`` ones, the kept
+    ones ``mask``, the points each stage ``removed``), or its rejection."""
+    y = p[finite, 1]
+    typical_abs_y = float(np.percentile(np.abs(y), 90)) if len(y) else math.nan
+    warnings: list[str] = []
+    if typical_abs_y > config.max_abs_y_m:
+        message = (
+            f"90% of the points have |y| up to {typical_abs_y * 1e3:.2f} mm, above the "
+            f"{config.max_abs_y_m * 1e3:.2f} mm expected of the laser plane y = 0: the cloud "
+            "may not be in the sensor frame (check the frame_id and the driver's output frame)"
+        )
+        if config.reject_off_plane:
+            return ProfileRejected(message)
+        warnings.append(message)
+    counts = {"input": len(p), **removed, "kept": int(mask.sum())}
+    if counts["kept"] < config.min_points:
+        text = ", ".join(f"{counts[k]} {k.replace('_', ' ')}" for k in REMOVED if counts[k])
+        return ProfileRejected(
             f"only {counts['kept']} of {counts['input']} points are left after cleaning "
-            f"(removed: {removed or 'none'}), at least {config.min_points} are needed; "
+            f"(removed: {text or 'none'}), at least {config.min_points} are needed; "
             "check that the laser line hits the cylinder and the range gate "
             f"(z {config.min_depth_m:g} to {config.max_depth_m:g} m, "
             f"|x| <= {config.max_abs_x_m:g} m)"
@@ -434,6 +520,6 @@ def clean_profile(points: ArrayLike, config: CleaningConfig) -> CleanedProfile:
         mask=mask,
         counts=counts,
         typical_abs_y_m=typical_abs_y,
-        spike_threshold_m=threshold,
+        spike_threshold_m=spike_threshold_m,
         warnings=tuple(warnings),
     )

@@ -43,6 +43,7 @@ result is deterministic and does not consume the caller's random stream.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import Enum
 
@@ -50,9 +51,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..errors import InputError
-from ..model_check import median
 from ..types import FloatArray
-from .cleaning import MAD_TO_SIGMA, scan_order
+from .cleaning import MAD_TO_SIGMA, profile_medians, scan_order
 
 IntArray = NDArray[np.intp]
 
@@ -189,23 +189,27 @@ def _check_xz(points_xz: ArrayLike) -> FloatArray:
     return p
 
 
-def depth_quantum(z: ArrayLike) -> float:
-    """The step of quantised depths, m, or 0 when they are not quantised.
+def depth_quanta(z: FloatArray, owner: IntArray, count: int) -> FloatArray:
+    """The step of each profile's quantised depths, m, or 0 where they are not quantised,
+    shape (count,), for ``count`` profiles' depths ``z`` (N,) stacked in turn (``owner``
+    (N,) the profile of each).
 
-    The candidate step is the smallest non-zero difference between sorted depths; the
-    depths are quantised when ``QUANTISED_SHARE`` of the differences up to
+    A profile's candidate step is the smallest non-zero difference between its sorted
+    depths; they are quantised when ``QUANTISED_SHARE`` of the differences up to
     ``QUANTUM_MAX_STEPS`` steps are whole multiples of it.
     """
-    values = np.sort(np.asarray(z, dtype=np.float64))
-    diff = np.diff(values)
-    positive = diff[diff > 1e-12]
-    if len(positive) < 10:
-        return 0.0
-    step = float(np.min(positive))
-    small = positive[positive <= QUANTUM_MAX_STEPS * step]
-    multiples = small / step
+    order = np.lexsort((z, owner))
+    diff, own = np.diff(z[order]), owner[order][1:]
+    positive = (owner[order][:-1] == own) & (diff > 1e-12)
+    step = np.full(count, math.inf)
+    np.minimum.at(step, own[positive], diff[positive])
+    small = positive & (diff <= QUANTUM_MAX_STEPS * step[own])
+    multiples = diff[small] / step[own[small]]
     whole = np.abs(multiples - np.round(multiples)) <= QUANTUM_TOLERANCE
-    return step if float(np.mean(whole)) >= QUANTISED_SHARE else 0.0
+    tested = np.bincount(own[small], minlength=count)
+    share = np.bincount(own[small], weights=whole, minlength=count) / np.maximum(tested, 1)
+    enough = np.bincount(own[positive], minlength=count) >= 10
+    return np.asarray(np.where(enough & (share >= QUANTISED_SHARE), step, 0.0), dtype=np.float64)
 
 
 def estimate_noise(points_xz: ArrayLike) -> NoiseEstimate:
@@ -221,30 +225,34 @@ def estimate_noise(points_xz: ArrayLike) -> NoiseEstimate:
     NoiseEstimate
     """
     p = _check_xz(points_xz)
-    quantum = depth_quantum(p[:, 1])
-    floor = max(MIN_NOISE_M, quantum / math.sqrt(12.0))
-    if len(p) < 3:
-        return NoiseEstimate(floor, quantum)
+    return _noises(p, np.zeros(len(p), dtype=np.intp), 1)[0]
+
+
+def _noises(p: FloatArray, owner: IntArray, count: int) -> list[NoiseEstimate]:
+    """:func:`estimate_noise` of ``count`` profiles' points (N, 2) stacked in turn, each in
+    scan-line order (``owner`` (N,) the profile of each)."""
+    quantum = depth_quanta(p[:, 1], owner, count)
+    floor = np.maximum(MIN_NOISE_M, quantum / math.sqrt(12.0))
     a, b, c = p[:-2], p[1:-1], p[2:]
     chord = c - a
     length = np.hypot(chord[:, 0], chord[:, 1])
     cross = chord[:, 0] * (b - a)[:, 1] - chord[:, 1] * (b - a)[:, 0]
-    ok = length > 0.0
+    ok = (owner[:-2] == owner[2:]) & (length > 0.0)
     distance = np.abs(cross[ok]) / length[ok]
-    if not len(distance):
-        return NoiseEstimate(floor, quantum)
-    sigma = MAD_TO_SIGMA * median(distance) / CHORD_SPREAD
-    return NoiseEstimate(max(sigma, floor), quantum)
+    sigma = MAD_TO_SIGMA * profile_medians(distance, owner[:-2][ok], count) / CHORD_SPREAD
+    sigma = np.where(np.isnan(sigma), floor, np.maximum(sigma, floor))
+    return [NoiseEstimate(s, q) for s, q in zip(sigma.tolist(), quantum.tolist(), strict=True)]
 
 
-def gap_pieces(points_xz: FloatArray, config: SegmentationConfig) -> list[IntArray]:
-    """Split points in scan-line order at gaps; positions of each piece, shape (M,) each."""
-    if len(points_xz) < 2:
-        return [np.arange(len(points_xz), dtype=np.intp)]
-    step = np.hypot(*np.diff(points_xz, axis=0).T)
-    limit = max(config.min_gap_m, config.gap_spacings * median(step))
-    cuts = np.flatnonzero(step > limit) + 1
-    return [np.asarray(piece, dtype=np.intp) for piece in np.split(np.arange(len(points_xz)), cuts)]
+def _gap_cuts(p: FloatArray, owner: IntArray, count: int, config: SegmentationConfig) -> IntArray:
+    """Where ``count`` profiles' points (N, 2) stacked in turn, each in scan-line order
+    (``owner`` (N,) the profile of each), are split at gaps: the positions (in the stack)
+    that start a piece after a gap, ascending."""
+    step = np.hypot(*np.diff(p, axis=0).T)
+    within = owner[1:] == owner[:-1]
+    spacing = profile_medians(step[within], owner[1:][within], count)
+    limit = np.maximum(config.min_gap_m, config.gap_spacings * spacing)
+    return np.asarray(np.flatnonzero(within & (step > limit[owner[1:]])) + 1, dtype=np.intp)
 
 
 def _longest_runs(mask: NDArray[np.bool_]) -> tuple[IntArray, IntArray]:
@@ -348,16 +356,42 @@ def segment_profile(
     SegmentedProfile
         Segment indices refer to rows of ``points_xz``.
     """
+    (segmented,) = segment_profiles([points_xz], config)
+    return segmented
+
+
+def segment_profiles(
+    profiles: Sequence[ArrayLike], config: SegmentationConfig | None = None
+) -> list[SegmentedProfile]:
+    """:func:`segment_profile` of each profile (N_i, 2), the same segments and noise: the
+    scan order, the noise and the gaps of all of them at once, then each one's planes."""
     config = config or SegmentationConfig()
-    p_in = _check_xz(points_xz)
-    order = scan_order(p_in)
-    p = p_in[order]
-    noise = estimate_noise(p)
+    arrays = [_check_xz(points_xz) for points_xz in profiles]
+    sizes = [len(p) for p in arrays]
+    owner = np.repeat(np.arange(len(arrays)), sizes)
+    stacked = np.concatenate(arrays) if arrays else np.zeros((0, 2))
+    order = scan_order(stacked, owner)  # the profiles stay in turn
+    p = stacked[order]
+    starts = np.concatenate([[0], np.cumsum(sizes)]).astype(np.intp)
+    noises = _noises(p, owner, len(arrays))
+    cuts = _gap_cuts(p, owner, len(arrays), config)
+    bounds = np.searchsorted(cuts, starts)
+    return [
+        _segments(p[lo:hi], order[lo:hi] - lo, noise, cuts[bounds[k] : bounds[k + 1]] - lo, config)
+        for k, (lo, hi, noise) in enumerate(zip(starts[:-1], starts[1:], noises, strict=True))
+    ]
+
+
+def _segments(
+    p: FloatArray, order: IntArray, noise: NoiseEstimate, cuts: IntArray, config: SegmentationConfig
+) -> SegmentedProfile:
+    """One profile's segments: its points ``p`` in scan-line order (their rows ``order``),
+    its noise, the positions that start a piece after a gap."""
     band = config.line_band_sigmas * noise.sigma_m
     rng = np.random.default_rng(len(p))
     segments: list[tuple[int, Segment]] = []
     lines_left = config.max_lines
-    stack = [piece for piece in gap_pieces(p, config) if len(piece)]
+    stack = [piece for piece in np.split(np.arange(len(p)), cuts) if len(piece)]
     while stack:
         piece = stack.pop()
         found = _find_line(p[piece], band, config, rng) if lines_left > 0 else None

@@ -685,32 +685,46 @@ def extract_each(
     stage: str,
     workers: int = 1,
 ) -> tuple[list[Any], list[Rejection]]:
-    """Features of every sample by ``extract_one`` (feature or Rejection), in order.
+    """:func:`extract_chunks` of ``extract_one`` (feature or Rejection) on each sample."""
 
-    Each sample draws from its own generator (:func:`sample_rng`), so the samples are
-    independent and ``workers`` 2 shares them with a forked child
+    def chunk(run: Sequence[Sample], cfg: ConfigT, rngs: Sequence[np.random.Generator]) -> Any:
+        return [extract_one(sample, cfg, rng) for sample, rng in zip(run, rngs, strict=True)]
+
+    return extract_chunks(samples, config, seed, chunk, progress, stage, workers)
+
+
+def extract_chunks(
+    samples: list[Sample],
+    config: ConfigT,
+    seed: int,
+    extract_chunk: Callable[[Sequence[Sample], ConfigT, Sequence[np.random.Generator]], list[Any]],
+    progress: Progress,
+    stage: str,
+    workers: int = 1,
+    chunk_size: int = 1,
+) -> tuple[list[Any], list[Rejection]]:
+    """Features of every sample (feature or Rejection), in order, by ``extract_chunk`` on
+    runs of ``chunk_size`` samples. Each sample draws from its own generator
+    (:func:`sample_rng`), so ``workers`` 2 shares the runs with a forked child
     (:func:`~linelaser_calib.core.forked.map_forked`) with the same outcome. The first
-    CalibrationError raised (in the samples' order) is raised here.
-    """
+    CalibrationError raised (in the runs' order) is raised here."""
     parent, reported = os.getpid(), [0]
 
-    def one(item: tuple[int, Sample]) -> Any:
-        k, sample = item
-        outcome = extract_one(sample, config, sample_rng(seed, sample.index))
+    def run(start: int) -> list[Any]:
+        chunk = samples[start : start + chunk_size]
+        outcomes = extract_chunk(chunk, config, [sample_rng(seed, s.index) for s in chunk])
         if os.getpid() == parent:  # the forked child reports nothing
-            reported[0] = k + 1
-            progress(stage, k + 1, len(samples))
-        return outcome
+            reported[0] = start + len(chunk)
+            progress(stage, reported[0], len(samples))
+        return outcomes
 
     features: list[Any] = []
     rejections: list[Rejection] = []
-    for outcome in map_forked(one, list(enumerate(samples)), workers):
-        if isinstance(outcome, CalibrationError):
-            raise outcome
-        if isinstance(outcome, Rejection):
-            rejections.append(outcome)
-        else:
-            features.append(outcome)
+    for outcomes in map_forked(run, range(0, len(samples), chunk_size), workers):
+        if isinstance(outcomes, CalibrationError):
+            raise outcomes
+        for outcome in outcomes:
+            (rejections if isinstance(outcome, Rejection) else features).append(outcome)
     if reported[0] < len(samples):
         progress(stage, len(samples), len(samples))
     return features, rejections

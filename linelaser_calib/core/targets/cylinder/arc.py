@@ -31,7 +31,12 @@ from scipy.optimize import least_squares
 from ...errors import ProfileRejected
 from ...model_check import median
 from ...profile.cleaning import MAD_TO_SIGMA
-from ...profile.segmentation import IntArray, SegmentationConfig, segment_profile
+from ...profile.segmentation import (
+    IntArray,
+    SegmentationConfig,
+    SegmentedProfile,
+    segment_profile,
+)
 from ...types import BoolArray, FloatArray
 from .conic import centre_from_conic, sampson_distance
 from .ellipse import EllipseConfig, EllipseFit, fit_ellipse_ransac, refine_conic
@@ -189,6 +194,7 @@ def fit_arc_in_scene(
     rng: np.random.Generator,
     radius_m: float | None = None,
     config: ArcConfig | None = None,
+    segmented: SegmentedProfile | None = None,
 ) -> ArcFit:
     """Find and fit the cylinder's elliptical arc in a cluttered profile.
 
@@ -201,6 +207,10 @@ def fit_arc_in_scene(
     radius_m : float or None
         Cylinder radius, m, when known (bounds the ellipse's semi-minor axis).
     config : ArcConfig, optional
+    segmented : SegmentedProfile, optional
+        The points' segmentation by ``config.segmentation`` where the caller holds it
+        (:func:`~linelaser_calib.core.profile.segmentation.segment_profiles`, done for many
+        profiles at once).
 
     Returns
     -------
@@ -216,7 +226,8 @@ def fit_arc_in_scene(
     """
     config = config or ArcConfig()
     p = np.asarray(points_xz, dtype=np.float64)
-    segmented = segment_profile(p, config.segmentation)
+    if segmented is None:
+        segmented = segment_profile(p, config.segmentation)
     sigma = segmented.noise.sigma_m
     threshold = max(ellipse_config.inlier_threshold_m, ARC_NOISE_SIGMAS * sigma)
     scaled = replace(ellipse_config, inlier_threshold_m=threshold)

@@ -4,6 +4,7 @@ found among the planes of the scene (:mod:`linelaser_calib.core.targets.cylinder
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -12,9 +13,10 @@ import numpy as np
 from ...errors import InputError, ProfileRejected
 from ...geometry import FloatArray
 from ...model_check import Comparison
-from ...profile.cleaning import clean_profile
+from ...profile.cleaning import CleanedProfile, clean_profiles
+from ...profile.segmentation import SegmentedProfile, segment_profiles
 from ...types import BoolArray, Rejection, Sample, SampleFit, StoredArray, stored_points
-from ..base import Progress, extract_each, sample_rng
+from ..base import Progress, extract_chunks, sample_rng
 from .arc import (
     circle_centre,
     circle_radius,
@@ -111,13 +113,33 @@ class FittedSample:
         )
 
 
+#: Samples whose cleaning and segmentation run as one batch (:func:`fit_chunk`): the stages'
+#: array calls cost about the same for one profile as for a few dozen.
+CHUNK_SIZE = 32
+
+
 def fit_sample(
     sample: Sample,
     config: CylinderConfig,
     rng: np.random.Generator,
     radius_m: float | None = None,
 ) -> FittedSample | Rejection:
-    """Clean one sample's profile and fit its ellipse; a rejection says why it failed.
+    """Clean one sample's profile and fit its ellipse; a rejection says why it failed:
+    :func:`fit_chunk` of this one sample."""
+    (outcome,) = fit_chunk([sample], config, [rng], radius_m)
+    return outcome
+
+
+def fit_chunk(
+    samples: Sequence[Sample],
+    config: CylinderConfig,
+    rngs: Sequence[np.random.Generator],
+    radius_m: float | None = None,
+) -> list[FittedSample | Rejection]:
+    """Clean and segment the samples' profiles (all at once,
+    :func:`~linelaser_calib.core.profile.cleaning.clean_profiles`,
+    :func:`~linelaser_calib.core.profile.segmentation.segment_profiles`) and fit each one's
+    ellipse, drawing from its generator in ``rngs``; a rejection says why a sample failed.
 
     ``radius_m`` (m), when given, bounds the plausible ellipse semi-axes. A profile without
     an arc that a rival shape (a line, a V) fits clearly better than any conic gives a
@@ -127,12 +149,30 @@ def fit_sample(
     (:attr:`~.ellipse.EllipseFit.short`) must also fit its ellipse clearly better than a
     line.
     """
+    cleaned = clean_profiles([sample.points for sample in samples], config.cleaning)
+    kept = [profile for profile in cleaned if not isinstance(profile, ProfileRejected)]
+    segmented = iter(segment_profiles([c.points_xz for c in kept], config.arc.segmentation))
+    return [
+        Rejection(sample.index, sample.stamp_ns, "cleaning", str(profile))
+        if isinstance(profile, ProfileRejected)
+        else _fit_cleaned(sample, profile, next(segmented), config, rng, radius_m)
+        for sample, profile, rng in zip(samples, cleaned, rngs, strict=True)
+    ]
+
+
+def _fit_cleaned(
+    sample: Sample,
+    cleaned: CleanedProfile,
+    segmented: SegmentedProfile,
+    config: CylinderConfig,
+    rng: np.random.Generator,
+    radius_m: float | None,
+) -> FittedSample | Rejection:
+    """The ellipse of one sample's cleaned and segmented profile (:func:`fit_chunk`)."""
     try:
-        cleaned = clean_profile(sample.points, config.cleaning)
-    except ProfileRejected as exc:
-        return Rejection(sample.index, sample.stamp_ns, "cleaning", str(exc))
-    try:
-        arc = fit_arc_in_scene(cleaned.points_xz, config.ellipse, rng, radius_m, config.arc)
+        arc = fit_arc_in_scene(
+            cleaned.points_xz, config.ellipse, rng, radius_m, config.arc, segmented
+        )
     except ProfileRejected as exc:
         if len(cleaned.points_xz) >= MIN_RIVAL_POINTS:
             comparison = compare_without_arc(cleaned.points_xz)
@@ -171,7 +211,7 @@ def fit_samples(
     workers: int = 1,
 ) -> tuple[list[FittedSample], list[Rejection]]:
     """Fit every sample's ellipse (semi-axes bounded by ``config.radius_m`` when given);
-    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`.
+    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_chunks`.
 
     Arcs that a rival shape fits better one by one are used: a real profiler's shape error
     makes a V or a line beat an ellipse now and then, and the refinement's outlier test sets
@@ -184,12 +224,12 @@ def fit_samples(
     """
 
     def fit_bounded(
-        sample: Sample, cfg: CylinderConfig, rng: np.random.Generator
-    ) -> FittedSample | Rejection:
-        return fit_sample(sample, cfg, rng, cfg.radius_m)
+        chunk: Sequence[Sample], cfg: CylinderConfig, rngs: Sequence[np.random.Generator]
+    ) -> list[FittedSample | Rejection]:
+        return fit_chunk(chunk, cfg, rngs, cfg.radius_m)
 
-    fitted, rejections = extract_each(
-        samples, config, seed, fit_bounded, progress, "ellipse", workers
+    fitted, rejections = extract_chunks(
+        samples, config, seed, fit_bounded, progress, "ellipse", workers, CHUNK_SIZE
     )
     if config.radius_m is not None and len(fitted) < max(config.min_samples, len(samples) // 2):
         # Most profiles failed with the given radius: fit freely to tell the user why.
