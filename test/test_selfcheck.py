@@ -41,6 +41,7 @@ from linelaser_calib.core.selfcheck import (
     self_check,
     sigma_at_point,
 )
+from linelaser_calib.core.sigma_budget import PROFILE_SCATTER
 from linelaser_calib.core.solver import Flag, solve_with_rejection
 from linelaser_calib.core.subsets import region_jackknife, region_subsets, solve_subsets
 from linelaser_calib.core.targets import get_target
@@ -626,7 +627,7 @@ def test_the_arm_accuracy_prior_is_stated_in_the_result_and_refused_with_kinemat
     assert not refused.exists()
 
 
-def test_a_real_profilers_scatter_widens_the_1_sigma_and_says_so() -> None:
+def test_a_real_profilers_scatter_widens_the_1_sigma_and_the_budget_says_so() -> None:
     # cylinder_scancontrol seed 0: lateral noise and speckle the learned line noise does not
     # describe make the profiles scatter the hand-eye about twice as much as predicted
     # along the line (rotation about x, translation along x).
@@ -644,6 +645,15 @@ def test_a_real_profilers_scatter_widens_the_1_sigma_and_says_so() -> None:
     text = format_summary(result)
     row = next(line for line in text.splitlines() if line.strip().startswith("profile scatter"))
     assert "leaving one profile out moves the hand-eye up to" in row
+    # The budget: the noise model's 1σ times each named widening is the reported 1σ, and the
+    # summary's line names the widening by the profiles' scatter.
+    budget = result.sigma_budget
+    assert budget is not None and dict(budget.factors)[PROFILE_SCATTER] == pytest.approx(
+        check.sigma_widening
+    )
+    np.testing.assert_allclose(budget.sigma, np.r_[check.sigma_honest], rtol=1e-9)
+    line = next(x for x in text.splitlines() if x.strip().startswith("1 sigma from"))
+    assert f"{float(np.max(check.sigma_widening)):.2f}x by the profiles' scatter" in line
 
 
 def test_the_plain_model_keeps_the_profiles_the_per_pose_model_kept(

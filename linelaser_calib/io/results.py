@@ -20,7 +20,15 @@ The result file layout (the README's "Result file")::
               pairing: {sync_tolerance_s, clock_offset_s, max_linear_speed_m_s,
                         max_angular_speed_rad_s, speed_window_s, clock_offset_diagnosis: {...}},
               thinning: {samples_kept, samples_given, neighbourhoods, neighbourhoods_thinned,
-                         per_neighbourhood, cell_m, cell_rad}}
+                         per_neighbourhood, cell_m, cell_rad},
+              sigma_budget: {noise_model: {rotation_rad, translation_m},
+                             widened_by: {NAME: {rotation, translation}, ...}, total: {...}}}
+
+``quality.sigma_budget`` says where the uncertainty comes from
+(:mod:`~linelaser_calib.core.sigma_budget`): the noise model's 1σ, then each widening by
+name (``profile_scatter``, ``shared_robot_error``, ``systematic_robot_error``, ``halves``,
+``scale_model``) as factors per axis, in the order applied; the noise model's 1σ times
+``total`` is the uncertainty.
 
 The target's section (``cylinder`` above; ``known_point``, ...) is the target's own: its
 name, content and extra ``quality`` entries (the cylinder's ``radius_estimated``) come from
@@ -60,6 +68,7 @@ from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections
 from linelaser_calib.core.selfcheck import sigma_at_point
+from linelaser_calib.core.sigma_budget import WORDS, SigmaBudget
 from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
 from linelaser_calib.core.types import Level, Rejection, Verdict
@@ -258,6 +267,28 @@ def _read_pairing(quality: Fields) -> PairingConfig | None:
         raise ResultFileError(f"{section.path}: quality.pairing: {err}") from None
 
 
+def _read_sigma_budget(quality: Fields) -> SigmaBudget | None:
+    """The result's ``quality.sigma_budget`` (None when the file has none): the noise model's
+    1σ and each named widening, in the file's order."""
+    if not quality.has("sigma_budget"):
+        return None
+    section = quality.section("sigma_budget")
+    noise = section.section("noise_model")
+    widened = section.section("widened_by")
+    factors = []
+    for name in widened.data:
+        if name not in WORDS:
+            raise widened.error(name, f"is no widening of the 1 sigma; known: {', '.join(WORDS)}")
+        factor = widened.section(name)
+        factors.append(
+            (str(name), np.r_[factor.array("rotation", (3,)), factor.array("translation", (3,))])
+        )
+    return SigmaBudget(
+        np.r_[noise.array("rotation_rad", (3,)), noise.array("translation_m", (3,))],
+        tuple(factors),
+    )
+
+
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
     """The result in the contract layout (plain lists and numbers), for YAML and JSON;
     ``quality.verdict`` once judged (:func:`~linelaser_calib.settings.render_warnings`)."""
@@ -312,6 +343,11 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             },
             **_pairing_entry(result),
             **_thinning_entry(result),
+            **(
+                {}
+                if result.sigma_budget is None
+                else {"sigma_budget": result.sigma_budget.to_mapping()}
+            ),
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
@@ -550,6 +586,7 @@ def read_result_yaml(path: str | Path, notes: list[str] | None = None) -> Calibr
         warnings=[str(w) for w in quality.items("warnings")],
         verdict=_read_verdict(quality),
         pairing=_read_pairing(quality),
+        sigma_budget=_read_sigma_budget(quality),
         parent_frame=parent_frame,
         child_frame=child_frame,
         base_frame=base_frame,
