@@ -17,18 +17,15 @@ Run: ``.venv/bin/python bench/sigma_sources.py [--seeds 3] [--rows line_ridge,we
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
-from realism import _error, _face_data
+from realism import _error, _face_data, command_line_result
 
 from linelaser_calib.core.errors import CalibrationError
-from linelaser_calib.core.pairing import PairingConfig, pair_profiles
-from linelaser_calib.core.pipeline import Method, calibrate_samples
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.verdict import verdict_of
-from linelaser_calib.settings import Front, pipeline_config, render
+from linelaser_calib.settings import Front, render
 from linelaser_calib.sim.line import line_scenario_from_preset, simulate_line
 from linelaser_calib.sim.weld import simulate_weld, weld_scenario_from_preset
 
@@ -64,18 +61,9 @@ def run_row(name: str, seeds: int) -> None:
     target, recording = ROWS[name]
     for seed in range(seeds):
         data = recording(seed)
-        moving = target == "line"
-        pairing = PairingConfig(
-            max_linear_speed_m_s=0.0 if moving else PairingConfig().max_linear_speed_m_s,
-            max_angular_speed_rad_s=0.0 if moving else PairingConfig().max_angular_speed_rad_s,
-            clock_offset_s=-data.truth.scenario.rig.latency_s if moving else 0.0,
-        )
-        paired = pair_profiles(data.profiles, data.poses, pairing)
-        config = pipeline_config(target, Method.DEFAULT, {}, Front.CLI, seed=0, pairing=pairing)
-        config = replace(config, workers=1)
         label = f"{name} {seed}"
         try:
-            result = calibrate_samples(list(paired.samples), config, list(paired.rejected))
+            result = command_line_result(data, target)
         except CalibrationError as exc:
             print(f"{label:<32} refused: {render(str(exc), Front.CLI)[:120]}", flush=True)
             continue
