@@ -82,6 +82,7 @@ from linelaser_calib.core.model_check import CLEAR_BIC, ShapeFit, compare_models
 from linelaser_calib.core.offset_search import search_clock_offset
 from linelaser_calib.core.pairing import PairingConfig, pair_profiles
 from linelaser_calib.core.pipeline import Method, calibrate_samples, run_pipeline
+from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.sphere import SphereConfig
 from linelaser_calib.core.targets.sphere.circle import (
@@ -346,9 +347,9 @@ def _face_data(target: str, faces: tuple[str, ...], seed: int) -> Any:
     return simulate_weld(replace(weld, rig=rig), seed)
 
 
-def calibrate(data: Any, target: str, tally: Tally, seed: int) -> None:
+def command_line_result(data: Any, target: str) -> CalibrationResult:
     """Calibrate one simulated recording as the command line does (the robot moving while a
-    seam is swept, its latency known) and add the outcome to ``tally``."""
+    seam is swept, its latency known); a refusal raises its CalibrationError."""
     moving = target == "line"
     pairing = PairingConfig(
         max_linear_speed_m_s=0.0 if moving else PairingConfig().max_linear_speed_m_s,
@@ -357,9 +358,14 @@ def calibrate(data: Any, target: str, tally: Tally, seed: int) -> None:
     )
     paired = pair_profiles(data.profiles, data.poses, pairing)
     config = pipeline_config(target, Method.DEFAULT, {}, Front.CLI, seed=0, pairing=pairing)
+    return calibrate_samples(list(paired.samples), config, list(paired.rejected))
+
+
+def calibrate(data: Any, target: str, tally: Tally, seed: int) -> None:
+    """:func:`command_line_result` of one simulated recording, added to ``tally``."""
     tally.recorded += len(data.profiles)
     try:
-        result = calibrate_samples(list(paired.samples), config, list(paired.rejected))
+        result = command_line_result(data, target)
     except CalibrationError as exc:
         tally.refused.append(f"seed {seed}: {render(str(exc), Front.CLI)[:200]}")
         return

@@ -110,6 +110,8 @@ def hand_eye_rows(result: CalibrationResult) -> Rows:
         rows.append(("1 sigma translation", f"{mm_text(sigma_t)} (flange x, y, z)"))
     if sigma_r is not None:
         rows.append(("1 sigma rotation", f"{deg_text(sigma_r)} ({ROTATION_AXES})"))
+    if result.sigma_budget is not None:
+        rows.append(("1 sigma from", result.sigma_budget.text()))
     if result.initial_T_flange_sensor is not None:
         change = truth_error(T, result.initial_T_flange_sensor)
         rows.append(

@@ -16,6 +16,7 @@ from linelaser_calib.core.geometry import (
     transform_from_rotvec_translation,
 )
 from linelaser_calib.core.result import CalibrationResult
+from linelaser_calib.core.sigma_budget import PROFILE_SCATTER, SHARED_ROBOT_ERROR, SigmaBudget
 from linelaser_calib.core.targets.cylinder import CylinderSection
 from linelaser_calib.core.targets.cylinder.model import Cylinder
 from linelaser_calib.core.types import Rejection
@@ -35,7 +36,16 @@ def random_cylinder(rng: np.random.Generator) -> Cylinder:
     )
 
 
+def random_budget(rng: np.random.Generator) -> SigmaBudget:
+    """A noise model's 1σ widened by two named factors per axis."""
+    return SigmaBudget(
+        np.r_[rng.random(3) * 1e-3, rng.random(3) * 1e-4],
+        ((PROFILE_SCATTER, 1.0 + rng.random(6)), (SHARED_ROBOT_ERROR, 1.0 + rng.random(6))),
+    )
+
+
 def random_result(rng: np.random.Generator, *, with_uncertainty: bool = True) -> CalibrationResult:
+    budget = random_budget(rng) if with_uncertainty else None
     return CalibrationResult(
         T_flange_sensor=transform_from_rotvec_translation(
             rng.normal(size=3), 0.1 * rng.normal(size=3)
@@ -53,8 +63,9 @@ def random_result(rng: np.random.Generator, *, with_uncertainty: bool = True) ->
         ],
         rms_residual_m=float(rng.random() * 1e-4),
         sample_residuals_m={i: float(rng.random() * 1e-4) for i in (0, 1, 2, 4, 7)},
-        uncertainty_translation_m=rng.random(3) * 1e-4 if with_uncertainty else None,
-        uncertainty_rotation_rad=rng.random(3) * 1e-3 if with_uncertainty else None,
+        uncertainty_translation_m=None if budget is None else budget.sigma[3:],
+        uncertainty_rotation_rad=None if budget is None else budget.sigma[:3],
+        sigma_budget=budget,
         warnings=["rotation about the sensor x axis is weakly observed"],
         history={"refine_cost": [3.0, 2.0, 1.0]},
         clock_offset_live_s=-0.004 + 1e-4 * float(rng.normal()) if with_uncertainty else None,
@@ -121,7 +132,17 @@ def test_result_round_trips_exactly(tmp_path: Path) -> None:
         if result.uncertainty_translation_m is None:
             assert back.uncertainty_translation_m is None
             assert back.uncertainty_rotation_rad is None
+            assert back.sigma_budget is None
         else:
+            assert back.sigma_budget is not None and result.sigma_budget is not None
+            assert [n for n, _ in back.sigma_budget.factors] == [
+                PROFILE_SCATTER,
+                SHARED_ROBOT_ERROR,
+            ]
+            np.testing.assert_array_equal(back.sigma_budget.total, result.sigma_budget.total)
+            np.testing.assert_allclose(
+                back.sigma_budget.sigma[3:], back.uncertainty_translation_m, rtol=1e-15
+            )
             np.testing.assert_array_equal(
                 back.uncertainty_translation_m, result.uncertainty_translation_m
             )
@@ -241,6 +262,10 @@ def test_truth_extras_cannot_replace_the_truth_or_hold_objects(tmp_path: Path) -
         ("set quality.line_noise {white_sigma_m: 1.0e-6}", "key quality.line_noise needs"),
         ("set quality.line_noise [1, 2]", "key quality.line_noise must be a mapping"),
         ("delete quality", "key quality is missing"),
+        (
+            "set quality.sigma_budget.widened_by {luck: {rotation: [1, 1, 1]}}",
+            "key quality.sigma_budget.widened_by.luck is no widening of the 1 sigma",
+        ),
     ],
 )
 def test_malformed_result_files_raise_result_file_error(

@@ -41,6 +41,13 @@ from linelaser_calib.core.selfcheck import (
     self_check,
     sigma_at_point,
 )
+from linelaser_calib.core.sigma_budget import (
+    PROFILE_SCATTER,
+    SCALE_MODEL,
+    SHARED_ROBOT_ERROR,
+    SYSTEMATIC_ROBOT_ERROR,
+    solution_budget,
+)
 from linelaser_calib.core.solver import Flag, solve_with_rejection
 from linelaser_calib.core.subsets import region_jackknife, region_subsets, solve_subsets
 from linelaser_calib.core.targets import get_target
@@ -319,6 +326,43 @@ def test_a_model_spread_stays_out_of_the_yardstick_and_in_the_reported_sigma() -
     )
     entry = widened.quality_entries()["self_check"]["model_spread_sigma"]
     assert entry["translation_m"][2] == pytest.approx(30.0 * solution.sigma_translation_m[2])
+
+
+def test_the_sigma_budget_names_each_widening_and_multiplies_to_the_reported_sigma() -> None:
+    """A solve widened for its profiles' scatter (x1.5) and the robot's shared error (x2 on
+    the translation), with a model spread: without a self-check the budget holds those and
+    the scale model; with one, on a region-dependent robot error, the systematic error's
+    widening too, and the noise model's 1σ times the factors is the reported 1σ."""
+    features = regional_features()
+    solution = toy_solve(features)
+    assert solution.sigma_translation_m is not None and solution.sigma_rotation_rad is not None
+    scatter, shared = np.full(6, 1.5), np.r_[np.ones(3), np.full(3, 2.0)]
+    widened = replace(
+        solution,
+        sigma_rotation_rad=solution.sigma_rotation_rad * 3.0,
+        sigma_translation_m=solution.sigma_translation_m * 3.0,
+        sigma_widening=scatter,
+        sigma_shared=shared,
+    )
+    other = replace(widened, T_flange_sensor=widened.T_flange_sensor.copy())
+    other.T_flange_sensor[2, 3] += 30.0 * solution.sigma_translation_m[2]
+    spread = with_model_spread(widened, other, "a reading", "advice")
+    budget = solution_budget(spread)
+    assert budget is not None
+    assert [name for name, _ in budget.factors] == [
+        PROFILE_SCATTER,
+        SHARED_ROBOT_ERROR,
+        SCALE_MODEL,
+    ]
+    np.testing.assert_allclose(budget.noise_model[:3], solution.sigma_rotation_rad * 2.0)
+    reported = np.r_[spread.sigma_rotation_rad, spread.sigma_translation_m]
+    np.testing.assert_allclose(budget.sigma, reported, rtol=1e-12)
+    check = self_check(features, spread, toy_solve)
+    assert check is not None and check.systematic and check.sigma_budget is not None
+    factors = dict(check.sigma_budget.factors)
+    assert float(np.max(factors[SYSTEMATIC_ROBOT_ERROR])) > 1.0
+    np.testing.assert_allclose(check.sigma_budget.sigma, check.sigma_honest, rtol=1e-12)
+    assert "by the robot's systematic error over the workspace" in check.sigma_budget.text()
 
 
 def test_halves_that_disagree_warn_and_agree_within_the_widened_sigma() -> None:
@@ -626,7 +670,7 @@ def test_the_arm_accuracy_prior_is_stated_in_the_result_and_refused_with_kinemat
     assert not refused.exists()
 
 
-def test_a_real_profilers_scatter_widens_the_1_sigma_and_says_so() -> None:
+def test_a_real_profilers_scatter_widens_the_1_sigma_and_the_budget_says_so() -> None:
     # cylinder_scancontrol seed 0: lateral noise and speckle the learned line noise does not
     # describe make the profiles scatter the hand-eye about twice as much as predicted
     # along the line (rotation about x, translation along x).
@@ -644,6 +688,15 @@ def test_a_real_profilers_scatter_widens_the_1_sigma_and_says_so() -> None:
     text = format_summary(result)
     row = next(line for line in text.splitlines() if line.strip().startswith("profile scatter"))
     assert "leaving one profile out moves the hand-eye up to" in row
+    # The budget: the noise model's 1σ times each named widening is the reported 1σ, and the
+    # summary's line names the widening by the profiles' scatter.
+    budget = result.sigma_budget
+    assert budget is not None and dict(budget.factors)[PROFILE_SCATTER] == pytest.approx(
+        check.sigma_widening
+    )
+    np.testing.assert_allclose(budget.sigma, np.r_[check.sigma_honest], rtol=1e-9)
+    line = next(x for x in text.splitlines() if x.strip().startswith("1 sigma from"))
+    assert f"{float(np.max(check.sigma_widening)):.2f}x by the profiles' scatter" in line
 
 
 def test_the_plain_model_keeps_the_profiles_the_per_pose_model_kept(

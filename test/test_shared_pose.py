@@ -19,6 +19,7 @@ from linelaser_calib.core.shared_pose import (
     pose_separations,
     shared_pose_error,
 )
+from linelaser_calib.core.subsets import model_sigma, statistical_sigma
 from linelaser_calib.core.targets import get_target
 from linelaser_calib.core.targets.base import SolveContext, TargetSolution
 from linelaser_calib.core.targets.cylinder import CylinderConfig
@@ -94,6 +95,11 @@ def test_independent_pose_errors_keep_the_per_view_1_sigma() -> None:
     assert np.all(np.abs(ratio - 1.0) < 0.25), ratio
 
 
+def widening(solution: TargetSolution) -> np.ndarray:
+    """The factors (6,) for the profiles' scatter a solution widened its 1σ by (1 where none)."""
+    return np.ones(6) if solution.sigma_widening is None else solution.sigma_widening
+
+
 def _line_ridge(
     seed: int, cell_field: bool = False, bumped: int | None = None
 ) -> tuple[TargetSolution, np.ndarray, int]:
@@ -140,9 +146,18 @@ def _line_ridge(
 def test_line_ridge_seed_6_is_within_3_sigma() -> None:
     """Regression: the simulated arm's error on ``line_ridge`` is drawn at 8 points of the
     sweep and blended, so about six neighbouring views share it; with each view's error
-    taken as independent, seed 6 came out 3.79 of its 1σ off (rotation about sensor z)."""
-    _, z, _ = _line_ridge(6)
+    taken as independent, seed 6 came out 3.79 of its 1σ off (rotation about sensor z).
+    The widening is named (``sigma_shared``), so that the self-check judges the robot's
+    error against the 1σ without it (:func:`~linelaser_calib.core.subsets.model_sigma`), as
+    the cylinder's and the sphere's."""
+    solution, z, _ = _line_ridge(6)
     assert np.all(z <= 3.0), z
+    assert solution.sigma_shared is not None and float(np.max(solution.sigma_shared)) > 1.2
+    noise, statistical = model_sigma(solution), statistical_sigma(solution)
+    assert noise is not None and statistical is not None
+    np.testing.assert_allclose(
+        noise * widening(solution) * solution.sigma_shared, statistical, rtol=1e-9
+    )
 
 
 def test_a_line_whose_arm_errs_far_beyond_its_prior_is_within_3_sigma_and_warned() -> None:

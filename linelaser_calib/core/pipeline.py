@@ -40,6 +40,7 @@ from .result import CalibrationResult
 from .robot.joint_calibration import KinematicSetup
 from .robot.kinematics import forward_kinematics
 from .selfcheck import DEFAULT_ARM_ACCURACY_M, DEFAULT_FOLDS, measuring_centre_depth, self_check
+from .sigma_budget import solution_budget
 from .targets import DEFAULT_TARGET, get_target
 from .targets.base import (
     Placement,
@@ -426,6 +427,7 @@ def calibrate_samples(
             solution.sigma_translation_m is not None,
         ),
         thinning=thinning,
+        sigma_budget=solution_budget(solution) if check is None else check.sigma_budget,
     )
 
 

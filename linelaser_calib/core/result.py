@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from .robot.joint_calibration import KinematicIdentifiability
     from .robot.kinematics import KinematicCorrections
     from .selfcheck import SelfCheck
+    from .sigma_budget import SigmaBudget
     from .targets.base import ResultSection
     from .thinning import Thinning
 
@@ -89,6 +90,9 @@ class CalibrationResult:
     thinning : Thinning or None
         The near-duplicate samples set aside before the solve (:mod:`.thinning`): how many
         were kept of how many, and the rule; None where every sample was kept.
+    sigma_budget : SigmaBudget or None
+        Where the uncertainty above comes from: the noise model's 1σ and each named widening
+        (:mod:`.sigma_budget`); None without a 1σ.
     """
 
     T_flange_sensor: FloatArray
@@ -121,3 +125,4 @@ class CalibrationResult:
     pairing: PairingConfig | None = None
     clock_diagnosis: ClockOffsetDiagnosis | None = None
     thinning: Thinning | None = None
+    sigma_budget: SigmaBudget | None = None

@@ -112,6 +112,13 @@ from .regions import (
     nearest_poses,
     workspace_regions,
 )
+from .sigma_budget import (
+    HALVES,
+    SCALE_MODEL,
+    SYSTEMATIC_ROBOT_ERROR,
+    SigmaBudget,
+    statistical_budget,
+)
 from .subsets import (
     halves_difference,
     hand_eye_difference,
@@ -211,6 +218,9 @@ class SelfCheck:
         The part of ``sigma_honest`` (added in quadrature) for a model of the sensor the
         profiles cannot tell apart (:attr:`TargetSolution.sigma_model_spread` of the default
         solve of all features); None where there is none.
+    sigma_budget : SigmaBudget or None
+        ``sigma_honest`` as the noise model's 1σ and each named widening
+        (:mod:`.sigma_budget`); None where the chosen solve has no 1σ.
     solution : TargetSolution
         The chosen model's solve of all features (the result to report).
     region_indices : list of list of int
@@ -248,6 +258,7 @@ class SelfCheck:
     solution: TargetSolution = field(repr=False)
     sigma_widening: FloatArray | None = None
     sigma_model_spread: FloatArray | None = None
+    sigma_budget: SigmaBudget | None = None
     region_indices: list[list[int]] = field(default_factory=list)
     region_solutions: list[TargetSolution | None] = field(default_factory=list, repr=False)
     warnings: list[str] = field(default_factory=list)
@@ -586,6 +597,9 @@ def self_check(
     reported = statistical_sigma(chosen)
     if reported is not None:
         sigma = np.maximum(sigma, reported)
+    budget = statistical_budget(chosen)
+    if budget is not None:
+        budget = budget.then(SYSTEMATIC_ROBOT_ERROR, sigma)
     split = halves_difference(even, odd)
     halves = None
     if split is not None:
@@ -597,9 +611,11 @@ def self_check(
         systematic = systematic or excess > 1.0
         if excess > 1.0:
             sigma = sigma * excess
+            budget = None if budget is None else budget.then(HALVES, sigma)
     spread = solution.sigma_model_spread
     if spread is not None:
         sigma = np.hypot(sigma, spread)
+        budget = None if budget is None else budget.then(SCALE_MODEL, sigma)
     check = SelfCheck(
         folds=folds,
         accuracy_in_use_m=None if blocked is None else blocked.rms_m,
@@ -629,6 +645,7 @@ def self_check(
         solution=chosen,
         sigma_widening=chosen.sigma_widening,
         sigma_model_spread=spread,
+        sigma_budget=budget,
         region_indices=[[f.index for f in held] for held in held_sets],
         region_solutions=[None if isinstance(r, CalibrationError) else r for r in region_solved],
     )

@@ -32,7 +32,8 @@ from linelaser_calib.core.errors import InputError
 from linelaser_calib.core.geometry import matrix_from_rpy, transform_from_rotation_translation
 from linelaser_calib.io.errors import ResultFileError
 from linelaser_calib.io.hand_eye import check_translation, rotation_from_quaternion
-from linelaser_calib.io.results import _load, hand_eye_transform
+from linelaser_calib.io.results import hand_eye_transform
+from linelaser_calib.io.yaml_file import load_fields
 
 FloatArray = NDArray[np.float64]
 
@@ -123,7 +124,7 @@ def _parse_numbers(spec: str) -> InitialHandEye | None:
 
 def _from_file(path: Path) -> InitialHandEye:
     """The hand-eye of a YAML file, read and checked as every result file is."""
-    path, fields = _load(path)
+    path, fields = load_fields(path)
     T, warnings = hand_eye_transform(fields)
     return InitialHandEye(T, warnings)
 

@@ -37,7 +37,8 @@ from linelaser_calib.core.robot.kinematics import (
     urdf_model,
 )
 from linelaser_calib.io.errors import ResultFileError
-from linelaser_calib.io.results import _load, kinematics_to_dict
+from linelaser_calib.io.results import kinematics_to_dict
+from linelaser_calib.io.yaml_file import load_fields
 
 SECTION = "kinematics"
 
@@ -179,7 +180,7 @@ def read_kinematics(path: str | Path) -> KinematicCorrections | None:
     ResultFileError
         Unreadable file or a malformed section (the key is named).
     """
-    file_path, fields = _load(path)
+    file_path, fields = load_fields(path)
     if not fields.has(SECTION):
         return None
     section = fields.section(SECTION)

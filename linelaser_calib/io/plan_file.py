@@ -9,7 +9,7 @@ from typing import Any
 from linelaser_calib.core.geometry import translation_quaternion_from_transform
 from linelaser_calib.core.planning import Plan
 from linelaser_calib.core.targets.base import plain_floats
-from linelaser_calib.io.results import write_yaml_atomically
+from linelaser_calib.io.yaml_file import write_yaml_atomically
 
 _PLAN_HEADER = (
     "# Planned flange poses (T_base_flange) from linelaser-calib plan, SI units (m);\n"

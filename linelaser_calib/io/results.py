@@ -20,7 +20,15 @@ The result file layout (the README's "Result file")::
               pairing: {sync_tolerance_s, clock_offset_s, max_linear_speed_m_s,
                         max_angular_speed_rad_s, speed_window_s, clock_offset_diagnosis: {...}},
               thinning: {samples_kept, samples_given, neighbourhoods, neighbourhoods_thinned,
-                         per_neighbourhood, cell_m, cell_rad}}
+                         per_neighbourhood, cell_m, cell_rad},
+              sigma_budget: {noise_model: {rotation_rad, translation_m},
+                             widened_by: {NAME: {rotation, translation}, ...}, total: {...}}}
+
+``quality.sigma_budget`` says where the uncertainty comes from
+(:mod:`~linelaser_calib.core.sigma_budget`): the noise model's 1σ, then each widening by
+name (``profile_scatter``, ``shared_robot_error``, ``systematic_robot_error``, ``halves``,
+``scale_model``) as factors per axis, in the order applied; the noise model's 1σ times
+``total`` is the uncertainty.
 
 The target's section (``cylinder`` above; ``known_point``, ...) is the target's own: its
 name, content and extra ``quality`` entries (the cylinder's ``radius_estimated``) come from
@@ -40,8 +48,6 @@ define the transform; ``matrix``, if present, must agree with them.
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -62,6 +68,7 @@ from linelaser_calib.core.pairing import PairingConfig
 from linelaser_calib.core.result import CalibrationResult
 from linelaser_calib.core.robot.kinematics import KinematicCorrections
 from linelaser_calib.core.selfcheck import sigma_at_point
+from linelaser_calib.core.sigma_budget import WORDS, SigmaBudget
 from linelaser_calib.core.targets import get_target, target_names
 from linelaser_calib.core.targets.base import ResultSection, plain_floats
 from linelaser_calib.core.types import Level, Rejection, Verdict
@@ -72,6 +79,7 @@ from linelaser_calib.io.hand_eye import (
     rotation_from_matrix,
     rotation_from_quaternion,
 )
+from linelaser_calib.io.yaml_file import Fields, load_fields, plain, write_yaml_atomically
 
 FloatArray = NDArray[np.float64]
 
@@ -113,17 +121,6 @@ class Truth:
     raw: dict[str, Any]
 
 
-def _plain(value: Any) -> Any:
-    """``value`` with numpy arrays and scalars turned into plain Python lists and numbers."""
-    if isinstance(value, Mapping):
-        return {_plain(key): _plain(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(item) for item in value]
-    if isinstance(value, (np.ndarray, np.generic)):
-        return value.tolist()
-    return value
-
-
 def _hand_eye_section(
     T_flange_sensor: ArrayLike, parent_frame: str, child_frame: str
 ) -> dict[str, Any]:
@@ -140,33 +137,7 @@ def _hand_eye_section(
 
 def _target_section(section: ResultSection, frame: str) -> dict[str, Any]:
     """``{key: mapping}`` of a target section."""
-    return {section.key: _plain(section.to_mapping(frame))}
-
-
-def write_yaml_atomically(path: Path, header: str, data: dict[str, Any]) -> Path:
-    """Write ``header`` + YAML of ``data`` to ``path`` via a flushed temporary file."""
-    try:
-        text = header + yaml.safe_dump(
-            data, sort_keys=False, default_flow_style=None, width=100, allow_unicode=True
-        )
-    except yaml.YAMLError as err:
-        raise InputError(f"cannot write {path}: a value is not plain YAML data: {err}") from err
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as stream:
-                os.fchmod(stream.fileno(), 0o644)
-                stream.write(text)
-                stream.flush()
-                os.fsync(stream.fileno())
-            os.replace(tmp_name, path)
-        except BaseException:
-            Path(tmp_name).unlink(missing_ok=True)
-            raise
-    except OSError as err:
-        raise ResultFileError(f"cannot write {path}: {err}") from err
-    return path
+    return {section.key: plain(section.to_mapping(frame))}
 
 
 def kinematics_to_dict(
@@ -211,14 +182,14 @@ def _verdict_section(verdict: Verdict) -> dict[str, Any]:
     }
 
 
-def _read_verdict(quality: _Fields) -> Verdict | None:
+def _read_verdict(quality: Fields) -> Verdict | None:
     """``quality.verdict`` with the accuracy in use beside it; None in a file without one."""
     if not quality.has("verdict"):
         return None
     section = quality.section("verdict")
     level = section.text("level")
     if level not in {item.value for item in Level}:
-        raise section._error(
+        raise section.error(
             "level", f"must be one of {', '.join(item.value for item in Level)}, got {level!r}"
         )
     accuracy = quality.data.get("accuracy_in_use")
@@ -279,7 +250,7 @@ def _thinning_entry(result: CalibrationResult) -> dict[str, Any]:
     }
 
 
-def _read_pairing(quality: _Fields) -> PairingConfig | None:
+def _read_pairing(quality: Fields) -> PairingConfig | None:
     """The result's ``quality.pairing`` (None when the file has none)."""
     if not quality.has("pairing"):
         return None
@@ -294,6 +265,28 @@ def _read_pairing(quality: _Fields) -> PairingConfig | None:
         )
     except ValueError as err:
         raise ResultFileError(f"{section.path}: quality.pairing: {err}") from None
+
+
+def _read_sigma_budget(quality: Fields) -> SigmaBudget | None:
+    """The result's ``quality.sigma_budget`` (None when the file has none): the noise model's
+    1σ and each named widening, in the file's order."""
+    if not quality.has("sigma_budget"):
+        return None
+    section = quality.section("sigma_budget")
+    noise = section.section("noise_model")
+    widened = section.section("widened_by")
+    factors = []
+    for name in widened.data:
+        if name not in WORDS:
+            raise widened.error(name, f"is no widening of the 1 sigma; known: {', '.join(WORDS)}")
+        factor = widened.section(name)
+        factors.append(
+            (str(name), np.r_[factor.array("rotation", (3,)), factor.array("translation", (3,))])
+        )
+    return SigmaBudget(
+        np.r_[noise.array("rotation_rad", (3,)), noise.array("translation_m", (3,))],
+        tuple(factors),
+    )
 
 
 def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
@@ -329,7 +322,7 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             ],
             "rms_residual_m": float(result.rms_residual_m),
             "warnings": [str(w) for w in result.warnings],
-            **_plain(result.target.quality_entries()),
+            **plain(result.target.quality_entries()),
             **(
                 {
                     "accuracy_in_use_m": None,
@@ -350,6 +343,11 @@ def result_to_dict(result: CalibrationResult) -> dict[str, Any]:
             },
             **_pairing_entry(result),
             **_thinning_entry(result),
+            **(
+                {}
+                if result.sigma_budget is None
+                else {"sigma_budget": result.sigma_budget.to_mapping()}
+            ),
             "samples_used_indices": [int(i) for i in result.samples_used],
             "sample_residuals_m": {
                 int(i): float(v) for i, v in sorted(result.sample_residuals_m.items())
@@ -426,111 +424,12 @@ def write_truth_yaml(
     data = {
         "hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame),
         **_target_section(target, base_frame),
-        **_plain(extra),
+        **plain(extra),
     }
     return write_yaml_atomically(Path(path), _TRUTH_HEADER, data)
 
 
-class _Fields:
-    """Typed access to a parsed YAML mapping; every problem names the file and the key."""
-
-    def __init__(self, path: Path, data: Any, prefix: str = "") -> None:
-        if not isinstance(data, dict):
-            where = prefix.rstrip(".") or "the top level"
-            raise ResultFileError(f"{path}: {where} must be a mapping, got {data!r}")
-        self.path, self.data, self.prefix = path, data, prefix
-
-    def _error(self, key: object, problem: str) -> ResultFileError:
-        return ResultFileError(f"{self.path}: key {self.prefix}{key} {problem}")
-
-    def has(self, key: str) -> bool:
-        return self.data.get(key) is not None
-
-    def get(self, key: object) -> Any:
-        if key not in self.data:
-            raise self._error(key, "is missing")
-        return self.data[key]
-
-    def section(self, key: str) -> _Fields:
-        return _Fields(self.path, self.get(key), f"{self.prefix}{key}.")
-
-    def text(self, key: str) -> str:
-        value = self.get(key)
-        if not isinstance(value, str):
-            raise self._error(key, f"must be a string, got {value!r}")
-        return value
-
-    def number(self, key: object) -> float:
-        value = self.get(key)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self._error(key, f"must be a number, got {value!r}")
-        return float(value)
-
-    def integer(self, key: str) -> int:
-        value = self.get(key)
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise self._error(key, f"must be an integer, got {value!r}")
-        return value
-
-    def array(self, key: str, shape: tuple[int, ...]) -> FloatArray:
-        value = self.get(key)
-        try:
-            array = np.asarray(value, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise self._error(key, f"must be numbers of shape {shape}, got {value!r}") from None
-        if array.shape != shape or not np.all(np.isfinite(array)):
-            raise self._error(key, f"must be finite numbers of shape {shape}, got {value!r}")
-        return array
-
-    def items(self, key: str) -> list[Any]:
-        """The list at ``key``; an absent or null key gives an empty list."""
-        value = self.data.get(key)
-        if value is None:
-            return []
-        if not isinstance(value, list):
-            raise self._error(key, f"must be a list, got {value!r}")
-        return value
-
-    def integers(self, key: str) -> list[int]:
-        values = self.items(key)
-        if not all(isinstance(v, int) and not isinstance(v, bool) for v in values):
-            raise self._error(key, f"must be a list of integers, got {values!r}")
-        return values
-
-    def flag(self, key: str) -> bool:
-        value = self.data.get(key, False)
-        if not isinstance(value, bool):
-            raise self._error(key, f"must be true or false, got {value!r}")
-        return value
-
-
-def _load(path: str | Path) -> tuple[Path, _Fields]:
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ResultFileError(f"{path} does not exist; check the path") from None
-    except (OSError, UnicodeDecodeError) as err:
-        raise ResultFileError(f"cannot read {path}: {err}") from err
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as err:
-        raise ResultFileError(f"{path} is not valid YAML: {yaml_problem(err)}") from None
-    return path, _Fields(path, data)
-
-
-def yaml_problem(err: yaml.YAMLError) -> str:
-    """What a YAML parser found wrong and where (line and column, 1-based), without the
-    parser's name for text it was handed (``"<unicode string>"``): the caller names the
-    file."""
-    if isinstance(err, yaml.MarkedYAMLError) and err.problem_mark is not None:
-        mark = err.problem_mark
-        context = f" ({err.context})" if err.context else ""
-        return f"{err.problem}{context} at line {mark.line + 1}, column {mark.column + 1}"
-    return str(err)
-
-
-def hand_eye_transform(fields: _Fields) -> tuple[FloatArray, list[str]]:
+def hand_eye_transform(fields: Fields) -> tuple[FloatArray, list[str]]:
     """``T_flange_sensor`` (4, 4) of a file's ``hand_eye`` section and what was normalised.
 
     The section holds ``translation`` (m) and ``rotation_xyzw``, a 4 x 4 ``matrix``, or both
@@ -580,7 +479,7 @@ def hand_eye_transform(fields: _Fields) -> tuple[FloatArray, list[str]]:
     return T, [f"{path}: {warning}" for warning in warnings]
 
 
-def _read_hand_eye(fields: _Fields, notes: list[str] | None = None) -> tuple[FloatArray, str, str]:
+def _read_hand_eye(fields: Fields, notes: list[str] | None = None) -> tuple[FloatArray, str, str]:
     """``T_flange_sensor`` (4, 4), parent frame, child frame from the ``hand_eye`` section;
     what was normalised is appended to ``notes`` (when given)."""
     T, normalised = hand_eye_transform(fields)
@@ -590,7 +489,7 @@ def _read_hand_eye(fields: _Fields, notes: list[str] | None = None) -> tuple[Flo
     return T, hand_eye.text("parent_frame"), hand_eye.text("child_frame")
 
 
-def _read_target(fields: _Fields) -> tuple[ResultSection, str]:
+def _read_target(fields: Fields) -> tuple[ResultSection, str]:
     """The target section (the first registered target whose key is present) and its frame."""
     quality = fields.data.get("quality")
     quality = quality if isinstance(quality, dict) else {}
@@ -608,14 +507,14 @@ def _read_target(fields: _Fields) -> tuple[ResultSection, str]:
     )
 
 
-def _read_uncertainty(hand_eye: _Fields, key: str) -> FloatArray | None:
+def _read_uncertainty(hand_eye: Fields, key: str) -> FloatArray | None:
     if not hand_eye.has("uncertainty"):
         return None
     uncertainty = hand_eye.section("uncertainty")
     return uncertainty.array(key, (3,)) if uncertainty.has(key) else None
 
 
-def _read_measuring_centre(hand_eye: _Fields) -> float | None:
+def _read_measuring_centre(hand_eye: Fields) -> float | None:
     """The depth (m) of the uncertainty's ``measuring_centre_m``, None without one."""
     centre = _read_uncertainty(hand_eye, "measuring_centre_m")
     return None if centre is None else float(centre[2])
@@ -637,14 +536,14 @@ def read_result_yaml(path: str | Path, notes: list[str] | None = None) -> Calibr
     ResultFileError
         Missing file, invalid YAML, or a missing or malformed key (named in the message).
     """
-    path, fields = _load(path)
+    path, fields = load_fields(path)
     T, parent_frame, child_frame = _read_hand_eye(fields, notes)
     target, base_frame = _read_target(fields)
     hand_eye = fields.section("hand_eye")
     quality = fields.section("quality")
     rejected = []
     for i, entry in enumerate(quality.items("samples_rejected")):
-        item = _Fields(path, entry, f"quality.samples_rejected[{i}].")
+        item = Fields(path, entry, f"quality.samples_rejected[{i}].")
         rejected.append(
             Rejection(
                 item.integer("index"),
@@ -687,6 +586,7 @@ def read_result_yaml(path: str | Path, notes: list[str] | None = None) -> Calibr
         warnings=[str(w) for w in quality.items("warnings")],
         verdict=_read_verdict(quality),
         pairing=_read_pairing(quality),
+        sigma_budget=_read_sigma_budget(quality),
         parent_frame=parent_frame,
         child_frame=child_frame,
         base_frame=base_frame,
@@ -701,7 +601,7 @@ def read_truth_yaml(path: str | Path) -> Truth:
     ResultFileError
         Missing file, invalid YAML, or a missing or malformed key.
     """
-    path, fields = _load(path)
+    path, fields = load_fields(path)
     T, parent_frame, child_frame = _read_hand_eye(fields)
     target, base_frame = _read_target(fields)
     return Truth(T, target, parent_frame, child_frame, base_frame, fields.data)
@@ -779,7 +679,7 @@ def write_reference_yaml(
     if "hand_eye" in extra:
         raise InputError("extra must not hold hand_eye, the reference itself")
     data = {"hand_eye": _hand_eye_section(T_flange_sensor, parent_frame, child_frame)}
-    return write_yaml_atomically(Path(path), _REFERENCE_HEADER, {**data, **_plain(extra)})
+    return write_yaml_atomically(Path(path), _REFERENCE_HEADER, {**data, **plain(extra)})
 
 
 def read_reference_yaml(path: str | Path) -> tuple[FloatArray, dict[str, Any]]:
@@ -790,6 +690,6 @@ def read_reference_yaml(path: str | Path) -> tuple[FloatArray, dict[str, Any]]:
     ResultFileError
         Missing file, invalid YAML, or a missing or malformed ``hand_eye`` key.
     """
-    _, fields = _load(path)
+    _, fields = load_fields(path)
     T, _, _ = _read_hand_eye(fields)
     return T, fields.data

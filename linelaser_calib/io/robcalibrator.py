@@ -38,7 +38,8 @@ from linelaser_calib.core.geometry import project_to_so3, transform_from_rotatio
 from linelaser_calib.core.types import FlangePose, FloatArray, Profile
 from linelaser_calib.io.bags import write_bag
 from linelaser_calib.io.errors import BagError
-from linelaser_calib.io.results import write_reference_yaml, yaml_problem
+from linelaser_calib.io.results import write_reference_yaml
+from linelaser_calib.io.yaml_file import yaml_problem
 
 #: Stamp of the first profile: the authors' save time, 2023-10-31 15:31:42 (taken as UTC).
 EPOCH_NS = 1_698_766_302_000_000_000

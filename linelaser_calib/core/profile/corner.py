@@ -654,7 +654,9 @@ def check_corner_recording(
     A corner whose lines leave an RMS residual ``sigmas`` robust spreads above the median of
     the recording's profiles is set aside
     (:func:`~linelaser_calib.core.model_check.recording_outliers`; corners given as feature
-    points are not judged); so is one that a rival shape fits clearly better by a margin
+    points are not judged), each corner's spread counting the sampling spread of an RMS over
+    its effective points (:attr:`~linelaser_calib.core.model_check.Comparison.n_effective`),
+    as the sphere's circles do; so is one that a rival shape fits clearly better by a margin
     ``sigmas`` robust spreads above the recording's median (:func:`_rival_outliers`).
 
     Parameters
@@ -666,8 +668,13 @@ def check_corner_recording(
     """
     corners, aside = _consistent_corners(corners, sigmas)
     aside.update({k: why for k, why in _rival_outliers(corners, sigmas).items() if k not in aside})
-    fitted = [(k, c.rms_m) for k, c in enumerate(corners) if c.rms_m is not None]
-    outliers = recording_outliers([rms for _, rms in fitted], sigmas, "line pair")
+    fitted = [(k, c.rms_m, c) for k, c in enumerate(corners) if c.rms_m is not None]
+    outliers = recording_outliers(
+        [rms for _, rms, _ in fitted],
+        sigmas,
+        "line pair",
+        [len(c.points) if c.shape is None else c.shape.n_effective for _, _, c in fitted],
+    )
     aside.update({fitted[j][0]: reason for j, reason in outliers if fitted[j][0] not in aside})
     rejections = rejections + [
         Rejection(corners[k].index, corners[k].stamp_ns, "corner", reason)

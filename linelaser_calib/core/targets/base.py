@@ -299,8 +299,8 @@ class TargetSolution:
         the solve estimates none.
     sigma_widening : ndarray, shape (6,), or None
         Factors (>= 1, [rotation, translation]) by which the 1σ above was widened because the
-        profiles scatter the hand-eye more than the noise model predicts
-        (:func:`~linelaser_calib.core.solver.sample_dispersion`); None where not checked.
+        profiles scatter the hand-eye more than the noise model predicts (``sample_dispersion``;
+        a V's corners: ``recording_widening``, one factor); None where not checked.
         The 1σ divided by them is the noise model's.
     sigma_shared : ndarray, shape (6,), or None
         Factors (>= 1, same order) by which the 1σ above was widened, after that, for the

@@ -179,6 +179,11 @@ class KnownPointResult:
     shared : SharedPoseError or None
         How the robot's error is shared by neighbouring views (``default``; None for
         ``paper`` or too few views), counted in the 1σ.
+    sigma_widening, sigma_shared : ndarray, shape (6,), or None
+        The hand-eye 1σ's factors (>= 1, [rotation, translation]) for the views' scatter
+        beyond their noise model and, after that, for the robot's error the views share
+        (:attr:`~..base.TargetSolution.sigma_widening`, ``sigma_shared``); None for
+        ``paper``.
     """
 
     T_flange_sensor: FloatArray
@@ -197,6 +202,8 @@ class KnownPointResult:
     history: dict[str, list[float]]
     corners: list[CornerSample]
     shared: SharedPoseError | None = None
+    sigma_widening: FloatArray | None = None
+    sigma_shared: FloatArray | None = None
 
 
 def _observability_warnings(observability: KnownPointObservability, method: str) -> list[str]:
@@ -467,10 +474,10 @@ def _default_result(
     )
     if scatter is not None:
         warnings.append(scatter)
-    sigma = widen * np.sqrt(np.diag(refined.covariance))
+    own = widen * np.sqrt(np.diag(refined.covariance))
     shared = shared_pose_error(refined.views(), learned)
+    sigma = own if shared is None else np.maximum(own, np.sqrt(np.diag(shared.covariance)))
     if shared is not None:
-        sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
         note = shared.excess_note(ROBOT_PRIOR_EXCESS)
         if note is not None:
             warnings.append(note)
@@ -491,6 +498,8 @@ def _default_result(
         history={"refine_cost": list(refined.cost_history)},
         corners=used,
         shared=shared,
+        sigma_widening=np.full(N_HAND_EYE, widen),
+        sigma_shared=None if shared is None else sigma[:N_HAND_EYE] / own[:N_HAND_EYE],
     )
 
 
@@ -518,6 +527,8 @@ def _solution(
         sample_fits=[c.record() for c in result.corners],
         noise_m=config.robot_sigma_t_m,
         subset_start=result.shared,
+        sigma_widening=result.sigma_widening,
+        sigma_shared=result.sigma_shared,
     )
 
 

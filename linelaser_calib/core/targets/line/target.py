@@ -135,6 +135,8 @@ def _solution(
         warnings=extra.pop("warnings", []),
         history=extra.pop("history", {}),
         subset_start=extra.pop("subset_start", None),
+        sigma_widening=extra.pop("sigma_widening", None),
+        sigma_shared=extra.pop("sigma_shared", None),
         sample_fits=[
             SampleFit(f.index, f.stamp_ns, f.T_base_flange, f.points, f.corner_xz) for f in features
         ],
@@ -437,12 +439,12 @@ class LineTarget:
         widen, scatter = recording_widening(refined.view_chi2, 2, len(refined.covariance))
         if scatter is not None:
             warnings.append(scatter)
-        sigma = widen * np.sqrt(np.diag(refined.covariance))
+        own = widen * np.sqrt(np.diag(refined.covariance))
         # The robot's error shared by neighbouring views, as the recording shows it: the 1σ
         # of the same estimate under it, where wider.
         shared = shared_pose_error(refined.views(), learned)
+        sigma = own if shared is None else np.maximum(own, np.sqrt(np.diag(shared.covariance)))
         if shared is not None:
-            sigma = np.maximum(sigma, np.sqrt(np.diag(shared.covariance)))
             note = shared.excess_note(ROBOT_PRIOR_EXCESS)
             if note is not None:
                 warnings.append(note)
@@ -462,6 +464,8 @@ class LineTarget:
             warnings=warnings,
             history={"refine_cost": list(refined.cost_history)},
             subset_start=shared,
+            sigma_widening=np.full(6, widen),
+            sigma_shared=None if shared is None else sigma[:6] / own[:6],
         )
 
     def check_features(self, features: list[Any], config: LineConfig) -> None:
