@@ -7,6 +7,7 @@ from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
@@ -14,7 +15,12 @@ from rosbags.typesys.store import Typestore
 
 from linelaser_calib.core.geometry import QUATERNION_NORM_TOLERANCE
 from linelaser_calib.core.pose_track import PoseTrack
-from linelaser_calib.io.bags.records import POSE_TYPE, SessionConnection, SkippedMessage
+from linelaser_calib.io.bags.records import (
+    POSE_TYPE,
+    RawMessages,
+    SessionConnection,
+    SkippedMessage,
+)
 from msg_adapters import MessageError, flange_pose_from_pose_stamped, stamp_ns_from_msg
 from msg_adapters.message_types import NS_PER_S
 
@@ -71,29 +77,28 @@ class _PoseRecords(NamedTuple):
     values: NDArray[np.float64]  # (K, 7): position x, y, z (m), orientation x, y, z, w
 
 
-def _parse_pose_stamped(raws: Sequence[bytes]) -> _PoseRecords:
+def _parse_pose_stamped(batch: RawMessages) -> _PoseRecords:
     """Parse serialised PoseStamped messages in one vectorised pass (a bag holds thousands).
 
     Little-endian CDR (what ROS 2 middlewares write on little-endian hosts: x86, ARM) of a
     PoseStamped is fixed but for the frame id: after the 4-byte encapsulation header
     (0, 1, options), int32 sec and uint32 nanosec, uint32 length of frame_id counting its
     NUL, the bytes, zero padding to 8 (relative to the payload), then 7 float64. Messages
-    of one size share one array view. A message that does not have exactly this layout
-    (big-endian, trailing bytes, a bad length or frame id) is left unparsed for the generic
-    decoder.
+    of one size are copied out of the batch's buffer as the rows of one array. A message
+    that does not have exactly this layout (big-endian, trailing bytes, a bad length or
+    frame id) is left unparsed for the generic decoder.
     """
-    count = len(raws)
+    count = len(batch)
     parsed = np.zeros(count, dtype=np.bool_)
     stamps = np.zeros(count, dtype=np.int64)
     values = np.full((count, 7), np.nan)
     frame_ids = [""] * count
-    sizes = np.fromiter((len(r) for r in raws), dtype=np.int64, count=count)
+    sizes = batch.sizes
     for size in np.unique(sizes):
         rows = np.flatnonzero(sizes == size)
         if size < 4 + 12 + 1 + 56:
             continue
-        joined = b"".join(raws[int(i)] for i in rows)
-        block = np.frombuffer(joined, dtype=np.uint8).reshape(len(rows), int(size))
+        block = sliding_window_view(batch.buffer, int(size))[batch.starts[rows]]
         length = block[:, 12:16].copy().view("<u4")[:, 0].astype(np.int64)
         data_start = 4 + (12 + length + 7) // 8 * 8
         layout = (block[:, 0] == 0) & (block[:, 1] == 1) & (length >= 1)
@@ -124,9 +129,7 @@ def _parse_pose_stamped(raws: Sequence[bytes]) -> _PoseRecords:
     return _PoseRecords(parsed, stamps, frame_ids, values)
 
 
-def flange_poses(
-    topic: str, raws: Sequence[bytes], log_ns: Sequence[int]
-) -> tuple[PoseTrack, list[SkippedMessage]]:
+def flange_poses(topic: str, batch: RawMessages) -> tuple[PoseTrack, list[SkippedMessage]]:
     """Flange poses of serialised PoseStamped messages, parsed and converted in one batch.
 
     A bag holds thousands of poses (125-500 Hz): the batch costs ~2 µs per pose instead of
@@ -143,16 +146,17 @@ def flange_poses(
         normalised).
     skipped : list of SkippedMessage
     """
-    records = _parse_pose_stamped(raws)
+    records = _parse_pose_stamped(batch)
     position, q_xyzw = records.values[:, :3], records.values[:, 3:]
     norm = np.linalg.norm(q_xyzw, axis=1)
     with np.errstate(invalid="ignore"):
         good = records.parsed & np.all(np.isfinite(records.values), axis=1) & (norm >= 1e-12)
         good &= np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE
     skipped: list[SkippedMessage] = []
-    frames = [records.frame_ids[k] if good[k] else "" for k in range(len(raws))]
+    frames = [records.frame_ids[k] if good[k] else "" for k in range(len(batch))]
     for k in np.flatnonzero(~good).tolist():
-        msg = decode_message(jazzy_typestore(), topic, POSE_TYPE, log_ns[k], raws[k])
+        raw = batch.raw(k).tobytes()
+        msg = decode_message(jazzy_typestore(), topic, POSE_TYPE, int(batch.log_ns[k]), raw)
         if isinstance(msg, SkippedMessage):
             skipped.append(msg)
             continue
