@@ -1,9 +1,12 @@
-"""CDR (de)serialisation: the typestores, and a hand-written batch decoder of PoseStamped."""
+"""CDR (de)serialisation: the typestores, and hand-written decoders of the two messages a
+recording holds thousands of: PoseStamped (a batch at a time) and PointCloud2."""
 
 from __future__ import annotations
 
 import functools
+import struct
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -68,11 +71,126 @@ def decode_message(store: Typestore, topic: str, msgtype: str, log_ns: int, raw:
         return SkippedMessage(topic, log_ns, f"cannot decode the message: {err}")
 
 
+class Stamp(NamedTuple):
+    """``builtin_interfaces/msg/Time``."""
+
+    sec: int
+    nanosec: int
+
+
+class Header(NamedTuple):
+    """``std_msgs/msg/Header``."""
+
+    stamp: Stamp
+    frame_id: str
+
+
+@dataclass(frozen=True, slots=True)
+class PointField:
+    """``sensor_msgs/msg/PointField`` (a dataclass: a tuple's ``count`` is a method)."""
+
+    name: str
+    offset: int
+    datatype: int
+    count: int
+
+
+class PointCloud2(NamedTuple):
+    """``sensor_msgs/msg/PointCloud2`` as :func:`pointcloud2_from_cdr` reads it: ``data`` a
+    view of the serialised bytes, not a copy."""
+
+    header: Header
+    height: int
+    width: int
+    fields: list[PointField]
+    is_bigendian: bool
+    point_step: int
+    row_step: int
+    data: NDArray[np.uint8]
+    is_dense: bool
+
+
+_U32 = struct.Struct("<I")
+_TWO_U32 = struct.Struct("<II")
+
+
+def pointcloud2_from_cdr(raw: NDArray[np.uint8]) -> PointCloud2 | None:
+    """A serialised PointCloud2 read field by field (~10 µs, against ~80 µs for rosbags'
+    generic deserialiser; a recording holds thousands), or None where the bytes are not
+    exactly the little-endian CDR of one (big-endian, cut short, trailing bytes, a string
+    that is not UTF-8): the generic decoder then reads them, or says why it cannot.
+
+    Little-endian CDR: the 4-byte encapsulation header (0, 1, options), then each field at
+    its own alignment counted from the end of that header; strings and sequences are a
+    uint32 count and the items (a string's bytes end in a NUL).
+    """
+    if len(raw) < 8 or raw[0] != 0 or raw[1] != 1:
+        return None
+    body = memoryview(raw)[4:]
+    try:
+        pos = 0
+
+        def text() -> str:
+            nonlocal pos
+            pos = (pos + 3) & ~3
+            (length,) = _U32.unpack_from(body, pos)
+            end = pos + 4 + length
+            if length < 1 or end > len(body) or body[end - 1] != 0:
+                raise ValueError("bad string")
+            value = bytes(body[pos + 4 : end - 1]).decode()
+            pos = end
+            return value
+
+        def two() -> tuple[int, int]:
+            nonlocal pos
+            pos = (pos + 3) & ~3
+            values: tuple[int, int] = _TWO_U32.unpack_from(body, pos)
+            pos += 8
+            return values
+
+        sec, nanosec = struct.unpack_from("<iI", body, 0)
+        pos = 8
+        frame_id = text()
+        height, width = two()
+        (n_fields,) = _U32.unpack_from(body, pos)
+        pos += 4
+        fields = []
+        for _ in range(n_fields):
+            name = text()
+            offset, datatype = two()  # datatype: a uint8, then padding to count's alignment
+            (count,) = _U32.unpack_from(body, pos)
+            fields.append(PointField(name, offset, datatype & 0xFF, count))
+            pos += 4
+        is_bigendian = body[pos]
+        pos += 1
+        point_step, row_step = two()
+        (size,) = _U32.unpack_from(body, pos)
+        start = pos + 4
+        pos = start + size
+        is_dense = body[pos]
+        if not 0 <= len(body) - pos - 1 < 4 or any(body[pos + 1 :]):  # at most padding after
+            return None
+    except (struct.error, ValueError, IndexError, UnicodeDecodeError):
+        return None
+    return PointCloud2(
+        Header(Stamp(sec, nanosec), frame_id),
+        height,
+        width,
+        fields,
+        bool(is_bigendian),
+        point_step,
+        row_step,
+        raw[4 + start : 4 + start + size],
+        bool(is_dense),
+    )
+
+
 class _PoseRecords(NamedTuple):
     """PoseStamped fields parsed in a batch; rows with ``parsed`` False are not filled."""
 
     parsed: NDArray[np.bool_]  # (K,)
     stamps_ns: NDArray[np.int64]  # (K,)
+    frame_of: NDArray[np.int64]  # (K,): each row's frame id, an index into frame_ids
     frame_ids: list[str]
     values: NDArray[np.float64]  # (K, 7): position x, y, z (m), orientation x, y, z, w
 
@@ -92,7 +210,8 @@ def _parse_pose_stamped(batch: RawMessages) -> _PoseRecords:
     parsed = np.zeros(count, dtype=np.bool_)
     stamps = np.zeros(count, dtype=np.int64)
     values = np.full((count, 7), np.nan)
-    frame_ids = [""] * count
+    frame_of = np.zeros(count, dtype=np.int64)
+    frame_ids = [""]
     sizes = batch.sizes
     for size in np.unique(sizes):
         rows = np.flatnonzero(sizes == size)
@@ -124,9 +243,9 @@ def _parse_pose_stamped(batch: RawMessages) -> _PoseRecords:
             parsed[rows[sub]] = True
             stamps[rows[sub]] = sec * NS_PER_S + nanosec
             values[rows[sub]] = block[sub, start : start + 56].copy().view("<f8")
-            for row, name_index in zip(rows[sub], inverse, strict=True):
-                frame_ids[row] = str(names[name_index])
-    return _PoseRecords(parsed, stamps, frame_ids, values)
+            frame_of[rows[sub]] = len(frame_ids) + inverse
+            frame_ids.extend(str(name) for name in names)
+    return _PoseRecords(parsed, stamps, frame_of, frame_ids, values)
 
 
 def flange_poses(topic: str, batch: RawMessages) -> tuple[PoseTrack, list[SkippedMessage]]:
@@ -153,7 +272,7 @@ def flange_poses(topic: str, batch: RawMessages) -> tuple[PoseTrack, list[Skippe
         good = records.parsed & np.all(np.isfinite(records.values), axis=1) & (norm >= 1e-12)
         good &= np.abs(norm - 1.0) <= QUATERNION_NORM_TOLERANCE
     skipped: list[SkippedMessage] = []
-    frames = [records.frame_ids[k] if good[k] else "" for k in range(len(batch))]
+    frame_of, frame_ids = records.frame_of, records.frame_ids
     for k in np.flatnonzero(~good).tolist():
         raw = batch.raw(k).tobytes()
         msg = decode_message(jazzy_typestore(), topic, POSE_TYPE, int(batch.log_ns[k]), raw)
@@ -168,9 +287,10 @@ def flange_poses(topic: str, batch: RawMessages) -> tuple[PoseTrack, list[Skippe
         one = PoseTrack.from_transforms([pose.stamp_ns], pose.T_base_flange)
         records.stamps_ns[k] = pose.stamp_ns
         position[k], q_xyzw[k], norm[k] = one.translation[0], one.rotation_xyzw[0], 1.0
-        frames[k], good[k] = pose.frame_id, True
+        frame_of[k], good[k] = len(frame_ids), True
+        frame_ids.append(pose.frame_id)
     usable = np.flatnonzero(good)
-    frame = frames[usable[0]] if len(usable) else ""
+    frame = frame_ids[frame_of[usable[0]]] if len(usable) else ""
     track = PoseTrack(
         records.stamps_ns[usable],
         position[usable],

@@ -22,7 +22,12 @@ from rosbags.typesys.store import Typestore
 from linelaser_calib.core.pose_track import PoseTrack
 from linelaser_calib.core.robot.kinematics import JointStates
 from linelaser_calib.core.types import Profile, stored_points
-from linelaser_calib.io.bags.cdr import decode_message, flange_poses, reading_store
+from linelaser_calib.io.bags.cdr import (
+    decode_message,
+    flange_poses,
+    pointcloud2_from_cdr,
+    reading_store,
+)
 from linelaser_calib.io.bags.indexed import indexed_messages, indexed_topics
 from linelaser_calib.io.bags.records import (
     JOINT_STATE_TOPIC,
@@ -267,7 +272,10 @@ def _profile(
     """Profile of the serialised PointCloud2 ``k`` of ``batch``, its points as
     :func:`~linelaser_calib.core.types.stored_points` keeps them (a recording's profiles are
     held through the whole calibration); a malformed one becomes a :class:`SkippedMessage`."""
-    msg = decode_message(store, topic, PROFILE_TYPE, int(batch.log_ns[k]), batch.raw(k).tobytes())
+    raw = batch.raw(k)
+    msg = pointcloud2_from_cdr(raw)
+    if msg is None:
+        msg = decode_message(store, topic, PROFILE_TYPE, int(batch.log_ns[k]), raw.tobytes())
     if isinstance(msg, SkippedMessage):
         return msg
     try:
