@@ -280,7 +280,9 @@ def _profile(
     if isinstance(msg, SkippedMessage):
         return msg
     try:
-        profile = profile_from_pointcloud2(msg, invalid_values_m=invalid_values_m)
+        profile = profile_from_pointcloud2(
+            msg, invalid_values_m=invalid_values_m, keep_float32=True
+        )
     except MessageError as err:
         return SkippedMessage(topic, stamp_ns_from_msg(msg.header.stamp), str(err))
     return replace(profile, points=stored_points(profile.points))
