@@ -85,6 +85,8 @@ def indexed_topics(part: Path, connections: Sequence[Any]) -> IndexedFile | None
         return None
     if summary is None or not summary.chunk_indexes:
         return None
+    if any(not chunk.message_index_offsets for chunk in summary.chunk_indexes):
+        return None  # chunks indexed, their messages not
     channels = []
     for connection in connections:
         ids = [
