@@ -13,6 +13,7 @@ is the message's row-major point order (``index = row * width + column``).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -109,6 +110,20 @@ def _check_layout(msg: Any) -> None:
         )
 
 
+@functools.lru_cache(maxsize=16)
+def _record_dtype(layout: tuple[tuple[str, str, int], ...], point_step: int) -> np.dtype[Any]:
+    """The numpy record of one point: (name, format, offset) of each field read (one per
+    layout, not per message: a recording's profiles share theirs)."""
+    return np.dtype(
+        {
+            "names": [name for name, _, _ in layout],
+            "formats": [kind for _, kind, _ in layout],
+            "offsets": [offset for _, _, offset in layout],
+            "itemsize": point_step,
+        }
+    )
+
+
 def invalid_rows(points: FloatArray, invalid_values_m: Sequence[float] = ()) -> NDArray[np.bool_]:
     """Mask (N,) of points that are no return: NaN or +-Inf anywhere, or a sentinel depth.
 
@@ -121,8 +136,9 @@ def invalid_rows(points: FloatArray, invalid_values_m: Sequence[float] = ()) -> 
         that a float32 -0.999999 matches; 0 matches exactly 0 only).
     """
     invalid = ~np.all(np.isfinite(points), axis=1)
+    depth = np.asarray(points[:, 2], dtype=np.float64) if invalid_values_m else points[:, 2]
     for value in invalid_values_m:
-        invalid |= np.isclose(points[:, 2], float(value), rtol=SENTINEL_RTOL, atol=0.0)
+        invalid |= np.isclose(depth, float(value), rtol=SENTINEL_RTOL, atol=0.0)
     return invalid
 
 
@@ -132,6 +148,7 @@ def cloud_from_pointcloud2(
     extra_fields: Sequence[str] = (),
     keep_invalid: bool = False,
     invalid_values_m: Sequence[float] = (),
+    keep_float32: bool = False,
 ) -> DecodedCloud:
     """Decode x, y, z (and optional extra fields) of a PointCloud2.
 
@@ -148,11 +165,16 @@ def cloud_from_pointcloud2(
     invalid_values_m : sequence of float
         Depths z, m, that the driver sends for no return (e.g. -0.999999 for Keyence's
         -999.999 mm, or 0.0); see :func:`invalid_rows`.
+    keep_float32 : bool
+        True: FLOAT32 coordinates come as float32, the values sent (as a profile held for a
+        whole calibration keeps them: half the memory, no widening and narrowing again);
+        False (default), and for FLOAT64 coordinates: float64.
 
     Returns
     -------
     DecodedCloud
-        ``points`` (N, 3) float64 in m and ``extras`` (N,) per requested field.
+        ``points`` (N, 3) float64 (or float32, see ``keep_float32``) in m and ``extras``
+        (N,) per requested field.
 
     Raises
     ------
@@ -178,18 +200,16 @@ def cloud_from_pointcloud2(
     _check_layout(msg)
 
     order = ">" if bool(msg.is_bigendian) else "<"
-    unique = list(dict.fromkeys(wanted))
-    dtype = np.dtype(
-        {
-            "names": unique,
-            "formats": [order + table[name][1] for name in unique],
-            "offsets": [table[name][0] for name in unique],
-            "itemsize": int(msg.point_step),
-        }
-    )
+    unique = tuple(dict.fromkeys(wanted))
+    layout = tuple((name, order + table[name][1], table[name][0]) for name in unique)
     n_points = int(msg.height) * int(msg.width)
-    records = np.frombuffer(uint8_array(msg.data), dtype=dtype, count=n_points)
-    points = np.stack([records[name].astype(np.float64) for name in _XYZ], axis=1).reshape(-1, 3)
+    records = np.frombuffer(
+        uint8_array(msg.data), dtype=_record_dtype(layout, int(msg.point_step)), count=n_points
+    )
+    narrow = keep_float32 and all(table[name][1] == "f4" for name in _XYZ)
+    points = np.empty((n_points, 3), dtype=np.float32 if narrow else np.float64)
+    for axis, name in enumerate(_XYZ):
+        points[:, axis] = records[name]
     extras = {name: records[name].astype(np.float64) for name in extra_fields}
     invalid = invalid_rows(points, invalid_values_m)
     if keep_invalid:
@@ -202,29 +222,44 @@ def cloud_from_pointcloud2(
 
 
 def points_from_pointcloud2(
-    msg: Any, *, keep_invalid: bool = False, invalid_values_m: Sequence[float] = ()
+    msg: Any,
+    *,
+    keep_invalid: bool = False,
+    invalid_values_m: Sequence[float] = (),
+    keep_float32: bool = False,
 ) -> FloatArray:
     """x, y, z of a PointCloud2 as an (N, 3) float64 array in m.
 
     See :func:`cloud_from_pointcloud2` for the accepted layouts, ``keep_invalid``,
-    ``invalid_values_m`` and errors.
+    ``invalid_values_m``, ``keep_float32`` and errors.
     """
     return cloud_from_pointcloud2(
-        msg, keep_invalid=keep_invalid, invalid_values_m=invalid_values_m
+        msg,
+        keep_invalid=keep_invalid,
+        invalid_values_m=invalid_values_m,
+        keep_float32=keep_float32,
     ).points
 
 
 def profile_from_pointcloud2(
-    msg: Any, *, keep_invalid: bool = False, invalid_values_m: Sequence[float] = ()
+    msg: Any,
+    *,
+    keep_invalid: bool = False,
+    invalid_values_m: Sequence[float] = (),
+    keep_float32: bool = False,
 ) -> Profile:
     """A :class:`~linelaser_calib.core.types.Profile` (stamp, points, frame) from a PointCloud2.
 
-    See :func:`cloud_from_pointcloud2` for ``keep_invalid`` and ``invalid_values_m``.
+    See :func:`cloud_from_pointcloud2` for ``keep_invalid``, ``invalid_values_m`` and
+    ``keep_float32``.
     """
     return Profile(
         stamp_ns=stamp_ns_from_msg(msg.header.stamp),
         points=points_from_pointcloud2(
-            msg, keep_invalid=keep_invalid, invalid_values_m=invalid_values_m
+            msg,
+            keep_invalid=keep_invalid,
+            invalid_values_m=invalid_values_m,
+            keep_float32=keep_float32,
         ),
         frame_id=str(msg.header.frame_id),
     )

@@ -282,6 +282,9 @@ def test_sentinel_depths_are_no_return_in_any_layout(
     np.testing.assert_array_equal(
         cloud.extras["intensity"], values["intensity"][finite & ~no_return]
     )
+    narrow = cloud_from_pointcloud2(msg, invalid_values_m=[sentinel], keep_float32=True).points
+    assert narrow.dtype == (np.float32 if np.dtype(kind).itemsize == 4 else np.float64)
+    np.testing.assert_array_equal(narrow, cloud.points)  # float32 as sent, the same test
     full = points_from_pointcloud2(msg, keep_invalid=True, invalid_values_m=[sentinel])
     assert np.all(np.isnan(full[no_return]))
     np.testing.assert_array_equal(full[~no_return], truth[~no_return])

@@ -283,12 +283,19 @@ def project_to_so3(M: ArrayLike) -> FloatArray:
     return np.asarray(U @ D @ Vt)
 
 
+def rotation_angles(R: ArrayLike) -> FloatArray:
+    """Rotation angles (K,) (rad, in [0, pi]) of rotation matrices (K, 3, 3)."""
+    R = np.asarray(R, dtype=np.float64)
+    c = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    vee = [R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]]
+    s = np.linalg.norm(np.stack(vee, axis=-1), axis=-1) / 2.0
+    angles: FloatArray = np.arctan2(s, c)
+    return angles
+
+
 def rotation_angle(R: ArrayLike) -> float:
     """Rotation angle (rad, in [0, pi]) of a rotation matrix (3, 3)."""
-    R = np.asarray(R, dtype=np.float64)
-    c = (np.trace(R) - 1.0) / 2.0
-    s = np.linalg.norm([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]]) / 2.0
-    return float(np.arctan2(s, c))
+    return float(rotation_angles(R))
 
 
 def transform_error(T_estimate: ArrayLike, T_truth: ArrayLike) -> tuple[float, float]:

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from .geometry import FloatArray, rotation_angle
+from .geometry import FloatArray, rotation_angles
 from .pose_track import PoseTrack
 from .types import BoolArray, FlangePose, Profile, Rejection, Sample
 
@@ -210,12 +210,21 @@ class PoseBuffer:
 
     def nearest_offset_ns(self, stamp_ns: int) -> int | None:
         """Signed offset from ``stamp_ns`` to the nearest pose stamp, ns."""
+        offsets = self.nearest_offsets_ns(np.array([stamp_ns], dtype=np.int64))
+        return None if offsets is None else int(offsets[0])
+
+    def nearest_offsets_ns(self, stamps_ns: NDArray[np.int64]) -> NDArray[np.int64] | None:
+        """:meth:`nearest_offset_ns` of each stamp (K,) (the earlier pose where two are
+        as near), ns; None without poses."""
         stamps = self.track.stamps_ns
         if not len(stamps):
             return None
-        i = int(np.searchsorted(stamps, stamp_ns))
-        candidates = [int(stamps[j]) - stamp_ns for j in (i - 1, i) if 0 <= j < len(stamps)]
-        return min(candidates, key=abs)
+        i = np.searchsorted(stamps, stamps_ns)
+        before = stamps[np.maximum(i - 1, 0)] - stamps_ns
+        after = stamps[np.minimum(i, len(stamps) - 1)] - stamps_ns
+        earlier = (i > 0) & ((i == len(stamps)) | (np.abs(before) <= np.abs(after)))
+        offsets: NDArray[np.int64] = np.where(earlier, before, after)
+        return offsets
 
     def pose_at(self, stamp_ns: int, tolerance_ns: int) -> FloatArray | str:
         """Flange pose at ``stamp_ns``, or the reason there is none.
@@ -263,10 +272,8 @@ class PoseBuffer:
         known = (lo >= stamps[0]) & (hi <= stamps[-1]) & found_a & found_b
         dt = 2 * window_ns / NS_PER_S
         linear[known] = np.linalg.norm(B[known, :3, 3] - A[known, :3, 3], axis=1) / dt
-        angular[known] = [
-            rotation_angle(a[:3, :3].T @ b[:3, :3]) / dt
-            for a, b in zip(A[known], B[known], strict=True)
-        ]
+        relative = np.einsum("kji,kjl->kil", A[known, :3, :3], B[known, :3, :3])
+        angular[known] = rotation_angles(relative) / dt
         return linear, angular, known
 
     def pair(self, profile: Profile, index: int, config: PairingConfig) -> Sample | Rejection:
@@ -332,7 +339,6 @@ def pair_profiles(
         notes.append(f"{buffer.duplicates} flange poses repeated a stamp; kept the first")
     samples: list[Sample] = []
     rejected: list[Rejection] = []
-    offsets: list[int] = []
     seen: set[int] = set()
     order = sorted(range(len(profiles)), key=lambda k: profiles[k].stamp_ns)
     first: list[int] = []
@@ -344,16 +350,16 @@ def pair_profiles(
             )
             continue
         seen.add(profile.stamp_ns)
-        offset = buffer.nearest_offset_ns(profile.stamp_ns)
-        if offset is not None:
-            offsets.append(offset)
         first.append(k)
+    offsets = buffer.nearest_offsets_ns(
+        np.array([profiles[k].stamp_ns for k in first], dtype=np.int64)
+    )
     for outcome in buffer.pair_many([profiles[k] for k in first], first, config):
         if isinstance(outcome, Sample):
             samples.append(outcome)
         else:
             rejected.append(outcome)
-    median = float(np.median(offsets)) / NS_PER_S if offsets else None
+    median = float(np.median(offsets)) / NS_PER_S if offsets is not None and first else None
     span = None
     pose_stamps = buffer.track.stamps_ns
     if profiles and len(pose_stamps):

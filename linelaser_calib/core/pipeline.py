@@ -206,18 +206,42 @@ def validate_sample(sample: Sample, config: PipelineConfig) -> Rejection | None:
     )
 
 
+#: Samples whose depths :func:`_median_depths` sorts at once (a block of a long recording's
+#: profiles padded to the longest: a few MB).
+DEPTH_BLOCK = 256
+
+
+def _median_depths(samples: Sequence[Sample]) -> FloatArray:
+    """The median |z| (m) of each sample's finite points, samples without one left out: the
+    rows of a block of samples sorted at once, padded with NaN (sorted last), instead of a
+    median per sample (~40 µs each, 1,600 of them on the critical path)."""
+    found = []
+    for first in range(0, len(samples), DEPTH_BLOCK):
+        block = samples[first : first + DEPTH_BLOCK]
+        lengths = np.array([len(s.points) for s in block])
+        width = int(lengths.max(initial=0))
+        depths = np.full((len(block), width), np.nan)
+        depths[np.arange(width) < lengths[:, None]] = np.abs(
+            np.concatenate([s.points[:, 2] for s in block]) if width else []
+        )
+        depths.sort(axis=1)
+        counts = np.count_nonzero(np.isfinite(depths), axis=1)
+        rows, n = np.flatnonzero(counts), counts[counts > 0]
+        found.append((depths[rows, (n - 1) // 2] + depths[rows, n // 2]) / 2.0)
+    return np.concatenate(found) if found else np.zeros(0)
+
+
 def check_units(samples: list[Sample]) -> None:
     """Raise InputError when the data is evidently in millimetres rather than metres."""
-    finite = [np.asarray(s.points[np.isfinite(s.points[:, 2]), 2], np.float64) for s in samples]
-    depths = [float(np.median(np.abs(z))) for z in finite if z.size]
-    reach = [float(np.linalg.norm(s.T_base_flange[:3, 3])) for s in samples]
-    if depths and float(np.median(depths)) > MAX_PLAUSIBLE_DEPTH_M:
+    depths = _median_depths(samples)
+    reach = np.linalg.norm(np.reshape([s.T_base_flange[:3, 3] for s in samples], (-1, 3)), axis=1)
+    if len(depths) and float(np.median(depths)) > MAX_PLAUSIBLE_DEPTH_M:
         raise InputError(
             f"the profile points have a median depth of {np.median(depths):.1f} m, which no "
             "profiler measures: the profiles look recorded in millimetres. ROS (REP 103) uses "
             "metres; rescale the points by 0.001 in the driver or when recording."
         )
-    if reach and float(np.median(reach)) > MAX_PLAUSIBLE_REACH_M:
+    if len(reach) and float(np.median(reach)) > MAX_PLAUSIBLE_REACH_M:
         raise InputError(
             f"the flange poses are a median {np.median(reach):.1f} m from the robot base: the "
             "poses look recorded in millimetres. ROS (REP 103) uses metres; rescale the "

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from .geometry import FloatArray, matrices_from_quaternions_xyzw
 from .types import BoolArray, FlangePose
@@ -137,8 +137,9 @@ class PoseTrack:
         """Flange poses at ``stamps_ns`` of a track sorted by stamp without repeats.
 
         At a stamp of the track, its pose. Between two poses both within ``tolerance_ns``,
-        lerp on the position and slerp (:class:`scipy.spatial.transform.Slerp`) on the
-        rotation; with only one within it, that pose.
+        lerp on the position and slerp on the rotation (as
+        :class:`scipy.spatial.transform.Slerp` computes it); with only one within it, that
+        pose.
 
         Returns
         -------
@@ -165,13 +166,9 @@ class PoseTrack:
             lo, hi = before_row[bracket], after_row[bracket]
             s = ((t[bracket] - stamps[lo]) / (stamps[hi] - stamps[lo]))[:, None]
             T[bracket, :3, 3] = (1.0 - s) * self.translation[lo] + s * self.translation[hi]
-            # Consecutive rows of the track stay consecutive among the rows used, so each
-            # stamp falls in the slerp segment of its own two poses.
-            used = np.unique(np.concatenate([lo, hi]))
-            origin = stamps[used[0]]
-            slerp = Slerp(
-                (stamps[used] - origin).astype(np.float64),
-                Rotation.from_quat(self.rotation_xyzw[used]),
-            )
-            T[bracket, :3, :3] = slerp((t[bracket] - origin).astype(np.float64)).as_matrix()
+            # Slerp's own steps, on each stamp's two poses only: a Slerp over the rows used
+            # also computes the steps between one stamp's poses and the next stamp's.
+            start = Rotation.from_quat(self.rotation_xyzw[lo])
+            step = (start.inv() * Rotation.from_quat(self.rotation_xyzw[hi])).as_rotvec()
+            T[bracket, :3, :3] = (start * Rotation.from_rotvec(step * s)).as_matrix()
         return T, exact | before | after

@@ -4,10 +4,12 @@ A recording holds ``sensor_msgs/msg/PointCloud2`` profiles in the sensor frame a
 ``geometry_msgs/msg/PoseStamped`` flange poses in the base frame. Bags are written with
 rosbags as rosbag2 version 9 MCAP directories (``metadata.yaml`` + ``<name>.mcap``), with each
 message logged at its header stamp. Reading uses rosbags' rosbag2 ``Reader`` (MCAP or
-SQLite 3 storage) and decodes with the Jazzy typestore: the definitions of PointCloud2 and
-PoseStamped (and of Header, Time, PointField, Pose) are the same in every ROS 2
-distribution, so this decodes bags recorded with any of them, without parsing each bag's
-stored definitions (which costs ~15 ms per bag, too much for a session of many small bags).
+SQLite 3 storage); in an indexed MCAP file the two topics' messages are read through its
+chunk and message indexes instead (:mod:`.indexed`: a chunk's messages of a topic in one
+buffer, nothing per message). The profiles and flange poses are decoded by hand-written CDR
+readers (:mod:`.cdr`), anything else, or what they cannot read, by rosbags' typestores: the
+definitions of PointCloud2 and PoseStamped (and of Header, Time, PointField, Pose) are the
+same in every ROS 2 distribution, so this decodes bags recorded with any of them.
 
 Durability. rosbags buffers messages in memory (MCAP chunks of about 1 MiB) and writes the
 chunk index, the summary and ``metadata.yaml`` only on close; its reader needs all of them.
@@ -25,9 +27,10 @@ Every user-caused failure (missing, empty, truncated or corrupt bag, missing or 
 topics, wrong types) raises :class:`~linelaser_calib.io.errors.BagError` saying what to do;
 a single malformed message is skipped and reported in :attr:`BagContents.skipped`.
 
-One module per job: :mod:`.records` (names and records), :mod:`.cdr` (typestores and
-the batch PoseStamped decoder), :mod:`.write`, :mod:`.session` (the collector's format),
-:mod:`.read` and :mod:`.info`.
+One module per job: :mod:`.records` (names and records), :mod:`.cdr` (typestores, the
+batch PoseStamped decoder and the PointCloud2 decoder), :mod:`.indexed` (an MCAP file read
+through its indexes), :mod:`.write`, :mod:`.session` (the collector's format), :mod:`.read`
+and :mod:`.info`.
 """
 
 from __future__ import annotations

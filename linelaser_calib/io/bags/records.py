@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
 
 from linelaser_calib.core.pose_track import PoseTrack
 from linelaser_calib.core.types import Profile
@@ -73,7 +76,7 @@ class BagContents:
     start_ns, end_ns : int
         Log times of the first and last message of the bag, ns.
     skipped : list of SkippedMessage
-        Messages on the two topics that were malformed or undecodable.
+        Messages on the two topics that were malformed or undecodable, sorted by stamp.
     """
 
     path: Path
@@ -95,3 +98,41 @@ class SessionConnection(NamedTuple):
     topic: str
     msgtype: str
     msgcount: int
+
+
+@dataclass(frozen=True)
+class RawMessages:
+    """Serialised messages of one topic, their bytes in one buffer: no object per message
+    (a recording holds 140,000 flange poses).
+
+    Attributes
+    ----------
+    buffer : ndarray, shape (B,), uint8
+        Holds every message's bytes (and maybe other bytes between them, e.g. an MCAP
+        chunk's record headers).
+    starts, sizes : ndarray, shape (K,), int64
+        Where each message's bytes start in ``buffer``, and how many there are.
+    log_ns : ndarray, shape (K,), int64
+        Each message's log time, ns.
+    """
+
+    buffer: NDArray[np.uint8]
+    starts: NDArray[np.int64]
+    sizes: NDArray[np.int64]
+    log_ns: NDArray[np.int64]
+
+    @classmethod
+    def of(cls, raws: Sequence[bytes], log_ns: Sequence[int]) -> RawMessages:
+        """The messages ``raws`` (logged at ``log_ns``) laid end to end."""
+        sizes = np.fromiter((len(r) for r in raws), dtype=np.int64, count=len(raws))
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        buffer = np.frombuffer(b"".join(raws), dtype=np.uint8)
+        return cls(buffer, starts, sizes, np.asarray(log_ns, dtype=np.int64).reshape(-1))
+
+    def __len__(self) -> int:
+        return len(self.starts)
+
+    def raw(self, k: int) -> NDArray[np.uint8]:
+        """The bytes of message ``k`` (a view of the buffer)."""
+        start = int(self.starts[k])
+        return self.buffer[start : start + int(self.sizes[k])]
