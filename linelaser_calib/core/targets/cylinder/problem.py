@@ -185,6 +185,11 @@ class CylinderProblem:
         return int(self.R_bf.shape[0])
 
     @property
+    def n_measurements(self) -> int:
+        """Real points (padding excluded): a :class:`~...solver.CountedProblem`."""
+        return int(self.counts.sum())
+
+    @property
     def x_m(self) -> FloatArray:
         """Each point's place along the line (sensor x), (M, K), m."""
         return np.asarray(self.points[..., 0], dtype=np.float64)
