@@ -494,7 +494,7 @@ def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
 def _sensor_normals(problem: CylinderProblem, state: CylinderState) -> FloatArray:
     """Each point's unit surface normal in the sensor frame (M, K, 3)."""
     geo = _geometry(problem, state)
-    return np.asarray(np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ state.R_fs)
+    return np.asarray(geo.normal @ geo.RE @ state.R_fs)
 
 
 def _cross(a: FloatArray, b: FloatArray, out: FloatArray | None = None) -> FloatArray:
