@@ -405,8 +405,10 @@ class CylinderTarget:
         scale too, and where that is the same stretch and moves the hand-eye beyond its 1σ,
         the move counts in the 1σ (:func:`with_depth_reading`). Both re-solves (the kept
         scales' and the depth reading's) start at the first solve's solution, so with
-        ``context.workers`` 2 they run side by side, the depth reading in a forked child
-        (``ur_scancontrol``, 1,600 poses: 0.5 s each)."""
+        ``context.workers`` 2 they run side by side, the depth reading in a forked child;
+        each learns how its own views share the robot's error (:mod:`.shared`), which the
+        first solve learns only where it is reported (``ur_scancontrol``, 1,600 poses: 1 s
+        each, 0.6 s of it the solve)."""
         radius = self._checked(features, config, context)
         warm = context.warm_start
         free, depth = estimates_scale(config)
