@@ -118,12 +118,11 @@ MAX_NOISE_RESIDUAL_RATIO = 2.0
 #: leave of it, learned 67 µm over 2 mm from 6.6 µm residuals, and the solve so weighed
 #: left 89 µm (13 times): a misfit that the learned noise's own 1σ let pass.
 MAX_FIRST_RESIDUAL_RATIO = 3.0
-#: The first solve of :func:`refine_with_outlier_rejection` stops where its steps tell that
-#: the optimum is within this fraction of each global parameter's 1σ (its noise levels
-#: learned from its residuals, :class:`~...solver.SolverConfig`), as the self-check's
-#: subsets do: it only starts the solve that is reported (after the point trimming, the
-#: line-noise learning, the outlier rounds). ``ur_scancontrol``, 1,600 poses: 4
-#: linearisations instead of 7, the last three moving the cost by under 1e-7 of itself.
+#: The first solve of :func:`refine_with_outlier_rejection`, which only starts the reported
+#: one, stops where its steps tell that the optimum is within this fraction of each global
+#: parameter's 1σ (its noise levels learned from its residuals), as the self-check's subsets
+#: do. ``ur_scancontrol``, 1,600 poses: 4 linearisations, not 7 (the last three moved the
+#: cost by under 1e-7 of itself).
 START_STEP_SIGMAS = 0.01
 
 
@@ -352,8 +351,7 @@ def refine(
         Start of the depth scale error, when estimated.
     observed : bool
         The poses passed the observability check at an earlier solve's solution (a re-solve
-        of the same samples from it): not checked again before the solve (the check at
-        the solution stands, :func:`summarise`).
+        of the same samples): not checked before the solve, only at its solution.
     solver : SolverConfig, optional
         The solve's settings (e.g. a looser stop); None: ``config.solver``.
 
@@ -730,8 +728,7 @@ def refine_with_outlier_rejection(
             return refine(
                 [points[i] for i in keep], T_all[keep], T0, start, cfg_solve, radius_m, noise=noise
             )
-        # From the first solve (stopped near its optimum) or the last round's solution, its
-        # pose corrections included: a few iterations.
+        # From the first solve (near its optimum) or the last round's, pose corrections too.
         rows = keep if previous is None else [solved_rows[i] for i in keep]
         return refine(
             [points[i] for i in keep],
