@@ -754,7 +754,10 @@ def solve(
                 break
             last_size = size
         candidate = problem.retract(state, step_global, step_local)
-        new_cost = cost(problem.residuals(candidate), config)
+        # Linearised, not only its residuals: an accepted step (most are) is the next
+        # linearisation's state, whose geometry is then formed once, not twice.
+        trial = linearised(problem, candidate, config)
+        new_cost = cost(trial[1], config)
         diag_step = np.concatenate(
             [
                 np.diag(normal.A) * step_global,
@@ -769,13 +772,14 @@ def solve(
             decrease = cost_now - new_cost
             state, cost_now = candidate, new_cost
             history.append(cost_now)
-            normal, residuals = None, None  # both of the old state: let go before the next
+            normal, residuals, pending = None, None, trial  # the old state's let go
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
             growth = 2.0
             if decrease <= config.tolerance * max(cost_now, 1e-300):
                 converged = True
                 break
         else:
+            del trial
             damping *= growth
             growth *= 2.0
             if damping > MAX_DAMPING:
