@@ -10,7 +10,13 @@ import numpy as np
 import pytest
 
 from linelaser_calib.core.errors import SolverError
-from linelaser_calib.core.solver import Linearisation, Residuals, SolverConfig, solve
+from linelaser_calib.core.solver import (
+    Linearisation,
+    Residuals,
+    SolverConfig,
+    solve,
+    variance_factors,
+)
 
 G, K, M = 8, 30, 60
 
@@ -31,6 +37,10 @@ class LinearBlocks:
     @property
     def step_scale(self) -> np.ndarray:
         return np.ones(G)
+
+    @property
+    def n_measurements(self) -> int:
+        return M * K
 
     def residuals(self, state: tuple[np.ndarray, np.ndarray]) -> Residuals:
         x, delta = state
@@ -67,6 +77,33 @@ def test_a_solve_stopped_at_a_fraction_of_its_1_sigma_is_that_close_to_the_optim
         # optimum is a little further than the steps told (here up to 1.2 times).
         assert np.all(np.abs(stopped.state[0] - optimum.state[0]) < 1.5 * fraction * sigma)
         assert stopped.iterations < by_cost.iterations
+
+
+def test_a_stop_at_a_fraction_of_the_1_sigma_learned_from_the_residuals() -> None:
+    """With the variance factors learned at each linearisation (``variance_factors`` None:
+    a solve that only starts a later one) the stop is at the fraction of the 1σ of the noise
+    the residuals show, here below the stated one (with the stated 1σ this seed stops 0.022
+    of the learned 1σ away), not of the stated 1σ."""
+    rng = np.random.default_rng(12)
+    J_global = rng.normal(size=(M, K, G))
+    J_local = rng.normal(size=(M, K, 6))
+    y = J_global @ rng.normal(size=G) + rng.normal(0.0, 0.2, size=(M, K))
+    gross = rng.random((M, K)) < 0.1
+    y[gross] += rng.normal(0.0, 4.0, size=int(gross.sum()))
+    problem = LinearBlocks(J_global, J_local, y)
+    start = (np.zeros(G), np.zeros((M, 6)))
+    huber = SolverConfig(loss="huber", loss_scale=0.6, max_iterations=200)
+    optimum = solve(problem, start, replace(huber, tolerance=1e-15, max_iterations=1000))
+    prior_cost = float(np.sum(optimum.residuals.pose_prior**2))
+    point_cost = 2.0 * optimum.cost_history[-1] - prior_cost
+    factors = variance_factors(optimum.normal, point_cost, prior_cost, M * K, G)
+    assert factors[0] < 0.5
+    sigma = np.sqrt(np.diag(np.linalg.inv(optimum.normal.schur_information(*factors))))
+    by_cost = solve(problem, start, replace(huber, tolerance=1e-8))
+    stopped = solve(problem, start, replace(huber, step_sigmas=0.01, variance_factors=None))
+    assert stopped.converged
+    assert np.all(np.abs(stopped.state[0] - optimum.state[0]) < 1.5 * 0.01 * sigma)
+    assert stopped.iterations < by_cost.iterations
 
 
 def test_a_global_number_the_data_do_not_determine_is_a_solver_error() -> None:

@@ -342,11 +342,17 @@ def _axes(sigma: FloatArray) -> dict[str, list[float]]:
 def tilt(x: FloatArray, d: FloatArray) -> float:
     """Change (m) of the distances ``d`` (N,) across the profile: the slope of a line fitted
     to d against the sensor x (N,) of the points, times their x spread (2σ); 0 for fewer than
-    3 points."""
-    if len(d) < 3 or float(np.std(x)) == 0.0:
+    3 points. The slope is the least-squares one (``np.polyfit``'s of degree 1) in closed
+    form, Σ(x − x̄)d / Σ(x − x̄)²: a self-check of 1,600 profiles takes 3,200 of them, and a
+    fit through a Vandermonde matrix cost a third of its statistics."""
+    if len(d) < 3:
         return 0.0
-    slope = float(np.polyfit(x, d, 1)[0])
-    return slope * 2.0 * float(np.std(x))
+    centred = np.asarray(x, dtype=np.float64)
+    centred = centred - np.mean(centred)
+    spread = float(centred @ centred)
+    if spread == 0.0:
+        return 0.0
+    return float(centred @ d) / spread * 2.0 * float(np.sqrt(spread / len(x)))
 
 
 def neighbour_correlation(residuals: FloatArray, T_base_flange: FloatArray) -> float:

@@ -29,9 +29,9 @@ update from the gain ratio (actual over predicted decrease). It stops when an ac
 lowers the cost by less than ``tolerance`` of it, when no global parameter moves by more than
 ``step_tolerance_m`` (a step times the problem's ``step_scale``: the lever for rotations, 1
 for lengths), when the steps tell that the optimum is within ``step_sigmas`` of each
-global parameter's 1σ (warm re-solves, whose figures need to be right to a small fraction
-of their 1σ only; off by default), or when no damping lowers the cost any more (a minimum to
-machine precision).
+global parameter's 1σ (solves whose figures need to be right to a small fraction of their
+1σ only: warm re-solves, and a solve that only starts a later one; off by default), or when
+no damping lowers the cost any more (a minimum to machine precision).
 
 Information and covariance
 --------------------------
@@ -118,9 +118,13 @@ class SolverConfig:
         robust loss makes the solve converge linearly, so the optimum is the step over
         (1 − r) away. The state is then that linearisation's, so no further linearisation
         is needed. 0 (default): not used.
-    variance_factors : tuple of float
-        Sensor and robot variance factors of that 1σ (:func:`variance_factors`; those of an
-        earlier solve of the problem).
+    variance_factors : tuple of float, or None
+        Sensor and robot variance factors of that 1σ (:func:`variance_factors`): those of an
+        earlier solve of the problem, or None to learn them at each linearisation from its
+        own residuals, for a problem that counts its measurements (:class:`CountedProblem`).
+        Far from the optimum the misfit inflates them (and the 1σ with them), but the stop
+        needs two linearisations whose steps shrink, by when the residuals are nearly the
+        optimum's.
     """
 
     loss: str = "linear"
@@ -129,7 +133,7 @@ class SolverConfig:
     tolerance: float = 1e-10
     step_tolerance_m: float = 1e-12
     step_sigmas: float = 0.0
-    variance_factors: tuple[float, float] = (1.0, 1.0)
+    variance_factors: tuple[float, float] | None = (1.0, 1.0)
 
     def __post_init__(self) -> None:
         if self.loss not in LOSSES:
@@ -142,8 +146,9 @@ class SolverConfig:
             raise InputError(f"max_iterations must be >= 1, got {self.max_iterations}")
         if not (np.isfinite(self.step_sigmas) and self.step_sigmas >= 0.0):
             raise InputError(f"step_sigmas must be >= 0 and finite, got {self.step_sigmas}")
-        if not all(np.isfinite(f) and f > 0.0 for f in self.variance_factors):
-            raise InputError(f"variance_factors must be positive, got {self.variance_factors}")
+        factors = self.variance_factors
+        if factors is not None and not all(np.isfinite(f) and f > 0.0 for f in factors):
+            raise InputError(f"variance_factors must be positive, got {factors}")
 
 
 @dataclass(frozen=True)
@@ -212,6 +217,17 @@ class BlockProblem(Protocol[State]):
 
     def retract(self, state: State, step_global: FloatArray, step_local: FloatArray) -> State:
         """``state`` moved by a global step (G,) and per-sample steps (M, 6)."""
+        ...
+
+
+@runtime_checkable
+class CountedProblem(Protocol):
+    """A :class:`BlockProblem` that counts its measurement residuals (padding excluded), as
+    :func:`variance_factors` needs."""
+
+    @property
+    def n_measurements(self) -> int:
+        """Measurement residuals, padding excluded."""
         ...
 
 
@@ -662,11 +678,24 @@ def widen_covariance(covariance: FloatArray, ratio: FloatArray | None) -> FloatA
     return np.asarray(covariance * np.outer(scale, scale))
 
 
-def _sigma(normal: BlockNormal, config: SolverConfig) -> FloatArray | None:
-    """1σ (G,) of the global parameters at a linearisation (``config.variance_factors``);
-    None where the information is singular."""
+def _sigma(
+    problem: BlockProblem[Any], normal: BlockNormal, residuals: Residuals, config: SolverConfig
+) -> FloatArray | None:
+    """1σ (G,) of the global parameters at a linearisation (``config.variance_factors``, or
+    learned from its ``residuals``); None where the information is singular."""
+    factors = config.variance_factors
+    if factors is None:
+        if not isinstance(problem, CountedProblem):
+            raise InputError("variance factors learned in the solve need a CountedProblem")
+        factors = variance_factors(
+            normal,
+            float(np.sum(robust_costs(residuals.points, config))),
+            float(np.sum(residuals.pose_prior**2)),
+            problem.n_measurements,
+            problem.n_global,
+        )
     try:
-        covariance = np.linalg.inv(normal.schur_information(*config.variance_factors))
+        covariance = np.linalg.inv(normal.schur_information(*factors))
     except np.linalg.LinAlgError:
         return None
     return np.asarray(np.sqrt(np.maximum(np.diag(covariance), 0.0)))
@@ -711,7 +740,9 @@ def solve(
             normal, residuals = linearised(problem, state, config) if pending is None else pending
             pending = None
             iterations += 1
-            sigma = _sigma(normal, config) if config.step_sigmas > 0.0 else None
+            if config.step_sigmas > 0.0:
+                assert residuals is not None
+                sigma = _sigma(problem, normal, residuals, config)
         step_global, step_local = solve_damped(normal, damping)
         if float(np.max(np.abs(step_global * scale))) < config.step_tolerance_m:
             converged = True
@@ -723,7 +754,10 @@ def solve(
                 break
             last_size = size
         candidate = problem.retract(state, step_global, step_local)
-        new_cost = cost(problem.residuals(candidate), config)
+        # Linearised, not only its residuals: an accepted step (most are) is the next
+        # linearisation's state, whose geometry is then formed once, not twice.
+        trial = linearised(problem, candidate, config)
+        new_cost = cost(trial[1], config)
         diag_step = np.concatenate(
             [
                 np.diag(normal.A) * step_global,
@@ -738,13 +772,14 @@ def solve(
             decrease = cost_now - new_cost
             state, cost_now = candidate, new_cost
             history.append(cost_now)
-            normal, residuals = None, None  # both of the old state: let go before the next
+            normal, residuals, pending = None, None, trial  # the old state's let go
             damping *= max(1.0 / 3.0, 1.0 - (2.0 * gain - 1.0) ** 3)
             growth = 2.0
             if decrease <= config.tolerance * max(cost_now, 1e-300):
                 converged = True
                 break
         else:
+            del trial
             damping *= growth
             growth *= 2.0
             if damping > MAX_DAMPING:

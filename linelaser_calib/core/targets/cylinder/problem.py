@@ -185,6 +185,11 @@ class CylinderProblem:
         return int(self.R_bf.shape[0])
 
     @property
+    def n_measurements(self) -> int:
+        """Real points (padding excluded): a :class:`~...solver.CountedProblem`."""
+        return int(self.counts.sum())
+
+    @property
     def x_m(self) -> FloatArray:
         """Each point's place along the line (sensor x), (M, K), m."""
         return np.asarray(self.points[..., 0], dtype=np.float64)
@@ -385,34 +390,42 @@ class CylinderProblem:
 
     def _jacobians(self, state: CylinderState) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Point residuals (M, K) and their Jacobians (M, K, G) and (M, K, 6) of all samples
-        at once (see :meth:`linearise`)."""
+        at once (see :meth:`linearise`). Each column block is written into the Jacobians in
+        place (no list of blocks joined), and a product with one 3-vector basis is taken over
+        all points at once (a broadcast (M, K, 3) @ (3, n) product loops over the samples)."""
         geo = _geometry(self, state)
-        scale = (self.mask / self.config.sensor_sigma_m)[..., None]
-        n_base = geo.normal * scale
-        n_corrected = n_base @ self.R_bf  # rows R_bfᵀ n: d r / d τ
+        M, K = self.mask.shape
+        unit = self.mask / self.config.sensor_sigma_m  # (M, K): 1/σ on points, 0 on padding
+        n_base = geo.normal * unit[..., None]
         n_flange = n_base @ geo.RE  # rows Exp(ω)ᵀ R_bfᵀ n: d r / d ρ
         n_sensor = n_flange @ state.R_fs  # rows R_fsᵀ n_flange
         u, v = orthonormal_basis(state.direction)
-        n_uv = n_base @ np.column_stack([u, v])
-        columns = [_cross(geo.p, n_sensor), n_flange, -geo.along[..., None] * n_uv, -n_uv]
-        if self.estimate_radius:
-            columns.append(-scale)
-        if self.estimate_scale:
+        n_uv = (n_base.reshape(-1, 3) @ np.column_stack([u, v])).reshape(M, K, 2)
+        J_global = np.empty((M, K, self.n_global))
+        _cross(geo.p, n_sensor, J_global[..., 0:3])
+        J_global[..., 3:6] = n_flange
+        np.multiply(n_uv, -geo.along[..., None], out=J_global[..., 6:8])
+        np.negative(n_uv, out=J_global[..., 8:10])
+        if self.radius_index is not None:
+            np.negative(unit, out=J_global[..., self.radius_index])
+        if self.scale_index is not None:
             # d (x / (1 + s)) / d s = −x / (1 + s)² = −(x / (1 + s)) / (1 + s)
-            columns.append((-n_sensor[..., 0] * geo.p[..., 0] / (1.0 + state.scale))[..., None])
-        if self.estimate_depth_scale:
-            columns.append(
-                (-n_sensor[..., 2] * geo.p[..., 2] / (1.0 + state.depth_scale))[..., None]
+            J_global[..., self.scale_index] = (
+                -n_sensor[..., 0] * geo.p[..., 0] / (1.0 + state.scale)
             )
-        J_omega = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
-        J_global = np.concatenate(columns, axis=2)
-        J_local = np.concatenate([J_omega, n_corrected], axis=2)
+        if self.depth_scale_index is not None:
+            J_global[..., self.depth_scale_index] = (
+                -n_sensor[..., 2] * geo.p[..., 2] / (1.0 + state.depth_scale)
+            )
+        J_local = np.empty((M, K, 6))
+        J_local[..., :3] = _cross(geo.y, n_flange) @ right_jacobian_so3(state.omega)
+        np.matmul(n_base, self.R_bf, out=J_local[..., 3:])  # rows R_bfᵀ n: d r / d τ
         if self.scale_shares is not None:
             # d (g e) = g de + e dg, dg / ds = a, dg / ds_z = b (e the true-unit residual)
             g = self._stretch(state)[..., None]
             J_global *= g
             J_local *= g
-            e = (geo.distance - state.radius) * (self.mask / self.config.sensor_sigma_m)
+            e = (geo.distance - state.radius) * unit
             for index, share in ((self.scale_index, 0), (self.depth_scale_index, 1)):
                 if index is not None:
                     J_global[..., index] += e * self.scale_shares[..., share]
@@ -467,26 +480,34 @@ def _geometry(problem: CylinderProblem, state: CylinderState) -> _Geometry:
     """Base-frame points and their relation to the axis."""
     RE, offset = _sample_transforms(problem, state)
     p = measured_to_true(problem.points, state.scale, state.depth_scale)
-    y = p @ state.R_fs.T + state.t_fs
-    w = y @ RE.transpose(0, 2, 1) + (offset - state.point)[:, None, :]
-    along = w @ state.direction
-    radial = w - along[..., None] * state.direction
-    distance = np.sqrt(np.sum(radial**2, axis=2))
-    normal = radial / np.maximum(distance, 1e-300)[..., None]
+    # One product over all points (a broadcast (M, K, 3) @ (3, 3) loops over the samples).
+    y = (p.reshape(-1, 3) @ state.R_fs.T + state.t_fs).reshape(p.shape)
+    radial = y @ RE.transpose(0, 2, 1)
+    radial += (offset - state.point)[:, None, :]  # w, the point relative to the axis point
+    along = radial @ state.direction
+    radial -= along[..., None] * state.direction
+    distance = np.sqrt(np.einsum("mki,mki->mk", radial, radial))
+    normal = np.divide(radial, np.maximum(distance, 1e-300)[..., None], out=radial)
     return _Geometry(p, y, RE, distance, normal, along)
 
 
 def _sensor_normals(problem: CylinderProblem, state: CylinderState) -> FloatArray:
     """Each point's unit surface normal in the sensor frame (M, K, 3)."""
     geo = _geometry(problem, state)
-    return np.asarray(np.einsum("mki,mij->mkj", geo.normal, geo.RE) @ state.R_fs)
+    return np.asarray(geo.normal @ geo.RE @ state.R_fs)
 
 
-def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
-    """Cross products of (..., 3) arrays (cheaper than numpy.cross on small last axes)."""
+def _cross(a: FloatArray, b: FloatArray, out: FloatArray | None = None) -> FloatArray:
+    """Cross products of (..., 3) arrays (cheaper than numpy.cross on small last axes), into
+    ``out`` where given."""
     a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
     b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    if out is None:
+        out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    np.subtract(a1 * b2, a2 * b1, out=out[..., 0])
+    np.subtract(a2 * b0, a0 * b2, out=out[..., 1])
+    np.subtract(a0 * b1, a1 * b0, out=out[..., 2])
+    return out
 
 
 def errors_in_variables_move(problem: CylinderProblem, normal: BlockNormal) -> FloatArray:

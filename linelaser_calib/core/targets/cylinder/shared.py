@@ -48,19 +48,33 @@ def shared_error(
     return shared_pose_error(views, learned)
 
 
+def shared_widening(
+    solved: SolvedProblem, own: FloatArray, learned: SharedPoseError | None = None
+) -> tuple[FloatArray, SharedPoseError, FloatArray] | None:
+    """The hand-eye 1σ (6,), per axis the wider of ``own`` and the one under the robot's
+    error as the solved refinement's views share it (:func:`shared_error`), that sharing
+    and the factors (6,) it widened ``own`` by; None with too few views."""
+    shared = shared_error(solved, learned)
+    if shared is None:
+        return None
+    sigma = np.maximum(own, np.sqrt(np.diag(shared.covariance)[:6]))
+    return sigma, shared, sigma / own
+
+
 def with_shared(
     refined: RefineResult, learned: SharedPoseError | None = None
 ) -> tuple[RefineResult, SharedPoseError | None, FloatArray | None]:
-    """``refined`` with its hand-eye 1σ the wider, per axis, of its own and the one under
-    the robot's error as its views share it (:func:`shared_error`), that sharing and the
-    factors (6,) it widened the 1σ by (None without a solved problem or with too few
-    views)."""
+    """``refined`` with its hand-eye 1σ widened by :func:`shared_widening`, that sharing and
+    the factors (6,) (None without a solved problem or with too few views)."""
     if refined.solved is None:
         return refined, None, None
-    shared = shared_error(refined.solved, learned)
-    if shared is None:
-        return refined, None, None
     own = np.r_[refined.sigma_rotation_rad, refined.sigma_translation_m]
-    sigma = np.maximum(own, np.sqrt(np.diag(shared.covariance)[:6]))
-    widened = replace(refined, sigma_rotation_rad=sigma[:3], sigma_translation_m=sigma[3:])
-    return widened, shared, sigma / own
+    widened = shared_widening(refined.solved, own, learned)
+    if widened is None:
+        return refined, None, None
+    sigma, shared, factors = widened
+    return (
+        replace(refined, sigma_rotation_rad=sigma[:3], sigma_translation_m=sigma[3:]),
+        shared,
+        factors,
+    )
