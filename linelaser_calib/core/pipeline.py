@@ -50,10 +50,10 @@ from .targets.base import (
     TargetSolution,
     configure,
     rejection_digest,
-    sample_rng,
 )
 from .targets.extraction import Extractions
 from .targets.rivals import RivalSamples, check_model, refuse_without_fit
+from .targets.runs import sample_rng
 from .thinning import DEFAULT_PER_NEIGHBOURHOOD, thin_samples
 from .types import FlangePose, Profile, Rejection, Sample
 from .verdict import no_self_check_reason, warning_kind
@@ -193,7 +193,7 @@ def validate_sample(sample: Sample, config: PipelineConfig) -> Rejection | None:
 
     The same checks the calibration applies to each sample (the collector validates live
     profiles with it): the target's cleaning and feature fit, with the sample's own random
-    draws (:func:`~linelaser_calib.core.targets.base.sample_rng` of ``config.seed`` and its
+    draws (:func:`~linelaser_calib.core.targets.runs.sample_rng` of ``config.seed`` and its
     index), as in the calibration.
 
     Returns

@@ -38,7 +38,7 @@ class Extractions:
     Parameters
     ----------
     seed : int
-        The run's seed (each sample's random draws: :func:`~.base.sample_rng`).
+        The run's seed (each sample's random draws: :func:`~.runs.sample_rng`).
     workers : int
         As :meth:`~.base.Target.extract`'s (the same features, less wall time on a second
         core).

@@ -16,7 +16,8 @@ from ...model_check import Comparison
 from ...profile.cleaning import CleanedProfile, clean_profiles
 from ...profile.segmentation import SegmentedProfile, segment_profiles
 from ...types import BoolArray, Rejection, Sample, SampleFit, StoredArray, stored_points
-from ..base import Progress, extract_chunks, sample_rng
+from ..base import Progress
+from ..runs import extract_chunks, sample_rng
 from .arc import (
     circle_centre,
     circle_radius,
@@ -211,7 +212,7 @@ def fit_samples(
     workers: int = 1,
 ) -> tuple[list[FittedSample], list[Rejection]]:
     """Fit every sample's ellipse (semi-axes bounded by ``config.radius_m`` when given);
-    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_chunks`.
+    ``workers`` as in :func:`~linelaser_calib.core.targets.runs.extract_chunks`.
 
     Arcs that a rival shape fits better one by one are used: a real profiler's shape error
     makes a V or a line beat an ellipse now and then, and the refinement's outlier test sets

@@ -6,7 +6,8 @@ import numpy as np
 
 from ...profile.corner import CornerSample, check_corner_recording, extract_corner_sample
 from ...types import Rejection, Sample
-from ..base import Progress, extract_each
+from ..base import Progress
+from ..runs import extract_each
 from .config import KnownPointConfig
 
 
@@ -30,7 +31,7 @@ def extract_corners(
     workers: int = 1,
 ) -> tuple[list[CornerSample], list[Rejection]]:
     """:func:`extract_corner` of every sample: the corners and the rejections (``seed`` and
-    ``workers`` as in :func:`~linelaser_calib.core.targets.base.extract_each`), corners that
+    ``workers`` as in :func:`~linelaser_calib.core.targets.runs.extract_each`), corners that
     are outliers among the recording's set aside
     (:func:`~...profile.corner.check_corner_recording`).
     """

@@ -290,7 +290,7 @@ def calibrate_known_point(
         ``default`` (closed form + maximum likelihood) or ``paper`` (grid search + shift).
     seed : int
         Of the RANSAC corner fits (each sample's own generator,
-        :func:`~linelaser_calib.core.targets.base.sample_rng`).
+        :func:`~linelaser_calib.core.targets.runs.sample_rng`).
 
     Returns
     -------

@@ -62,10 +62,10 @@ from ..base import (
     Progress,
     SolveContext,
     TargetSolution,
-    extract_each,
     mismatch_message,
     rejection_digest,
 )
+from ..runs import extract_each
 from .clocks import clock_evidence
 from .config import LineConfig
 from .features import extract_line_feature

@@ -59,10 +59,10 @@ from linelaser_calib.core.targets.base import (
     RobotError,
     SolveContext,
     TargetSolution,
-    extract_each,
     mismatch_message,
     rejection_digest,
 )
+from linelaser_calib.core.targets.runs import extract_each
 from linelaser_calib.core.targets.sphere.circle import (
     CircleFit,
     circle_residuals,
