@@ -1,8 +1,7 @@
 """Maximum-likelihood refinement of the hand-eye on every profile point (the default method).
 
 The driver (start, solve, outlier samples and points) and the statistics of the solution.
-The problem it solves (the model, its parametrisation and Jacobians) is
-:mod:`.problem`.
+The problem it solves (the model, its parametrisation and Jacobians) is :mod:`.problem`.
 
 Covariance
 ----------
@@ -54,6 +53,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import chdtri
+from scipy.stats import median_abs_deviation
 
 from ...errors import DegenerateError, InputError, SolverError
 from ...geometry import FloatArray, exp_so3, transform_from_rotation_translation
@@ -287,9 +287,8 @@ def _marginal_hand_eye(information: FloatArray) -> FloatArray:
 
 
 def _robust_zscore(values: FloatArray) -> FloatArray:
-    """(value − median) / (1.4826 · MAD), with the MAD floored at 1e-3 of the median."""
-    median = float(np.median(values))
-    mad = 1.4826 * float(np.median(np.abs(values - median)))
+    """(value − median) / (1.4826 · MAD), the MAD floored at 1e-3 of the median."""
+    median, mad = float(np.median(values)), float(median_abs_deviation(values, scale="normal"))
     return np.asarray((values - median) / max(mad, 1e-3 * abs(median), 1e-300))
 
 
