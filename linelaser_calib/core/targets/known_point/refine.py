@@ -6,8 +6,12 @@ Per view i: the corner s_i (sensor frame, y = 0) measured with the covariance of
 flange-pose nuisance δ_i = (ω_i, τ_i) in the flange frame, true pose T_i·D(δ_i), with Gaussian
 priors σ_r, σ_t; a prior on the hand-eye from the initial one (loose, plus pinned directions);
 the point p fixed when taught (or with ``point_sigma_m``), else estimated. The predicted corner
-is R_Xᵀ (Exp(ω)ᵀ (R_iᵀ (p − t_i) − τ) − t_X). Global step: θ (3, sensor axes), ρ (3, flange
-axes) and, when estimated, the point (3, base frame). Its covariance is the per-view model's;
+is R_Xᵀ (Exp(ω)ᵀ (R_iᵀ (p − t_i) − τ) − t_X). Optionally the profiler's x and z scale errors
+are estimated too: a scale of either axis maps the flanks' straight lines to straight lines,
+so the measured corner is the scaled true one and is compared with the prediction with the
+scales removed (:func:`~...profile.along_line.measured_to_true`, as the line target's). Global
+step: θ (3, sensor axes), ρ (3, flange axes), when estimated the point (3, base frame), and
+when estimated the scale errors (2, x then z). Its covariance is the per-view model's;
 :meth:`KnownPointRefinement.views` gives what :mod:`...shared_pose` needs for the estimate's
 covariance where neighbouring views share their pose error.
 """
@@ -30,6 +34,7 @@ from ...geometry import (
     skews,
     transform_from_rotation_translation,
 )
+from ...profile.along_line import measured_to_true
 from ...seam_grid import corners_3d
 from ...shared_pose import ViewsLinearised
 from ...solver import Linearisation, Residuals, SolverConfig, normal_equations, solve
@@ -44,13 +49,14 @@ PIN_SIGMA_M = 1e-6
 @dataclass(frozen=True)
 class KnownPointState:
     """Current estimate: hand-eye (R_fs, t_fs m), point (3,) m, pose corrections ω, τ (M, 3)
-    (rad, m; flange frame)."""
+    (rad, m; flange frame), the profiler's x and z scale errors (2,) (0 where held)."""
 
     R_fs: FloatArray
     t_fs: FloatArray
     point: FloatArray
     omega: FloatArray
     tau: FloatArray
+    scales: FloatArray = field(default_factory=lambda: np.zeros(2))
 
 
 class _Priors(NamedTuple):
@@ -92,6 +98,8 @@ class KnownPointProblem:
         Prior on an estimated point: its value and 1σ, m.
     hand_eye_prior : HandEyePrior or None
     config : KnownPointConfig
+    free_scales : bool
+        Whether the profiler's x and z scale errors are estimated (held at 0 otherwise).
     """
 
     s: FloatArray
@@ -103,17 +111,25 @@ class KnownPointProblem:
     hand_eye_prior: HandEyePrior | None
     config: KnownPointConfig
     lever_m: float = field(default=1.0)
+    free_scales: bool = False
 
     @property
     def n_global(self) -> int:
-        return 9 if self.estimate_point else 6
+        return 6 + (3 if self.estimate_point else 0) + (2 if self.free_scales else 0)
 
     @property
     def step_scale(self) -> FloatArray:
-        """Rotations times the lever (the corners' median distance), lengths as they are."""
+        """Rotations and scale errors times the lever (the corners' median distance),
+        lengths as they are."""
         scale = np.ones(self.n_global)
         scale[:3] = self.lever_m
+        if self.free_scales:
+            scale[-2:] = self.lever_m
         return scale
+
+    def _corners(self, scales: FloatArray) -> FloatArray:
+        """The measured corners (M, 3) with the scale errors removed, m."""
+        return measured_to_true(self.s, float(scales[0]), float(scales[1]))
 
     def _predict(self, state: KnownPointState) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Predicted corners (M, 3), the point in the true flange frame h (M, 3), Exp(ω)."""
@@ -152,7 +168,7 @@ class KnownPointProblem:
         if self.point_prior is not None:
             point0, sigma = self.point_prior
             J = np.zeros((3, G))
-            J[:, 6:] = np.eye(3) / sigma
+            J[:, 6:9] = np.eye(3) / sigma
             residuals.append((state.point - point0) / sigma)
             jacobians.append(J)
         return _Priors(np.concatenate(residuals), np.vstack(jacobians), hand_eye_info, pinned_info)
@@ -165,7 +181,7 @@ class KnownPointProblem:
     def _residuals(
         self, state: KnownPointState, predicted: FloatArray, priors: _Priors
     ) -> Residuals:
-        r = np.einsum("mij,mj->mi", self.W, predicted - self.s)
+        r = np.einsum("mij,mj->mi", self.W, predicted - self._corners(state.scales))
         cfg = self.config
         prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
         return Residuals(np.asarray(r), prior, priors.residuals)
@@ -180,10 +196,14 @@ class KnownPointProblem:
         global_blocks = [skews(predicted), np.broadcast_to(-RT, (M, 3, 3))]
         if self.estimate_point:
             global_blocks.append(RTE @ np.transpose(self.R, (0, 2, 1)))
+        J_global = self.W @ np.concatenate(global_blocks, axis=2)
+        if self.free_scales:
+            true = self._corners(state.scales)[:, [0, 2]] / (1.0 + state.scales)
+            J_global = np.concatenate([J_global, self.W[:, :, [0, 2]] * true[:, None, :]], axis=2)
         J_omega = RT @ skews(h) @ right_jacobian_so3(state.omega)
         return Linearisation(
             residuals=self._residuals(state, predicted, priors),
-            J_global=self.W @ np.concatenate(global_blocks, axis=2),
+            J_global=J_global,
             J_local=self.W @ np.concatenate([J_omega, -RTE], axis=2),
             pose_prior_sqrt_information=self._sqrt_information(),
             global_prior_jacobian=priors.jacobian,
@@ -192,21 +212,24 @@ class KnownPointProblem:
     def retract(
         self, state: KnownPointState, step_global: FloatArray, step_local: FloatArray
     ) -> KnownPointState:
-        """Apply increments: R ← R·Exp(θ), t ← t + ρ, p ← p + step, ω, τ additively."""
+        """Apply increments: R ← R·Exp(θ), t ← t + ρ, p, scale errors, ω, τ additively."""
         point = state.point + step_global[6:9] if self.estimate_point else state.point
+        scales = state.scales + step_global[-2:] if self.free_scales else state.scales
         return KnownPointState(
             R_fs=state.R_fs @ exp_so3(step_global[None, :3])[0],
             t_fs=state.t_fs + step_global[3:6],
             point=point,
             omega=state.omega + step_local[:, :3],
             tau=state.tau + step_local[:, 3:],
+            scales=scales,
         )
 
 
-def data_information(information: FloatArray, estimate_point: bool) -> FloatArray:
-    """Hand-eye information (6, 6) with the point (if estimated) marginalised."""
+def data_information(information: FloatArray) -> FloatArray:
+    """Hand-eye information (6, 6) with the point and scale errors (if estimated)
+    marginalised."""
     data = information
-    if estimate_point:
+    if len(data) > 6:
         data = data[:6, :6] - data[:6, 6:] @ np.linalg.pinv(data[6:, 6:]) @ data[6:, :6]
     return np.asarray(0.5 * (data + data.T))
 
@@ -219,6 +242,7 @@ def build_problem(
     point_prior: tuple[FloatArray, float] | None,
     prior: HandEyePrior | None,
     config: KnownPointConfig,
+    free_scales: bool = False,
 ) -> KnownPointProblem:
     """The problem of checked corners (M, 2), covariances (M, 2, 2) and poses (M, 4, 4)."""
     return KnownPointProblem(
@@ -231,6 +255,7 @@ def build_problem(
         hand_eye_prior=prior,
         config=config,
         lever_m=float(np.median(np.linalg.norm(corners_xz, axis=1))),
+        free_scales=free_scales,
     )
 
 
@@ -259,6 +284,8 @@ class KnownPointRefinement:
     converged : bool
     problem : KnownPointProblem
         The problem solved (for :meth:`views`).
+    scales : ndarray, shape (2,)
+        The profiler's x and z scale errors; 0 where held (``problem.free_scales`` False).
     """
 
     T_flange_sensor: FloatArray
@@ -271,6 +298,7 @@ class KnownPointRefinement:
     iterations: int
     converged: bool
     problem: KnownPointProblem
+    scales: FloatArray = field(default_factory=lambda: np.zeros(2))
 
     def views(self) -> ViewsLinearised:
         """The views linearised at the solution with every pose correction at zero, for
@@ -282,7 +310,7 @@ class KnownPointRefinement:
             problem = replace(problem, hand_eye_prior=replace(prior, pinned=np.zeros((0, 6))))
         M = len(problem.s)
         X, zero = self.T_flange_sensor, np.zeros((M, 3))
-        state = KnownPointState(X[:3, :3], X[:3, 3], self.point_base, zero, zero)
+        state = KnownPointState(X[:3, :3], X[:3, 3], self.point_base, zero, zero, self.scales)
         T = np.tile(np.eye(4), (M, 1, 1))
         T[:, :3, :3], T[:, :3, 3] = problem.R, problem.t
         return ViewsLinearised.from_linearisation(problem.linearise(state), T)
@@ -321,6 +349,7 @@ def refine_known_point(
     estimate_point: bool,
     prior: HandEyePrior | None,
     config: KnownPointConfig | None = None,
+    free_scales: bool = False,
 ) -> KnownPointRefinement:
     """Maximum-likelihood hand-eye (and point) with per-view flange-pose nuisance.
 
@@ -343,6 +372,8 @@ def refine_known_point(
     prior : HandEyePrior or None
         Prior on the hand-eye (its information is left out of ``information_data``).
     config : KnownPointConfig, optional
+    free_scales : bool
+        Estimate the profiler's x and z scale errors (after the point in ``covariance``).
 
     Raises
     ------
@@ -361,7 +392,9 @@ def refine_known_point(
     point_prior = (
         (p0.copy(), cfg.point_sigma_m) if estimate_point and cfg.point_sigma_m > 0 else None
     )
-    problem = build_problem(c, covariance_xz, T, estimate_point, point_prior, prior, cfg)
+    problem = build_problem(
+        c, covariance_xz, T, estimate_point, point_prior, prior, cfg, free_scales
+    )
     M = len(c)
     state = KnownPointState(
         X0[:3, :3].copy(), X0[:3, 3].copy(), p0.copy(), np.zeros((M, 3)), np.zeros((M, 3))
@@ -379,15 +412,14 @@ def refine_known_point(
         T_flange_sensor=transform_from_rotation_translation(state.R_fs, state.t_fs),
         point_base=state.point.copy(),
         covariance=covariance,
-        information_data=data_information(
-            normal.schur_information(remove=priors.hand_eye_info), estimate_point
-        ),
+        information_data=data_information(normal.schur_information(remove=priors.hand_eye_info)),
         pose_corrections=np.hstack([state.omega, state.tau]),
         view_chi2=np.sum(r**2, axis=1) + np.sum(pose_prior**2, axis=1),
         cost_history=solution.cost_history,
         iterations=solution.iterations,
         converged=solution.converged,
         problem=problem,
+        scales=state.scales.copy(),
     )
 
 
@@ -406,4 +438,4 @@ def paper_information(
     M = len(corners_xz)
     state = KnownPointState(X[:3, :3], X[:3, 3], point, np.zeros((M, 3)), np.zeros((M, 3)))
     normal = normal_equations(problem.linearise(state), SolverConfig())
-    return data_information(normal.schur_information(), False)
+    return data_information(normal.schur_information())

@@ -108,6 +108,7 @@ from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
+from ...model_spread import with_held_sigma
 from ...profile.corner import CornerSample, corner_doubt, corners_shown
 from ...seam_grid import paper_correction, weld_points_base
 from ...shared_pose import SharedPoseError, alone_among_neighbours, shared_pose_error
@@ -184,6 +185,9 @@ class KnownPointResult:
         beyond their noise model and, after that, for the robot's error the views share
         (:attr:`~..base.TargetSolution.sigma_widening`, ``sigma_shared``); None for
         ``paper``.
+    sigma_model_spread : ndarray, shape (6,), or None
+        What the profiler's x and z scales, held at 1, may move the hand-eye, counted in
+        the 1σ (:func:`_with_held_scales`); None for ``paper``.
     """
 
     T_flange_sensor: FloatArray
@@ -204,6 +208,7 @@ class KnownPointResult:
     shared: SharedPoseError | None = None
     sigma_widening: FloatArray | None = None
     sigma_shared: FloatArray | None = None
+    sigma_model_spread: FloatArray | None = None
 
 
 def _observability_warnings(observability: KnownPointObservability, method: str) -> list[str]:
@@ -311,7 +316,9 @@ def calibrate_known_point(
     if method == "paper":
         assert X0 is not None and taught is not None  # checked by _inputs
         return _paper_result(corner_samples, rejections, X0, taught, config)
-    return _default_result(corner_samples, rejections, X0, taught, config)
+    return _with_held_scales(
+        _default_result(corner_samples, rejections, X0, taught, config), X0, taught, config
+    )
 
 
 def _stack(corners: list[CornerSample]) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -380,10 +387,12 @@ def _default_result(
     config: KnownPointConfig,
     learned: SharedPoseError | None = None,
     screen: bool = True,
+    free_scales: bool = False,
 ) -> KnownPointResult:
     """Closed form, maximum likelihood with outlier views dropped (with ``screen``), the
-    undetermined directions pinned; the 1σ counts the robot's error shared by neighbouring
-    views (:mod:`...shared_pose`: as ``learned`` on a superset of the corners, else learned
+    undetermined directions pinned, the profiler's x and z scale errors estimated with
+    ``free_scales``; the 1σ counts the robot's error shared by neighbouring views
+    (:mod:`...shared_pose`: as ``learned`` on a superset of the corners, else learned
     here)."""
     prior = (
         None
@@ -401,7 +410,15 @@ def _default_result(
         X_start = X if previous is None else previous.T_flange_sensor
         point_start = point if previous is None else previous.point_base
         return refine_known_point(
-            c[keep], cov[keep], T[keep], X_start, point_start, estimate_point, prior, config
+            c[keep],
+            cov[keep],
+            T[keep],
+            X_start,
+            point_start,
+            estimate_point,
+            prior,
+            config,
+            free_scales,
         )
 
     def flag(refined: KnownPointRefinement, keep: list[int]) -> list[Flag]:
@@ -459,7 +476,7 @@ def _default_result(
         scale = np.array([observability.lever_m] * 3 + [1.0] * 3)
         pinned = replace(prior, pinned=np.array([d.vector * scale for d in missing]))
         refined = refine_known_point(
-            c_used, cov_used, T_used, X, point, estimate_point, pinned, config
+            c_used, cov_used, T_used, X, point, estimate_point, pinned, config, free_scales
         )
         X, point = refined.T_flange_sensor, refined.point_base
     warnings = _observability_warnings(observability, "default")
@@ -469,9 +486,7 @@ def _default_result(
             "the result may be inaccurate"
         )
     residuals, rms = _residuals_m(used, X, point)
-    widen, scatter = recording_widening(
-        refined.view_chi2, 3, N_HAND_EYE + (3 if estimate_point else 0)
-    )
+    widen, scatter = recording_widening(refined.view_chi2, 3, len(refined.covariance))
     if scatter is not None:
         warnings.append(scatter)
     own = widen * np.sqrt(np.diag(refined.covariance))
@@ -503,6 +518,39 @@ def _default_result(
     )
 
 
+def _with_held_scales(
+    result: KnownPointResult,
+    X0: FloatArray | None,
+    taught: FloatArray | None,
+    config: KnownPointConfig,
+) -> KnownPointResult:
+    """``result`` (the profiler's scales held at 1) with its 1σ counting what those scales
+    may move the hand-eye: the same views solved with the x and z scale errors estimated,
+    the larger of the move to that solve and what the scales' own 1σ adds, per axis
+    (:func:`~...model_spread.with_held_sigma`, the line's and the cylinder's rule).
+
+    The views' corners span a few tens of mm along x and z, so a scale error of a few
+    tenths of a percent moves each corner by tens of µm, alike in neighbouring views, and
+    the solve with it held is that much off with a 1σ that does not know it: on the stress
+    matrix's ``scales`` face (x 0.6 % long, z 0.2 % short; seeds 0-2) the worst axis was
+    3.64 times its 1σ, now 1.66 (the 1σ along flange axes 0.16 -> 0.33 mm; clean 2.30 at
+    0.13 -> 0.15 mm, what the scales' own 1σ may hide). Those views read x +0.56 to +0.65 %
+    (1σ 0.11-0.13 %) and z -0.11 to -0.24 % (1σ 0.06-0.07 %), clean ones within 1.6 of
+    their 1σ of 0: the estimate is not kept, as the result file has no place for it yet."""
+    if result.uncertainty_rotation_rad is None:
+        return result
+    free = _default_result(
+        result.corners, [], X0, taught, config, result.shared, screen=False, free_scales=True
+    )
+    widened = with_held_sigma(_solution(result, [], config), _solution(free, [], config))
+    return replace(
+        result,
+        uncertainty_rotation_rad=widened.sigma_rotation_rad,
+        uncertainty_translation_m=widened.sigma_translation_m,
+        sigma_model_spread=widened.sigma_model_spread,
+    )
+
+
 def _solution(
     result: KnownPointResult, rejections: list[Rejection], config: KnownPointConfig
 ) -> TargetSolution:
@@ -529,6 +577,7 @@ def _solution(
         subset_start=result.shared,
         sigma_widening=result.sigma_widening,
         sigma_shared=result.sigma_shared,
+        sigma_model_spread=result.sigma_model_spread,
     )
 
 
@@ -600,6 +649,8 @@ class KnownPointTarget:
                 learned if isinstance(learned, SharedPoseError) else None,
                 context.screen_outliers,
             )
+            if warm is None:
+                result = _with_held_scales(result, X0, taught, config)
         return _solution(result, rejections, config)
 
     def solve_paper(
