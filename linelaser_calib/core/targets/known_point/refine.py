@@ -98,8 +98,8 @@ class KnownPointProblem:
         Prior on an estimated point: its value and 1σ, m.
     hand_eye_prior : HandEyePrior or None
     config : KnownPointConfig
-    free_scales : bool
-        Whether the profiler's x and z scale errors are estimated (held at 0 otherwise).
+    free_scales : (bool, bool)
+        Whether the profiler's x and the z scale errors are estimated (held at 0 otherwise).
     """
 
     s: FloatArray
@@ -111,11 +111,11 @@ class KnownPointProblem:
     hand_eye_prior: HandEyePrior | None
     config: KnownPointConfig
     lever_m: float = field(default=1.0)
-    free_scales: bool = False
+    free_scales: tuple[bool, bool] = (False, False)
 
     @property
     def n_global(self) -> int:
-        return 6 + (3 if self.estimate_point else 0) + (2 if self.free_scales else 0)
+        return 6 + (3 if self.estimate_point else 0) + sum(self.free_scales)
 
     @property
     def step_scale(self) -> FloatArray:
@@ -123,8 +123,7 @@ class KnownPointProblem:
         lengths as they are."""
         scale = np.ones(self.n_global)
         scale[:3] = self.lever_m
-        if self.free_scales:
-            scale[-2:] = self.lever_m
+        scale[6 + (3 if self.estimate_point else 0) :] = self.lever_m
         return scale
 
     def _corners(self, scales: FloatArray) -> FloatArray:
@@ -197,9 +196,11 @@ class KnownPointProblem:
         if self.estimate_point:
             global_blocks.append(RTE @ np.transpose(self.R, (0, 2, 1)))
         J_global = self.W @ np.concatenate(global_blocks, axis=2)
-        if self.free_scales:
+        free = [a for a, f in enumerate(self.free_scales) if f]
+        if free:
             true = self._corners(state.scales)[:, [0, 2]] / (1.0 + state.scales)
-            J_global = np.concatenate([J_global, self.W[:, :, [0, 2]] * true[:, None, :]], axis=2)
+            columns = self.W[:, :, [0, 2]] * true[:, None, :]
+            J_global = np.concatenate([J_global, columns[:, :, free]], axis=2)
         J_omega = RT @ skews(h) @ right_jacobian_so3(state.omega)
         return Linearisation(
             residuals=self._residuals(state, predicted, priors),
@@ -214,7 +215,10 @@ class KnownPointProblem:
     ) -> KnownPointState:
         """Apply increments: R ← R·Exp(θ), t ← t + ρ, p, scale errors, ω, τ additively."""
         point = state.point + step_global[6:9] if self.estimate_point else state.point
-        scales = state.scales + step_global[-2:] if self.free_scales else state.scales
+        scales = state.scales.copy()
+        scales[np.flatnonzero(self.free_scales)] += step_global[
+            6 + (3 if self.estimate_point else 0) :
+        ]
         return KnownPointState(
             R_fs=state.R_fs @ exp_so3(step_global[None, :3])[0],
             t_fs=state.t_fs + step_global[3:6],
@@ -242,7 +246,7 @@ def build_problem(
     point_prior: tuple[FloatArray, float] | None,
     prior: HandEyePrior | None,
     config: KnownPointConfig,
-    free_scales: bool = False,
+    free_scales: tuple[bool, bool] = (False, False),
 ) -> KnownPointProblem:
     """The problem of checked corners (M, 2), covariances (M, 2, 2) and poses (M, 4, 4)."""
     return KnownPointProblem(
@@ -285,7 +289,9 @@ class KnownPointRefinement:
     problem : KnownPointProblem
         The problem solved (for :meth:`views`).
     scales : ndarray, shape (2,)
-        The profiler's x and z scale errors; 0 where held (``problem.free_scales`` False).
+        The profiler's x and z scale errors; 0 where held (``problem.free_scales``).
+    scale_sigmas : (float or None, float or None)
+        1σ of each scale error; None where it was held.
     """
 
     T_flange_sensor: FloatArray
@@ -299,6 +305,7 @@ class KnownPointRefinement:
     converged: bool
     problem: KnownPointProblem
     scales: FloatArray = field(default_factory=lambda: np.zeros(2))
+    scale_sigmas: tuple[float | None, float | None] = (None, None)
 
     def views(self) -> ViewsLinearised:
         """The views linearised at the solution with every pose correction at zero, for
@@ -349,7 +356,7 @@ def refine_known_point(
     estimate_point: bool,
     prior: HandEyePrior | None,
     config: KnownPointConfig | None = None,
-    free_scales: bool = False,
+    free_scales: tuple[bool, bool] = (False, False),
 ) -> KnownPointRefinement:
     """Maximum-likelihood hand-eye (and point) with per-view flange-pose nuisance.
 
@@ -372,8 +379,8 @@ def refine_known_point(
     prior : HandEyePrior or None
         Prior on the hand-eye (its information is left out of ``information_data``).
     config : KnownPointConfig, optional
-    free_scales : bool
-        Estimate the profiler's x and z scale errors (after the point in ``covariance``).
+    free_scales : (bool, bool)
+        Estimate the profiler's x and the z scale error (after the point in ``covariance``).
 
     Raises
     ------
@@ -420,7 +427,17 @@ def refine_known_point(
         converged=solution.converged,
         problem=problem,
         scales=state.scales.copy(),
+        scale_sigmas=_scale_sigmas(covariance, free_scales),
     )
+
+
+def _scale_sigmas(
+    covariance: FloatArray, free_scales: tuple[bool, bool]
+) -> tuple[float | None, float | None]:
+    """1σ of the estimated scale errors, the last rows of ``covariance``; None where held."""
+    sigmas = iter(np.sqrt(np.diag(covariance))[len(covariance) - sum(free_scales) :])
+    x, z = (float(next(sigmas)) if free else None for free in free_scales)
+    return x, z
 
 
 def paper_information(

@@ -109,6 +109,7 @@ from scipy.special import chdtri
 from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
 from ...model_spread import with_held_sigma
+from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, ScalePair, scale_significant
 from ...profile.corner import CornerSample, corner_doubt, corners_shown
 from ...seam_grid import paper_correction, weld_points_base
 from ...shared_pose import SharedPoseError, alone_among_neighbours, shared_pose_error
@@ -187,7 +188,10 @@ class KnownPointResult:
         ``paper``.
     sigma_model_spread : ndarray, shape (6,), or None
         What the profiler's x and z scales, held at 1, may move the hand-eye, counted in
-        the 1σ (:func:`_with_held_scales`); None for ``paper``.
+        the 1σ (:func:`_with_scales`); None for ``paper`` or when both were estimated.
+    scales, scale_sigmas : (float or None, float or None)
+        The profiler's x and z scale errors estimated with the hand-eye, and their 1σ; None
+        where held at 1.
     """
 
     T_flange_sensor: FloatArray
@@ -209,6 +213,8 @@ class KnownPointResult:
     sigma_widening: FloatArray | None = None
     sigma_shared: FloatArray | None = None
     sigma_model_spread: FloatArray | None = None
+    scales: ScalePair = (None, None)
+    scale_sigmas: ScalePair = (None, None)
 
 
 def _observability_warnings(observability: KnownPointObservability, method: str) -> list[str]:
@@ -316,7 +322,7 @@ def calibrate_known_point(
     if method == "paper":
         assert X0 is not None and taught is not None  # checked by _inputs
         return _paper_result(corner_samples, rejections, X0, taught, config)
-    return _with_held_scales(
+    return _with_scales(
         _default_result(corner_samples, rejections, X0, taught, config), X0, taught, config
     )
 
@@ -387,7 +393,7 @@ def _default_result(
     config: KnownPointConfig,
     learned: SharedPoseError | None = None,
     screen: bool = True,
-    free_scales: bool = False,
+    free_scales: tuple[bool, bool] = (False, False),
 ) -> KnownPointResult:
     """Closed form, maximum likelihood with outlier views dropped (with ``screen``), the
     undetermined directions pinned, the profiler's x and z scale errors estimated with
@@ -515,36 +521,55 @@ def _default_result(
         shared=shared,
         sigma_widening=np.full(N_HAND_EYE, widen),
         sigma_shared=None if shared is None else sigma[:N_HAND_EYE] / own[:N_HAND_EYE],
+        scales=(
+            float(refined.scales[0]) if free_scales[0] else None,
+            float(refined.scales[1]) if free_scales[1] else None,
+        ),
+        scale_sigmas=refined.scale_sigmas,
     )
 
 
-def _with_held_scales(
+def _with_scales(
     result: KnownPointResult,
     X0: FloatArray | None,
     taught: FloatArray | None,
     config: KnownPointConfig,
 ) -> KnownPointResult:
-    """``result`` (the profiler's scales held at 1) with its 1σ counting what those scales
-    may move the hand-eye: the same views solved with the x and z scale errors estimated,
-    the larger of the move to that solve and what the scales' own 1σ adds, per axis
-    (:func:`~...model_spread.with_held_sigma`, the line's and the cylinder's rule).
+    """``result`` (the profiler's scales held at 1), or the same views solved with each of
+    the x and z scale errors estimated that reads clearly off 1 and plausible
+    (:func:`~...profile.along_line.scale_significant`, within
+    :data:`~...profile.along_line.PLAUSIBLE_SCALE_ERROR`; the line target's ``auto``). A
+    scale held is still known only to its reading, so the held solve's 1σ counts what it
+    may move the hand-eye, the larger of the move to the solve that estimates both and what
+    their own 1σ adds, per axis (:func:`~...model_spread.with_held_sigma`, the line's and
+    the cylinder's rule).
 
     The views' corners span a few tens of mm along x and z, so a scale error of a few
-    tenths of a percent moves each corner by tens of µm, alike in neighbouring views, and
-    the solve with it held is that much off with a 1σ that does not know it: on the stress
-    matrix's ``scales`` face (x 0.6 % long, z 0.2 % short; seeds 0-2) the worst axis was
-    3.64 times its 1σ, now 1.66 (the 1σ along flange axes 0.16 -> 0.33 mm; clean 2.30 at
-    0.13 -> 0.15 mm, what the scales' own 1σ may hide). Those views read x +0.56 to +0.65 %
-    (1σ 0.11-0.13 %) and z -0.11 to -0.24 % (1σ 0.06-0.07 %), clean ones within 1.6 of
-    their 1σ of 0: the estimate is not kept, as the result file has no place for it yet."""
+    tenths of a percent moves each corner by tens of µm, alike in neighbouring views: on
+    the stress matrix's ``scales`` face (x 0.6 % long, z 0.2 % short) the solve with them
+    held was 3.64 times its 1σ off on its worst axis (seeds 0-2; 2.30 clean). The views
+    determine the scales: they read x +0.56 to +0.65 % (1σ 0.11-0.13 %) and z -0.11 to
+    -0.24 % (1σ 0.06-0.07 %) there, and within 1.6 of their 1σ of 0 on clean views."""
     if result.uncertainty_rotation_rad is None:
         return result
-    free = _default_result(
-        result.corners, [], X0, taught, config, result.shared, screen=False, free_scales=True
+
+    def solve(free_scales: tuple[bool, bool]) -> KnownPointResult:
+        outcome = _default_result(
+            result.corners, [], X0, taught, config, result.shared, False, free_scales
+        )
+        return replace(outcome, samples_rejected=result.samples_rejected)
+
+    free = solve((True, True))
+    x, z = (
+        s is not None and abs(s) <= PLAUSIBLE_SCALE_ERROR and scale_significant(s, sigma)
+        for s, sigma in zip(free.scales, free.scale_sigmas, strict=True)
     )
-    widened = with_held_sigma(_solution(result, [], config), _solution(free, [], config))
+    if x and z:
+        return free
+    held = solve((x, z)) if x or z else result
+    widened = with_held_sigma(_solution(held, [], config), _solution(free, [], config))
     return replace(
-        result,
+        held,
         uncertainty_rotation_rad=widened.sigma_rotation_rad,
         uncertainty_translation_m=widened.sigma_translation_m,
         sigma_model_spread=widened.sigma_model_spread,
@@ -559,7 +584,13 @@ def _solution(
     The noise a view's residual carries on clean data is about the robot's position error.
     """
     earlier = {(r.index, r.stage) for r in rejections}
-    section = KnownPoint(result.point_base, result.point_estimated, result.uncertainty_point_m)
+    section = KnownPoint(
+        result.point_base,
+        result.point_estimated,
+        result.uncertainty_point_m,
+        result.scales,
+        result.scale_sigmas,
+    )
     return TargetSolution(
         T_flange_sensor=result.T_flange_sensor,
         section=section,
@@ -640,6 +671,7 @@ class KnownPointTarget:
         else:
             warm = context.warm_start
             learned = None if warm is None else warm.subset_start
+            section = None if warm is None else warm.section
             result = _default_result(
                 features,
                 rejections,
@@ -648,9 +680,10 @@ class KnownPointTarget:
                 config,
                 learned if isinstance(learned, SharedPoseError) else None,
                 context.screen_outliers,
+                section.free_scales if isinstance(section, KnownPoint) else (False, False),
             )
             if warm is None:
-                result = _with_held_scales(result, X0, taught, config)
+                result = _with_scales(result, X0, taught, config)
         return _solution(result, rejections, config)
 
     def solve_paper(
