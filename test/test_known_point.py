@@ -7,6 +7,7 @@ noisy checks run the whole chain from simulated profiles and compare with the tr
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from functools import lru_cache
 from typing import Any
 
@@ -32,8 +33,10 @@ from linelaser_calib.core.targets.known_point import (
     solve_linear,
     weld_points_base,
 )
+from linelaser_calib.core.targets.known_point.section import KnownPoint, read_known_point_section
 from linelaser_calib.core.types import Sample
 from linelaser_calib.sim.robot import draw_errors, error_transforms
+from linelaser_calib.sim.sensor_models import with_faces
 from linelaser_calib.sim.weld import WeldSimulatedData, simulate_weld, weld_scenario_from_preset
 
 CONFIG = KnownPointConfig(robot_sigma_r_rad=math.radians(0.002))
@@ -199,6 +202,36 @@ def test_default_method_on_general_views() -> None:
     assert np.all(np.abs(theta) < 4.0 * result.uncertainty_rotation_rad)
     assert np.all(np.abs(rho) < 4.0 * result.uncertainty_translation_m)
     assert result.samples_rejected == [] and len(result.samples_used) == 20
+    assert result.scales == (None, None)  # read within their 1σ of 1, held
+
+
+def test_the_profilers_x_and_z_scales_are_estimated_where_the_views_read_them() -> None:
+    """A profiler whose x and z scales are 0.3-1 % apart (the stress matrix's ``scales``
+    face: x 0.6 % long, z 0.2 % short) left the hand-eye with the scales held 3.6 of its
+    1σ off on seeds 0-2; the views read both, and the estimate is written to the result."""
+    base = weld_scenario_from_preset("weld_seam_general")
+    sensor = with_faces(base.rig.sensor, "scales")
+    data = simulate_weld(replace(base, rig=replace(base.rig, sensor=sensor)), 0)
+    result = calibrate(data, "default")
+    for s, sigma, true in zip(
+        result.scales,
+        result.scale_sigmas,
+        (sensor.x_scale_error, sensor.z_scale_error),
+        strict=True,
+    ):
+        assert s is not None and sigma is not None and abs(s - true) <= 3.0 * sigma
+    truth = data.truth.T_flange_sensor
+    error = np.r_[
+        rotvec_from_matrix(truth[:3, :3].T @ result.T_flange_sensor[:3, :3]),
+        result.T_flange_sensor[:3, 3] - truth[:3, 3],
+    ]
+    assert result.uncertainty_rotation_rad is not None
+    assert result.uncertainty_translation_m is not None
+    sigma = np.r_[result.uncertainty_rotation_rad, result.uncertainty_translation_m]
+    assert np.all(np.abs(error) <= 3.0 * sigma), error / sigma
+    section = KnownPoint(result.point_base, False, None, result.scales, result.scale_sigmas)
+    read = read_known_point_section(section.to_mapping("base"), {})
+    assert read.scales == pytest.approx(result.scales)
 
 
 def test_tilted_views_need_no_initial_hand_eye() -> None:
