@@ -142,7 +142,7 @@ class KnownPointProblem:
         return np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
 
     def priors(self, state: KnownPointState) -> _Priors:
-        """Hand-eye (with pinned directions) and point priors, normalised."""
+        """Hand-eye (with pinned directions), point and scale priors, normalised."""
         G = self.n_global
         residuals, jacobians = [np.zeros(0)], [np.zeros((0, G))]
         hand_eye_info, pinned_info = np.zeros((G, G)), np.zeros((G, G))
@@ -169,6 +169,12 @@ class KnownPointProblem:
             J = np.zeros((3, G))
             J[:, 6:9] = np.eye(3) / sigma
             residuals.append((state.point - point0) / sigma)
+            jacobians.append(J)
+        free = np.flatnonzero(self.free_scales)
+        if len(free):
+            J = np.zeros((len(free), G))
+            J[:, G - len(free) :] = np.eye(len(free)) / self.config.scale_prior_sigma
+            residuals.append(state.scales[free] / self.config.scale_prior_sigma)
             jacobians.append(J)
         return _Priors(np.concatenate(residuals), np.vstack(jacobians), hand_eye_info, pinned_info)
 
