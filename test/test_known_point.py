@@ -81,6 +81,21 @@ def calibrate(
     )
 
 
+def error_over_sigma(result: KnownPointResult, data: WeldSimulatedData) -> np.ndarray:
+    """The hand-eye's error per axis (rotation about the sensor axes, translation) over
+    its 1σ."""
+    truth = data.truth.T_flange_sensor
+    error = np.r_[
+        rotvec_from_matrix(truth[:3, :3].T @ result.T_flange_sensor[:3, :3]),
+        result.T_flange_sensor[:3, 3] - truth[:3, 3],
+    ]
+    assert result.uncertainty_rotation_rad is not None
+    assert result.uncertainty_translation_m is not None
+    return np.asarray(
+        error / np.r_[result.uncertainty_rotation_rad, result.uncertainty_translation_m]
+    )
+
+
 # --------------------------------------------------------------------------------------
 # Building blocks
 
@@ -220,15 +235,8 @@ def test_the_profilers_x_and_z_scales_are_estimated_where_the_views_read_them() 
         strict=True,
     ):
         assert s is not None and sigma is not None and abs(s - true) <= 3.0 * sigma
-    truth = data.truth.T_flange_sensor
-    error = np.r_[
-        rotvec_from_matrix(truth[:3, :3].T @ result.T_flange_sensor[:3, :3]),
-        result.T_flange_sensor[:3, 3] - truth[:3, 3],
-    ]
-    assert result.uncertainty_rotation_rad is not None
-    assert result.uncertainty_translation_m is not None
-    sigma = np.r_[result.uncertainty_rotation_rad, result.uncertainty_translation_m]
-    assert np.all(np.abs(error) <= 3.0 * sigma), error / sigma
+    z = error_over_sigma(result, data)
+    assert np.all(np.abs(z) <= 3.0), z
     section = KnownPoint(result.point_base, False, None, result.scales, result.scale_sigmas)
     read = read_known_point_section(section.to_mapping("base"), {})
     assert read.scales == pytest.approx(result.scales)
@@ -274,16 +282,9 @@ def test_a_robot_error_shared_by_neighbouring_views_is_counted_in_the_1_sigma() 
     T = data.truth.T_base_flange_true @ error_transforms(rig, errors, views // 4, views % 4 / 4)
     samples = [Sample(k, p.stamp_ns, T[k], p.points) for k, p in enumerate(data.profiles)]
     result = calibrate(data, "default", samples=samples)
-    truth = data.truth.T_flange_sensor
-    error = np.r_[
-        rotvec_from_matrix(truth[:3, :3].T @ result.T_flange_sensor[:3, :3]),
-        result.T_flange_sensor[:3, 3] - truth[:3, 3],
-    ]
-    assert result.uncertainty_rotation_rad is not None
-    assert result.uncertainty_translation_m is not None
-    sigma = np.r_[result.uncertainty_rotation_rad, result.uncertainty_translation_m]
+    z = error_over_sigma(result, data)
     assert result.shared is not None and len(result.samples_used) == len(views)
-    assert np.all(np.abs(error) <= 3.0 * sigma), error / sigma
+    assert np.all(np.abs(z) <= 3.0), z
     # Named, so that the self-check judges the robot's error without it (subsets.model_sigma).
     assert result.sigma_shared is not None and float(np.max(result.sigma_shared)) > 1.2
 
