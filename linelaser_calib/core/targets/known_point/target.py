@@ -548,8 +548,8 @@ def _with_scales(
     tenths of a percent moves each corner by tens of µm, alike in neighbouring views: on
     the stress matrix's ``scales`` face (x 0.6 % long, z 0.2 % short) the solve with them
     held was 3.64 times its 1σ off on its worst axis (seeds 0-2; 2.30 clean). The views
-    determine the scales: they read x +0.56 to +0.65 % (1σ 0.11-0.13 %) and z -0.11 to
-    -0.24 % (1σ 0.06-0.07 %) there, and within 1.6 of their 1σ of 0 on clean views."""
+    determine the scales: they read x +0.55 to +0.64 % (1σ 0.11-0.13 %) and z -0.11 to
+    -0.24 % (1σ 0.06-0.07 %) there, and within 1.4 of their 1σ of 0 on clean views."""
     if result.uncertainty_rotation_rad is None:
         return result
 
