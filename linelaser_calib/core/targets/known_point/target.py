@@ -57,6 +57,9 @@ Methods
        by neighbouring views as the residuals show it (:mod:`...shared_pose`, as the line
        target's): a weld program's views err alike by region, and their corners do not
        average that away.
+    3. The profiler's x and z scale errors: each that the views read clearly off 1 is
+       estimated with the hand-eye (the line target's ``auto``), and the 1σ of a held one
+       counts what it may move the hand-eye (:func:`_with_scales`).
 
 Observability (:func:`.diagnosis.analyse_known_point`)
 ------------------------------------------------------
