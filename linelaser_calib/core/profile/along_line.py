@@ -100,3 +100,35 @@ def scales_from_mapping(mapping: Mapping[str, Any], key: str) -> tuple[float | N
         raise ValueError(f"key {key} must be a ratio > 0, got {ratio!r}")
     sigma = mapping.get(f"{key}_sigma")
     return float(ratio) - 1.0, None if sigma is None else float(sigma)
+
+
+#: Result-file keys of the x and z scale errors a corner target (line, known point)
+#: estimates, each with ``_sigma``; and those axes in words.
+XZ_SCALE_KEYS = ("along_line_scale", "depth_scale")
+XZ_SCALE_AXES = ("along-line (x)", "depth (z)")
+
+#: The x and z scale errors (or their 1σ), None where held at 1.
+ScalePair = tuple[float | None, float | None]
+
+
+def xz_scale_entries(scales: ScalePair, sigmas: ScalePair) -> dict[str, Any]:
+    """A result file's entries of the estimated x and z scale errors (:func:`scale_entries`)."""
+    entries: dict[str, Any] = {}
+    for key, s, sigma in zip(XZ_SCALE_KEYS, scales, sigmas, strict=True):
+        entries.update(scale_entries(key, s, sigma))
+    return entries
+
+
+def xz_scales_from_mapping(mapping: Mapping[str, Any]) -> tuple[ScalePair, ScalePair]:
+    """The x and z scale errors and their 1σ written by :func:`xz_scale_entries`."""
+    (x, sigma_x), (z, sigma_z) = (scales_from_mapping(mapping, key) for key in XZ_SCALE_KEYS)
+    return (x, z), (sigma_x, sigma_z)
+
+
+def xz_scale_text(scales: ScalePair, sigmas: ScalePair) -> str:
+    """``; `` and each estimated scale in words (:func:`scale_text`), or nothing."""
+    return "".join(
+        f"; {scale_text(s, sigma, axis)}"
+        for s, sigma, axis in zip(scales, sigmas, XZ_SCALE_AXES, strict=True)
+        if s is not None
+    )

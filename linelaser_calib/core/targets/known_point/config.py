@@ -44,6 +44,13 @@ class KnownPointConfig:
         Same for the translation, m. Default 10 mm.
     point_sigma_m : float
         1σ per axis of the taught point, m; 0 (default) takes it as exact (the paper does).
+    scale_prior_sigma : float
+        Prior 1σ of the profiler's x and z scale errors where they are estimated (relative).
+        Default 1 % (a poorly calibrated profiler's; the stress matrix's ``scales`` face has
+        them 0.3-1 % apart). Views that determine the scales read them to about 0.1 %; views
+        in one orientation stepped in z (the paper's) confuse one mix of them with the
+        hand-eye, and without the prior the 1σ that counts a held scale grew from 0.8 to
+        6 mm along flange axes there (``bench/known_point_regional.py``).
     grid_coarse, grid_fine : GridStep
         The paper's two grid steps. Defaults: ±0.4 rad in 41 values per axis (step 0.02),
         then ±0.02 rad in 9 (step 0.005), as in its experiment (see the module docstring).
@@ -74,6 +81,7 @@ class KnownPointConfig:
     initial_sigma_rotation_rad: float = math.radians(5.0)
     initial_sigma_translation_m: float = 0.01
     point_sigma_m: float = 0.0
+    scale_prior_sigma: float = 0.01
     grid_coarse: GridStep = PAPER_GRID_COARSE
     grid_fine: GridStep = PAPER_GRID_FINE
     min_samples: int = 6
@@ -97,6 +105,7 @@ class KnownPointConfig:
             "aim_sigma_m",
             "initial_sigma_rotation_rad",
             "initial_sigma_translation_m",
+            "scale_prior_sigma",
             "tolerance",
         )
         for name in positive:

@@ -6,8 +6,12 @@ Per view i: the corner s_i (sensor frame, y = 0) measured with the covariance of
 flange-pose nuisance δ_i = (ω_i, τ_i) in the flange frame, true pose T_i·D(δ_i), with Gaussian
 priors σ_r, σ_t; a prior on the hand-eye from the initial one (loose, plus pinned directions);
 the point p fixed when taught (or with ``point_sigma_m``), else estimated. The predicted corner
-is R_Xᵀ (Exp(ω)ᵀ (R_iᵀ (p − t_i) − τ) − t_X). Global step: θ (3, sensor axes), ρ (3, flange
-axes) and, when estimated, the point (3, base frame). Its covariance is the per-view model's;
+is R_Xᵀ (Exp(ω)ᵀ (R_iᵀ (p − t_i) − τ) − t_X). Optionally the profiler's x and z scale errors
+are estimated too: a scale of either axis maps the flanks' straight lines to straight lines,
+so the measured corner is the scaled true one and is compared with the prediction with the
+scales removed (:func:`~...profile.along_line.measured_to_true`, as the line target's). Global
+step: θ (3, sensor axes), ρ (3, flange axes), when estimated the point (3, base frame), and
+when estimated the scale errors (2, x then z). Its covariance is the per-view model's;
 :meth:`KnownPointRefinement.views` gives what :mod:`...shared_pose` needs for the estimate's
 covariance where neighbouring views share their pose error.
 """
@@ -30,6 +34,7 @@ from ...geometry import (
     skews,
     transform_from_rotation_translation,
 )
+from ...profile.along_line import measured_to_true
 from ...seam_grid import corners_3d
 from ...shared_pose import ViewsLinearised
 from ...solver import Linearisation, Residuals, SolverConfig, normal_equations, solve
@@ -44,13 +49,14 @@ PIN_SIGMA_M = 1e-6
 @dataclass(frozen=True)
 class KnownPointState:
     """Current estimate: hand-eye (R_fs, t_fs m), point (3,) m, pose corrections ω, τ (M, 3)
-    (rad, m; flange frame)."""
+    (rad, m; flange frame), the profiler's x and z scale errors (2,) (0 where held)."""
 
     R_fs: FloatArray
     t_fs: FloatArray
     point: FloatArray
     omega: FloatArray
     tau: FloatArray
+    scales: FloatArray = field(default_factory=lambda: np.zeros(2))
 
 
 class _Priors(NamedTuple):
@@ -92,6 +98,8 @@ class KnownPointProblem:
         Prior on an estimated point: its value and 1σ, m.
     hand_eye_prior : HandEyePrior or None
     config : KnownPointConfig
+    free_scales : (bool, bool)
+        Whether the profiler's x and the z scale errors are estimated (held at 0 otherwise).
     """
 
     s: FloatArray
@@ -103,17 +111,24 @@ class KnownPointProblem:
     hand_eye_prior: HandEyePrior | None
     config: KnownPointConfig
     lever_m: float = field(default=1.0)
+    free_scales: tuple[bool, bool] = (False, False)
 
     @property
     def n_global(self) -> int:
-        return 9 if self.estimate_point else 6
+        return 6 + (3 if self.estimate_point else 0) + sum(self.free_scales)
 
     @property
     def step_scale(self) -> FloatArray:
-        """Rotations times the lever (the corners' median distance), lengths as they are."""
+        """Rotations and scale errors times the lever (the corners' median distance),
+        lengths as they are."""
         scale = np.ones(self.n_global)
         scale[:3] = self.lever_m
+        scale[6 + (3 if self.estimate_point else 0) :] = self.lever_m
         return scale
+
+    def _corners(self, scales: FloatArray) -> FloatArray:
+        """The measured corners (M, 3) with the scale errors removed, m."""
+        return measured_to_true(self.s, float(scales[0]), float(scales[1]))
 
     def _predict(self, state: KnownPointState) -> tuple[FloatArray, FloatArray, FloatArray]:
         """Predicted corners (M, 3), the point in the true flange frame h (M, 3), Exp(ω)."""
@@ -127,7 +142,7 @@ class KnownPointProblem:
         return np.array([1.0 / cfg.robot_sigma_r_rad] * 3 + [1.0 / cfg.robot_sigma_t_m] * 3)
 
     def priors(self, state: KnownPointState) -> _Priors:
-        """Hand-eye (with pinned directions) and point priors, normalised."""
+        """Hand-eye (with pinned directions), point and scale priors, normalised."""
         G = self.n_global
         residuals, jacobians = [np.zeros(0)], [np.zeros((0, G))]
         hand_eye_info, pinned_info = np.zeros((G, G)), np.zeros((G, G))
@@ -152,8 +167,14 @@ class KnownPointProblem:
         if self.point_prior is not None:
             point0, sigma = self.point_prior
             J = np.zeros((3, G))
-            J[:, 6:] = np.eye(3) / sigma
+            J[:, 6:9] = np.eye(3) / sigma
             residuals.append((state.point - point0) / sigma)
+            jacobians.append(J)
+        free = np.flatnonzero(self.free_scales)
+        if len(free):
+            J = np.zeros((len(free), G))
+            J[:, G - len(free) :] = np.eye(len(free)) / self.config.scale_prior_sigma
+            residuals.append(state.scales[free] / self.config.scale_prior_sigma)
             jacobians.append(J)
         return _Priors(np.concatenate(residuals), np.vstack(jacobians), hand_eye_info, pinned_info)
 
@@ -165,7 +186,7 @@ class KnownPointProblem:
     def _residuals(
         self, state: KnownPointState, predicted: FloatArray, priors: _Priors
     ) -> Residuals:
-        r = np.einsum("mij,mj->mi", self.W, predicted - self.s)
+        r = np.einsum("mij,mj->mi", self.W, predicted - self._corners(state.scales))
         cfg = self.config
         prior = np.hstack([state.omega / cfg.robot_sigma_r_rad, state.tau / cfg.robot_sigma_t_m])
         return Residuals(np.asarray(r), prior, priors.residuals)
@@ -180,10 +201,16 @@ class KnownPointProblem:
         global_blocks = [skews(predicted), np.broadcast_to(-RT, (M, 3, 3))]
         if self.estimate_point:
             global_blocks.append(RTE @ np.transpose(self.R, (0, 2, 1)))
+        J_global = self.W @ np.concatenate(global_blocks, axis=2)
+        free = [a for a, f in enumerate(self.free_scales) if f]
+        if free:
+            true = self._corners(state.scales)[:, [0, 2]] / (1.0 + state.scales)
+            columns = self.W[:, :, [0, 2]] * true[:, None, :]
+            J_global = np.concatenate([J_global, columns[:, :, free]], axis=2)
         J_omega = RT @ skews(h) @ right_jacobian_so3(state.omega)
         return Linearisation(
             residuals=self._residuals(state, predicted, priors),
-            J_global=self.W @ np.concatenate(global_blocks, axis=2),
+            J_global=J_global,
             J_local=self.W @ np.concatenate([J_omega, -RTE], axis=2),
             pose_prior_sqrt_information=self._sqrt_information(),
             global_prior_jacobian=priors.jacobian,
@@ -192,21 +219,27 @@ class KnownPointProblem:
     def retract(
         self, state: KnownPointState, step_global: FloatArray, step_local: FloatArray
     ) -> KnownPointState:
-        """Apply increments: R ← R·Exp(θ), t ← t + ρ, p ← p + step, ω, τ additively."""
+        """Apply increments: R ← R·Exp(θ), t ← t + ρ, p, scale errors, ω, τ additively."""
         point = state.point + step_global[6:9] if self.estimate_point else state.point
+        scales = state.scales.copy()
+        scales[np.flatnonzero(self.free_scales)] += step_global[
+            6 + (3 if self.estimate_point else 0) :
+        ]
         return KnownPointState(
             R_fs=state.R_fs @ exp_so3(step_global[None, :3])[0],
             t_fs=state.t_fs + step_global[3:6],
             point=point,
             omega=state.omega + step_local[:, :3],
             tau=state.tau + step_local[:, 3:],
+            scales=scales,
         )
 
 
-def data_information(information: FloatArray, estimate_point: bool) -> FloatArray:
-    """Hand-eye information (6, 6) with the point (if estimated) marginalised."""
+def data_information(information: FloatArray) -> FloatArray:
+    """Hand-eye information (6, 6) with the point and scale errors (if estimated)
+    marginalised."""
     data = information
-    if estimate_point:
+    if len(data) > 6:
         data = data[:6, :6] - data[:6, 6:] @ np.linalg.pinv(data[6:, 6:]) @ data[6:, :6]
     return np.asarray(0.5 * (data + data.T))
 
@@ -219,6 +252,7 @@ def build_problem(
     point_prior: tuple[FloatArray, float] | None,
     prior: HandEyePrior | None,
     config: KnownPointConfig,
+    free_scales: tuple[bool, bool] = (False, False),
 ) -> KnownPointProblem:
     """The problem of checked corners (M, 2), covariances (M, 2, 2) and poses (M, 4, 4)."""
     return KnownPointProblem(
@@ -231,6 +265,7 @@ def build_problem(
         hand_eye_prior=prior,
         config=config,
         lever_m=float(np.median(np.linalg.norm(corners_xz, axis=1))),
+        free_scales=free_scales,
     )
 
 
@@ -259,6 +294,10 @@ class KnownPointRefinement:
     converged : bool
     problem : KnownPointProblem
         The problem solved (for :meth:`views`).
+    scales : ndarray, shape (2,)
+        The profiler's x and z scale errors; 0 where held (``problem.free_scales``).
+    scale_sigmas : (float or None, float or None)
+        1σ of each scale error; None where it was held.
     """
 
     T_flange_sensor: FloatArray
@@ -271,6 +310,8 @@ class KnownPointRefinement:
     iterations: int
     converged: bool
     problem: KnownPointProblem
+    scales: FloatArray = field(default_factory=lambda: np.zeros(2))
+    scale_sigmas: tuple[float | None, float | None] = (None, None)
 
     def views(self) -> ViewsLinearised:
         """The views linearised at the solution with every pose correction at zero, for
@@ -282,7 +323,7 @@ class KnownPointRefinement:
             problem = replace(problem, hand_eye_prior=replace(prior, pinned=np.zeros((0, 6))))
         M = len(problem.s)
         X, zero = self.T_flange_sensor, np.zeros((M, 3))
-        state = KnownPointState(X[:3, :3], X[:3, 3], self.point_base, zero, zero)
+        state = KnownPointState(X[:3, :3], X[:3, 3], self.point_base, zero, zero, self.scales)
         T = np.tile(np.eye(4), (M, 1, 1))
         T[:, :3, :3], T[:, :3, 3] = problem.R, problem.t
         return ViewsLinearised.from_linearisation(problem.linearise(state), T)
@@ -321,6 +362,7 @@ def refine_known_point(
     estimate_point: bool,
     prior: HandEyePrior | None,
     config: KnownPointConfig | None = None,
+    free_scales: tuple[bool, bool] = (False, False),
 ) -> KnownPointRefinement:
     """Maximum-likelihood hand-eye (and point) with per-view flange-pose nuisance.
 
@@ -343,6 +385,8 @@ def refine_known_point(
     prior : HandEyePrior or None
         Prior on the hand-eye (its information is left out of ``information_data``).
     config : KnownPointConfig, optional
+    free_scales : (bool, bool)
+        Estimate the profiler's x and the z scale error (after the point in ``covariance``).
 
     Raises
     ------
@@ -361,7 +405,9 @@ def refine_known_point(
     point_prior = (
         (p0.copy(), cfg.point_sigma_m) if estimate_point and cfg.point_sigma_m > 0 else None
     )
-    problem = build_problem(c, covariance_xz, T, estimate_point, point_prior, prior, cfg)
+    problem = build_problem(
+        c, covariance_xz, T, estimate_point, point_prior, prior, cfg, free_scales
+    )
     M = len(c)
     state = KnownPointState(
         X0[:3, :3].copy(), X0[:3, 3].copy(), p0.copy(), np.zeros((M, 3)), np.zeros((M, 3))
@@ -379,16 +425,25 @@ def refine_known_point(
         T_flange_sensor=transform_from_rotation_translation(state.R_fs, state.t_fs),
         point_base=state.point.copy(),
         covariance=covariance,
-        information_data=data_information(
-            normal.schur_information(remove=priors.hand_eye_info), estimate_point
-        ),
+        information_data=data_information(normal.schur_information(remove=priors.hand_eye_info)),
         pose_corrections=np.hstack([state.omega, state.tau]),
         view_chi2=np.sum(r**2, axis=1) + np.sum(pose_prior**2, axis=1),
         cost_history=solution.cost_history,
         iterations=solution.iterations,
         converged=solution.converged,
         problem=problem,
+        scales=state.scales.copy(),
+        scale_sigmas=_scale_sigmas(covariance, free_scales),
     )
+
+
+def _scale_sigmas(
+    covariance: FloatArray, free_scales: tuple[bool, bool]
+) -> tuple[float | None, float | None]:
+    """1σ of the estimated scale errors, the last rows of ``covariance``; None where held."""
+    sigmas = iter(np.sqrt(np.diag(covariance))[len(covariance) - sum(free_scales) :])
+    x, z = (float(next(sigmas)) if free else None for free in free_scales)
+    return x, z
 
 
 def paper_information(
@@ -406,4 +461,4 @@ def paper_information(
     M = len(corners_xz)
     state = KnownPointState(X[:3, :3], X[:3, 3], point, np.zeros((M, 3)), np.zeros((M, 3)))
     normal = normal_equations(problem.linearise(state), SolverConfig())
-    return data_information(normal.schur_information(), False)
+    return data_information(normal.schur_information())

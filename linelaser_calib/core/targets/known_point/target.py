@@ -57,6 +57,9 @@ Methods
        by neighbouring views as the residuals show it (:mod:`...shared_pose`, as the line
        target's): a weld program's views err alike by region, and their corners do not
        average that away.
+    3. The profiler's x and z scale errors: each that the views read clearly off 1 is
+       estimated with the hand-eye (the line target's ``auto``), and the 1σ of a held one
+       counts what it may move the hand-eye (:func:`_with_scales`).
 
 Observability (:func:`.diagnosis.analyse_known_point`)
 ------------------------------------------------------
@@ -108,6 +111,8 @@ from scipy.special import chdtri
 
 from ...errors import DegenerateError, InputError, ModelMismatch, TooFewFeatures
 from ...geometry import FloatArray, check_transform
+from ...model_spread import with_held_sigma
+from ...profile.along_line import PLAUSIBLE_SCALE_ERROR, ScalePair, scale_significant
 from ...profile.corner import CornerSample, corner_doubt, corners_shown
 from ...seam_grid import paper_correction, weld_points_base
 from ...shared_pose import SharedPoseError, alone_among_neighbours, shared_pose_error
@@ -184,6 +189,12 @@ class KnownPointResult:
         beyond their noise model and, after that, for the robot's error the views share
         (:attr:`~..base.TargetSolution.sigma_widening`, ``sigma_shared``); None for
         ``paper``.
+    sigma_model_spread : ndarray, shape (6,), or None
+        What the profiler's x and z scales, held at 1, may move the hand-eye, counted in
+        the 1σ (:func:`_with_scales`); None for ``paper`` or when both were estimated.
+    scales, scale_sigmas : (float or None, float or None)
+        The profiler's x and z scale errors estimated with the hand-eye, and their 1σ; None
+        where held at 1.
     """
 
     T_flange_sensor: FloatArray
@@ -204,6 +215,9 @@ class KnownPointResult:
     shared: SharedPoseError | None = None
     sigma_widening: FloatArray | None = None
     sigma_shared: FloatArray | None = None
+    sigma_model_spread: FloatArray | None = None
+    scales: ScalePair = (None, None)
+    scale_sigmas: ScalePair = (None, None)
 
 
 def _observability_warnings(observability: KnownPointObservability, method: str) -> list[str]:
@@ -311,7 +325,9 @@ def calibrate_known_point(
     if method == "paper":
         assert X0 is not None and taught is not None  # checked by _inputs
         return _paper_result(corner_samples, rejections, X0, taught, config)
-    return _default_result(corner_samples, rejections, X0, taught, config)
+    return _with_scales(
+        _default_result(corner_samples, rejections, X0, taught, config), X0, taught, config
+    )
 
 
 def _stack(corners: list[CornerSample]) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -380,10 +396,12 @@ def _default_result(
     config: KnownPointConfig,
     learned: SharedPoseError | None = None,
     screen: bool = True,
+    free_scales: tuple[bool, bool] = (False, False),
 ) -> KnownPointResult:
     """Closed form, maximum likelihood with outlier views dropped (with ``screen``), the
-    undetermined directions pinned; the 1σ counts the robot's error shared by neighbouring
-    views (:mod:`...shared_pose`: as ``learned`` on a superset of the corners, else learned
+    undetermined directions pinned, the profiler's x and z scale errors estimated with
+    ``free_scales``; the 1σ counts the robot's error shared by neighbouring views
+    (:mod:`...shared_pose`: as ``learned`` on a superset of the corners, else learned
     here)."""
     prior = (
         None
@@ -401,7 +419,15 @@ def _default_result(
         X_start = X if previous is None else previous.T_flange_sensor
         point_start = point if previous is None else previous.point_base
         return refine_known_point(
-            c[keep], cov[keep], T[keep], X_start, point_start, estimate_point, prior, config
+            c[keep],
+            cov[keep],
+            T[keep],
+            X_start,
+            point_start,
+            estimate_point,
+            prior,
+            config,
+            free_scales,
         )
 
     def flag(refined: KnownPointRefinement, keep: list[int]) -> list[Flag]:
@@ -459,7 +485,7 @@ def _default_result(
         scale = np.array([observability.lever_m] * 3 + [1.0] * 3)
         pinned = replace(prior, pinned=np.array([d.vector * scale for d in missing]))
         refined = refine_known_point(
-            c_used, cov_used, T_used, X, point, estimate_point, pinned, config
+            c_used, cov_used, T_used, X, point, estimate_point, pinned, config, free_scales
         )
         X, point = refined.T_flange_sensor, refined.point_base
     warnings = _observability_warnings(observability, "default")
@@ -469,9 +495,7 @@ def _default_result(
             "the result may be inaccurate"
         )
     residuals, rms = _residuals_m(used, X, point)
-    widen, scatter = recording_widening(
-        refined.view_chi2, 3, N_HAND_EYE + (3 if estimate_point else 0)
-    )
+    widen, scatter = recording_widening(refined.view_chi2, 3, len(refined.covariance))
     if scatter is not None:
         warnings.append(scatter)
     own = widen * np.sqrt(np.diag(refined.covariance))
@@ -500,6 +524,58 @@ def _default_result(
         shared=shared,
         sigma_widening=np.full(N_HAND_EYE, widen),
         sigma_shared=None if shared is None else sigma[:N_HAND_EYE] / own[:N_HAND_EYE],
+        scales=(
+            float(refined.scales[0]) if free_scales[0] else None,
+            float(refined.scales[1]) if free_scales[1] else None,
+        ),
+        scale_sigmas=refined.scale_sigmas,
+    )
+
+
+def _with_scales(
+    result: KnownPointResult,
+    X0: FloatArray | None,
+    taught: FloatArray | None,
+    config: KnownPointConfig,
+) -> KnownPointResult:
+    """``result`` (the profiler's scales held at 1), or the same views solved with each of
+    the x and z scale errors estimated that reads clearly off 1 and plausible
+    (:func:`~...profile.along_line.scale_significant`, within
+    :data:`~...profile.along_line.PLAUSIBLE_SCALE_ERROR`; the line target's ``auto``). A
+    scale held is still known only to its reading, so the held solve's 1σ counts what it
+    may move the hand-eye, the larger of the move to the solve that estimates both and what
+    their own 1σ adds, per axis (:func:`~...model_spread.with_held_sigma`, the line's and
+    the cylinder's rule).
+
+    The views' corners span a few tens of mm along x and z, so a scale error of a few
+    tenths of a percent moves each corner by tens of µm, alike in neighbouring views: on
+    the stress matrix's ``scales`` face (x 0.6 % long, z 0.2 % short) the solve with them
+    held was 3.64 times its 1σ off on its worst axis (seeds 0-2; 2.30 clean). The views
+    determine the scales: they read x +0.55 to +0.64 % (1σ 0.11-0.13 %) and z -0.11 to
+    -0.24 % (1σ 0.06-0.07 %) there, and within 1.4 of their 1σ of 0 on clean views."""
+    if result.uncertainty_rotation_rad is None:
+        return result
+
+    def solve(free_scales: tuple[bool, bool]) -> KnownPointResult:
+        outcome = _default_result(
+            result.corners, [], X0, taught, config, result.shared, False, free_scales
+        )
+        return replace(outcome, samples_rejected=result.samples_rejected)
+
+    free = solve((True, True))
+    x, z = (
+        s is not None and abs(s) <= PLAUSIBLE_SCALE_ERROR and scale_significant(s, sigma)
+        for s, sigma in zip(free.scales, free.scale_sigmas, strict=True)
+    )
+    if x and z:
+        return free
+    held = solve((x, z)) if x or z else result
+    widened = with_held_sigma(_solution(held, [], config), _solution(free, [], config))
+    return replace(
+        held,
+        uncertainty_rotation_rad=widened.sigma_rotation_rad,
+        uncertainty_translation_m=widened.sigma_translation_m,
+        sigma_model_spread=widened.sigma_model_spread,
     )
 
 
@@ -511,7 +587,13 @@ def _solution(
     The noise a view's residual carries on clean data is about the robot's position error.
     """
     earlier = {(r.index, r.stage) for r in rejections}
-    section = KnownPoint(result.point_base, result.point_estimated, result.uncertainty_point_m)
+    section = KnownPoint(
+        result.point_base,
+        result.point_estimated,
+        result.uncertainty_point_m,
+        result.scales,
+        result.scale_sigmas,
+    )
     return TargetSolution(
         T_flange_sensor=result.T_flange_sensor,
         section=section,
@@ -529,6 +611,7 @@ def _solution(
         subset_start=result.shared,
         sigma_widening=result.sigma_widening,
         sigma_shared=result.sigma_shared,
+        sigma_model_spread=result.sigma_model_spread,
     )
 
 
@@ -591,6 +674,7 @@ class KnownPointTarget:
         else:
             warm = context.warm_start
             learned = None if warm is None else warm.subset_start
+            section = None if warm is None else warm.section
             result = _default_result(
                 features,
                 rejections,
@@ -599,7 +683,10 @@ class KnownPointTarget:
                 config,
                 learned if isinstance(learned, SharedPoseError) else None,
                 context.screen_outliers,
+                section.free_scales if isinstance(section, KnownPoint) else (False, False),
             )
+            if warm is None:
+                result = _with_scales(result, X0, taught, config)
         return _solution(result, rejections, config)
 
     def solve_paper(

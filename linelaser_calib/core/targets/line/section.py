@@ -10,15 +10,15 @@ from typing import Any, ClassVar
 import numpy as np
 
 from ...geometry import FloatArray, apply_transform
-from ...profile.along_line import measured_to_true, scale_entries, scale_text, scales_from_mapping
+from ...profile.along_line import (
+    measured_to_true,
+    xz_scale_entries,
+    xz_scale_text,
+    xz_scales_from_mapping,
+)
 from ...types import SampleFit
 from ..base import Shape, direction_text, mm_text, plain_floats, read_vector
 from .model import Line
-
-#: Result-file keys of the estimated scales of the x and z axes (each with ``_sigma``).
-SCALE_KEYS = ("along_line_scale", "depth_scale")
-#: The axes in words.
-SCALE_AXES = ("along-line (x)", "depth (z)")
 
 
 def read_line_section(mapping: Mapping[str, Any]) -> LineSection:
@@ -26,12 +26,7 @@ def read_line_section(mapping: Mapping[str, Any]) -> LineSection:
     point, direction = read_vector(mapping, "point"), read_vector(mapping, "direction")
     if not float(np.linalg.norm(direction)) > 0.0:
         raise ValueError("key direction must not be zero")
-    read = [scales_from_mapping(mapping, key) for key in SCALE_KEYS]
-    return LineSection(
-        Line.through(point, direction),
-        (read[0][0], read[1][0]),
-        (read[0][1], read[1][1]),
-    )
+    return LineSection(Line.through(point, direction), *xz_scales_from_mapping(mapping))
 
 
 @dataclass(frozen=True)
@@ -97,9 +92,7 @@ class LineSection:
             "point": plain_floats(self.line.point),
             "direction": plain_floats(self.line.direction),
         }
-        for key, s, sigma in zip(SCALE_KEYS, self.scales, self.scale_sigmas, strict=True):
-            mapping.update(scale_entries(key, s, sigma))
-        return mapping
+        return mapping | xz_scale_entries(self.scales, self.scale_sigmas)
 
     def quality_entries(self) -> dict[str, Any]:
         """No further quality entries."""
@@ -126,14 +119,10 @@ class LineSection:
 
     def describe(self, base_frame: str) -> str:
         """One line, mm."""
-        scales = "".join(
-            f"; {scale_text(s, sigma, axis)}"
-            for s, sigma, axis in zip(self.scales, self.scale_sigmas, SCALE_AXES, strict=True)
-            if s is not None
-        )
         return (
             f"Seam line in {base_frame}: point {mm_text(self.line.point)} (nearest the base "
-            f"origin), direction {direction_text(self.line.direction)}" + scales
+            f"origin), direction {direction_text(self.line.direction)}"
+            + xz_scale_text(self.scales, self.scale_sigmas)
         )
 
     def residual_kind(self, method: str) -> str:
