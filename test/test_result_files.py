@@ -139,7 +139,9 @@ def test_result_round_trips_exactly(tmp_path: Path) -> None:
                 PROFILE_SCATTER,
                 SHARED_ROBOT_ERROR,
             ]
-            np.testing.assert_array_equal(back.sigma_budget.total, result.sigma_budget.total)
+            np.testing.assert_allclose(
+                back.sigma_budget.total, result.sigma_budget.total, rtol=1e-12
+            )
             np.testing.assert_allclose(
                 back.sigma_budget.sigma[3:], back.uncertainty_translation_m, rtol=1e-15
             )
