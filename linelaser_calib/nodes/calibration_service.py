@@ -146,8 +146,8 @@ PARAMETERS = (
         "free estimates them with the hand-eye, fixed holds them at 1, auto (or '') is free "
         "for the cylinder and the line where clearly off 1 and fixed for the sphere (whose "
         "1 sigma then counts the hand-eye's move with the scale estimated, where beyond it); "
-        "the result's along_line_scale, depth_scale and their 1 sigma. Refused by the other "
-        "targets and the paper method.",
+        "the result's along_line_scale, depth_scale and their 1 sigma. Refused by the known "
+        "point (which always treats its x and z scales as auto) and the paper method.",
         choices=("", "auto", "fixed", "free"),
     ),
     ParamSpec(
