@@ -79,10 +79,7 @@ class SigmaBudget:
     @property
     def total(self) -> FloatArray:
         """(6,) the product of the factors: the reported 1σ over the noise model's."""
-        total = np.ones(6)
-        for _, factor in self.factors:
-            total = total * factor
-        return total
+        return np.prod([np.ones(6)] + [factor for _, factor in self.factors], axis=0)
 
     @property
     def sigma(self) -> FloatArray:
